@@ -1,0 +1,140 @@
+"""Drives of the syringe pump (PHYSICS.md §1.5–1.7, §3.11, §3.14–3.15).
+
+* forward drive: PID on the sensed pressure → two ideal torque sources (paper eq. 1);
+* inverse drive: desired length → syringe displacement (eq. 2) → step counter →
+  stepper driver → permanent-magnet stepper motor.
+
+The step controller is open loop in the demand, so its whole step sequence is
+computed once from the input (:func:`step_schedule`) and enters the ODE as data.
+"""
+
+from __future__ import annotations
+
+import math
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+
+class PID(eqx.Module):
+    """Continuous parallel PID with filtered derivative: C(s) = P + I/s + D N s/(s + N).
+
+    Shipped gains P 20, I 80, D 0.5, N 100 s⁻¹ (the paper quotes 80/25/0.5: :func:`paper_pid`).
+    Units: output Pa of equivalent syringe pressure per Pa of error.
+    """
+
+    proportional: float = 20.0
+    integral: float = 80.0
+    derivative: float = 0.5
+    filter_coefficient: float = 100.0
+
+
+def paper_pid() -> PID:
+    """The gains printed in the paper (K_P 80, K_I 25, K_D 0.5)."""
+    return PID(80.0, 25.0, 0.5, 100.0)
+
+
+def pid_output(pid: PID, error, z_integral, z_filter):
+    """Controller output u and the state derivatives (ż_I, ż_D) for pressure error ``error`` (Pa)."""
+    d_term = pid.filter_coefficient * (error - z_filter)
+    u = pid.proportional * error + pid.integral * z_integral + pid.derivative * d_term
+    return u, error, d_term
+
+
+def ideal_torque_drive_force(syringe_area, n_syringes, u):
+    """Force on the platform (N) from the torque sources: torque L·A_s·u/(2π) per screw → A_s·u per nut."""
+    return n_syringes * syringe_area * u
+
+
+class StepperMotor(eqx.Module):
+    """Permanent-magnet stepper (Minebea 08PM-K139BSTDCN data) with its full-step driver.
+
+    Attributes:
+        winding_resistance: R, Ω.  winding_inductance: L, H.
+        torque_constant: K_m, N·m/A.  detent_torque: T_d, N·m.
+        rotor_inertia: J, kg·m².  rotor_damping: B, N·m/(rad/s).
+        step_angle: full step, rad.  supply_voltage: driver output amplitude V_m, V.
+        controller_rate: f, Hz, of the step controller (undefined in the shipped model; see README).
+    """
+
+    winding_resistance: float = 6.5
+    winding_inductance: float = 3.2e-3
+    torque_constant: float = 51.63e-3
+    detent_torque: float = 2.5e-3
+    rotor_inertia: float = 2.9e-7
+    rotor_damping: float = 2.65e-5
+    step_angle: float = math.radians(1.8)
+    supply_voltage: float = 12.0
+    controller_rate: float = 4.0
+
+    @property
+    def teeth(self):
+        """Rotor teeth N_r = (π/2)/step angle."""
+        return 0.5 * jnp.pi / self.step_angle
+
+
+def winding_voltages(motor: StepperMotor, step_count):
+    """Full-step driver phase voltages (v_A, v_B), V, for integer ``step_count`` k: (+,−),(+,+),(−,+),(−,−)."""
+    k = jnp.mod(step_count, 4)
+    v_a = jnp.where(k < 2, 1.0, -1.0)
+    v_b = jnp.where((k == 1) | (k == 2), 1.0, -1.0)
+    return motor.supply_voltage * v_a, motor.supply_voltage * v_b
+
+
+def motor_equilibrium_offset(motor: StepperMotor):
+    """Rotor angle (rad) at which step 0 of the driver is a stable equilibrium: −π/(4 N_r)."""
+    return -0.25 * jnp.pi / motor.teeth
+
+
+def motor_derivatives(motor: StepperMotor, theta, omega, i_a, i_b, v_a, v_b):
+    """Electrical torque T_e (N·m) and current rates (A/s) of the PM stepper (PHYSICS.md §3.15)."""
+    nr = motor.teeth
+    km = motor.torque_constant
+    e_a = -km * omega * jnp.sin(nr * theta)
+    e_b = km * omega * jnp.cos(nr * theta)
+    di_a = (v_a - motor.winding_resistance * i_a - e_a) / motor.winding_inductance
+    di_b = (v_b - motor.winding_resistance * i_b - e_b) / motor.winding_inductance
+    torque = -km * i_a * jnp.sin(nr * theta) + km * i_b * jnp.cos(nr * theta)
+    torque = torque - motor.detent_torque * jnp.sin(4.0 * nr * theta)
+    return torque, di_a, di_b
+
+
+def step_schedule(demand_steps: np.ndarray, times: np.ndarray, rate: float, t0: float, t1: float):
+    """Steps issued by the shipped position controller (PHYSICS.md §1.7) for a demand in steps.
+
+    Every 1/f s the demand is sampled (zero-order hold) and the counter c advances by
+    e = sat(d − c, −1, 1). The driver sees a pulse of 5|e| V in the second half of the
+    period and steps only if it crosses 2.5 V, i.e. if |e| > 0.5, in the direction of e.
+
+    Returns:
+        step_times: (K,) times of the step edges, s, sorted.
+        step_counts: (K,) driver step count k after each edge (integers, as float).
+    """
+    demand_steps = np.asarray(demand_steps, float)
+    n = int(math.floor((t1 - 0.0) * rate)) + 1
+    sample_t = np.arange(n) / rate
+    sample_t = sample_t[(sample_t >= t0 - 1e-12) | (np.arange(n) == 0)]
+    sample_t[0] = max(sample_t[0], t0)
+    d = np.interp(sample_t, times, demand_steps, left=np.nan, right=np.nan)
+    d = _extrapolate(sample_t, times, demand_steps, d)
+    c, k, out_t, out_k = 0.0, 0, [], []
+    for tk, dk in zip(sample_t, d):
+        e = min(max(dk - c, -1.0), 1.0)
+        if abs(e) > 0.5:
+            k += 1 if e > 0 else -1
+            edge = tk + 0.5 / rate
+            if edge < t1:
+                out_t.append(edge)
+                out_k.append(k)
+        c += e
+    return np.asarray(out_t, float), np.asarray(out_k, float)
+
+
+def _extrapolate(t, xp, fp, values):
+    """Fill NaNs of ``values`` by linear extrapolation from the two end samples (From Workspace default)."""
+    lo, hi = t < xp[0], t > xp[-1]
+    slope_lo = (fp[1] - fp[0]) / (xp[1] - xp[0])
+    slope_hi = (fp[-1] - fp[-2]) / (xp[-1] - xp[-2])
+    values = np.where(lo, fp[0] + slope_lo * (t - xp[0]), values)
+    return np.where(hi, fp[-1] + slope_hi * (t - xp[-1]), values)

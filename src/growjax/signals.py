@@ -1,0 +1,106 @@
+"""Inputs of the model as data: pulse trains, sampled series and step schedules.
+
+Every signal is a pytree with a ``__call__(t)`` that is pure in ``t`` and a
+``jump_times(t0, t1)`` listing discontinuities the solver must step onto.
+Sampled series are interpolated linearly and extrapolated linearly from the two
+end samples, as Simulink's From Workspace block does.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+
+class Constant(eqx.Module):
+    """A constant signal."""
+
+    value: float = 0.0
+
+    def __call__(self, t):
+        return jnp.asarray(self.value, float) + 0.0 * t
+
+    def jump_times(self, t0, t1):
+        return np.zeros(0)
+
+
+class PulseTrain(eqx.Module):
+    """Time-based pulse: ``amplitude`` for a fraction ``width`` of each ``period`` (s) after ``delay`` (s), else 0."""
+
+    amplitude: float = 150e3
+    period: float = 1.3
+    width: float = 0.9
+    delay: float = 0.26
+
+    def __call__(self, t):
+        phase = jnp.mod(t - self.delay, self.period)
+        on = (t >= self.delay) & (phase < self.width * self.period)
+        return jnp.where(on, self.amplitude, 0.0)
+
+    def jump_times(self, t0, t1):
+        k = np.arange(int(np.ceil((t1 - self.delay) / self.period)) + 1)
+        rise = self.delay + k * self.period
+        fall = rise + self.width * self.period
+        edges = np.concatenate([rise, fall])
+        return np.sort(edges[(edges > t0) & (edges < t1)])
+
+
+class Sampled(eqx.Module):
+    """Piecewise-linear series through (``times`` s, ``values``) with linear extrapolation."""
+
+    times: jnp.ndarray
+    values: jnp.ndarray
+
+    def __call__(self, t):
+        ts, vs = self.times, self.values
+        i = jnp.clip(jnp.searchsorted(ts, t, side="right") - 1, 0, ts.shape[-1] - 2)
+        t_a, t_b = ts[i], ts[i + 1]
+        w = (t - t_a) / (t_b - t_a)
+        return vs[i] + w * (vs[i + 1] - vs[i])
+
+    def jump_times(self, t0, t1):
+        return np.zeros(0)
+
+
+class StepSchedule(eqx.Module):
+    """Integer step count of a stepper driver: ``counts[j]`` from ``times[j]`` on, 0 before the first edge."""
+
+    times: jnp.ndarray
+    counts: jnp.ndarray
+
+    def __call__(self, t):
+        if self.times.shape[-1] == 0:
+            return jnp.zeros_like(t)
+        j = jnp.searchsorted(self.times, t, side="right") - 1
+        return jnp.where(j >= 0, self.counts[jnp.maximum(j, 0)], 0.0)
+
+    def jump_times(self, t0, t1):
+        t = np.asarray(self.times)
+        return t[(t > t0) & (t < t1)]
+
+
+def published_pulse() -> PulseTrain:
+    """The shipped demand: 0/150 kPa, period 1.3 s, width 90 %, delay 0.26 s."""
+    return PulseTrain()
+
+
+class Inputs(eqx.Module):
+    """Everything that drives a simulation from outside.
+
+    Attributes:
+        catheter_length: L_c(t), m (catheter in contact with the robot).
+        pressure_demand: P_ref(t), Pa (forward drive).
+        steps: driver step count k(t) (inverse drive; from :func:`growjax.motor.step_schedule`).
+        desired_length: desired robot length, m (inverse drive; kept for plotting and metrics).
+    """
+
+    catheter_length: eqx.Module
+    pressure_demand: eqx.Module = Constant(0.0)
+    steps: eqx.Module = StepSchedule(jnp.zeros(0), jnp.zeros(0))
+    desired_length: eqx.Module | None = None
+
+    def jump_times(self, t0, t1):
+        """All input discontinuities in (t0, t1), s, sorted."""
+        ts = np.concatenate([self.pressure_demand.jump_times(t0, t1), self.steps.jump_times(t0, t1)])
+        return np.unique(ts)
