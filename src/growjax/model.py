@@ -278,7 +278,7 @@ def _solve(params, inputs, config: Config, ts, jump_ts):
 
         event = diffrax.Event(crossed, root_finder=optx.Newton(rtol=1e-8, atol=1e-8))
     controller = diffrax.PIDController(rtol=config.rtol, atol=config.atol, pcoeff=0.3, icoeff=0.4, dtmax=0.05)
-    if jump_ts is not None and len(jump_ts):
+    if jump_ts is not None:
         controller = diffrax.ClipStepSizeController(controller, jump_ts=jnp.asarray(jump_ts))
     adjoint = diffrax.ForwardMode() if config.adjoint == "forward" else diffrax.RecursiveCheckpointAdjoint()
     saveat = diffrax.SaveAt(
@@ -346,7 +346,17 @@ def simulate(params: Parameters, inputs: Inputs, config: Config = Config(), ts=N
             jump_ts = inputs.jump_times(config.t0, config.t1)
         except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
             jump_ts = None
-    return _solve_jit(params, inputs, config, jnp.asarray(ts, float), None if jump_ts is None else np.asarray(jump_ts))
+    return _solve_jit(params, inputs, config, jnp.asarray(ts, float), _pad_jumps(jump_ts, config.t1))
+
+
+def _pad_jumps(jump_ts, t1, block: int = 32):
+    """Jump times padded (beyond t1, never reached) to a multiple of ``block``, so inputs with a
+    similar number of edges share one compiled solver."""
+    if jump_ts is None:
+        return None
+    jump_ts = np.asarray(jump_ts, float)
+    size = block * max(1, -(-jump_ts.size // block))
+    return np.concatenate([jump_ts, np.full(size - jump_ts.size, t1 + 1.0)])
 
 
 def status_name(code) -> str:

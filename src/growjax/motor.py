@@ -66,7 +66,7 @@ class StepperMotor(eqx.Module):
     rotor_damping: float = 2.65e-5
     step_angle: float = math.radians(1.8)
     supply_voltage: float = 12.0
-    controller_rate: float = 4.0
+    controller_rate: float = 3.0
 
     @property
     def teeth(self):
