@@ -1,0 +1,46 @@
+"""Shared fixtures. Compiled solvers are cached on disk across test processes (xdist workers, CLI subprocesses)."""
+
+import os
+from pathlib import Path
+
+import jax
+import numpy as np
+import pytest
+
+jax.config.update("jax_enable_x64", True)
+_CACHE = os.environ.setdefault("GROWJAX_CACHE_DIR", str(Path(__file__).resolve().parents[1] / ".jax_cache"))
+jax.config.update("jax_compilation_cache_dir", _CACHE)
+jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+
+import growjax as gj  # noqa: E402
+from growjax import experiment as ex  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="session")
+def shared_experiment():
+    """The public MAMMOBOT experiment from ../shared/data/mammobot (skipped where absent)."""
+    folder = ex.shared_experiment_dir()
+    if folder is None:
+        pytest.skip("the shared MAMMOBOT experiment (../shared/data/mammobot) is not beside this checkout")
+    return ex.read(folder / "experiment.csv")
+
+
+@pytest.fixture(scope="session")
+def synthetic_experiment():
+    """The synthetic forward-drive experiment shipped in data/."""
+    return ex.read(REPO / "data" / "synthetic_forward.csv")
+
+
+def forward_inputs(amplitude=150e3, catheter=0.02):
+    """Published pulse timing with a chosen amplitude, constant catheter length (m)."""
+    t = np.array([0.0, 100.0])
+    return gj.Inputs(
+        catheter_length=gj.Sampled(t, np.full(2, catheter)),
+        pressure_demand=gj.PulseTrain(amplitude=amplitude),
+    )
+
+
+# One configuration for the short physics checks, so they share one compiled solver.
+SHORT = gj.Config(t1=3.0, rtol=1e-7, atol=1e-7)

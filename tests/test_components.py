@@ -1,0 +1,120 @@
+"""Component laws checked against PHYSICS.md values and against their own definitions (no ODE solve)."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import growjax as gj
+from growjax import hydraulics as hy
+from growjax._smooth import bracketed_root, smooth_ramp, smooth_step
+from growjax.fluid import Fluid, bulk_modulus, water
+from growjax.robot import catheter_friction_gain, robot_pressure
+
+
+def test_water_properties_match_the_stock_table():
+    w = water(22.0)
+    assert w.density == pytest.approx(997.41, abs=0.01)
+    assert w.kinematic_viscosity == pytest.approx(9.5838e-7, rel=1e-3)
+    assert w.bulk_modulus_liquid == pytest.approx(2.18895e9, rel=1e-4)
+
+
+@pytest.mark.parametrize("p, expected", [(0.0, 2.815e7), (8e3, 3.200e7), (150e3, 1.272e8), (373.3e3, 3.391e8)])
+def test_mixture_bulk_modulus_table(p, expected):
+    assert float(bulk_modulus(Fluid(), p)) == pytest.approx(expected, rel=2e-3)
+
+
+def test_pressure_limit_is_373_kpa():
+    assert float(gj.pressure_limit(gj.reference().robot)) == pytest.approx(373.333e3, rel=1e-5)
+    thicker = gj.replace(gj.reference(), t=7e-5)
+    assert float(gj.pressure_limit(thicker.robot)) == pytest.approx(2 * 373.333e3, rel=1e-5)
+
+
+def test_orifice_inverse_is_exact():
+    k, p_cr = 1e-7, 150.0
+    q = jnp.array([-3e-5, -1e-8, 0.0, 2e-9, 4e-6])
+    dp = hy.orifice_pressure_drop(k, q, p_cr)
+    np.testing.assert_allclose(hy.orifice_flow(k, dp, p_cr), q, rtol=1e-12, atol=1e-20)
+
+
+def test_check_valve_blocks_reverse_flow_unless_bypass_opens():
+    p = gj.reference()
+    fl, cv, dv = p.fluid, p.check_valve, p.valve
+    y = p.robot.yield_pressure
+    args = dict(crack_pressure=y, crack_width=50.0)
+    reverse = hy.check_valve_flow(cv, fl, -50e3, 50e3, **args)
+    assert -1e-10 < float(reverse) < 0  # only the 1e-12 m² leak
+    through_network = hy.valve_network_flow(cv, dv, fl, -50e3, 50e3, y, 50.0, 10.0)
+    assert float(through_network) < -1e-4  # the 3-way valve bypasses the check valve
+    # Below cracking, forward flow is leak-only, through the check valve and the network alike.
+    below = hy.valve_network_flow(cv, dv, fl, 0.5 * y, 0.5 * y, y, 50.0, 10.0)
+    assert 0 < float(below) < 1e-10
+    # Above cracking the valve passes the growth flow of PHYSICS.md §7 (168 kPa → 6.7 mm/s).
+    q = hy.valve_network_flow(cv, dv, fl, 168e3, 60e3, y, 50.0, 10.0)
+    assert float(q) / p.robot.area == pytest.approx(6.7e-3, rel=0.05)
+
+
+def test_network_flow_never_bypasses_forward():
+    p = gj.reference()
+    dps = jnp.linspace(0.0, 7e3, 50)
+    q = jax.vmap(lambda d: hy.valve_network_flow(p.check_valve, p.valve, p.fluid, d, 5e3, 7920.0, 50.0, 10.0))(dps)
+    assert float(jnp.max(q)) < 1e-10
+
+
+def test_catheter_friction_assists_growth_as_shipped():
+    r = gj.reference().robot
+    assert float(catheter_friction_gain(r, 0.04)) == pytest.approx(0.1758, rel=1e-3)
+    p_r = robot_pressure(r, 150e3, 0.0, 0.03, 0.04, 0.0, (1e-6, 1e-6))
+    assert float(p_r) == pytest.approx(-18.45e3, rel=2e-3)  # PHYSICS.md §7
+
+
+def test_velocity_term_is_negligible_in_the_shipped_model():
+    r = gj.reference().robot
+    lo = robot_pressure(r, 150e3, 0.0, 0.03, 0.04, 0.0, (1e-6, 1e-6))
+    hi = robot_pressure(r, 150e3, 0.01, 0.03, 0.04, 0.0, (1e-6, 1e-6))
+    assert 0 < float(hi - lo) * r.area < 1e-10  # N, the ~1e-11 N of PHYSICS.md §7
+
+
+def test_smooth_primitives_are_exact_outside_their_band():
+    x = jnp.array([-1.0, 0.0, 2.0, 5.0])
+    np.testing.assert_allclose(smooth_ramp(x, 1.0), [0.0, 0.0, 1.5, 4.5])
+    np.testing.assert_allclose(smooth_step(x, 1.0), [0.0, 0.0, 1.0, 1.0])
+    g = jax.grad(lambda v: smooth_ramp(v, 1.0))
+    assert float(g(1.0 - 1e-12)) == pytest.approx(float(g(1.0 + 1e-12)), abs=1e-9)  # C¹ at the band edge
+
+
+def test_bracketed_root_value_and_implicit_gradient():
+    def root(a):
+        return bracketed_root(lambda x: a - x**3 - x, 0.0, a)
+
+    a = 3.0
+    x = float(root(a))
+    assert x**3 + x == pytest.approx(a, rel=1e-12)
+    assert float(jax.grad(root)(a)) == pytest.approx(1.0 / (3 * x**2 + 1), rel=1e-10)
+
+
+def test_parameters_override_by_symbol_block_and_field():
+    p = gj.replace(gj.reference(), Y=8000.0, **{"tank.length": 0.2, "catheter_friction": 0.02})
+    assert gj.get(p, "robot.yield_pressure") == 8000.0
+    assert p.tank.length == 0.2 and p.robot.catheter_friction == 0.02
+    with pytest.raises(ValueError, match="ambiguous"):
+        gj.replace(p, length=0.1)
+    with pytest.raises(ValueError, match="unknown parameter"):
+        gj.replace(p, yeild=1.0)
+
+
+@pytest.mark.parametrize(
+    "name, value, message",
+    [("Y", float("nan"), "not finite"), ("n", -1.0, "physical range"), ("ri", 2e-3, "smaller than")],
+)
+def test_validate_names_the_bad_parameter(name, value, message):
+    with pytest.raises(ValueError, match=message):
+        gj.validate(gj.replace(gj.reference(), **{name: value}))
+
+
+def test_reference_drives_differ_as_shipped():
+    fwd, inv = gj.reference("forward"), gj.reference("inverse")
+    assert fwd.tube.length == 0.3 and inv.tube.length == 0.1
+    assert fwd.robot.stroke == 0.08 and inv.robot.stroke == 0.1
+    with pytest.raises(ValueError):
+        gj.reference("sideways")
