@@ -15,7 +15,6 @@ import time
 from pathlib import Path
 
 import jax
-import numpy as np
 
 import growjax as gj
 from growjax import experiment as ex

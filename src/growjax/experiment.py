@@ -18,7 +18,7 @@ import numpy as np
 
 from growjax.motor import step_schedule
 from growjax.params import Parameters
-from growjax.signals import Constant, Inputs, PulseTrain, Sampled, StepSchedule, published_pulse
+from growjax.signals import Constant, Inputs, Sampled, StepSchedule, published_pulse
 
 COLUMNS = ("robot_length_m", "pressure_Pa", "catheter_length_m", "pressure_demand_Pa", "desired_length_m")
 LENGTH_COLUMNS = ("robot_length_m", "catheter_length_m", "desired_length_m")
@@ -216,5 +216,4 @@ def shared_experiment_dir() -> Path | None:
 
 
 __all__ = ["Experiment", "ExperimentError", "read", "read_csv", "write_csv", "read_mat_timeseries",
-           "read_mat_experiment", "to_inputs", "demand_steps", "validate_series", "shared_experiment_dir",
-           "PulseTrain"]
+           "read_mat_experiment", "to_inputs", "demand_steps", "validate_series", "shared_experiment_dir"]

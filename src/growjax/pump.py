@@ -10,7 +10,6 @@ from __future__ import annotations
 import math
 
 import equinox as eqx
-import jax.numpy as jnp
 
 from growjax._smooth import smooth_ramp
 
