@@ -17,9 +17,9 @@ from growjax._smooth import smooth_ramp, smooth_step
 from growjax.fluid import P_ATM, Fluid, bulk_modulus
 
 
-def critical_pressure(p_a, p_b, b_lam):
+def critical_pressure(p_avg, b_lam):
     """Laminar–turbulent transition pressure p_cr = (p_avg + p_atm)(1 − B_lam), Pa ('pressure ratio' spec)."""
-    return jnp.maximum(0.5 * (p_a + p_b) + P_ATM, 0.05 * P_ATM) * (1.0 - b_lam)
+    return jnp.maximum(p_avg + P_ATM, 0.05 * P_ATM) * (1.0 - b_lam)
 
 
 def orifice_flow(conductance, dp, p_cr):
@@ -69,7 +69,7 @@ class Pipeline(eqx.Module):
 
 def circular_pipeline(diameter: float, length: float, **kw) -> Pipeline:
     """A circular :class:`Pipeline` of inner ``diameter`` (m)."""
-    return Pipeline(area=jnp.pi * diameter**2 / 4.0, hydraulic_diameter=diameter, length=length, **kw)
+    return Pipeline(area=math.pi * diameter**2 / 4.0, hydraulic_diameter=diameter, length=length, **kw)
 
 
 def _friction_times_reynolds(pipe: Pipeline, re):
@@ -147,7 +147,7 @@ def nozzle_pressure_drop(noz: Nozzle, fluid: Fluid, q_ab, p_avg, flow_width):
     k = k_con + (k_exp - k_con) * smooth_step(q_ab + flow_width, 2.0 * flow_width)
     a_s = jnp.pi * noz.small_diameter**2 / 4.0
     conductance = a_s * jnp.sqrt(2.0 / (k * fluid.density))
-    p_cr = (jnp.maximum(p_avg + P_ATM, 0.05 * P_ATM)) * (1.0 - noz.b_lam)
+    p_cr = critical_pressure(p_avg, noz.b_lam)
     return orifice_pressure_drop(conductance, q_ab, p_cr)
 
 
@@ -169,7 +169,7 @@ def check_valve_flow(cv: CheckValve, fluid: Fluid, dp, p_avg, crack_pressure, cr
     """Flow A→B (m³/s) at Δp = p_A − p_B; the opening starts smoothly (C¹) over ``crack_width`` Pa."""
     gain = (cv.area_max - cv.leak_area) / (cv.max_open_pressure - crack_pressure)
     area = jnp.minimum(cv.leak_area + gain * smooth_ramp(dp - crack_pressure, crack_width), cv.area_max)
-    p_cr = (jnp.maximum(p_avg + P_ATM, 0.05 * P_ATM)) * (1.0 - cv.b_lam)
+    p_cr = critical_pressure(p_avg, cv.b_lam)
     return orifice_flow(orifice_conductance(area, cv.discharge_coefficient, fluid), dp, p_cr)
 
 
@@ -199,6 +199,6 @@ def valve_network_flow(
     q_check = check_valve_flow(cv, fluid, dp, p_avg, crack_pressure, crack_width)
     bypass_open = 1.0 - smooth_step(dp + switch_width, switch_width)
     area_at = dv.leak_area + (dv.area_max - dv.leak_area) * bypass_open
-    p_cr = (jnp.maximum(p_avg + P_ATM, 0.05 * P_ATM)) * (1.0 - dv.b_lam)
+    p_cr = critical_pressure(p_avg, dv.b_lam)
     q_bypass = orifice_flow(orifice_conductance(area_at, dv.discharge_coefficient, fluid), dp, p_cr)
     return q_check + q_bypass

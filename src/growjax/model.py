@@ -121,7 +121,7 @@ def network(params: Parameters, inputs: Inputs, config: Config, t, v_platform, p
 
     # Hoses → junction → orifice → tank: unknown is the orifice drop.
     k_or = hy.orifice_conductance(params.orifice.area, params.orifice.discharge_coefficient, fl)
-    p_cr_or = hy.critical_pressure(p_tube, p_tank, params.orifice.b_lam)
+    p_cr_or = hy.critical_pressure(0.5 * (p_tube + p_tank), params.orifice.b_lam)
     dp_chambers = p_tube - p_tank
 
     def series_residual(dp_or):

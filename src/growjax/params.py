@@ -67,7 +67,6 @@ def reference(drive: str = "forward") -> Parameters:
     tube = circular_pipeline(
         4e-3, tube_length, diameter_compliance=2e-12, wall_time_constant=0.01, initial_pressure=200.0
     )
-    tube = dataclasses.replace(tube, area=float(tube.area))
     tank = Pipeline(area=1.695e-4, hydraulic_diameter=0.015, length=0.122, initial_pressure=1.0)
     return Parameters(
         fluid=Fluid(),
