@@ -215,5 +215,16 @@ def shared_experiment_dir() -> Path | None:
     return None
 
 
-__all__ = ["Experiment", "ExperimentError", "read", "read_csv", "write_csv", "read_mat_timeseries",
-           "read_mat_experiment", "to_inputs", "demand_steps", "validate_series", "shared_experiment_dir"]
+__all__ = [
+    "Experiment",
+    "ExperimentError",
+    "demand_steps",
+    "read",
+    "read_csv",
+    "read_mat_experiment",
+    "read_mat_timeseries",
+    "shared_experiment_dir",
+    "to_inputs",
+    "validate_series",
+    "write_csv",
+]

@@ -262,7 +262,7 @@ def _outputs(t, y, args):
 
 
 def _save_grid(config: Config, save_dt: float = 0.01) -> np.ndarray:
-    n = int(round((config.t1 - config.t0) / save_dt))
+    n = round((config.t1 - config.t0) / save_dt)
     return np.linspace(config.t0, config.t1, n + 1)
 
 
@@ -338,7 +338,16 @@ def simulate(params: Parameters, inputs: Inputs, config: Config = Config(), ts=N
     default every 10 ms. Input discontinuities (pulse edges, motor steps) are found
     from ``inputs`` when they are concrete, or can be given as ``jump_ts``.
     A failed solve is reported in ``status``, never raised.
+
+    With a :class:`growjax.quasistatic.QuasiStaticConfig` the reduced forward model runs
+    instead (fixed grid ``config.save_grid()``; ``ts`` and ``jump_ts`` are not used).
     """
+    from growjax import quasistatic
+
+    if isinstance(config, quasistatic.QuasiStaticConfig):
+        if ts is not None:
+            raise ValueError("the quasi-static model saves on config.save_grid(); do not pass ts")
+        return quasistatic.simulate(params, inputs, config)
     if ts is None:
         ts = _save_grid(config)
     if jump_ts is None:

@@ -112,7 +112,7 @@ def step_schedule(demand_steps: np.ndarray, times: np.ndarray, rate: float, t0: 
         step_counts: (K,) driver step count k after each edge (integers, as float).
     """
     demand_steps = np.asarray(demand_steps, float)
-    n = int(math.floor((t1 - 0.0) * rate)) + 1
+    n = math.floor((t1 - 0.0) * rate) + 1
     sample_t = np.arange(n) / rate
     sample_t = sample_t[(sample_t >= t0 - 1e-12) | (np.arange(n) == 0)]
     sample_t[0] = max(sample_t[0], t0)

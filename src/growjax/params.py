@@ -15,7 +15,14 @@ import jax
 import numpy as np
 
 from growjax.fluid import Fluid
-from growjax.hydraulics import CheckValve, DirectionalValve, Nozzle, Orifice, Pipeline, circular_pipeline
+from growjax.hydraulics import (
+    CheckValve,
+    DirectionalValve,
+    Nozzle,
+    Orifice,
+    Pipeline,
+    circular_pipeline,
+)
 from growjax.motor import PID, StepperMotor
 from growjax.pump import SyringePump
 from growjax.robot import GrowingRobot

@@ -1,0 +1,313 @@
+"""Quasi-static reduction of the forward drive, for batched sweeps and sampling.
+
+The reference assembly (:mod:`growjax.model`) resolves time scales from 8 ns (platform
+mass against the screw damping) to seconds. Over the seconds that matter for the
+robot's length, the fast modes sit on their slow manifolds, so this reduction
+(singular perturbation, same parameters, same component laws) keeps six states:
+
+* the hoses, orifice, tank, nozzle and node P form one chamber at pressure P: the
+  series drops between them are < 1 Pa at the robot's flows (PHYSICS.md §7), and
+  they equalise in < 10 µs;
+* the platform is massless: its velocity balances the drive force against the screw
+  damping, the laminar hose drop and the syringes' end stop (closed form);
+* the rod balance is solved by two fixed-point passes (the velocity term is ~1e-10
+  of the other forces, so the iteration contracts at once).
+
+States: P (Pa), platform travel x_p (m), hose wall strain δ (m), PID integral and
+filter states, robot displacement ξ (m). The ODE is integrated on a fixed grid by the
+two-stage Rosenbrock W-method ROS2 (order 2 for any Jacobian approximation), with the
+stiff P–P entry of the Jacobian exact: the opened bypass couples P to the robot with
+a rate near 1e5 s⁻¹. A fixed grid has no data-dependent loops, so ``vmap`` runs every
+member in lockstep at full vector speed, and reverse-mode gradients are plain scans.
+
+Agreement with the reference is measured, not assumed: ``tests/test_quasistatic.py``
+and ``benchmarks/sweep.py`` report the length difference over the sweep box.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from growjax import hydraulics as hy
+from growjax.fluid import bulk_modulus
+from growjax.motor import ideal_torque_drive_force, pid_output
+from growjax.params import Parameters
+from growjax.robot import pressure_limit, robot_pressure
+from growjax.signals import Inputs
+
+STATES = ("pressure", "x_platform", "wall_strain", "z_integral", "z_filter", "robot_displacement")
+SCALES = (1e5, 1e-3, 1e-7, 1e4, 1e5, 1e-3)
+GAMMA = 1.0 + 1.0 / np.sqrt(2.0)  # ROS2 (Verwer et al. 1999)
+
+
+@dataclasses.dataclass(frozen=True)
+class QuasiStaticConfig:
+    """Static settings of the quasi-static forward model (hashable).
+
+    Attributes:
+        t0, t1: window, s.  save_dt: output spacing, s (the reference's 10 ms grid).
+        substeps: fixed solver steps per output interval (step = save_dt / substeps).
+        stop_at_pressure_limit: flag runs whose sensed pressure crosses the membrane limit
+            (samples after the crossing become NaN, as in the reference).
+        velocity_eps, stop_width, crack_width, switch_width: smoothing widths, as in :class:`growjax.Config`.
+        extra_rod_forces: candidate effects, as in :class:`growjax.Config`.
+        rod_iterations: fixed-point passes of the rod balance.
+    """
+
+    t0: float = 0.001
+    t1: float = 10.0
+    save_dt: float = 0.01
+    substeps: int = 10
+    stop_at_pressure_limit: bool = True
+    velocity_eps: float = 1e-6
+    stop_width: float = 1e-6
+    crack_width: float = 50.0
+    switch_width: float = 10.0
+    extra_rod_forces: tuple[Callable, ...] = ()
+    rod_iterations: int = 1
+    drive: str = dataclasses.field(default="forward", init=False)
+
+    def __post_init__(self):
+        if not self.t1 > self.t0:
+            raise ValueError(f"t1 ({self.t1} s) must be after t0 ({self.t0} s)")
+        if self.substeps < 1 or self.save_dt <= 0:
+            raise ValueError("substeps must be ≥ 1 and save_dt > 0")
+
+    @property
+    def n_saves(self) -> int:
+        return max(1, round((self.t1 - self.t0) / self.save_dt))
+
+    def save_grid(self) -> np.ndarray:
+        """Output times, s: ``n_saves`` equal intervals over [t0, t1] (the reference's default grid)."""
+        return np.linspace(self.t0, self.t1, self.n_saves + 1)
+
+    @property
+    def step(self) -> float:
+        """Solver step, s."""
+        return (self.t1 - self.t0) / (self.n_saves * self.substeps)
+
+
+def _extra_force(config, params, t, length, velocity, sensor_pressure):
+    total = 0.0
+    for force in config.extra_rod_forces:
+        total = total + force(t, length, velocity, sensor_pressure, params)
+    return total
+
+
+def _crack(params: Parameters):
+    cv = params.check_valve
+    return params.robot.yield_pressure if cv.crack_pressure is None else cv.crack_pressure
+
+
+def robot_flow(params: Parameters, config: QuasiStaticConfig, t, pressure, length, catheter):
+    """Forward flow into the robot through the check valve (m³/s) and the robot pressure (Pa), from node pressure P.
+
+    The rod balance is met by fixed-point passes on the velocity. Reverse flow (through
+    the bypass) is not here: it is the equalisation of :func:`equalise`.
+    """
+    robot, cv = params.robot, params.check_valve
+    widths = (config.velocity_eps, config.stop_width)
+
+    def rod(v):
+        extra = _extra_force(config, params, t, length, v, pressure)
+        return robot_pressure(robot, pressure, v, length, catheter, extra, widths)
+
+    def flow(p_r):
+        dp = pressure - p_r
+        return hy.check_valve_flow(cv, params.fluid, dp, pressure - 0.5 * dp, _crack(params), config.crack_width)
+
+    p_r = rod(0.0)
+    for _ in range(config.rod_iterations):
+        p_r = rod(flow(p_r) / robot.area)
+    return flow(p_r), p_r
+
+
+def _static_robot_pressure(params, config, t, length, catheter, p_guess):
+    """P* with P* = p_r(P*, v = 0): the node pressure at which the robot is in equilibrium (Pa)."""
+    p = p_guess
+    for _ in range(3):  # contraction factor 2π r_i μ_c L_c / A_r ≈ 0.02: error ~1e-5 Pa
+        extra = _extra_force(config, params, t, length, 0.0, p)
+        p = robot_pressure(params.robot, p, 0.0, length, catheter, extra, (config.velocity_eps, config.stop_width))
+    return p
+
+
+def charged_volume(params: Parameters, wall, p_from, p_to):
+    """Liquid volume (m³) that raises the chamber from ``p_from`` to ``p_to`` (Pa): ∫ V/E(p) dp, 3-point Gauss–Legendre."""
+    nodes, weights = np.polynomial.legendre.leggauss(3)
+    mid, half = 0.5 * (p_to + p_from), 0.5 * (p_to - p_from)
+    volume = _chamber_volume(params, wall)
+    return half * sum(w * volume / bulk_modulus(params.fluid, mid + half * x) for x, w in zip(nodes, weights))
+
+
+def equalise(params: Parameters, inputs: Inputs, config: QuasiStaticConfig, t, y):
+    """Reverse flow as an instantaneous equalisation (unscaled state in, out).
+
+    When the node pressure P falls below P*, the robot's pressure at rest, the opened
+    bypass (conductance ~1e-7 m³/s/Pa against a chamber compliance ~1e-12 m³/Pa: a
+    ~10 µs mode) drains the robot back until P = P*. The robot retracts by the volume
+    that charges the chamber to P*, limited by its retract stop (zero length).
+    """
+    p, x_p, wall, z_i, z_d, xi = y
+    robot = params.robot
+    length = robot.initial_length + xi
+    catheter = jnp.maximum(inputs.catheter_length(t), 0.0)
+    p_star = _static_robot_pressure(params, config, t, length, catheter, p)
+    below = p < p_star
+    target = jnp.where(below, p_star, p)
+    needed = charged_volume(params, wall, p, target)
+    available = robot.area * jnp.maximum(length, 0.0)
+    vol = jnp.minimum(needed, available)
+    # If the stop limits the retraction, raise P by the volume available (local compliance).
+    compliance = _chamber_volume(params, wall) / bulk_modulus(params.fluid, p)
+    p_new = jnp.where(vol < needed, p + vol / compliance, target)
+    return jnp.stack([p_new, x_p, wall, z_i, z_d, xi - vol / robot.area])
+
+
+def platform_velocity(params: Parameters, u, pressure, x_platform):
+    """Massless-platform velocity (m/s): drive n A_s u against screw damping, the hose drop and the syringe stop.
+
+    Force balance n A_s u = b_p v + n A_s (P + 2 R_h A_s v) + K_p·pen·|v|, closed form: the
+    hoses are laminar (Re < 300 at the robot's flows), the orifice and tank drops
+    (< 1 Pa) are neglected, and the inelastic stop resists retraction beyond the full
+    mark (x_p < 0) only.
+    """
+    pump = params.pump
+    n, a_s = pump.n_syringes, pump.syringe_area
+    r_hose = 2.0 * hy.pipeline_half_pressure_drop(params.tube, params.fluid, 1e-12) / 1e-12
+    damping = pump.screw_damping + n * a_s * a_s * r_hose
+    push = ideal_torque_drive_force(a_s, n, u) - n * a_s * pressure
+    stop = n * pump.penetration_coefficient * jnp.maximum(-x_platform, 0.0)
+    return jnp.where(push >= 0.0, push / damping, push / (damping + stop))
+
+
+def _rates(t, y, params: Parameters, inputs: Inputs, config: QuasiStaticConfig):
+    """Unscaled state derivatives (and diagnostics) at time t (s)."""
+    p, x_p, wall, z_i, z_d, xi = y
+    robot, tube, fl = params.robot, params.tube, params.fluid
+    length = robot.initial_length + xi
+    catheter = jnp.maximum(inputs.catheter_length(t), 0.0)
+    u, dz_i, dz_d = pid_output(params.pid, inputs.pressure_demand(t) - p, z_i, z_d)
+    v_p = platform_velocity(params, u, p, x_p)
+    q_robot, p_r = robot_flow(params, config, t, p, length, catheter)
+
+    n = params.pump.n_syringes
+    e = bulk_modulus(fl, p)
+    d = tube.hydraulic_diameter
+    d_wall = (tube.diameter_compliance * p - wall) / tube.wall_time_constant
+    wall_flow = n * jnp.pi * (d + wall) / 2.0 * tube.length * (1.0 + p / e) * d_wall
+    volume = _chamber_volume(params, wall)
+    q_pump = n * params.pump.syringe_area * v_p
+    dp = (q_pump - q_robot - wall_flow) * e / volume
+    rates = jnp.stack([dp, v_p, d_wall, dz_i, dz_d, q_robot / robot.area])
+    return rates, (q_robot, p_r, x_p)
+
+
+def _field(t, ys, params, inputs, config):
+    scales = jnp.asarray(SCALES)
+    return _rates(t, ys * scales, params, inputs, config)[0] / scales
+
+
+def _chamber_volume(params: Parameters, wall):
+    tube = params.tube
+    n = params.pump.n_syringes
+    return n * jnp.pi * (tube.hydraulic_diameter + wall) ** 2 / 4.0 * tube.length + params.tank.volume
+
+
+def initial_state(params: Parameters, inputs: Inputs, config: QuasiStaticConfig) -> jax.Array:
+    """Scaled initial state: one chamber at the volume-weighted initial pressure of the lines, equalised with the robot.
+
+    The reference drains the robot back through the bypass in the first millisecond
+    until P reaches the robot's pressure; :func:`equalise` does that at once.
+    """
+    tube, tank = params.tube, params.tank
+    n = params.pump.n_syringes
+    v_tube, v_tank = n * tube.volume, tank.volume
+    p0 = (v_tube * tube.initial_pressure + v_tank * tank.initial_pressure) / (v_tube + v_tank)
+    y = jnp.stack([jnp.asarray(v, float) for v in (p0, 0.0, tube.diameter_compliance * p0, 0.0, 0.0, 0.0)])
+    return equalise(params, inputs, config, config.t0, y) / jnp.asarray(SCALES)
+
+
+def _ros2_step(t, ys, h, params, inputs, config):
+    """One ROS2 step with W = I − γ h diag(J_PP, J_xx, 0, …).
+
+    ROS2 is a W-method, order 2 for any W; only the stiff entries are kept: the
+    pressure loop (≈ −400 s⁻¹ through the PID and the pump) and the syringe stop
+    (≈ −4e4 s⁻¹ when it engages). Reverse flow is handled by :func:`equalise`.
+    """
+    field = lambda y: _field(t, y, params, inputs, config)
+    f0, linear = jax.linearize(field, ys)
+    cols = jax.vmap(linear)(jnp.eye(ys.shape[0])[:2])
+    diag = jnp.zeros_like(ys).at[0].set(cols[0, 0]).at[1].set(cols[1, 1])
+    w = 1.0 - GAMMA * h * jnp.minimum(diag, 0.0)
+    k1 = f0 / w
+    f1 = _field(t + h, ys + h * k1, params, inputs, config)
+    k2 = (f1 - 2.0 * k1) / w
+    scales = jnp.asarray(SCALES)
+    y_new = (ys + h * (1.5 * k1 + 0.5 * k2)) * scales
+    return equalise(params, inputs, config, t + h, y_new) / scales
+
+
+def simulate(params: Parameters, inputs: Inputs, config: QuasiStaticConfig = QuasiStaticConfig()):
+    """Simulate the quasi-static forward model → :class:`growjax.Trajectory` on ``config.save_grid()``.
+
+    Pure, jit/vmap/grad-able (fixed grid, no data-dependent loops). Status: 0 ok,
+    1 pressure limit crossed (samples after the crossing are NaN), 2 non-finite state.
+    """
+    from growjax.model import OK, PRESSURE_LIMIT, SOLVER_FAILED, Trajectory
+
+    ts = jnp.asarray(config.save_grid())
+    h = config.step
+    scales = jnp.asarray(SCALES)
+    limit = pressure_limit(params.robot)
+
+    def outputs(t, ys):
+        y = ys * scales
+        _, (q_robot, p_r, x_p) = _rates(t, y, params, inputs, config)
+        return jnp.stack([params.robot.initial_length + y[5], y[0], q_robot, x_p, p_r])
+
+    def interval(ys, t_start):
+        def sub(k, y):
+            return _ros2_step(t_start + k * h, y, h, params, inputs, config)
+
+        ys = jax.lax.fori_loop(0, config.substeps, sub, ys)
+        return ys, (outputs(t_start + config.substeps * h, ys), ys)
+
+    y0 = initial_state(params, inputs, config)
+    _ys_final, (out, states) = jax.lax.scan(interval, y0, ts[:-1])
+    out = jnp.concatenate([outputs(ts[0], y0)[None], out])
+    states = jnp.concatenate([y0[None], states])
+    finite = jnp.all(jnp.isfinite(out), axis=1)
+    crossed = (out[:, 1] > limit) & bool(config.stop_at_pressure_limit)
+    bad = ~finite | crossed
+    first_bad = jnp.where(jnp.any(bad), jnp.argmax(bad), ts.shape[0])
+    after = jnp.arange(ts.shape[0]) >= first_bad
+    out = jnp.where(after[:, None], jnp.nan, out)
+    failed = jnp.any(~finite)
+    any_cross = jnp.any(crossed)
+    status = jnp.where(
+        any_cross & (jnp.argmax(crossed) <= jnp.where(failed, jnp.argmax(~finite), ts.shape[0])),
+        PRESSURE_LIMIT,
+        jnp.where(failed, SOLVER_FAILED, OK),
+    )
+    limit_time = jnp.where(any_cross, ts[jnp.argmax(crossed)], jnp.nan)
+    last = jnp.clip(first_bad - 1, 0, ts.shape[0] - 1)
+    demand = jax.vmap(inputs.pressure_demand)(ts)
+    return Trajectory(
+        time=ts,
+        length=out[:, 0],
+        pressure=out[:, 1],
+        robot_flow=out[:, 2],
+        syringe_displacement=out[:, 3],
+        robot_pressure=out[:, 4],
+        pressure_demand=demand,
+        status=status,
+        limit_time=limit_time,
+        t_final=jnp.where(jnp.isfinite(limit_time), limit_time, ts[last]),
+        n_steps=jnp.asarray(config.n_saves * config.substeps),
+        final_state=states[last],
+    )

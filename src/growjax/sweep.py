@@ -1,0 +1,293 @@
+"""Batched parameter sweeps: Latin hypercubes and Sobol designs through one compiled, sharded call.
+
+A sweep is a box of parameters (:class:`Dimension`), a design of points in it, and one
+``jit(vmap(...))`` of the model that scores every point against a measured length
+(RMSE over a window) and reports the final length and the run status. Points are
+evaluated in equal chunks (one compiled shape, memory bounded), each chunk split across
+all devices JAX sees (``jax.sharding``). A member that fails (solver failure, pressure
+limit, invalid parameter) is flagged with its reason; the others are unaffected.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.sharding import Mesh, NamedSharding, PartitionSpec
+
+from growjax import params as gp
+from growjax.metrics import length_rmse
+from growjax.model import OK, PRESSURE_LIMIT, SOLVER_FAILED, Config, simulate
+from growjax.quasistatic import QuasiStaticConfig
+
+INVALID_PARAMETER = 3
+QUASI_STATIC = QuasiStaticConfig()  # default configuration of sweeps
+REASONS = {OK: "ok", PRESSURE_LIMIT: "pressure_limit", SOLVER_FAILED: "solver_failed", INVALID_PARAMETER: "invalid_parameter"}
+
+
+@dataclasses.dataclass(frozen=True)
+class Dimension:
+    """One swept parameter: qualified ``name`` (``block.field``), bounds in SI units, linear or log scale."""
+
+    name: str
+    low: float
+    high: float
+    log: bool = False
+
+    def __post_init__(self):
+        if not (math.isfinite(self.low) and math.isfinite(self.high)) or not self.high > self.low:
+            raise ValueError(f"{self.name}: need finite LOW < HIGH, got {self.low}:{self.high}")
+        if self.log and self.low <= 0:
+            raise ValueError(f"{self.name}: a log scale needs LOW > 0, got {self.low}")
+
+    def from_unit(self, u):
+        """Map u ∈ [0, 1] to the parameter value."""
+        u = np.asarray(u, float)
+        if self.log:
+            return np.exp(np.log(self.low) + u * (np.log(self.high) - np.log(self.low)))
+        return self.low + u * (self.high - self.low)
+
+
+def paper_box() -> tuple[Dimension, ...]:
+    """The published investigation: n 0.9–1.1, Y 5–15 kPa, ext 4000–10000."""
+    return (
+        Dimension("robot.growth_exponent", 0.9, 1.1),
+        Dimension("robot.yield_pressure", 5e3, 15e3),
+        Dimension("robot.extensibility", 4000.0, 10000.0),
+    )
+
+
+def parse_dimension(text: str, params: gp.Parameters) -> Dimension:
+    """``NAME=LOW:HIGH[:log]`` → :class:`Dimension` (NAME as accepted by :func:`growjax.replace`)."""
+    if "=" not in text:
+        raise ValueError(f"--param expects NAME=LOW:HIGH[:log], got {text!r}")
+    name, rng = text.split("=", 1)
+    parts = rng.split(":")
+    if len(parts) not in (2, 3) or (len(parts) == 3 and parts[2] not in ("log", "lin")):
+        raise ValueError(f"--param {name}: range must be LOW:HIGH or LOW:HIGH:log, got {rng!r}")
+    try:
+        low, high = float(parts[0]), float(parts[1])
+    except ValueError:
+        raise ValueError(f"--param {name}: bounds {rng!r} are not numbers") from None
+    return Dimension(gp.resolve_name(params, name.strip()), low, high, len(parts) == 3 and parts[2] == "log")
+
+
+def latin_hypercube(dims: Sequence[Dimension], n: int, seed: int) -> np.ndarray:
+    """(n, d) Latin-hypercube design in parameter units (``scipy.stats.qmc.LatinHypercube``, seeded)."""
+    from scipy.stats import qmc
+
+    if n < 1:
+        raise ValueError(f"a sweep needs n ≥ 1 points, got {n}")
+    unit = qmc.LatinHypercube(d=len(dims), seed=np.random.default_rng(seed)).random(n)
+    return np.column_stack([d.from_unit(unit[:, i]) for i, d in enumerate(dims)])
+
+
+@dataclasses.dataclass
+class SweepResult:
+    """Every point of a sweep and its score.
+
+    Attributes:
+        names: qualified parameter names, (d,).  values: (n, d) parameter values, SI.
+        rmse: (n,) length RMSE, m (NaN where no data or failed).  final_length: (n,) m.
+        status: (n,) codes, see :data:`REASONS`.  wall_s: evaluation time after compilation, s.
+        compile_s: compilation time, s.  n_devices: devices the sweep was split over.
+    """
+
+    names: tuple
+    values: np.ndarray
+    rmse: np.ndarray
+    final_length: np.ndarray
+    status: np.ndarray
+    wall_s: float = float("nan")
+    compile_s: float = float("nan")
+    n_devices: int = 1
+
+    @property
+    def reasons(self) -> list[str]:
+        return [REASONS.get(int(s), f"unknown({int(s)})") for s in self.status]
+
+    @property
+    def failed(self) -> np.ndarray:
+        return self.status != OK
+
+    @property
+    def best_index(self) -> int | None:
+        """Index of the lowest finite RMSE among successful members (None if there is none)."""
+        ok = ~self.failed & np.isfinite(self.rmse)
+        if not np.any(ok):
+            return None
+        return int(np.flatnonzero(ok)[np.argmin(self.rmse[ok])])
+
+    def best(self) -> dict | None:
+        i = self.best_index
+        if i is None:
+            return None
+        return {"index": i, "parameters": dict(zip(self.names, map(float, self.values[i]))),
+                "rmse_length_m": float(self.rmse[i]), "final_length_m": float(self.final_length[i])}
+
+    def write_csv(self, path) -> None:
+        """One row per point: parameters, rmse_length_m, final_length_m, status."""
+        import csv
+
+        with open(path, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow([*self.names, "rmse_length_m", "final_length_m", "status"])
+            for row, r, fl, why in zip(self.values, self.rmse, self.final_length, self.reasons):
+                w.writerow([*(repr(float(v)) for v in row), repr(float(r)), repr(float(fl)), why])
+
+
+def _valid_rows(names, values, base: gp.Parameters) -> np.ndarray:
+    """Rows whose parameter values are finite and pass :func:`growjax.validate`."""
+    ok = np.all(np.isfinite(values), axis=1)
+    for i in np.flatnonzero(ok):
+        try:
+            gp.validate(gp.replace(base, **dict(zip(names, map(float, values[i])))))
+        except ValueError:
+            ok[i] = False
+    return ok
+
+
+def make_member(base: gp.Parameters, names: Sequence[str], inputs, config, measured=None, window=None):
+    """Function θ (d,) → (rmse m, final length m, status) of one member; pure, ``vmap``-able."""
+    names = tuple(names)
+    t_start, t_end = window if window is not None else (config.t0, config.t1)
+
+    def member(theta):
+        p = gp.replace(base, **{n: theta[i] for i, n in enumerate(names)})
+        traj = simulate(p, inputs, config)
+        finite = jnp.isfinite(traj.length)
+        final = traj.length[jnp.maximum(jnp.sum(finite) - 1, 0)]
+        if measured is None:
+            rmse = jnp.nan
+        else:
+            rmse = length_rmse(traj, measured[0], measured[1], t_start, t_end)
+        return rmse, final, traj.status
+
+    return member
+
+
+def _mesh(devices=None) -> Mesh:
+    return Mesh(np.asarray(devices if devices is not None else jax.devices()), ("batch",))
+
+
+def evaluate(
+    values,
+    names: Sequence[str],
+    base: gp.Parameters,
+    inputs,
+    config: Config | QuasiStaticConfig = QUASI_STATIC,
+    measured=None,
+    window=None,
+    chunk_size: int | None = None,
+    devices=None,
+    memory_budget_bytes: float = 2**30,
+    progress: bool = False,
+) -> SweepResult:
+    """Simulate and score every row of ``values`` (n, d) in one compiled, sharded, chunked call.
+
+    ``measured`` = (times s, length m) scores the length RMSE over ``window`` (s, default the
+    simulated window). Rows with invalid parameters are flagged, not simulated. Chunks
+    hold ``chunk_size`` rows (default: as many as ``memory_budget_bytes`` allows), rounded
+    to a multiple of the device count; the last chunk is padded, so one shape compiles once.
+    """
+    values = np.atleast_2d(np.asarray(values, float))
+    names = tuple(gp.resolve_name(base, n) for n in names)
+    if values.shape[1] != len(names):
+        raise ValueError(f"values have {values.shape[1]} columns for {len(names)} names")
+    n = values.shape[0]
+    mesh = _mesh(devices)
+    n_dev = mesh.devices.size
+    valid = _valid_rows(names, values, base)
+    fill = np.array([float(gp.get(base, q)) for q in names])
+    safe = np.where(valid[:, None], values, fill)
+
+    if chunk_size is None:
+        n_save = round((config.t1 - config.t0) / 0.01) + 1
+        per_member = 8 * n_save * 16 * 4  # outputs, states and solver temporaries, with margin
+        chunk_size = max(1, int(memory_budget_bytes // per_member))
+    chunk = min(chunk_size, n)
+    chunk = n_dev * max(1, -(-chunk // n_dev))
+    n_chunks = -(-n // chunk)
+    padded = np.concatenate([safe, np.repeat(safe[-1:], n_chunks * chunk - n, axis=0)])
+
+    member = make_member(base, names, inputs, config, measured, window)
+    sharding = NamedSharding(mesh, PartitionSpec("batch"))
+    batched = jax.jit(jax.vmap(member), in_shardings=sharding, out_shardings=sharding)
+    start = time.perf_counter()
+    compiled = batched.lower(jax.ShapeDtypeStruct((chunk, len(names)), jnp.float64, sharding=sharding)).compile()
+    compile_s = time.perf_counter() - start
+
+    outs = []
+    start = time.perf_counter()
+    chunks = range(n_chunks)
+    if progress and n_chunks > 1:
+        from tqdm import tqdm
+
+        chunks = tqdm(chunks, desc="sweep", unit="chunk", total=n_chunks)
+    for c in chunks:
+        block = jax.device_put(padded[c * chunk:(c + 1) * chunk], sharding)
+        outs.append(jax.device_get(compiled(block)))
+    wall_s = time.perf_counter() - start
+
+    rmse, final, status = (np.concatenate([o[k] for o in outs])[:n] for k in range(3))
+    status = np.where(valid, np.asarray(status, int), INVALID_PARAMETER)
+    rmse = np.where(status == OK, rmse, np.nan)
+    final = np.where(valid, final, np.nan)
+    return SweepResult(names, values, np.asarray(rmse, float), np.asarray(final, float), status, wall_s, compile_s, n_dev)
+
+
+def lhs_sweep(
+    n: int,
+    base: gp.Parameters,
+    inputs,
+    config: Config | QuasiStaticConfig = QUASI_STATIC,
+    dims: Sequence[Dimension] | None = None,
+    seed: int = 0,
+    **kwargs,
+) -> SweepResult:
+    """Latin-hypercube sweep of ``n`` points over ``dims`` (default: the paper's box); kwargs as :func:`evaluate`."""
+    dims = tuple(dims) if dims is not None else paper_box()
+    values = latin_hypercube(dims, n, seed)
+    return evaluate(values, [d.name for d in dims], base, inputs, config, **kwargs)
+
+
+def sobol_indices(
+    dims: Sequence[Dimension],
+    base: gp.Parameters,
+    inputs,
+    config: Config | QuasiStaticConfig = QUASI_STATIC,
+    n_base: int = 256,
+    seed: int = 0,
+    n_bootstrap: int = 1000,
+    **kwargs,
+) -> dict:
+    """First- and total-order Sobol indices of the RMSE and of the final length (SALib, Saltelli design).
+
+    ``n_base`` (a power of 2) base points give n_base·(d + 2) model runs, evaluated as one
+    sweep. Confidence half-widths are 95 % bootstrap intervals. Returns
+    ``{output: {"S1", "S1_conf", "ST", "ST_conf"}}`` (lists ordered as ``dims``) plus the sweep.
+    """
+    from SALib.analyze import sobol as sobol_analyze
+    from SALib.sample import sobol as sobol_sample
+
+    dims = tuple(dims)
+    problem = {"num_vars": len(dims), "names": [d.name for d in dims], "bounds": [[0.0, 1.0]] * len(dims)}
+    unit = sobol_sample.sample(problem, n_base, calc_second_order=False, seed=seed)
+    values = np.column_stack([d.from_unit(unit[:, i]) for i, d in enumerate(dims)])
+    result = evaluate(values, [d.name for d in dims], base, inputs, config, **kwargs)
+    outputs = {"final_length_m": result.final_length}
+    if kwargs.get("measured") is not None:
+        outputs["rmse_length_m"] = result.rmse
+    indices = {}
+    for key, y in outputs.items():
+        if not np.all(np.isfinite(y)):
+            indices[key] = {"error": f"{int(np.sum(~np.isfinite(y)))} failed members; indices not defined"}
+            continue
+        s = sobol_analyze.analyze(problem, y, calc_second_order=False, num_resamples=n_bootstrap, seed=seed)
+        indices[key] = {k: [float(v) for v in s[k]] for k in ("S1", "S1_conf", "ST", "ST_conf")}
+    return {"names": [d.name for d in dims], "indices": indices, "n_runs": int(values.shape[0]), "sweep": result}
