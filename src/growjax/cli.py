@@ -1,4 +1,4 @@
-"""Command line: ``growjax simulate [DATA] ...`` (``growjax --help``)."""
+"""Command line: ``growjax simulate [DATA] ...`` and ``growjax sweep [DATA] ...`` (``growjax --help``)."""
 
 from __future__ import annotations
 
@@ -111,6 +111,78 @@ def simulate_command(args) -> dict:
     return summary
 
 
+def _use_all_cpu_cores():
+    """Expose every CPU core as a JAX device so sweeps shard across them (GROWJAX_CPU_DEVICES overrides)."""
+    import jax
+
+    wanted = os.environ.get("GROWJAX_CPU_DEVICES")
+    n = int(wanted) if wanted else (os.cpu_count() or 1)
+    if "xla_force_host_platform_device_count" in os.environ.get("XLA_FLAGS", ""):
+        return
+    try:
+        jax.config.update("jax_num_cpu_devices", n)
+    except (AttributeError, RuntimeError):
+        pass  # older JAX, or the backend is already initialised
+
+
+def sweep_command(args) -> dict:
+    import jax
+
+    import growjax as gj
+    from growjax import experiment as ex
+    from growjax import sweep as sw
+    from growjax.plotting import sobol_figure, sweep_figure
+
+    data = Path(args.data) if args.data else default_data_path()
+    exp = ex.read(data).window(args.t_end + 1e-9)
+    base = gj.reference("forward")
+    dims = tuple(sw.parse_dimension(p, base) for p in args.param) if args.param else sw.paper_box()
+    if args.fidelity == "quasistatic":
+        config = gj.QuasiStaticConfig(t1=args.t_end)
+    else:
+        config = gj.Config(t1=args.t_end, rtol=1e-4, atol=1e-4)
+    inputs = ex.to_inputs(exp, "forward", base, config.t0, config.t1)
+    measured = (exp.time, exp["robot_length_m"]) if "robot_length_m" in exp else None
+    result = sw.lhs_sweep(args.n, base, inputs, config, dims, seed=args.seed, measured=measured,
+                          chunk_size=args.chunk_size, progress=True)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    result.write_csv(out / "sweep.csv")
+    best = result.best()
+    title = f"{args.n}-set Latin hypercube on {data.name}"
+    if best is not None and measured is not None:
+        title += f": best RMSE {1e3 * best['rmse_length_m']:.2f} mm"
+    fig = sweep_figure(result, out / "sweep.png", title=title)
+    failed = {}
+    for why in result.reasons:
+        if why != "ok":
+            failed[why] = failed.get(why, 0) + 1
+    summary = {
+        "data": str(data),
+        "fidelity": args.fidelity,
+        "t_end_s": args.t_end,
+        "n": args.n,
+        "seed": args.seed,
+        "parameters": [{"name": d.name, "low": d.low, "high": d.high, "log": d.log} for d in dims],
+        "best": best,
+        "n_failed": int(np.sum(result.failed)),
+        "failed_reasons": failed,
+        "wall_s": result.wall_s,
+        "compile_s": result.compile_s,
+        "n_devices": result.n_devices,
+        "device": str(jax.devices()[0].platform),
+        "table_csv": str(out / "sweep.csv"),
+        "figure": str(fig),
+    }
+    if args.sobol:
+        sob = sw.sobol_indices(dims, base, inputs, config, n_base=args.sobol_n, seed=args.seed, measured=measured,
+                               chunk_size=args.chunk_size, progress=True)
+        summary["sobol"] = {"names": sob["names"], "n_runs": sob["n_runs"], "indices": sob["indices"],
+                            "wall_s": sob["sweep"].wall_s}
+        summary["sobol_figure"] = str(sobol_figure(sob, out / "sobol.png", title=f"Sobol indices ({sob['n_runs']} runs)"))
+    return summary
+
+
 def build_parser():
     parser = argparse.ArgumentParser(prog="growjax", description="MAMMOBOT growing-robot simulator")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -122,6 +194,21 @@ def build_parser():
     sim.add_argument("--rtol", type=float, default=1e-6, help="solver tolerance on scaled states")
     sim.add_argument("--out", default="out", help="output folder (trajectory.csv, trajectory.png)")
     sim.add_argument("--json", help="also write the JSON summary to this file")
+
+    swp = sub.add_parser("sweep", help="Latin-hypercube parameter sweep scored against the measured length")
+    swp.add_argument("data", nargs="?", help="experiment CSV or folder (default: shipped synthetic data)")
+    swp.add_argument("--n", type=int, default=500, help="number of parameter sets (default 500)")
+    swp.add_argument("--param", action="append", default=[], metavar="NAME=LOW:HIGH[:log]",
+                     help="swept parameter and range, SI units (repeat); default the paper's n, Y, ext box")
+    swp.add_argument("--seed", type=int, default=0, help="seed of the design (default 0)")
+    swp.add_argument("--t-end", type=float, default=10.0, help="end time, s (default 10)")
+    swp.add_argument("--sobol", action="store_true", help="also compute Sobol indices of RMSE and final length")
+    swp.add_argument("--sobol-n", type=int, default=256, help="Saltelli base points (power of 2; runs = N·(d+2))")
+    swp.add_argument("--fidelity", choices=["quasistatic", "reference"], default="quasistatic",
+                     help="quasi-static reduced model (default, fast) or the reference model (slow)")
+    swp.add_argument("--chunk-size", type=int, default=None, help="sets per compiled call (default: memory-sized)")
+    swp.add_argument("--out", default="out", help="output folder (sweep.csv, sweep.png, sobol.png)")
+    swp.add_argument("--json", help="also write the JSON summary to this file")
     return parser
 
 
@@ -131,7 +218,11 @@ def main(argv=None) -> int:
     from growjax.experiment import ExperimentError
 
     try:
-        summary = simulate_command(args)
+        if args.command == "sweep":
+            _use_all_cpu_cores()
+            summary = sweep_command(args)
+        else:
+            summary = simulate_command(args)
     except (ExperimentError, ValueError) as err:
         print(f"growjax: error: {err}", file=sys.stderr)
         return 2
@@ -140,7 +231,7 @@ def main(argv=None) -> int:
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(text + "\n")
-    return 0 if summary["status"] != "solver_failed" else 1
+    return 0 if summary.get("status") != "solver_failed" else 1
 
 
 if __name__ == "__main__":

@@ -40,3 +40,80 @@ def trajectory_figure(traj, path, measured=None, desired=None, title: str = "", 
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
+
+
+_LABELS = {
+    "robot.yield_pressure": ("Y (kPa)", 1e-3),
+    "robot.extensibility": ("ext φ", 1.0),
+    "robot.growth_exponent": ("n", 1.0),
+}
+
+
+def _axis(name):
+    return _LABELS.get(name, (name, 1.0))
+
+
+def sweep_figure(result, path, title: str = ""):
+    """The paper's Fig. 2: every swept set in 3-D (first three parameters) coloured by length RMSE (mm), best starred.
+
+    With fewer than three parameters, a 2-D scatter (or RMSE against the one parameter).
+    Failed members are drawn as grey crosses.
+    """
+    vals, rmse = np.asarray(result.values), 1e3 * np.asarray(result.rmse)
+    ok = ~np.asarray(result.failed) & np.isfinite(rmse)
+    best = result.best_index
+    d = vals.shape[1]
+    fig = plt.figure(figsize=(7.5, 6), constrained_layout=True)
+    labels = [_axis(n) for n in result.names]
+    cols = [vals[:, i] * labels[i][1] for i in range(d)]
+    if d >= 3:
+        ax = fig.add_subplot(projection="3d")
+        sc = ax.scatter(cols[0][ok], cols[1][ok], cols[2][ok], c=rmse[ok], cmap="viridis", s=12)
+        if np.any(~ok):
+            ax.scatter(cols[0][~ok], cols[1][~ok], cols[2][~ok], c="0.6", marker="x", s=14, label="failed")
+        if best is not None:
+            ax.scatter(cols[0][best], cols[1][best], cols[2][best], c="r", marker="*", s=250, label="best")
+        ax.set_xlabel(labels[0][0])
+        ax.set_ylabel(labels[1][0])
+        ax.set_zlabel(labels[2][0])
+    else:
+        ax = fig.add_subplot()
+        x = cols[0]
+        y = cols[1] if d == 2 else rmse
+        sc = ax.scatter(x[ok], y[ok], c=rmse[ok], cmap="viridis", s=12)
+        if best is not None:
+            ax.scatter(x[best], y[best], c="r", marker="*", s=250, label="best")
+        ax.set_xlabel(labels[0][0])
+        ax.set_ylabel(labels[1][0] if d == 2 else "length RMSE (mm)")
+    fig.colorbar(sc, ax=ax, shrink=0.7, label="length RMSE (mm)")
+    if best is not None:
+        ax.legend(loc="upper left", fontsize=8)
+    if title:
+        ax.set_title(title, fontsize=10)
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def sobol_figure(sobol: dict, path, title: str = ""):
+    """Bar chart of first-order (S1) and total-order (ST) Sobol indices with 95 % bootstrap intervals, per output."""
+    outputs = [k for k, v in sobol["indices"].items() if "S1" in v]
+    names = [_axis(n)[0] for n in sobol["names"]]
+    fig, axes = plt.subplots(1, max(1, len(outputs)), figsize=(5 * max(1, len(outputs)), 4), constrained_layout=True,
+                             squeeze=False)
+    x = np.arange(len(names))
+    for ax, key in zip(axes[0], outputs):
+        s = sobol["indices"][key]
+        ax.bar(x - 0.18, s["S1"], 0.36, yerr=s["S1_conf"], capsize=3, label="first order S1")
+        ax.bar(x + 0.18, s["ST"], 0.36, yerr=s["ST_conf"], capsize=3, label="total order ST")
+        ax.set_xticks(x, names)
+        ax.set_ylim(min(0.0, float(np.min(s["S1"])) - 0.05), 1.1)
+        ax.set_title(key)
+        ax.legend(fontsize=8)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path

@@ -27,6 +27,7 @@ and ``benchmarks/sweep.py`` report the length difference over the sweep box.
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Callable
 
 import jax
@@ -80,16 +81,13 @@ class QuasiStaticConfig:
 
     @property
     def n_saves(self) -> int:
-        return max(1, round((self.t1 - self.t0) / self.save_dt))
+        """Output intervals: every ``save_dt`` from t0, the last one ending at t1."""
+        return max(1, math.ceil((self.t1 - self.t0) / self.save_dt - 1e-9))
 
     def save_grid(self) -> np.ndarray:
-        """Output times, s: ``n_saves`` equal intervals over [t0, t1] (the reference's default grid)."""
-        return np.linspace(self.t0, self.t1, self.n_saves + 1)
-
-    @property
-    def step(self) -> float:
-        """Solver step, s."""
-        return (self.t1 - self.t0) / (self.n_saves * self.substeps)
+        """Output times, s: t0 + k·save_dt, then t1. Pulse edges on a multiple of ``save_dt / substeps`` from t0
+        fall on step boundaries, so no step straddles a discontinuity of the demand."""
+        return np.append(self.t0 + self.save_dt * np.arange(self.n_saves), self.t1)
 
 
 def _extra_force(config, params, t, length, velocity, sensor_pressure):
@@ -232,21 +230,45 @@ def initial_state(params: Parameters, inputs: Inputs, config: QuasiStaticConfig)
     return equalise(params, inputs, config, config.t0, y) / jnp.asarray(SCALES)
 
 
-def _ros2_step(t, ys, h, params, inputs, config):
-    """One ROS2 step with W = I − γ h diag(J_PP, J_xx, 0, …).
+def _solve_unrolled(a, b):
+    """x with a x = b for a small dense (d, d) matrix: Gaussian elimination, unrolled (vectorises under vmap).
 
-    ROS2 is a W-method, order 2 for any W; only the stiff entries are kept: the
-    pressure loop (≈ −400 s⁻¹ through the PID and the pump) and the syringe stop
-    (≈ −4e4 s⁻¹ when it engages). Reverse flow is handled by :func:`equalise`.
+    No pivoting: a = I − γ h J is dominated by its unit diagonal except along the stiff
+    pressure and stop entries, whose diagonal then dominates.
     """
-    field = lambda y: _field(t, y, params, inputs, config)
+    d = b.shape[0]
+    a = [[a[i, j] for j in range(d)] for i in range(d)]
+    b = [b[i] for i in range(d)]
+    for k in range(d):
+        for i in range(k + 1, d):
+            m = a[i][k] / a[k][k]
+            for j in range(k + 1, d):
+                a[i][j] = a[i][j] - m * a[k][j]
+            b[i] = b[i] - m * b[k]
+    x = [None] * d
+    for i in reversed(range(d)):
+        acc = b[i]
+        for j in range(i + 1, d):
+            acc = acc - a[i][j] * x[j]
+        x[i] = acc / a[i][i]
+    return jnp.stack(x)
+
+
+def _ros2_step(t, ys, h, params, inputs, config):
+    """One ROS2 step, W = I − γ h J with the exact Jacobian of the scaled field (L-stable, order 2).
+
+    Reverse flow is handled by :func:`equalise` after the step.
+    """
+    inside = 1e-7 * h  # evaluate the inputs just inside the step, never across an edge at its ends
+    def field(y):
+        return _field(t + inside, y, params, inputs, config)
+
     f0, linear = jax.linearize(field, ys)
-    cols = jax.vmap(linear)(jnp.eye(ys.shape[0])[:2])
-    diag = jnp.zeros_like(ys).at[0].set(cols[0, 0]).at[1].set(cols[1, 1])
-    w = 1.0 - GAMMA * h * jnp.minimum(diag, 0.0)
-    k1 = f0 / w
-    f1 = _field(t + h, ys + h * k1, params, inputs, config)
-    k2 = (f1 - 2.0 * k1) / w
+    jac = jax.vmap(linear, out_axes=1)(jnp.eye(ys.shape[0]))
+    w = jnp.eye(ys.shape[0]) - GAMMA * h * jac
+    k1 = _solve_unrolled(w, f0)
+    f1 = _field(t + h - inside, ys + h * k1, params, inputs, config)
+    k2 = _solve_unrolled(w, f1 - 2.0 * k1)
     scales = jnp.asarray(SCALES)
     y_new = (ys + h * (1.5 * k1 + 0.5 * k2)) * scales
     return equalise(params, inputs, config, t + h, y_new) / scales
@@ -260,8 +282,9 @@ def simulate(params: Parameters, inputs: Inputs, config: QuasiStaticConfig = Qua
     """
     from growjax.model import OK, PRESSURE_LIMIT, SOLVER_FAILED, Trajectory
 
-    ts = jnp.asarray(config.save_grid())
-    h = config.step
+    grid = config.save_grid()
+    ts = jnp.asarray(grid)
+    steps = jnp.asarray(np.diff(grid) / config.substeps)
     scales = jnp.asarray(SCALES)
     limit = pressure_limit(params.robot)
 
@@ -270,15 +293,17 @@ def simulate(params: Parameters, inputs: Inputs, config: QuasiStaticConfig = Qua
         _, (q_robot, p_r, x_p) = _rates(t, y, params, inputs, config)
         return jnp.stack([params.robot.initial_length + y[5], y[0], q_robot, x_p, p_r])
 
-    def interval(ys, t_start):
+    def interval(ys, span):
+        t_start, t_end, h = span
+
         def sub(k, y):
             return _ros2_step(t_start + k * h, y, h, params, inputs, config)
 
         ys = jax.lax.fori_loop(0, config.substeps, sub, ys)
-        return ys, (outputs(t_start + config.substeps * h, ys), ys)
+        return ys, (outputs(t_end, ys), ys)
 
     y0 = initial_state(params, inputs, config)
-    _ys_final, (out, states) = jax.lax.scan(interval, y0, ts[:-1])
+    _ys_final, (out, states) = jax.lax.scan(interval, y0, (ts[:-1], ts[1:], steps))
     out = jnp.concatenate([outputs(ts[0], y0)[None], out])
     states = jnp.concatenate([y0[None], states])
     finite = jnp.all(jnp.isfinite(out), axis=1)

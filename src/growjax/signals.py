@@ -97,7 +97,7 @@ class Inputs(eqx.Module):
 
     catheter_length: eqx.Module
     pressure_demand: eqx.Module = Constant(0.0)
-    steps: eqx.Module = StepSchedule(jnp.zeros(0), jnp.zeros(0))
+    steps: eqx.Module = StepSchedule(np.zeros(0), np.zeros(0))
     desired_length: eqx.Module | None = None
 
     def jump_times(self, t0, t1):

@@ -1,0 +1,134 @@
+"""Batched sweeps: design, equality with single runs, chunking, sharding, failures, Sobol, CLI."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import jax
+import numpy as np
+import pytest
+
+import growjax as gj
+from growjax import experiment as ex
+from growjax import sweep as sw
+from growjax.metrics import length_rmse
+
+CFG = gj.QuasiStaticConfig(t1=2.0)
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def setup(synthetic_experiment):
+    exp = synthetic_experiment
+    base = gj.reference()
+    return base, ex.to_inputs(exp, "forward", base), (exp.time, exp["robot_length_m"])
+
+
+def test_latin_hypercube_is_reproducible_stratified_and_in_the_box():
+    dims = sw.paper_box() + (sw.Dimension("fluid.air_fraction", 1e-4, 1e-2, log=True),)
+    a, b = sw.latin_hypercube(dims, 50, seed=3), sw.latin_hypercube(dims, 50, seed=3)
+    np.testing.assert_array_equal(a, b)
+    assert not np.allclose(a, sw.latin_hypercube(dims, 50, seed=4))
+    for i, d in enumerate(dims):
+        assert np.all((a[:, i] >= d.low) & (a[:, i] <= d.high))
+        u = (np.log(a[:, i] / d.low) / np.log(d.high / d.low)) if d.log else (a[:, i] - d.low) / (d.high - d.low)
+        assert sorted(np.floor(u * 50).astype(int)) == list(range(50))  # one point per stratum
+
+
+def test_dimension_parsing_names_the_problem():
+    base = gj.reference()
+    d = sw.parse_dimension("Y=5000:15000", base)
+    assert (d.name, d.low, d.high, d.log) == ("robot.yield_pressure", 5000.0, 15000.0, False)
+    assert sw.parse_dimension("air_fraction=1e-4:1e-2:log", base).log
+    for bad, msg in [("Y", "NAME=LOW:HIGH"), ("Y=1:x", "not numbers"), ("Y=5:1", "LOW < HIGH"),
+                     ("nope=1:2", "unknown parameter"), ("Y=0:1:log", "LOW > 0")]:
+        with pytest.raises(ValueError, match=msg):
+            sw.parse_dimension(bad, base)
+
+
+def test_sweep_equals_one_at_a_time_and_chunking_changes_nothing(setup):
+    base, inputs, measured = setup
+    values = sw.latin_hypercube(sw.paper_box(), 5, seed=1)
+    names = [d.name for d in sw.paper_box()]
+    whole = sw.evaluate(values, names, base, inputs, CFG, measured=measured)
+    chunked = sw.evaluate(values, names, base, inputs, CFG, measured=measured, chunk_size=2)
+    # Equal to rounding: XLA may vectorise a batch of 2 and of 5 differently.
+    np.testing.assert_allclose(whole.rmse, chunked.rmse, rtol=1e-12)
+    np.testing.assert_allclose(whole.final_length, chunked.final_length, rtol=1e-12)
+    single = jax.jit(lambda p: gj.simulate(p, inputs, CFG))
+    for i in (0, 3):
+        traj = single(gj.replace(base, **dict(zip(names, values[i]))))
+        rmse = float(length_rmse(traj, *measured, CFG.t0, CFG.t1))
+        assert whole.rmse[i] == pytest.approx(rmse, rel=1e-12)
+        assert whole.final_length[i] == pytest.approx(float(traj.length[-1]), rel=1e-12)
+    assert np.all(whole.status == gj.OK)
+    # Lower Y grows the robot further over the same pulses.
+    order = np.argsort(values[:, 1])
+    assert np.all(np.diff(whole.final_length[order]) < 0)
+
+
+def test_failed_members_are_flagged_and_do_not_touch_the_others(setup):
+    base, inputs, measured = setup
+    names = ["Y", "t"]
+    values = np.array([[8000.0, 3.5e-5], [np.nan, 3.5e-5], [-5.0, 3.5e-5], [8000.0, 1e-5], [9000.0, 3.5e-5]])
+    res = sw.evaluate(values, names, base, inputs, CFG, measured=measured)
+    assert res.reasons == ["ok", "invalid_parameter", "invalid_parameter", "pressure_limit", "ok"]
+    assert np.all(np.isnan(res.rmse[1:4]))
+    clean = sw.evaluate(values[[0, 4]], names, base, inputs, CFG, measured=measured)
+    np.testing.assert_allclose(res.rmse[[0, 4]], clean.rmse, rtol=1e-12)
+    assert res.best_index in (0, 4)
+    assert res.best()["rmse_length_m"] == pytest.approx(min(clean.rmse))
+
+
+def test_sobol_indices_find_that_yield_pressure_dominates(setup):
+    base, inputs, measured = setup
+    out = sw.sobol_indices(sw.paper_box(), base, inputs, CFG, n_base=32, seed=0, measured=measured, n_bootstrap=200)
+    s = out["indices"]["final_length_m"]
+    y = out["names"].index("robot.yield_pressure")
+    assert out["n_runs"] == 32 * 5
+    assert s["ST"][y] > 0.9
+    for i in range(3):
+        if i != y:
+            assert s["ST"][i] < 1e-6
+
+
+def test_sharded_sweep_equals_single_device(tmp_path):
+    script = tmp_path / "shard.py"
+    script.write_text(
+        "import json, sys, jax, numpy as np\n"
+        "import growjax as gj\n"
+        "from growjax import experiment as ex, sweep as sw\n"
+        f"exp = ex.read({str(REPO / 'data' / 'synthetic_forward.csv')!r})\n"
+        "base = gj.reference(); inputs = ex.to_inputs(exp, 'forward', base)\n"
+        "cfg = gj.QuasiStaticConfig(t1=1.0)\n"
+        "vals = sw.latin_hypercube(sw.paper_box(), 6, seed=2); names = [d.name for d in sw.paper_box()]\n"
+        "m = (exp.time, exp['robot_length_m'])\n"
+        "a = sw.evaluate(vals, names, base, inputs, cfg, measured=m)\n"
+        "b = sw.evaluate(vals, names, base, inputs, cfg, measured=m, devices=jax.devices()[:1])\n"
+        "print(json.dumps({'n': a.n_devices, 'a': a.rmse.tolist(), 'b': b.rmse.tolist()}))\n"
+    )
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2")
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, env=env, timeout=600, check=False)
+    assert out.returncode == 0, out.stderr[-2000:]
+    res = json.loads(out.stdout.strip().splitlines()[-1])
+    assert res["n"] == 2
+    np.testing.assert_allclose(res["a"], res["b"], rtol=1e-12)
+
+
+def test_sweep_command_writes_table_figures_and_summary(tmp_path):
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "growjax.cli", "sweep", str(REPO / "data" / "synthetic_forward.csv"), "--n", "16",
+           "--t-end", "2", "--seed", "5", "--sobol", "--sobol-n", "8", "--out", str(out), "--json", str(out / "s.json")]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, check=False)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    summary = json.loads((out / "s.json").read_text())
+    assert summary["n_failed"] == 0 and summary["best"]["rmse_length_m"] > 0
+    assert set(summary["best"]["parameters"]) == {"robot.growth_exponent", "robot.yield_pressure", "robot.extensibility"}
+    assert summary["wall_s"] > 0 and summary["compile_s"] > 0
+    rows = (out / "sweep.csv").read_text().splitlines()
+    assert len(rows) == 17 and rows[0].endswith("rmse_length_m,final_length_m,status")
+    assert (out / "sweep.png").stat().st_size > 10_000 and (out / "sobol.png").stat().st_size > 10_000
+    bad = subprocess.run([sys.executable, "-m", "growjax.cli", "sweep", "--param", "Y=9:1"], capture_output=True, text=True, check=False)
+    assert bad.returncode == 2 and "LOW < HIGH" in bad.stderr
