@@ -132,3 +132,17 @@ def test_sweep_command_writes_table_figures_and_summary(tmp_path):
     assert (out / "sweep.png").stat().st_size > 10_000 and (out / "sobol.png").stat().st_size > 10_000
     bad = subprocess.run([sys.executable, "-m", "growjax.cli", "sweep", "--param", "Y=9:1"], capture_output=True, text=True, check=False)
     assert bad.returncode == 2 and "LOW < HIGH" in bad.stderr
+
+
+def test_paper_sweep_finds_the_published_yield_pressure_and_rmse(shared_experiment):
+    exp = shared_experiment
+    base = gj.reference()
+    inputs = ex.to_inputs(exp, "forward", base)
+    res = sw.lhs_sweep(500, base, inputs, gj.QuasiStaticConfig(), seed=0, measured=(exp.time, exp["robot_length_m"]))
+    best = res.best()
+    assert res.failed.sum() == 0
+    assert 7.0e3 < best["parameters"]["robot.yield_pressure"] < 9.0e3  # paper: ≈ 7.9 kPa
+    assert best["rmse_length_m"] < 1.75e-3  # paper: 1.7 mm
+    # RMSE is a function of Y alone: sets with Y within 100 Pa of the best agree to 0.1 mm.
+    near = np.abs(res.values[:, 1] - best["parameters"]["robot.yield_pressure"]) < 100.0
+    assert np.ptp(res.rmse[near]) < 1e-4
