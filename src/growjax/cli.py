@@ -183,6 +183,54 @@ def sweep_command(args) -> dict:
     return summary
 
 
+def fit_command(args) -> dict:
+    import growjax as gj
+    from growjax import experiment as ex
+    from growjax import fit as gf
+    from growjax.plotting import trajectory_figure
+
+    data = Path(args.data) if args.data else default_data_path()
+    exp = ex.read(data).window(args.t_end + 1e-9)
+    if "robot_length_m" not in exp:
+        raise ValueError(f"{data} has no robot_length_m column to fit")
+    base = gj.reference(args.drive)
+    if args.drive == "forward":
+        config = gj.QuasiStaticConfig(t1=args.t_end)
+    else:
+        config = gj.Config(drive="inverse", t1=args.t_end, rtol=1e-5, atol=1e-5, adjoint="forward")
+    inputs = ex.to_inputs(exp, args.drive, base, config.t0, config.t1)
+    pressure = exp["pressure_Pa"] if "pressure_Pa" in exp else None  # noqa: SIM401 (Experiment is not a dict)
+    result = gf.fit(exp.time, exp["robot_length_m"], inputs, free=args.free or ["Y"], base=base, config=config,
+                    pressure=pressure, n_starts=args.starts, seed=args.seed)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    fitted = gj.replace(base, **result.estimate)
+    traj = gj.simulate(fitted, inputs, config)
+    fig = trajectory_figure(traj, out / "fit.png", measured=(exp.time, exp["robot_length_m"]),
+                            title=f"fit of {', '.join(result.names)}: RMSE {1e3 * result.rmse_length_m:.2f} mm")
+    summary = {"data": str(data), "drive": args.drive, "t_end_s": args.t_end, "model": type(config).__name__,
+               **result.summary(), "figure": str(fig)}
+    return summary
+
+
+def posterior_command(args) -> dict:
+    import growjax as gj
+    from growjax import experiment as ex
+    from growjax import posterior as gpost
+
+    data = Path(args.data) if args.data else default_data_path()
+    exp = ex.read(data).window(args.t_end + 1e-9)
+    base = gj.reference("forward")
+    config = gj.QuasiStaticConfig(t1=args.t_end)
+    inputs = ex.to_inputs(exp, "forward", base, config.t0, config.t1)
+    res = gpost.sample(exp.time, exp["robot_length_m"], inputs, base, config, chains=args.chains, warmup=args.warmup,
+                       samples=args.samples, seed=args.seed, progress=True)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    res.idata.to_netcdf(str(out / "posterior.nc"))
+    return {"data": str(data), "t_end_s": args.t_end, **res.summary, "inference_data": str(out / "posterior.nc")}
+
+
 def build_parser():
     parser = argparse.ArgumentParser(prog="growjax", description="MAMMOBOT growing-robot simulator")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -209,6 +257,26 @@ def build_parser():
     swp.add_argument("--chunk-size", type=int, default=None, help="sets per compiled call (default: memory-sized)")
     swp.add_argument("--out", default="out", help="output folder (sweep.csv, sweep.png, sobol.png)")
     swp.add_argument("--json", help="also write the JSON summary to this file")
+
+    fit = sub.add_parser("fit", help="least-squares fit of parameters to the measured length (and pressure)")
+    fit.add_argument("data", nargs="?", help="experiment CSV or folder (default: shipped synthetic data)")
+    fit.add_argument("--drive", choices=["forward", "inverse"], default="forward")
+    fit.add_argument("--t-end", type=float, default=10.0, help="end time, s (default 10)")
+    fit.add_argument("--free", action="append", default=[], metavar="NAME", help="parameter to fit (repeat; default Y)")
+    fit.add_argument("--starts", type=int, default=3, help="multi-start count, from the best LHS sets (default 3)")
+    fit.add_argument("--seed", type=int, default=0)
+    fit.add_argument("--out", default="out", help="output folder (fit.png)")
+    fit.add_argument("--json", help="also write the JSON summary to this file")
+
+    post = sub.add_parser("posterior", help="NUTS posterior of Y, ext, n and the noise scale")
+    post.add_argument("data", nargs="?", help="experiment CSV or folder (default: shipped synthetic data)")
+    post.add_argument("--t-end", type=float, default=10.0, help="end time, s (default 10)")
+    post.add_argument("--chains", type=int, default=4)
+    post.add_argument("--warmup", type=int, default=500)
+    post.add_argument("--samples", type=int, default=500)
+    post.add_argument("--seed", type=int, default=0)
+    post.add_argument("--out", default="out", help="output folder (posterior.nc)")
+    post.add_argument("--json", help="also write the JSON summary to this file")
     return parser
 
 
@@ -221,12 +289,16 @@ def main(argv=None) -> int:
         if args.command == "sweep":
             _use_all_cpu_cores()
             summary = sweep_command(args)
+        elif args.command == "fit":
+            summary = fit_command(args)
+        elif args.command == "posterior":
+            summary = posterior_command(args)
         else:
             summary = simulate_command(args)
     except (ExperimentError, ValueError) as err:
         print(f"growjax: error: {err}", file=sys.stderr)
         return 2
-    text = json.dumps(summary, indent=2)
+    text = json.dumps(summary, indent=2, default=str)
     print(text)
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
