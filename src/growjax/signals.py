@@ -53,7 +53,7 @@ class Sampled(eqx.Module):
     values: jnp.ndarray
 
     def __call__(self, t):
-        ts, vs = self.times, self.values
+        ts, vs = jnp.asarray(self.times), jnp.asarray(self.values)
         i = jnp.clip(jnp.searchsorted(ts, t, side="right") - 1, 0, ts.shape[-1] - 2)
         t_a, t_b = ts[i], ts[i + 1]
         w = (t - t_a) / (t_b - t_a)
@@ -72,8 +72,8 @@ class StepSchedule(eqx.Module):
     def __call__(self, t):
         if self.times.shape[-1] == 0:
             return jnp.zeros_like(t)
-        j = jnp.searchsorted(self.times, t, side="right") - 1
-        return jnp.where(j >= 0, self.counts[jnp.maximum(j, 0)], 0.0)
+        j = jnp.searchsorted(jnp.asarray(self.times), t, side="right") - 1
+        return jnp.where(j >= 0, jnp.asarray(self.counts)[jnp.maximum(j, 0)], 0.0)
 
     def jump_times(self, t0, t1):
         t = np.asarray(self.times)
