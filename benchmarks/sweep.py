@@ -22,22 +22,22 @@ import jax
 
 jax.config.update("jax_num_cpu_devices", int(os.environ.get("GROWJAX_CPU_DEVICES", os.cpu_count() or 1)))
 
-import argparse  # noqa: E402
-import json  # noqa: E402
-import resource  # noqa: E402
-import subprocess  # noqa: E402
-import sys  # noqa: E402
-import tempfile  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
+import argparse
+import json
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
 
-import numpy as np  # noqa: E402
-from scipy.integrate import solve_ivp  # noqa: E402
+import numpy as np
+from scipy.integrate import solve_ivp
 
-import growjax as gj  # noqa: E402
-from growjax import experiment as ex  # noqa: E402
-from growjax import sweep as sw  # noqa: E402
-from growjax.metrics import length_rmse  # noqa: E402
+import growjax as gj
+from growjax import experiment as ex
+from growjax import sweep as sw
+from growjax.metrics import length_rmse
 
 REPO = Path(__file__).resolve().parents[1]
 P_ATM = 101325.0
@@ -76,7 +76,7 @@ def numpy_field(params, demand, catheter):
         return s * s * (3 - 2 * s)
 
     def rhs(t, y):
-        p, x_p, wall, z_i, z_d, xi = y
+        p, x_p, wall, z_i, z_d, _xi = y
         err = demand(t) - p
         u = kp_ * err + ki_ * z_i + kd_ * nf * (err - z_d)
         push = n * a_s * (u - p)
@@ -96,9 +96,9 @@ def numpy_field(params, demand, catheter):
 
 
 def scipy_run(params, inputs, exp, t1):
-    demand = lambda t: float(inputs.pressure_demand(t))  # noqa: E731
+    demand = lambda t: float(inputs.pressure_demand(t))
     tc, lc = np.asarray(exp.time), np.asarray(exp["catheter_length_m"])
-    catheter = lambda t: float(np.interp(t, tc, lc))  # noqa: E731
+    catheter = lambda t: float(np.interp(t, tc, lc))
     y0 = np.asarray(gj.quasistatic.initial_state(params, inputs, gj.QuasiStaticConfig(t1=t1))) * np.asarray(gj.quasistatic.SCALES)
     grid = gj.QuasiStaticConfig(t1=t1).save_grid()
     sol = solve_ivp(numpy_field(params, demand, catheter), (grid[0], grid[-1]), y0, method="LSODA", t_eval=grid,
@@ -161,7 +161,7 @@ def main():
     diffs = []
     for v in values[:n_scipy]:
         p = gj.replace(base, **dict(zip(names, v)))
-        t, length, status = scipy_run(p, inputs, exp, cfg.t1)
+        t, length, _status = scipy_run(p, inputs, exp, cfg.t1)
         fast = gj.simulate(p, inputs, cfg)
         diffs.append(float(np.max(np.abs(length - np.asarray(fast.length))[t > 0.05])))
     scipy_s = (time.perf_counter() - start) * 500 / n_scipy  # includes 4 jitted QS runs (< 0.5 s)

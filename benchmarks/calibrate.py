@@ -1,0 +1,81 @@
+"""Benchmark of calibration on the measured data (issue 4): fit time, NUTS cost, and the fast approximation.
+
+Run: ``python benchmarks/calibrate.py [--out benchmarks/results/calibrate.json] [--t-end 10]
+[--chains 4 --warmup 500 --samples 500]``. By default the NUTS run is short (``--warmup 50 --samples 50``):
+the full 4 × 500 × 500 run on 10 s of data takes hours on a 2-core CPU with the present model. The JSON
+gives its measured wall time, ESS per second and the leapfrog cost, from which the full run follows.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import growjax as gj
+from growjax import experiment as ex
+from growjax import fit as gf
+from growjax import posterior as gpost
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def main():
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "calibrate.json"))
+    parser.add_argument("--t-end", type=float, default=10.0)
+    parser.add_argument("--chains", type=int, default=4)
+    parser.add_argument("--warmup", type=int, default=50)
+    parser.add_argument("--samples", type=int, default=50)
+    args = parser.parse_args()
+    folder = ex.shared_experiment_dir()
+    exp = ex.read(folder / "experiment.csv") if folder else ex.read(REPO / "data" / "synthetic_forward.csv")
+    base = gj.reference()
+    cfg = gj.QuasiStaticConfig(t1=args.t_end)
+    inputs = ex.to_inputs(exp, "forward", base, cfg.t0, cfg.t1)
+    out = {"data": exp.source, "t_end_s": args.t_end, "device": str(jax.devices()[0])}
+
+    start = time.perf_counter()
+    res = gf.fit(exp.time, exp["robot_length_m"], inputs, free=["Y"], base=base, config=cfg)
+    first = time.perf_counter() - start
+    start = time.perf_counter()
+    res = gf.fit(exp.time, exp["robot_length_m"], inputs, free=["Y"], base=base, config=cfg)
+    out["fit"] = {"wall_s_first_call_with_compile": first, "wall_s_compiled": time.perf_counter() - start,
+                  **res.summary()}
+    out["laplace"] = gpost.laplace(res)
+
+    keep = exp.time <= args.t_end
+    t, y = jnp.asarray(exp.time[keep]), jnp.asarray(exp["robot_length_m"][keep])
+
+    def loss(theta):
+        traj = gj.simulate(gj.replace(base, Y=theta[0], ext=theta[1], n=theta[2]), inputs, cfg)
+        return jnp.sum((jnp.interp(t, traj.time, traj.length) - y) ** 2)
+
+    theta = jnp.array([7900.0, 7000.0, 1.0])
+    grad = jax.jit(jax.jacfwd(loss))
+    jax.block_until_ready(grad(theta))
+    start = time.perf_counter()
+    for _ in range(3):
+        jax.block_until_ready(grad(theta))
+    out["gradient_s_forward_mode"] = (time.perf_counter() - start) / 3
+
+    post = gpost.sample(exp.time, exp["robot_length_m"], inputs, base, cfg, chains=args.chains, warmup=args.warmup,
+                        samples=args.samples, progress=True)
+    s = post.summary
+    steps = np.asarray(post.idata.sample_stats["n_steps"]) if "n_steps" in post.idata.sample_stats else None
+    out["nuts"] = {**s, "ess_bulk_per_s": s["ess_bulk_min"] / post.wall_s,
+                   "mean_leapfrog_steps": None if steps is None else float(steps.mean())}
+    iters = args.chains * (args.warmup + args.samples)
+    out["nuts"]["extrapolated_wall_s_4x500x500"] = post.wall_s * (4 * 1000) / iters
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(out, indent=2, default=str) + "\n")
+    print(json.dumps(out, indent=2, default=str))
+
+
+if __name__ == "__main__":
+    main()
