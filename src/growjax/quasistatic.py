@@ -36,6 +36,7 @@ import numpy as np
 
 from growjax import hydraulics as hy
 from growjax.fluid import bulk_modulus
+from growjax.model import _crack_pressure, _extra_force
 from growjax.motor import ideal_torque_drive_force, pid_output
 from growjax.params import Parameters
 from growjax.robot import pressure_limit, robot_pressure
@@ -90,18 +91,6 @@ class QuasiStaticConfig:
         return np.append(self.t0 + self.save_dt * np.arange(self.n_saves), self.t1)
 
 
-def _extra_force(config, params, t, length, velocity, sensor_pressure):
-    total = 0.0
-    for force in config.extra_rod_forces:
-        total = total + force(t, length, velocity, sensor_pressure, params)
-    return total
-
-
-def _crack(params: Parameters):
-    cv = params.check_valve
-    return params.robot.yield_pressure if cv.crack_pressure is None else cv.crack_pressure
-
-
 def robot_flow(params: Parameters, config: QuasiStaticConfig, t, pressure, length, catheter):
     """Forward flow into the robot through the check valve (m³/s) and the robot pressure (Pa), from node pressure P.
 
@@ -117,7 +106,7 @@ def robot_flow(params: Parameters, config: QuasiStaticConfig, t, pressure, lengt
 
     def flow(p_r):
         dp = pressure - p_r
-        return hy.check_valve_flow(cv, params.fluid, dp, pressure - 0.5 * dp, _crack(params), config.crack_width)
+        return hy.check_valve_flow(cv, params.fluid, dp, pressure - 0.5 * dp, _crack_pressure(params), config.crack_width)
 
     p_r = rod(0.0)
     for _ in range(config.rod_iterations):
