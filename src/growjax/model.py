@@ -45,46 +45,58 @@ INVERSE_STATES = ("rotor_angle", "rotor_speed", "current_a", "current_b", "p_tub
 INVERSE_SCALES = (1e-2, 1.0, 1.0, 1.0, 1e5, 1e-7, 1e5, 1e-3)
 
 
-@dataclasses.dataclass(frozen=True)
-class Config:
-    """Static settings of a simulation (hashable: it is a static argument of ``jit``).
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class SimulationSettings:
+    """Settings shared by every assembly of the model (keyword-only; hashable).
 
     Attributes:
-        drive: ``"forward"`` (pressure demand, PID, ideal torque) or ``"inverse"`` (desired length, stepper).
         t0, t1: integration window, s (the shipped model starts at 0.001 s).
-        rtol, atol: step-size control on the scaled states.
-        max_steps: solver step budget.
         stop_at_pressure_limit: stop and flag a run when the sensed pressure crosses the membrane limit.
         velocity_eps: regularisation of |v|^n at v = 0, m/s.
         stop_width: C¹ band of end stops, m (and m/s for their velocity gate).
         crack_width: C¹ band of the check-valve opening, Pa.
         switch_width: band over which the bypass opens as the valve pressure drop turns negative, Pa.
-        flow_width: band of the nozzle's loss-coefficient switch, m³/s.
         extra_rod_forces: callables ``(t, length, velocity, sensor_pressure, params) -> N`` pushing the rod
             outward; the plug-in point for candidate effects (must not increase with velocity).
-        adjoint: ``"reverse"`` (checkpointed, for ``jax.grad``) or ``"forward"`` (for ``jax.jvp``/``jacfwd``).
     """
 
-    drive: str = "forward"
     t0: float = 0.001
     t1: float = 10.0
-    rtol: float = 1e-6
-    atol: float = 1e-6
-    max_steps: int = 200_000
     stop_at_pressure_limit: bool = True
     velocity_eps: float = 1e-6
     stop_width: float = 1e-6
     crack_width: float = 50.0
     switch_width: float = 10.0
-    flow_width: float = 1e-10
     extra_rod_forces: tuple[Callable, ...] = ()
+
+    def __post_init__(self):
+        if not self.t1 > self.t0:
+            raise ValueError(f"t1 ({self.t1} s) must be after t0 ({self.t0} s)")
+
+
+@dataclasses.dataclass(frozen=True)
+class Config(SimulationSettings):
+    """Static settings of the reference simulation (hashable: it is a static argument of ``jit``).
+
+    Attributes (besides :class:`SimulationSettings`):
+        drive: ``"forward"`` (pressure demand, PID, ideal torque) or ``"inverse"`` (desired length, stepper).
+        rtol, atol: step-size control on the scaled states.
+        max_steps: solver step budget.
+        flow_width: band of the nozzle's loss-coefficient switch, m³/s.
+        adjoint: ``"reverse"`` (checkpointed, for ``jax.grad``) or ``"forward"`` (for ``jax.jvp``/``jacfwd``).
+    """
+
+    drive: str = "forward"
+    rtol: float = 1e-6
+    atol: float = 1e-6
+    max_steps: int = 200_000
+    flow_width: float = 1e-10
     adjoint: str = "reverse"
 
     def __post_init__(self):
         if self.drive not in DRIVES:
             raise ValueError(f"drive must be one of {DRIVES}, got {self.drive!r}")
-        if not self.t1 > self.t0:
-            raise ValueError(f"t1 ({self.t1} s) must be after t0 ({self.t0} s)")
+        super().__post_init__()
 
 
 class Network(NamedTuple):

@@ -11,6 +11,14 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 
+def _save(fig, path):
+    """Write ``fig`` to ``path`` (folders created), close it, return the path."""
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
 def trajectory_figure(traj, path, measured=None, desired=None, title: str = "", pressure_limit=None):
     """Two panels: pressure demand and sensed pressure (kPa); simulated (and measured) length (mm).
 
@@ -36,10 +44,7 @@ def trajectory_figure(traj, path, measured=None, desired=None, title: str = "", 
     ax_l.legend(loc="upper left", fontsize=8)
     if title:
         ax_p.set_title(title, fontsize=10)
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
 
 
 _LABELS = {
@@ -90,10 +95,7 @@ def sweep_figure(result, path, title: str = ""):
         ax.legend(loc="upper left", fontsize=8)
     if title:
         ax.set_title(title, fontsize=10)
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
 
 
 def sobol_figure(sobol: dict, path, title: str = ""):
@@ -113,7 +115,4 @@ def sobol_figure(sobol: dict, path, title: str = ""):
         ax.legend(fontsize=8)
     if title:
         fig.suptitle(title, fontsize=10)
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return _save(fig, path)

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable
 
 import jax
 import jax.numpy as jnp
@@ -36,7 +35,7 @@ import numpy as np
 
 from growjax import hydraulics as hy
 from growjax.fluid import bulk_modulus
-from growjax.model import _crack_pressure, _extra_force
+from growjax.model import SimulationSettings, _crack_pressure, _extra_force
 from growjax.motor import ideal_torque_drive_force, pid_output
 from growjax.params import Parameters
 from growjax.robot import pressure_limit, robot_pressure
@@ -48,35 +47,23 @@ GAMMA = 1.0 + 1.0 / np.sqrt(2.0)  # ROS2 (Verwer et al. 1999)
 
 
 @dataclasses.dataclass(frozen=True)
-class QuasiStaticConfig:
+class QuasiStaticConfig(SimulationSettings):
     """Static settings of the quasi-static forward model (hashable).
 
-    Attributes:
-        t0, t1: window, s.  save_dt: output spacing, s (the reference's 10 ms grid).
+    Attributes (besides :class:`growjax.model.SimulationSettings`; the pressure limit flags the run and
+    NaNs the samples after the crossing, as in the reference):
+        save_dt: output spacing, s (the reference's 10 ms grid).
         substeps: fixed solver steps per output interval (step = save_dt / substeps).
-        stop_at_pressure_limit: flag runs whose sensed pressure crosses the membrane limit
-            (samples after the crossing become NaN, as in the reference).
-        velocity_eps, stop_width, crack_width, switch_width: smoothing widths, as in :class:`growjax.Config`.
-        extra_rod_forces: candidate effects, as in :class:`growjax.Config`.
         rod_iterations: fixed-point passes of the rod balance.
     """
 
-    t0: float = 0.001
-    t1: float = 10.0
     save_dt: float = 0.01
     substeps: int = 10
-    stop_at_pressure_limit: bool = True
-    velocity_eps: float = 1e-6
-    stop_width: float = 1e-6
-    crack_width: float = 50.0
-    switch_width: float = 10.0
-    extra_rod_forces: tuple[Callable, ...] = ()
     rod_iterations: int = 1
     drive: str = dataclasses.field(default="forward", init=False)
 
     def __post_init__(self):
-        if not self.t1 > self.t0:
-            raise ValueError(f"t1 ({self.t1} s) must be after t0 ({self.t0} s)")
+        super().__post_init__()
         if self.substeps < 1 or self.save_dt <= 0:
             raise ValueError("substeps must be ≥ 1 and save_dt > 0")
 
