@@ -12,8 +12,8 @@ _CACHE = os.environ.setdefault("GROWJAX_CACHE_DIR", str(Path(__file__).resolve()
 jax.config.update("jax_compilation_cache_dir", _CACHE)
 jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
 
-import growjax as gj  # noqa: E402
-from growjax import experiment as ex  # noqa: E402
+import growjax as gj
+from growjax import experiment as ex
 
 REPO = Path(__file__).resolve().parents[1]
 

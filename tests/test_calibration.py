@@ -64,3 +64,29 @@ def test_nuts_on_the_test_problem_is_converged_and_covers_the_truth():
     lo_b, hi_b = gpost.predictive_band(draws)
     assert np.all(hi_b[-10:] > lo_b[-10:])
     assert np.median(draws[:, -1]) < np.median(length[-5:])
+
+
+def test_simulation_based_calibration_of_nuts_covers_at_the_nominal_rate():
+    from scipy import stats
+
+    from growjax import emulator as em
+
+    cfg, inputs, times, _ = _synthetic(0.8, seed=14)
+    emu = em.build([em.Axis("Y", 5e3, 15e3, 41)], gj.reference(), inputs, cfg, times)
+    res = gpost.sbc(emu, gpost.paper_priors()[:1], replicates=100, warmup=150, samples=150, seed=0)
+    assert res["divergences"] == 0
+    for site in ("Y", "sigma"):
+        assert 0.8 <= res["coverage"][site] <= 0.97, (site, res["coverage"][site])
+        hist = np.histogram(res["ranks"][site], bins=5, range=(0, res["draws"] + 1))[0]
+        assert stats.chisquare(hist).pvalue > 1e-3, (site, hist)  # ranks of the truth are uniform
+
+
+@pytest.mark.slow
+def test_emulated_and_direct_posteriors_agree_on_the_test_problem():
+    cfg, inputs, times, length = _synthetic(0.8, seed=13)
+    priors = gpost.paper_priors()[:1]
+    kw = {"config": cfg, "priors": priors, "chains": 2, "warmup": 150, "samples": 150, "seed": 3, "progress": False}
+    emulated = gpost.sample(times, length, inputs, **kw).summary["parameters"]["Y"]
+    direct = gpost.sample(times, length, inputs, emulate=False, **kw).summary["parameters"]["Y"]
+    assert emulated["mean"] == pytest.approx(direct["mean"], abs=0.3 * direct["sd"])
+    assert emulated["sd"] == pytest.approx(direct["sd"], rel=0.2)

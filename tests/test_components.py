@@ -41,7 +41,7 @@ def test_check_valve_blocks_reverse_flow_unless_bypass_opens():
     p = gj.reference()
     fl, cv, dv = p.fluid, p.check_valve, p.valve
     y = p.robot.yield_pressure
-    args = dict(crack_pressure=y, crack_width=50.0)
+    args = {"crack_pressure": y, "crack_width": 50.0}
     reverse = hy.check_valve_flow(cv, fl, -50e3, 50e3, **args)
     assert -1e-10 < float(reverse) < 0  # only the 1e-12 m² leak
     through_network = hy.valve_network_flow(cv, dv, fl, -50e3, 50e3, y, 50.0, 10.0)

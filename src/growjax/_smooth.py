@@ -68,3 +68,30 @@ def bracketed_root(
 
     x0 = 0.5 * (lower + upper)
     return jax.lax.custom_root(residual, x0, solve, tangent_solve)
+
+
+def unrolled_root(residual: Callable, lower, upper, *, iterations: int = 12):
+    """Root of a scalar, monotonically decreasing ``residual`` on ``[lower, upper]``, in a fixed number of steps.
+
+    Like :func:`bracketed_root` (Newton inside a shrinking bracket, bisection otherwise,
+    implicit differentiation), but with ``iterations`` steps unrolled: no data-dependent
+    loop, so under ``vmap`` and inside a fixed-step scan it fuses into straight-line code.
+    Use it where the residual is well conditioned enough to converge in that many steps.
+    """
+
+    def solve(f, x0):
+        lo, hi = jnp.minimum(lower, upper), jnp.maximum(lower, upper)
+        x = x0
+        for _ in range(iterations):
+            fx, dfx = jax.jvp(f, (x,), (jnp.ones_like(x),))
+            lo = jnp.where(fx > 0, x, lo)
+            hi = jnp.where(fx > 0, hi, x)
+            newton = x - fx / jnp.where(dfx < 0, dfx, -1.0)
+            ok = (dfx < 0) & (newton > lo) & (newton < hi)
+            x = jnp.where(fx == 0, x, jnp.where(ok, newton, 0.5 * (lo + hi)))
+        return x
+
+    def tangent_solve(g, y):
+        return y / g(jnp.ones_like(y))
+
+    return jax.lax.custom_root(residual, 0.5 * (lower + upper), solve, tangent_solve)

@@ -220,15 +220,18 @@ def posterior_command(args) -> dict:
 
     data = Path(args.data) if args.data else default_data_path()
     exp = ex.read(data).window(args.t_end + 1e-9)
-    base = gj.reference("forward")
+    base = gj.reference("forward", growth_law=args.law)
     config = gj.QuasiStaticConfig(t1=args.t_end)
     inputs = ex.to_inputs(exp, "forward", base, config.t0, config.t1)
-    res = gpost.sample(exp.time, exp["robot_length_m"], inputs, base, config, chains=args.chains, warmup=args.warmup,
-                       samples=args.samples, seed=args.seed, progress=True)
+    priors = gpost.paper_priors() if args.law == "reference" else gpost.lockhart_priors()
+    res = gpost.sample(exp.time, exp["robot_length_m"], inputs, base, config, priors=priors, chains=args.chains,
+                       warmup=args.warmup, samples=args.samples, seed=args.seed, progress=True,
+                       emulate=not args.direct)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     res.idata.to_netcdf(str(out / "posterior.nc"))
-    return {"data": str(data), "t_end_s": args.t_end, **res.summary, "inference_data": str(out / "posterior.nc")}
+    return {"data": str(data), "t_end_s": args.t_end, "growth_law": args.law, **res.summary,
+            "inference_data": str(out / "posterior.nc")}
 
 
 def build_parser():
@@ -268,9 +271,13 @@ def build_parser():
     fit.add_argument("--out", default="out", help="output folder (fit.png)")
     fit.add_argument("--json", help="also write the JSON summary to this file")
 
-    post = sub.add_parser("posterior", help="NUTS posterior of Y, ext, n and the noise scale")
+    post = sub.add_parser("posterior", help="NUTS posterior of Y, ext, n (or Y, phi_L, n_L) and the noise scale")
     post.add_argument("data", nargs="?", help="experiment CSV or folder (default: shipped synthetic data)")
     post.add_argument("--t-end", type=float, default=10.0, help="end time, s (default 10)")
+    post.add_argument("--law", choices=["reference", "lockhart"], default="reference",
+                      help="growth law: the published velocity term (default) or Lockhart's")
+    post.add_argument("--direct", action="store_true",
+                      help="run the model in every gradient instead of the validated emulator (slow)")
     post.add_argument("--chains", type=int, default=4)
     post.add_argument("--warmup", type=int, default=500)
     post.add_argument("--samples", type=int, default=500)

@@ -13,6 +13,7 @@ import dataclasses
 import time
 from collections.abc import Sequence
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -73,27 +74,79 @@ class FitResult:
         }
 
 
-def make_residuals(base, names, refs, inputs, config, times, length, pressure=None, window=None,
-                   sigma_length=1e-3, sigma_pressure=5e3):
-    """r(z) (non-dimensional, shape (m,)) for log coordinates z of the parameters ``names``."""
-    names = tuple(names)
-    refs = jnp.asarray(refs, float)
-    t0, t1 = window if window is not None else (config.t0, config.t1)
-    keep = (np.asarray(times) >= t0) & (np.asarray(times) <= t1)
-    times = jnp.asarray(np.asarray(times)[keep])
-    length = jnp.asarray(np.asarray(length)[keep])
-    pressure = None if pressure is None else jnp.asarray(np.asarray(pressure)[keep])
+class Problem(eqx.Module):
+    """A least-squares problem as data: the model, its inputs and the (windowed) measurements.
 
-    def residuals(z, args=None):
-        theta = refs * jnp.exp(z)
-        p = gp.replace(base, **{n: theta[i] for i, n in enumerate(names)})
-        traj = simulate(p, inputs, config)
-        r = (jnp.interp(times, traj.time, traj.length) - length) / sigma_length
-        if pressure is not None:
-            r = jnp.concatenate([r, (jnp.interp(times, traj.time, traj.pressure) - pressure) / sigma_pressure])
+    Arrays are leaves, so one compiled program serves every call with the same shapes.
+    """
+
+    base: gp.Parameters
+    inputs: object
+    refs: jax.Array  # (p,) reference values of the free parameters, SI
+    times: jax.Array  # (m,) s
+    length: jax.Array  # (m,) m
+    pressure: jax.Array | None  # (m,) Pa or None
+    names: tuple = eqx.field(static=True)
+    config: object = eqx.field(static=True)
+    sigma_length: float = eqx.field(static=True, default=1e-3)
+    sigma_pressure: float = eqx.field(static=True, default=5e3)
+
+    def residuals(self, z, args=None):
+        """Non-dimensional residuals r(z), shape (m,) or (2m,), for log coordinates z = ln(θ/θ_ref)."""
+        return _residuals(z, self)
+
+    def _residuals(self, z):
+        theta = self.refs * jnp.exp(z)
+        p = gp.replace(self.base, **{n: theta[i] for i, n in enumerate(self.names)})
+        traj = simulate(p, self.inputs, self.config)
+        r = (jnp.interp(self.times, traj.time, traj.length) - self.length) / self.sigma_length
+        if self.pressure is not None:
+            r = jnp.concatenate([r, (jnp.interp(self.times, traj.time, traj.pressure) - self.pressure) / self.sigma_pressure])
         return jnp.where(jnp.isfinite(r), r, 1e3)  # a failed run is a very bad fit, not a crash
 
-    return residuals
+
+@eqx.filter_jit
+def _residuals(z, problem: Problem):
+    # A jitted leaf: the solver's traces (step, Jacobian, vmap) reuse one traced simulation.
+    return problem._residuals(z)
+
+
+def make_problem(base, names, inputs, config, times, length, pressure=None, window=None,
+                 sigma_length=1e-3, sigma_pressure=5e3) -> Problem:
+    """The :class:`Problem` for the parameters ``names`` on the data inside ``window`` (default: the config's)."""
+    names = tuple(gp.resolve_name(base, n) for n in names)
+    refs = jnp.asarray([float(gp.get(base, n)) for n in names])
+    t0, t1 = window if window is not None else (config.t0, config.t1)
+    keep = (np.asarray(times) >= t0) & (np.asarray(times) <= t1)
+    pick = (lambda a: None if a is None else jnp.asarray(np.asarray(a)[keep]))
+    return Problem(base, inputs, refs, pick(times), pick(length), pick(pressure), names, config,
+                   sigma_length, sigma_pressure)
+
+
+def make_residuals(base, names, refs, inputs, config, times, length, pressure=None, window=None,
+                   sigma_length=1e-3, sigma_pressure=5e3):
+    """r(z) (non-dimensional) for log coordinates z of ``names`` about ``refs`` (a closure over :class:`Problem`)."""
+    prob = make_problem(base, names, inputs, config, times, length, pressure, window, sigma_length, sigma_pressure)
+    return dataclasses.replace(prob, refs=jnp.asarray(refs, float)).residuals
+
+
+@eqx.filter_jit
+def _solve_starts(z0s, problem: Problem, max_steps: int, rtol: float):
+    """Levenberg–Marquardt from every start at once (vmapped): (z (k, p), cost (k,), converged (k,))."""
+    solver = optx.LevenbergMarquardt(rtol=rtol, atol=rtol)
+
+    def one(z0):
+        sol = optx.least_squares(problem.residuals, solver, z0, max_steps=max_steps, throw=False)
+        r = problem.residuals(sol.value)
+        return sol.value, 0.5 * jnp.sum(r**2), sol.result == optx.RESULTS.successful
+
+    return jax.vmap(one)(z0s)
+
+
+@eqx.filter_jit
+def _jacobian(z, problem: Problem):
+    """Residuals (m,) and their forward-mode Jacobian (m, p) at z."""
+    return problem.residuals(z), jax.jacfwd(problem.residuals)(z)
 
 
 def fit(
@@ -132,28 +185,19 @@ def fit(
     if not order:
         raise RuntimeError("no start of the multi-start sweep simulated successfully")
 
-    residuals = make_residuals(base, names, refs, inputs, config, times, length, pressure, window,
-                               sigma_length, sigma_pressure)
-    solver = optx.LevenbergMarquardt(rtol=1e-8, atol=1e-8)
+    problem = make_problem(base, names, inputs, config, times, length, pressure, window,
+                           sigma_length, sigma_pressure)
+    z0s = jnp.log(jnp.asarray(scout.values[order]) / refs)
+    zs, costs, oks = _solve_starts(z0s, problem, max_steps, 1e-8)
+    zs, costs, oks = np.asarray(zs), np.asarray(costs), np.asarray(oks)
+    starts = [{"start": dict(zip(names, map(float, scout.values[i]))),
+               "estimate": dict(zip(names, map(float, refs * np.exp(zs[k])))),
+               "cost": float(costs[k]), "converged": bool(oks[k])} for k, i in enumerate(order)]
+    k_best = int(np.argmin(costs))
+    z = jnp.asarray(zs[k_best])
+    best = starts[k_best]
 
-    @jax.jit
-    def solve(z0):
-        sol = optx.least_squares(residuals, solver, z0, max_steps=max_steps, throw=False)
-        r = residuals(sol.value)
-        return sol.value, 0.5 * jnp.sum(r**2), sol.result == optx.RESULTS.successful
-
-    starts = []
-    for i in order:
-        z0 = jnp.log(jnp.asarray(scout.values[i]) / refs)
-        z, cost, ok = solve(z0)
-        starts.append({"start": dict(zip(names, map(float, scout.values[i]))),
-                       "estimate": dict(zip(names, map(float, refs * np.exp(np.asarray(z))))),
-                       "cost": float(cost), "converged": bool(ok), "z": np.asarray(z)})
-    best = min(starts, key=lambda s: s["cost"])
-    z = jnp.asarray(best["z"])
-
-    jac = np.asarray(jax.jacfwd(residuals)(z))
-    r = np.asarray(residuals(z))
+    r, jac = (np.asarray(a) for a in _jacobian(z, problem))
     m, p = jac.shape
     dof = max(m - p, 1)
     s2 = float(np.sum(r**2) / dof)
@@ -177,8 +221,6 @@ def fit(
     n_len = int(np.sum((np.asarray(times) >= (window or (config.t0, config.t1))[0])
                        & (np.asarray(times) <= (window or (config.t0, config.t1))[1])))
     rmse = float(np.sqrt(np.mean((r[:n_len] * sigma_length) ** 2)))
-    for s in starts:
-        s.pop("z")
     return FitResult(
         names=names, estimate=dict(zip(names, map(float, theta))), interval_90=interval, standard_error=se,
         rmse_length_m=rmse, cost=float(best["cost"]), covariance_log=cov, eigenvalues=evals, eigenvectors=evecs,

@@ -51,6 +51,8 @@ ALIASES = {
     "ext": "robot.extensibility",
     "phi": "robot.extensibility",
     "n": "robot.growth_exponent",
+    "phi_L": "robot.lockhart_rate",
+    "n_L": "robot.lockhart_exponent",
     "ri": "robot.inner_radius",
     "ro": "robot.outer_radius",
     "t": "robot.membrane_thickness",
@@ -65,8 +67,11 @@ ALIASES = {
 }
 
 
-def reference(drive: str = "forward") -> Parameters:
-    """The shipped Simscape model's parameters for the ``forward`` (ideal torque) or ``inverse`` (stepper) drive."""
+def reference(drive: str = "forward", growth_law: str = "reference") -> Parameters:
+    """The shipped Simscape model's parameters for the ``forward`` (ideal torque) or ``inverse`` (stepper) drive.
+
+    ``growth_law="lockhart"`` swaps the published velocity term for Lockhart's law (see :mod:`growjax.robot`).
+    """
     if drive not in DRIVES:
         raise ValueError(f"drive must be one of {DRIVES}, got {drive!r}")
     tube_length = 0.3 if drive == "forward" else 0.1
@@ -84,7 +89,7 @@ def reference(drive: str = "forward") -> Parameters:
         nozzle=Nozzle(),
         check_valve=CheckValve(),
         valve=DirectionalValve(),
-        robot=GrowingRobot(stroke=stroke, hard_stop_bound=stroke),
+        robot=GrowingRobot(stroke=stroke, hard_stop_bound=stroke, growth_law=growth_law),
         pid=PID(),
         motor=StepperMotor(),
     )
@@ -151,6 +156,8 @@ _RANGES = {
     "robot.yield_pressure": (0.0, 1e6, "Pa"),
     "robot.extensibility": (1e-12, math.inf, "(m/s)·Pa^(-1/n)"),
     "robot.growth_exponent": (0.05, 5.0, "-"),
+    "robot.lockhart_rate": (1e-12, 10.0, "m/s"),
+    "robot.lockhart_exponent": (0.05, 5.0, "-"),
     "robot.inner_radius": (0.0, 0.05, "m"),
     "robot.outer_radius": (1e-5, 0.05, "m"),
     "robot.membrane_thickness": (1e-7, 1e-2, "m"),

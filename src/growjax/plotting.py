@@ -116,3 +116,30 @@ def sobol_figure(sobol: dict, path, title: str = ""):
     if title:
         fig.suptitle(title, fontsize=10)
     return _save(fig, path)
+
+
+def predictive_figure(times, observed, bands: dict, path, title: str = ""):
+    """Measured length with posterior predictive 90 % bands, one per model ({label: (lower, upper, median)}, m)."""
+    fig, ax = plt.subplots(figsize=(8, 3.8), constrained_layout=True)
+    for k, (label, (lo, hi, med)) in enumerate(bands.items()):
+        ax.fill_between(times, 1e3 * np.asarray(lo), 1e3 * np.asarray(hi), color=f"C{k}", alpha=0.25,
+                        label=f"{label}: 90 % band")
+        ax.plot(times, 1e3 * np.asarray(med), color=f"C{k}", lw=1.2)
+    ax.plot(times, 1e3 * np.asarray(observed), "k.", ms=1.5, label="measured")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("robot length (mm)")
+    ax.legend(loc="upper left", fontsize=8)
+    if title:
+        ax.set_title(title, fontsize=10)
+    return _save(fig, path)
+
+
+def posterior_figures(idata, sites, folder, prefix: str = ""):
+    """ArviZ trace (rank bars) and pair plots of ``sites`` → (trace path, pair path)."""
+    import arviz as az
+
+    az.plot_trace(idata, var_names=list(sites), kind="rank_bars")
+    trace = _save(plt.gcf(), Path(folder) / f"{prefix}trace.png")
+    az.plot_pair(idata, var_names=list(sites), kind="kde", marginals=True, figsize=(8, 8), textsize=9)
+    pair = _save(plt.gcf(), Path(folder) / f"{prefix}pair.png")
+    return trace, pair

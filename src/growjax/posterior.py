@@ -15,6 +15,7 @@ density, rejected by NUTS), never an exception.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 from collections.abc import Sequence
 
@@ -23,7 +24,9 @@ import jax.numpy as jnp
 import numpy as np
 import numpyro
 import numpyro.distributions as dist
+import optimistix as optx
 
+from growjax import emulator as em
 from growjax import params as gp
 from growjax.model import Config, simulate
 from growjax.quasistatic import QuasiStaticConfig
@@ -31,20 +34,51 @@ from growjax.quasistatic import QuasiStaticConfig
 
 @dataclasses.dataclass(frozen=True)
 class Prior:
-    """Uniform prior of one parameter (qualified name, SI bounds) and its site name in the NumPyro model."""
+    """Prior of one parameter: site name in the NumPyro model, qualified name, SI bounds.
+
+    Uniform on [low, high], or log-uniform when ``log``. ``nodes`` is the emulator's node
+    count along this parameter (see :mod:`growjax.emulator`).
+    """
 
     site: str
     name: str
     low: float
     high: float
+    log: bool = False
+    nodes: int = 33
+
+    def distribution(self):
+        return dist.LogUniform(self.low, self.high) if self.log else dist.Uniform(self.low, self.high)
+
+    def axis(self) -> em.Axis:
+        return em.Axis(self.name, self.low, self.high, self.nodes, self.log)
 
 
 def paper_priors() -> tuple[Prior, ...]:
-    """Uniform priors over the paper's investigation box."""
+    """Uniform priors over the paper's investigation box (reference growth law).
+
+    Emulator nodes: 101 along Y; 3 along ext and n, whose effect is ~1e-10 (validated, not assumed).
+    """
     return (
-        Prior("Y", "robot.yield_pressure", 5e3, 15e3),
-        Prior("ext", "robot.extensibility", 4000.0, 10000.0),
-        Prior("n", "robot.growth_exponent", 0.9, 1.1),
+        Prior("Y", "robot.yield_pressure", 5e3, 15e3, nodes=101),
+        Prior("ext", "robot.extensibility", 4000.0, 10000.0, nodes=3),
+        Prior("n", "robot.growth_exponent", 0.9, 1.1, nodes=3),
+    )
+
+
+def lockhart_priors() -> tuple[Prior, ...]:
+    """Priors of the Lockhart growth law (:mod:`growjax.robot`): Y on the paper's box, φ_L and n_L log-uniform.
+
+    φ_L, the growth speed 1 kPa above the rest pressure, spans 0.1–10 mm/s: from a robot
+    that barely moves within the experiment to one whose speed the check valve alone sets.
+    n_L spans 0.25–2, from a nearly rate-capped membrane to a stiffening one (Lockhart's plant
+    cells have n ≈ 1); below 0.25 the quasi-static rod balance needs more than its 16 Newton
+    steps. Emulator nodes: 21 × 25 × 15 (log-spaced in φ_L and n_L).
+    """
+    return (
+        Prior("Y", "robot.yield_pressure", 5e3, 15e3, nodes=21),
+        Prior("phi_L", "robot.lockhart_rate", 1e-4, 1e-2, log=True, nodes=25),
+        Prior("n_L", "robot.lockhart_exponent", 0.25, 2.0, log=True, nodes=15),
     )
 
 
@@ -56,15 +90,39 @@ def predicted_length(theta: dict, base, inputs, config, times):
     return jnp.where(ok, jnp.interp(times, traj.time, traj.length), jnp.nan)
 
 
-def growth_model(times, length=None, *, base, inputs, config, priors: Sequence[Prior], noise_scale=1e-3):
-    """NumPyro model: priors → simulated length → Normal likelihood of the measured length (m)."""
-    theta = {p.name: numpyro.sample(p.site, dist.Uniform(p.low, p.high)) for p in priors}
+def growth_model(length=None, *, mean_length, priors: Sequence[Prior], noise_scale=1e-3, model_error=0.0):
+    """NumPyro model of the measured length (m)::
+
+        θ_j ~ prior_j,   σ ~ HalfNormal(noise_scale),   L_i ~ Normal(L_model(t_i; θ), √(σ² + e²))
+
+    ``mean_length(theta)`` is the model (or its emulator) at the measured times; ``e`` (m) is the
+    emulator's RMS error (0 for the model itself). A failed solve has zero likelihood.
+    """
+    theta = {p.name: numpyro.sample(p.site, p.distribution()) for p in priors}
     sigma = numpyro.sample("sigma", dist.HalfNormal(noise_scale))
-    mu = predicted_length(theta, base, inputs, config, times)
+    mu = mean_length(theta)
     ok = jnp.all(jnp.isfinite(mu))
     numpyro.factor("solver_ok", jnp.where(ok, 0.0, -jnp.inf))
     numpyro.deterministic("length_model", mu)
-    numpyro.sample("length", dist.Normal(jnp.where(jnp.isfinite(mu), mu, 0.0), sigma), obs=length)
+    scale = jnp.sqrt(sigma**2 + model_error**2)
+    numpyro.sample("length", dist.Normal(jnp.where(jnp.isfinite(mu), mu, 0.0), scale), obs=length)
+
+
+def direct_mean(base, inputs, config, times):
+    """``mean_length`` that runs the model: θ {name: value} → length (m) at ``times``."""
+    times = jnp.asarray(times)
+    return lambda theta: predicted_length(theta, base, inputs, config, times)
+
+
+def emulated_mean(emulator: em.Emulator):
+    """``mean_length`` from an emulator (θ {name: value} → length at the emulator's times)."""
+    return lambda theta: emulator(jnp.stack([jnp.asarray(theta[n], float) for n in emulator.names]))
+
+
+def build_emulator(priors: Sequence[Prior], base, inputs, config, times, seed: int = 0) -> em.Emulator:
+    """Emulator over the prior box, validated at 64 seeded points."""
+    emu = em.build([p.axis() for p in priors], base, inputs, config, times)
+    return em.validate(emu, 64, seed)
 
 
 @dataclasses.dataclass
@@ -97,13 +155,19 @@ def sample(
     target_accept: float = 0.9,
     window=None,
     progress: bool = True,
+    emulate: bool | em.Emulator = True,
 ) -> PosteriorResult:
     """NUTS over the priors and σ given a measured length (m) at ``times`` (s); chains vectorised.
 
-    Returns InferenceData with posterior, posterior predictive of the length, observed
-    data and sample stats, and a summary: per-parameter mean and 90 % interval,
-    ``rhat_max``, ``ess_bulk_min``, ``ess_tail_min``, ``divergences``, ``bfmi_min``,
-    ``coverage_90`` (share of measured points inside the 90 % predictive band).
+    ``emulate``: True (default) samples through an :class:`~growjax.emulator.Emulator` of the
+    model built over the prior box (its validated RMS error joins the noise); an
+    ``Emulator`` is used as given; False runs the model in every gradient (forward mode).
+
+    Returns InferenceData with posterior, pointwise log-likelihood (for LOO), posterior
+    predictive of the length, observed data and sample stats, and a summary: per-parameter
+    mean and 90 % interval, ``rhat_max``, ``ess_bulk_min``, ``ess_tail_min``,
+    ``divergences``, ``bfmi_min``, ``coverage_90`` (share of measured points inside the 90 %
+    predictive band), ``emulator`` (its error and build time) and ``wall_s`` (everything).
     """
     import arviz as az
     from numpyro.infer import MCMC, NUTS, Predictive
@@ -112,65 +176,78 @@ def sample(
     config = config if config is not None else QuasiStaticConfig()
     priors = tuple(priors) if priors is not None else paper_priors()
     t, y = _window(times, length, config, window)
-    kwargs = {"base": base, "inputs": inputs, "config": config, "priors": priors}
+    start = time.perf_counter()
+    emu_info = None
+    if emulate is False:
+        mean, model_error = direct_mean(base, inputs, config, t), 0.0
+    else:
+        emu = emulate if isinstance(emulate, em.Emulator) else build_emulator(priors, base, inputs, config, t, seed)
+        if emu.times.shape != t.shape or not np.allclose(np.asarray(emu.times), t):
+            raise ValueError("the emulator was built for other measurement times than these data")
+        mean, model_error = emulated_mean(emu), float(emu.error_rms)
+        emu_info = {"error_rms_m": float(emu.error_rms), "error_max_m": float(emu.error_max),
+                    "nodes": dict(zip(emu.names, emu.nodes)), "build_s": time.perf_counter() - start}
+    model = functools.partial(growth_model, mean_length=mean, priors=priors, model_error=model_error)
 
-    def model(times, length=None):
-        growth_model(times, length, **kwargs)
-
-    init_values, inverse_mass = precondition(model, priors, base, inputs, config, t, y, seed)
+    init_values, inverse_mass = precondition(model, priors, mean, y, seed, optimise=emulate is not False)
     kernel = NUTS(model, dense_mass=dense_mass, target_accept_prob=target_accept,
                   inverse_mass_matrix=inverse_mass if dense_mass else jnp.diag(inverse_mass),
                   init_strategy=numpyro.infer.init_to_value(values=init_values),
-                  forward_mode_differentiation=True)  # 5× cheaper than reverse mode through the scan here
+                  # through the ODE, forward mode is 5× cheaper than reverse mode through the scan
+                  forward_mode_differentiation=emulate is False)
     mcmc = MCMC(kernel, num_warmup=warmup, num_samples=samples, num_chains=chains,
                 chain_method="vectorized", progress_bar=progress)
-    start = time.perf_counter()
-    mcmc.run(jax.random.PRNGKey(seed), jnp.asarray(t), jnp.asarray(y), extra_fields=("diverging", "energy"))
-    wall = time.perf_counter() - start
+    mcmc.run(jax.random.PRNGKey(seed), jnp.asarray(y), extra_fields=("diverging", "energy"))
     post = mcmc.get_samples(group_by_chain=False)
-    predictive = Predictive(lambda times: growth_model(times, None, **kwargs), posterior_samples=post)
-    pp = predictive(jax.random.PRNGKey(seed + 1), jnp.asarray(t))
+    pp = Predictive(model, posterior_samples=post)(jax.random.PRNGKey(seed + 1))
     idata = az.from_numpyro(mcmc, posterior_predictive={"length": np.asarray(pp["length"]).reshape(chains, samples, -1)})
+    wall = time.perf_counter() - start
     summary = diagnostics(idata, priors, y, mcmc)
     summary["wall_s"] = wall
+    summary["emulator"] = emu_info
     summary["chains"], summary["warmup"], summary["samples"] = chains, warmup, samples
     return PosteriorResult(idata, summary, wall)
 
 
-def precondition(model, priors, base, inputs, config, times, length, seed=0, grid: int = 33):
+def precondition(model, priors, mean_length, length, seed=0, n_scout: int = 64, optimise: bool = True):
     """Start point and inverse mass matrix for NUTS.
 
     The data fix Y to ~0.2 % of its prior width while ext and n stay at their priors, a
-    scale ratio of ~200 in the unconstrained space. Without preconditioning, NUTS builds
-    trees of hundreds of leapfrog steps. The start is the best Y of a grid (ext and n at
-    their prior centres, σ at that fit's RMS residual). The inverse mass matrix is the
-    inverse Hessian of the potential there, with eigenvalues floored at the logistic
-    prior's curvature so that flat directions get the prior's scale.
+    scale ratio of ~200 in the unconstrained space: without preconditioning NUTS builds
+    trees of hundreds of leapfrog steps. The start is the best of a seeded Latin hypercube
+    over the priors (σ at its RMS residual), then, if ``optimise``, the posterior mode by
+    BFGS (cheap on an emulator). The inverse mass matrix is the inverse Hessian of the
+    potential there, eigenvalues floored at the logistic prior's curvature so that flat
+    directions get the prior's scale.
     """
     from jax.flatten_util import ravel_pytree
     from numpyro.infer.util import initialize_model
+    from scipy.stats import qmc
 
-    from growjax import sweep as sw
-
-    centre = {p.name: 0.5 * (p.low + p.high) for p in priors}
-    y_prior = next((p for p in priors if p.name == "robot.yield_pressure"), None)
-    init = {p.site: centre[p.name] for p in priors}
-    b = gp.replace(base, **centre)
-    if y_prior is not None:
-        vals = np.linspace(y_prior.low, y_prior.high, grid)[1:-1, None]
-        res = sw.evaluate(vals, [y_prior.name], b, inputs, config, measured=(times, length))
-        best = int(np.nanargmin(res.rmse))
-        init["Y"] = float(vals[best, 0])
-        sigma0 = float(res.rmse[best])
-    else:
-        mu = predicted_length(centre, base, inputs, config, jnp.asarray(times))
-        sigma0 = float(np.sqrt(np.nanmean((np.asarray(mu) - length) ** 2)))
-    init["sigma"] = max(sigma0, 1e-6)
-    info = initialize_model(jax.random.PRNGKey(seed), model, model_args=(jnp.asarray(times), jnp.asarray(length)),
+    unit = qmc.LatinHypercube(d=len(priors), seed=seed).random(n_scout)
+    cols = {}
+    for k, p in enumerate(priors):
+        u = unit[:, k]
+        cols[p.name] = np.exp(np.log(p.low) + u * np.log(p.high / p.low)) if p.log else p.low + u * (p.high - p.low)
+    mu = np.asarray(jax.jit(jax.vmap(mean_length))({n: jnp.asarray(v) for n, v in cols.items()}))
+    rmse = np.sqrt(np.nanmean((mu - np.asarray(length)) ** 2, axis=1))
+    rmse = np.where(np.all(np.isfinite(mu), axis=1), rmse, np.inf)
+    best = int(np.argmin(rmse))
+    if not np.isfinite(rmse[best]):
+        raise RuntimeError("no point of the preconditioning scout simulated successfully")
+    init = {p.site: float(cols[p.name][best]) for p in priors}
+    init["sigma"] = max(float(rmse[best]), 1e-6)
+    info = initialize_model(jax.random.PRNGKey(seed), model, model_args=(jnp.asarray(length),),
                             init_strategy=numpyro.infer.init_to_value(values=init),
-                            forward_mode_differentiation=True, validate_grad=False)
+                            forward_mode_differentiation=not optimise, validate_grad=False)
     z0, unravel = ravel_pytree(info.param_info.z)
-    hess = _fd_hessian(jax.jit(jax.vmap(lambda z: info.potential_fn(unravel(z)))), np.asarray(z0))
+    potential = jax.jit(lambda z: info.potential_fn(unravel(z)))
+    if optimise:
+        sol = optx.minimise(lambda z, _: potential(z), optx.BFGS(rtol=1e-8, atol=1e-8), z0, max_steps=500, throw=False)
+        if np.isfinite(float(potential(sol.value))) and float(potential(sol.value)) < float(potential(z0)):
+            z0 = sol.value
+            init = {k: float(v) for k, v in info.postprocess_fn(unravel(z0)).items() if k in init}
+    hess = _fd_hessian(jax.jit(jax.vmap(potential)), np.asarray(z0))
     evals, evecs = np.linalg.eigh(np.asarray(hess))
     evals = np.maximum(evals, 0.3)  # logistic prior curvature ≈ 0.5 at its centre
     inverse_mass = (evecs / evals) @ evecs.T
@@ -245,6 +322,74 @@ def predict(idata, priors, base, inputs, config, times, seed: int = 0, max_draws
     mu = jax.jit(jax.vmap(lambda th: predicted_length(th, base, inputs, config, jnp.asarray(times))))(thetas)
     noise = np.random.default_rng(seed + 1).normal(size=mu.shape) * sigma[take][:, None]
     return np.asarray(mu) + noise
+
+
+def sbc(emulator: em.Emulator, priors: Sequence[Prior], replicates: int = 100, warmup: int = 200,
+        samples: int = 200, seed: int = 0, noise_scale: float = 1e-3, level: float = 0.9) -> dict:
+    """Simulation-based calibration (Talts et al. 2018) of NUTS on :func:`growth_model`, all replicates at once.
+
+    Each replicate draws θ and σ from the prior and a data set from the model (here its
+    emulator, which is then exact by construction), and samples the posterior with NUTS
+    (diagonal mass adapted in warm-up). All replicates run in one ``vmap``ped program
+    (NumPyro's functional NUTS). A calibrated sampler ranks the truth uniformly among the
+    draws and covers it with the central ``level`` interval in a share ``level`` of replicates.
+
+    Returns ``ranks`` {site: (replicates,) ints in [0, samples]}, ``coverage`` {site: share},
+    ``divergences`` (total) and ``draws`` (samples per replicate).
+    """
+    from numpyro.infer import Predictive
+    from numpyro.infer.hmc import hmc
+    from numpyro.infer.util import initialize_model
+
+    model = functools.partial(growth_model, mean_length=emulated_mean(emulator), priors=priors,
+                              noise_scale=noise_scale)
+    k_prior, k_init, k_run = jax.random.split(jax.random.PRNGKey(seed), 3)
+    truth = Predictive(model, num_samples=replicates)(k_prior)
+    sites = [p.site for p in priors] + ["sigma"]
+    info = initialize_model(k_init, model, model_args=(truth["length"][0],), dynamic_args=True)
+    init_kernel, sample_kernel = hmc(potential_fn_gen=info.potential_fn, algo="NUTS")
+
+    def run(key, data):
+        state = init_kernel(info.param_info.z, warmup, model_args=(data,), rng_key=key, target_accept_prob=0.9)
+
+        def step(state, _):
+            state = sample_kernel(state, model_args=(data,))
+            return state, (state.z, state.diverging)
+
+        _, (zs, div) = jax.lax.scan(step, state, None, length=warmup + samples)
+        kept = jax.tree_util.tree_map(lambda a: a[warmup:], zs)
+        values = jax.vmap(info.postprocess_fn(data))(kept)
+        return {s: values[s] for s in sites}, jnp.sum(div[warmup:])
+
+    draws, div = jax.jit(jax.vmap(run))(jax.random.split(k_run, replicates), truth["length"])
+    a = 0.5 * (1.0 - level)
+    ranks, coverage = {}, {}
+    for s in sites:
+        d, t = np.asarray(draws[s]), np.asarray(truth[s])[:, None]
+        ranks[s] = np.sum(d < t, axis=1)
+        lo, hi = np.quantile(d, a, axis=1), np.quantile(d, 1.0 - a, axis=1)
+        coverage[s] = float(np.mean((t[:, 0] >= lo) & (t[:, 0] <= hi)))
+    return {"ranks": ranks, "coverage": coverage, "divergences": int(np.sum(np.asarray(div))), "draws": samples}
+
+
+def compare_loo(results: dict) -> dict:
+    """PSIS-LOO of several posteriors of the same data ({label: PosteriorResult}) via ArviZ.
+
+    Returns per model ``elpd_loo``, its standard error, ``p_loo``, the largest Pareto k̂, and
+    the ArviZ ranking (``elpd_diff``, ``dse``, ``weight``). The likelihood treats residuals as
+    independent; when they are autocorrelated (model discrepancy) the standard errors are optimistic.
+    """
+    import arviz as az
+
+    table = az.compare({k: r.idata for k, r in results.items()}, ic="loo", var_name="length")
+    out = {}
+    for label, r in results.items():
+        loo = az.loo(r.idata, pointwise=True, var_name="length")
+        out[label] = {"elpd_loo": float(loo.elpd_loo), "se": float(loo.se), "p_loo": float(loo.p_loo),
+                      "pareto_k_max": float(np.max(np.asarray(loo.pareto_k))),
+                      "rank": int(table.loc[label, "rank"]), "elpd_diff": float(table.loc[label, "elpd_diff"]),
+                      "dse": float(table.loc[label, "dse"]), "weight": float(table.loc[label, "weight"])}
+    return out
 
 
 def laplace(fit_result, sigma: float | None = None) -> dict:

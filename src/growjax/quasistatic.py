@@ -10,8 +10,9 @@ robot's length, the fast modes sit on their slow manifolds, so this reduction
   they equalise in < 10 µs;
 * the platform is massless: its velocity balances the drive force against the screw
   damping, the laminar hose drop and the syringes' end stop (closed form);
-* the rod balance is solved by two fixed-point passes (the velocity term is ~1e-10
-  of the other forces, so the iteration contracts at once).
+* the rod balance is solved by fixed-point passes for the reference growth law (its
+  velocity term is ~1e-10 of the other forces, so the iteration contracts at once),
+  and by a bracketed Newton solve for Lockhart's law, where it is not small.
 
 States: P (Pa), platform travel x_p (m), hose wall strain δ (m), PID integral and
 filter states, robot displacement ξ (m). The ODE is integrated on a fixed grid by the
@@ -34,11 +35,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from growjax import hydraulics as hy
+from growjax._smooth import unrolled_root
 from growjax.fluid import bulk_modulus
 from growjax.model import SimulationSettings, _crack_pressure, _extra_force
 from growjax.motor import ideal_torque_drive_force, pid_output
 from growjax.params import Parameters
-from growjax.robot import pressure_limit, robot_pressure
+from growjax.robot import LOCKHART_PRESSURE_SCALE, pressure_limit, robot_pressure
 from growjax.signals import Inputs
 
 STATES = ("pressure", "x_platform", "wall_strain", "z_integral", "z_filter", "robot_displacement")
@@ -54,12 +56,14 @@ class QuasiStaticConfig(SimulationSettings):
     NaNs the samples after the crossing, as in the reference):
         save_dt: output spacing, s (the reference's 10 ms grid).
         substeps: fixed solver steps per output interval (step = save_dt / substeps).
-        rod_iterations: fixed-point passes of the rod balance.
+        rod_iterations: fixed-point passes of the rod balance (reference growth law).
+        rod_iterations_lockhart: safeguarded Newton steps of the rod balance (Lockhart growth law).
     """
 
     save_dt: float = 0.01
     substeps: int = 10
     rod_iterations: int = 1
+    rod_iterations_lockhart: int = 16
     drive: str = dataclasses.field(default="forward", init=False)
 
     def __post_init__(self):
@@ -95,9 +99,31 @@ def robot_flow(params: Parameters, config: QuasiStaticConfig, t, pressure, lengt
         dp = pressure - p_r
         return hy.check_valve_flow(cv, params.fluid, dp, pressure - 0.5 * dp, _crack_pressure(params), config.crack_width)
 
-    p_r = rod(0.0)
-    for _ in range(config.rod_iterations):
-        p_r = rod(flow(p_r) / robot.area)
+    if robot.growth_law == "reference":
+        p_r = rod(0.0)
+        for _ in range(config.rod_iterations):
+            p_r = rod(flow(p_r) / robot.area)
+        return flow(p_r), p_r
+
+    # Lockhart: the growth term is of the order of the valve drop, so the fixed point does not
+    # contract. Unknown: the excess x = p_r − p_0 over the rest pressure p_0 = p_r(v = 0), with
+    # Q_cv(P − p_0 − x) = A_r φ_L (x/p_ref)^(n_L). Since Q_cv(P − p_0 − x) ≤ Q_cv(P − p_0), x ≤ x_hi :=
+    # p_ref (Q_cv(P − p_0)/(A_r φ_L))^(1/n_L). Both sides are near power laws, so the residual is taken in
+    # logs, ln Q_cv − ln(A_r φ_L) − n_L ln(x/p_ref), over u = ln(x/x_hi) ∈ [−40, 0]: nearly linear in u,
+    # decreasing, well conditioned for any n_L. The rod's stop forces enter at v = 0 (ends of stroke only).
+    p_0 = rod(0.0)
+    phi, n_l = robot.lockhart_rate, robot.lockhart_exponent
+    room = jnp.maximum(pressure - p_0, 0.0)
+    tiny = 1e-30  # m³/s: floor of the valve flow inside the logarithm
+    q_max = jnp.maximum(flow(p_0), tiny)  # floored before the power: finite tangents below cracking
+    x_hi = jnp.maximum(jnp.minimum(room, LOCKHART_PRESSURE_SCALE * (q_max / (robot.area * phi)) ** (1.0 / n_l)), 1e-12)
+
+    def residual(u):
+        x = x_hi * jnp.exp(u)
+        return jnp.log(flow(p_0 + x) + tiny) - jnp.log(robot.area * phi) - n_l * jnp.log(x / LOCKHART_PRESSURE_SCALE)
+
+    u = unrolled_root(residual, jnp.asarray(-40.0), jnp.asarray(0.0), iterations=config.rod_iterations_lockhart)
+    p_r = p_0 + x_hi * jnp.exp(u)
     return flow(p_r), p_r
 
 

@@ -8,6 +8,17 @@ gives the robot pressure p_r needed to move at velocity v:
 
 Note the catheter-friction term enters with the sign that *assists* growth, as in the
 shipped model (PHYSICS.md §8.4). ``extra_force`` is where candidate effects plug in.
+
+Two growth laws set the velocity term (``GrowingRobot.growth_law``):
+
+* ``"reference"`` — the shipped diagram's sgn(v)|v/ext|^n (Pa). With the published ext it is
+  ~1e-10 of the other forces (PHYSICS.md §9), so ext and n cannot be identified.
+* ``"lockhart"`` — Lockhart's law v = φ_L·((p_r − p_0)/p_ref)^(n_L) above yield, with φ_L a
+  velocity (m/s) at the reference excess p_ref = 1 kPa; p_0 is the rest pressure above
+  (Y and the other rod forces). Its inverse, p_ref·sgn(v)|v/φ_L|^(1/n_L), replaces the
+  velocity term, so the everting membrane adds a physically sized resistance in series
+  with the check valve and φ_L, n_L shape the growth rate. This is a deviation from the
+  reference added beside it, not in place of it (PHYSICS.md: "add better-posed variants").
 """
 
 from __future__ import annotations
@@ -17,6 +28,9 @@ import jax.numpy as jnp
 
 from growjax._smooth import smooth_abs_power, smooth_ramp
 from growjax.pump import cylinder_stop_force
+
+GROWTH_LAWS = ("reference", "lockhart")
+LOCKHART_PRESSURE_SCALE = 1e3  # Pa: p_ref of the Lockhart law
 
 
 class GrowingRobot(eqx.Module):
@@ -35,6 +49,9 @@ class GrowingRobot(eqx.Module):
         hard_stop_bound: ±bound of the rod hard stop, m (never reached in normal use).
         hard_stop_stiffness: N/m.  hard_stop_damping: N·s/m.
         penetration_coefficient: end-stop coefficient of the cylinder, N·s/m².
+        growth_law: ``"reference"`` or ``"lockhart"`` (static; see the module docstring).
+        lockhart_rate: φ_L, m/s: growth speed at 1 kPa above the rest pressure (Lockhart law only).
+        lockhart_exponent: n_L (–), Lockhart law only.
     """
 
     yield_pressure: float = 7920.459191723583
@@ -53,6 +70,13 @@ class GrowingRobot(eqx.Module):
     hard_stop_stiffness: float = 1e6
     hard_stop_damping: float = 150.0
     penetration_coefficient: float = 1e12
+    lockhart_rate: float = 1.5e-4
+    lockhart_exponent: float = 1.0
+    growth_law: str = eqx.field(static=True, default="reference")
+
+    def __check_init__(self):
+        if self.growth_law not in GROWTH_LAWS:
+            raise ValueError(f"growth_law must be one of {GROWTH_LAWS}, got {self.growth_law!r}")
 
     @property
     def area(self):
@@ -71,7 +95,14 @@ def catheter_friction_gain(robot: GrowingRobot, catheter_length):
 
 
 def velocity_pressure(robot: GrowingRobot, velocity, velocity_eps):
-    """Velocity term sgn(v)|v/ext|^n of eq. (1), Pa (regularised at v = 0 over ``velocity_eps`` m/s)."""
+    """Velocity term of the rod balance, Pa (regularised at v = 0 over ``velocity_eps`` m/s).
+
+    Reference: sgn(v)|v/ext|^n (eq. 1). Lockhart: p_ref·sgn(v)|v/φ_L|^(1/n_L), the inverse of
+    v = φ_L((p_r − p_0)/p_ref)^(n_L).
+    """
+    if robot.growth_law == "lockhart":
+        phi = robot.lockhart_rate
+        return LOCKHART_PRESSURE_SCALE * smooth_abs_power(velocity / phi, 1.0 / robot.lockhart_exponent, velocity_eps / phi)
     return smooth_abs_power(velocity / robot.extensibility, robot.growth_exponent, velocity_eps / robot.extensibility)
 
 

@@ -1,0 +1,73 @@
+"""Lockhart's growth law beside the reference: the rod balance it solves, and what it makes identifiable."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import growjax as gj
+from growjax import hydraulics as hy
+from growjax.model import _crack_pressure
+from growjax.quasistatic import robot_flow
+from growjax.robot import LOCKHART_PRESSURE_SCALE, robot_pressure
+
+
+def _lockhart(**kw):
+    return gj.replace(gj.reference(growth_law="lockhart"), **kw)
+
+
+@pytest.mark.parametrize("n_l", [0.25, 1.0, 2.0])
+@pytest.mark.parametrize("pressure", [20e3, 80e3, 150e3])
+def test_lockhart_flow_satisfies_both_the_valve_and_the_growth_law(n_l, pressure):
+    p = _lockhart(n_L=n_l, phi_L=1e-3)
+    cfg = gj.QuasiStaticConfig()
+    length, catheter = 0.02, 0.005
+    q, p_r = robot_flow(p, cfg, 0.5, pressure, length, catheter)
+    p_0 = robot_pressure(p.robot, pressure, 0.0, length, catheter, 0.0, (cfg.velocity_eps, cfg.stop_width))
+    dp = pressure - p_r
+    valve = hy.check_valve_flow(p.check_valve, p.fluid, dp, pressure - 0.5 * dp, _crack_pressure(p), cfg.crack_width)
+    growth = p.robot.area * 1e-3 * max(float(p_r - p_0) / LOCKHART_PRESSURE_SCALE, 0.0) ** n_l
+    assert float(q) > 0
+    assert float(q) == pytest.approx(float(valve), rel=1e-9)
+    assert float(q) == pytest.approx(growth, rel=1e-6)
+
+
+def test_lockhart_flow_gradient_matches_finite_differences():
+    cfg = gj.QuasiStaticConfig()
+
+    def q(log_phi, n_l):
+        return robot_flow(_lockhart(phi_L=jnp.exp(log_phi), n_L=n_l), cfg, 0.5, 100e3, 0.02, 0.005)[0]
+
+    x = (jnp.log(1e-3), 0.8)
+    grad = jax.grad(q, argnums=(0, 1))(*x)
+    h = 1e-6
+    fd = ((q(x[0] + h, x[1]) - q(x[0] - h, x[1])) / (2 * h), (q(x[0], x[1] + h) - q(x[0], x[1] - h)) / (2 * h))
+    for g, f in zip(grad, fd):
+        assert float(g) == pytest.approx(float(f), rel=1e-5)
+
+
+def test_lockhart_law_makes_phi_and_n_matter_where_ext_and_n_do_not():
+    cfg = gj.QuasiStaticConfig(t1=2.0)
+    t = np.array([0.0, 100.0])
+    inputs = gj.Inputs(catheter_length=gj.Sampled(t, 0.004 + 0.004 * t), pressure_demand=gj.published_pulse())
+
+    def final(params):
+        tr = gj.simulate(params, inputs, cfg)
+        assert int(tr.status) == 0
+        return float(tr.length[-1])
+
+    ref = [final(gj.replace(gj.reference(), ext=e, n=n)) for e, n in [(4000.0, 0.9), (10000.0, 1.1)]]
+    assert abs(ref[0] - ref[1]) < 1e-9  # the published velocity term: no effect
+    slow, fast = final(_lockhart(phi_L=3e-4)), final(_lockhart(phi_L=3e-3))
+    soft, stiff = final(_lockhart(phi_L=1e-3, n_L=0.5)), final(_lockhart(phi_L=1e-3, n_L=1.5))
+    base = final(gj.reference())
+    assert fast - slow > 8e-4  # faster membrane, longer robot: a mm-scale effect (1.2 mm measured)
+    assert abs(soft - stiff) > 8e-4  # 1.4 mm measured
+    assert max(slow, fast, soft, stiff) <= base + 1e-4  # a resistance in series never speeds growth
+
+
+def test_growth_law_is_validated():
+    with pytest.raises(ValueError, match="growth_law"):
+        gj.reference(growth_law="plant")
+    with pytest.raises(ValueError, match="lockhart_rate"):
+        gj.validate(_lockhart(phi_L=-1.0))
