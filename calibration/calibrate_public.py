@@ -86,16 +86,18 @@ def main():
     print(f"[{time.perf_counter() - clock:.0f} s] fits done", flush=True)
 
     # 2–3. Posteriors of both growth laws.
-    laws = {"reference": (base, gpost.paper_priors()),
-            "lockhart": (gj.reference(growth_law="lockhart"), gpost.lockhart_priors())}
+    # Lockhart's posterior sits against two bounds of its box (Y = 5 kPa, n_L = 0.25): a higher target
+    # acceptance shortens the steps there (9 divergences at 0.9, 3 at 0.98 in 2000 draws).
+    laws = {"reference": (base, gpost.paper_priors(), 0.9),
+            "lockhart": (gj.reference(growth_law="lockhart"), gpost.lockhart_priors(), 0.98)}
     if args.quick:
-        laws["lockhart"] = (laws["lockhart"][0], tuple(dataclasses.replace(p, nodes=min(p.nodes, 11))
-                                                        for p in laws["lockhart"][1]))
+        law_base, priors, accept = laws["lockhart"]
+        laws["lockhart"] = (law_base, tuple(dataclasses.replace(p, nodes=min(p.nodes, 11)) for p in priors), accept)
     results, report["posterior"] = {}, {}
-    for law, (law_base, priors) in laws.items():
+    for law, (law_base, priors, accept) in laws.items():
         law_inputs = ex.to_inputs(exp, "forward", law_base, cfg.t0, cfg.t1)
         res = gpost.sample(exp.time, exp["robot_length_m"], law_inputs, law_base, cfg, priors=priors,
-                           chains=chains, warmup=warmup, samples=samples, progress=False)
+                           chains=chains, warmup=warmup, samples=samples, progress=False, target_accept=accept)
         res.idata.to_netcdf(str(out / f"posterior_{law}.nc"))
         summary = dict(res.summary)
         summary["posterior_sd_over_prior_sd"] = _identification(res.idata, priors)

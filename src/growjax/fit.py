@@ -131,16 +131,12 @@ def make_residuals(base, names, refs, inputs, config, times, length, pressure=No
 
 
 @eqx.filter_jit
-def _solve_starts(z0s, problem: Problem, max_steps: int, rtol: float):
-    """Levenberg–Marquardt from every start at once (vmapped): (z (k, p), cost (k,), converged (k,))."""
+def _solve(z0, problem: Problem, max_steps: int, rtol: float):
+    """Levenberg–Marquardt from one start: (z (p,), cost, converged). Compiled once per problem shape."""
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=rtol)
-
-    def one(z0):
-        sol = optx.least_squares(problem.residuals, solver, z0, max_steps=max_steps, throw=False)
-        r = problem.residuals(sol.value)
-        return sol.value, 0.5 * jnp.sum(r**2), sol.result == optx.RESULTS.successful
-
-    return jax.vmap(one)(z0s)
+    sol = optx.least_squares(problem.residuals, solver, z0, max_steps=max_steps, throw=False)
+    r = problem.residuals(sol.value)
+    return sol.value, 0.5 * jnp.sum(r**2), sol.result == optx.RESULTS.successful
 
 
 @eqx.filter_jit
@@ -188,8 +184,10 @@ def fit(
     problem = make_problem(base, names, inputs, config, times, length, pressure, window,
                            sigma_length, sigma_pressure)
     z0s = jnp.log(jnp.asarray(scout.values[order]) / refs)
-    zs, costs, oks = _solve_starts(z0s, problem, max_steps, 1e-8)
-    zs, costs, oks = np.asarray(zs), np.asarray(costs), np.asarray(oks)
+    # One start after another through one compiled solver: under vmap every start would pay for the
+    # slowest one's iterations and for both branches of each accept/reject decision.
+    solved = [_solve(z0, problem, max_steps, 1e-8) for z0 in z0s]
+    zs, costs, oks = (np.asarray([s[k] for s in solved]) for k in range(3))
     starts = [{"start": dict(zip(names, map(float, scout.values[i]))),
                "estimate": dict(zip(names, map(float, refs * np.exp(zs[k])))),
                "cost": float(costs[k]), "converged": bool(oks[k])} for k, i in enumerate(order)]
