@@ -71,3 +71,16 @@ def test_growth_law_is_validated():
         gj.reference(growth_law="plant")
     with pytest.raises(ValueError, match="lockhart_rate"):
         gj.validate(_lockhart(phi_L=-1.0))
+
+
+@pytest.mark.slow
+def test_reference_model_runs_the_lockhart_law_and_agrees_with_the_quasistatic_one(shared_experiment):
+    from growjax import experiment as ex
+
+    p = _lockhart(Y=5068.0, phi_L=2.1e-3, n_L=0.253)  # the Lockhart posterior mean on the public experiment
+    lengths = []
+    for cfg in (gj.QuasiStaticConfig(t1=3.0), gj.Config(t1=3.0, rtol=1e-5, atol=1e-5)):
+        tr = gj.simulate(p, ex.to_inputs(shared_experiment, "forward", p, cfg.t0, cfg.t1), cfg)
+        assert int(tr.status) == 0
+        lengths.append(np.asarray(tr.length))
+    assert np.max(np.abs(lengths[0] - lengths[1])[5:]) < 1.2e-3  # 0.9 mm measured (0.11 mm for the reference law)

@@ -11,6 +11,7 @@ limit, invalid parameter) is flagged with its reason; the others are unaffected.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import math
 import time
 from collections.abc import Sequence
@@ -171,6 +172,21 @@ def make_member(base: gp.Parameters, names: Sequence[str], inputs, config, measu
     return member
 
 
+# Compiled sweep programs of this process, keyed by everything they close over (at most 8 kept).
+_COMPILED: dict = {}
+
+
+def _content_key(tree) -> tuple:
+    """Hashable fingerprint of a pytree's structure and leaf values (the constants a sweep program closes over)."""
+    leaves, treedef = jax.tree_util.tree_flatten(tree)
+    digest = hashlib.sha1()
+    for leaf in leaves:
+        a = np.asarray(leaf)
+        digest.update(str((a.dtype, a.shape)).encode())
+        digest.update(a.tobytes())
+    return (str(treedef), digest.hexdigest())
+
+
 def _mesh(devices=None) -> Mesh:
     return Mesh(np.asarray(devices if devices is not None else jax.devices()), ("batch",))
 
@@ -215,11 +231,17 @@ def evaluate(
     n_chunks = -(-n // chunk)
     padded = np.concatenate([safe, np.repeat(safe[-1:], n_chunks * chunk - n, axis=0)])
 
-    member = make_member(base, names, inputs, config, measured, window)
     sharding = NamedSharding(mesh, PartitionSpec("batch"))
-    batched = jax.jit(jax.vmap(member), in_shardings=sharding, out_shardings=sharding)
     start = time.perf_counter()
-    compiled = batched.lower(jax.ShapeDtypeStruct((chunk, len(names)), jnp.float64, sharding=sharding)).compile()
+    key = (names, config, chunk, None if window is None else tuple(window), tuple(d.id for d in mesh.devices.flat), _content_key((base, inputs, measured)))
+    compiled = _COMPILED.get(key)
+    if compiled is None:
+        member = make_member(base, names, inputs, config, measured, window)
+        batched = jax.jit(jax.vmap(member), in_shardings=sharding, out_shardings=sharding)
+        compiled = batched.lower(jax.ShapeDtypeStruct((chunk, len(names)), jnp.float64, sharding=sharding)).compile()
+        if len(_COMPILED) >= 8:
+            _COMPILED.pop(next(iter(_COMPILED)))
+        _COMPILED[key] = compiled
     compile_s = time.perf_counter() - start
 
     outs = []
