@@ -36,8 +36,8 @@ def test_simulate_command_reports_bad_input(tmp_path):
 
 
 def test_posterior_command_writes_inference_data_and_the_issue_keys(tmp_path):
-    cmd = [sys.executable, "-m", "growjax.cli", "posterior", "--t-end", "0.8", "--chains", "2", "--warmup", "60",
-           "--samples", "60", "--out", str(tmp_path), "--json", str(tmp_path / "p.json")]
+    cmd = [sys.executable, "-m", "growjax.cli", "posterior", "--t-end", "0.8", "--chains", "2", "--warmup", "40",
+           "--samples", "40", "--out", str(tmp_path), "--json", str(tmp_path / "p.json")]
     done = subprocess.run(cmd, capture_output=True, text=True, check=False, timeout=900)
     assert done.returncode == 0, done.stderr
     summary = json.loads((tmp_path / "p.json").read_text())

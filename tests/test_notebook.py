@@ -12,7 +12,7 @@ def test_posterior_analysis_notebook_executes():
     nbformat = pytest.importorskip("nbformat")
     nbclient = pytest.importorskip("nbclient")
     nb = nbformat.read(NOTEBOOK, as_version=4)
-    os.environ["GROWJAX_NOTEBOOK_QUICK"] = "1"  # inherited by the kernel: 0–2 s, 2 chains × 150 + 150
+    os.environ["GROWJAX_NOTEBOOK_QUICK"] = "1"  # inherited by the kernel: 0–2 s, 2 chains × 100 + 100
     client = nbclient.NotebookClient(nb, timeout=600, kernel_name="python3",
                                      resources={"metadata": {"path": str(NOTEBOOK.parent)}})
     client.execute()  # raises CellExecutionError on any failing cell, the notebook's assertions included

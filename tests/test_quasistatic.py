@@ -20,7 +20,10 @@ def synthetic_inputs(synthetic_experiment):
     return ex.to_inputs(synthetic_experiment, "forward", gj.reference())
 
 
-@pytest.mark.parametrize("yield_pressure, tolerance_mm", [(5e3, 0.15), (7920.46, 0.25), (15e3, 0.6)])
+@pytest.mark.parametrize("yield_pressure, tolerance_mm", [
+    (5e3, 0.15), (7920.46, 0.25),
+    pytest.param(15e3, 0.6, marks=pytest.mark.slow),  # the box's far corner; CI keeps the two nearer ones
+])
 def test_quasistatic_length_agrees_with_the_reference(synthetic_experiment, synthetic_inputs, yield_pressure, tolerance_mm):
     params = gj.replace(gj.reference(), Y=yield_pressure)
     fast = gj.simulate(params, synthetic_inputs, QS_SHORT)
