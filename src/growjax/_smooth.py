@@ -31,6 +31,17 @@ def smooth_abs_power(x, exponent, eps):
     return x * (x * x + eps * eps) ** (0.5 * (exponent - 1.0))
 
 
+def _safeguarded_newton_step(f, x, lo, hi):
+    """One step for a decreasing f: shrink [lo, hi] around the root, then Newton if it stays inside, else bisect."""
+    fx, dfx = jax.jvp(f, (x,), (jnp.ones_like(x),))
+    lo = jnp.where(fx > 0, x, lo)
+    hi = jnp.where(fx > 0, hi, x)
+    newton = x - fx / jnp.where(dfx < 0, dfx, -1.0)
+    ok = (dfx < 0) & (newton > lo) & (newton < hi)
+    x_new = jnp.where(fx == 0, x, jnp.where(ok, newton, 0.5 * (lo + hi)))
+    return x_new, lo, hi
+
+
 def bracketed_root(
     residual: Callable, lower, upper, *, max_iter: int = 60, xtol: float = 1e-13
 ):
@@ -50,13 +61,7 @@ def bracketed_root(
 
         def body(carry):
             x, lo, hi, _, it = carry
-            fx, dfx = jax.jvp(f, (x,), (jnp.ones_like(x),))
-            lo = jnp.where(fx > 0, x, lo)
-            hi = jnp.where(fx > 0, hi, x)
-            newton = x - fx / jnp.where(dfx < 0, dfx, -1.0)
-            ok = (dfx < 0) & (newton > lo) & (newton < hi)
-            x_new = jnp.where(ok, newton, 0.5 * (lo + hi))
-            x_new = jnp.where(fx == 0, x, x_new)
+            x_new, lo, hi = _safeguarded_newton_step(f, x, lo, hi)
             return x_new, lo, hi, x_new - x, it + 1
 
         lo, hi = jnp.minimum(lower, upper), jnp.maximum(lower, upper)
@@ -83,12 +88,7 @@ def unrolled_root(residual: Callable, lower, upper, *, iterations: int = 12):
         lo, hi = jnp.minimum(lower, upper), jnp.maximum(lower, upper)
         x = x0
         for _ in range(iterations):
-            fx, dfx = jax.jvp(f, (x,), (jnp.ones_like(x),))
-            lo = jnp.where(fx > 0, x, lo)
-            hi = jnp.where(fx > 0, hi, x)
-            newton = x - fx / jnp.where(dfx < 0, dfx, -1.0)
-            ok = (dfx < 0) & (newton > lo) & (newton < hi)
-            x = jnp.where(fx == 0, x, jnp.where(ok, newton, 0.5 * (lo + hi)))
+            x, lo, hi = _safeguarded_newton_step(f, x, lo, hi)
         return x
 
     def tangent_solve(g, y):

@@ -123,13 +123,6 @@ def make_problem(base, names, inputs, config, times, length, pressure=None, wind
                    sigma_length, sigma_pressure)
 
 
-def make_residuals(base, names, refs, inputs, config, times, length, pressure=None, window=None,
-                   sigma_length=1e-3, sigma_pressure=5e3):
-    """r(z) (non-dimensional) for log coordinates z of ``names`` about ``refs`` (a closure over :class:`Problem`)."""
-    prob = make_problem(base, names, inputs, config, times, length, pressure, window, sigma_length, sigma_pressure)
-    return dataclasses.replace(prob, refs=jnp.asarray(refs, float)).residuals
-
-
 @eqx.filter_jit
 def _solve(z0, problem: Problem, max_steps: int, rtol: float):
     """Levenberg–Marquardt from one start: (z (p,), cost, converged). Compiled once per problem shape."""

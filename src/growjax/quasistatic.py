@@ -85,8 +85,9 @@ class QuasiStaticConfig(SimulationSettings):
 def robot_flow(params: Parameters, config: QuasiStaticConfig, t, pressure, length, catheter):
     """Forward flow into the robot through the check valve (m³/s) and the robot pressure (Pa), from node pressure P.
 
-    The rod balance is met by fixed-point passes on the velocity. Reverse flow (through
-    the bypass) is not here: it is the equalisation of :func:`equalise`.
+    The rod balance is met by fixed-point passes on the velocity (published growth law) or
+    by an unrolled Newton solve (Lockhart's law). Reverse flow (through the bypass) is not
+    here: it is the equalisation of :func:`equalise`.
     """
     robot, cv = params.robot, params.check_valve
     widths = (config.velocity_eps, config.stop_width)
