@@ -87,7 +87,7 @@ def main():
 
     # 2–3. Posteriors of both growth laws.
     # Lockhart's posterior sits against two bounds of its box (Y = 5 kPa, n_L = 0.25): a higher target
-    # acceptance shortens the steps there (9 divergences at 0.9, 3 at 0.98 in 2000 draws).
+    # acceptance shortens the steps there (one-off comparison, 2000 draws: 9 divergences at 0.9, 3 at 0.98).
     laws = {"reference": (base, gpost.paper_priors(), 0.9),
             "lockhart": (gj.reference(growth_law="lockhart"), gpost.lockhart_priors(), 0.98)}
     if args.quick:
