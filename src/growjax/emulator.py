@@ -117,6 +117,13 @@ def _pad_linear(values: np.ndarray, n_axes: int) -> np.ndarray:
     return values
 
 
+def predicted_length(theta: dict, base, inputs, config, times):
+    """Model length (m) at ``times`` for parameter values ``theta`` {qualified name: value}; NaN if the run failed."""
+    p = gp.replace(base, **theta)
+    traj = simulate(p, inputs, config)
+    return jnp.where(traj.status == OK, jnp.interp(times, traj.time, traj.length), jnp.nan)
+
+
 def model_lengths(thetas, names: Sequence[str], base, inputs, config, times, chunk: int = 512):
     """Model length (m) at ``times`` for each row of ``thetas`` (N, d), shape (N, m); NaN rows for failed runs."""
     names = tuple(names)
@@ -124,12 +131,8 @@ def model_lengths(thetas, names: Sequence[str], base, inputs, config, times, chu
 
     @jax.jit
     def batch(th):
-        def one(row):
-            p = gp.replace(base, **{n: row[i] for i, n in enumerate(names)})
-            traj = simulate(p, inputs, config)
-            return jnp.where(traj.status == OK, jnp.interp(times, traj.time, traj.length), jnp.nan)
-
-        return jax.vmap(one)(th)
+        return jax.vmap(lambda row: predicted_length({n: row[i] for i, n in enumerate(names)},
+                                                     base, inputs, config, times))(th)
 
     thetas = np.asarray(thetas, float)
     out = []

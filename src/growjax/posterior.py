@@ -28,7 +28,8 @@ import optimistix as optx
 
 from growjax import emulator as em
 from growjax import params as gp
-from growjax.model import Config, simulate
+from growjax.emulator import predicted_length
+from growjax.model import Config
 from growjax.quasistatic import QuasiStaticConfig
 
 
@@ -80,14 +81,6 @@ def lockhart_priors() -> tuple[Prior, ...]:
         Prior("phi_L", "robot.lockhart_rate", 1e-4, 1e-2, log=True, nodes=25),
         Prior("n_L", "robot.lockhart_exponent", 0.25, 2.0, log=True, nodes=15),
     )
-
-
-def predicted_length(theta: dict, base, inputs, config, times):
-    """Model length (m) at ``times`` for parameter values ``theta`` {qualified name: value}; NaN if the run failed."""
-    p = gp.replace(base, **theta)
-    traj = simulate(p, inputs, config)
-    ok = traj.status == 0
-    return jnp.where(ok, jnp.interp(times, traj.time, traj.length), jnp.nan)
 
 
 def growth_model(length=None, *, mean_length, priors: Sequence[Prior], noise_scale=1e-3, model_error=0.0):
