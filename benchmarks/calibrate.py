@@ -42,7 +42,7 @@ def main():
     folder = ex.shared_experiment_dir()
     exp = ex.read(folder / "experiment.csv") if folder else ex.read(REPO / "data" / "synthetic_forward.csv")
     base = gj.reference()
-    cfg = gj.QuasiStaticConfig(t1=args.t_end)
+    cfg = gj.Config(t1=args.t_end)
     inputs = ex.to_inputs(exp, "forward", base, cfg.t0, cfg.t1)
     out = {"data": exp.source, "t_end_s": args.t_end, "device": str(jax.devices()[0])}
 

@@ -4,21 +4,20 @@ Run from the repository root::
 
     python calibration/calibrate_public.py [--quick] [--out out/calibration]
 
-Steps (forward drive, quasi-static model, 0–10 s):
+Steps (forward drive, fast configuration, 0–10 s):
 
 1. least-squares fit of Y (reference growth law) with its Gauss–Newton (Laplace) interval, and the fit of
    Y, ext and n that names the directions the data cannot determine;
-2. NUTS posterior of Y, ext, n and σ (reference law), 4 chains × 500 + 500, through the validated emulator;
+2. NUTS posterior of Y, ext, n and σ (reference law), 4 chains × 500 + 500, directly through the model (forward-mode gradients);
 3. NUTS posterior of Y, φ_L, n_L and σ (Lockhart law), same settings;
 4. PSIS-LOO comparison of the two laws (ArviZ), the Laplace-against-NUTS check, figures and ``report.json``.
 
-``--quick`` (a smoke run, ~5 min): 0–2 s, 2 chains × 150 + 150, coarser Lockhart emulator.
+``--quick`` (a smoke run): 0–2 s, 2 chains × 150 + 150.
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import time
 from pathlib import Path
@@ -73,7 +72,7 @@ def main():
 
     # 1. Fits (reference growth law).
     base = gj.reference()
-    cfg = gj.QuasiStaticConfig(t1=t_end)
+    cfg = gj.Config(t1=t_end, adjoint="forward")
     inputs = ex.to_inputs(exp, "forward", base, cfg.t0, cfg.t1)
     y_fit = gf.fit(exp.time, exp["robot_length_m"], inputs, free=["Y"], config=cfg)
     report["fit_Y"] = y_fit.summary()
@@ -90,9 +89,6 @@ def main():
     # acceptance shortens the steps there (one-off comparison, 2000 draws: 9 divergences at 0.9, 3 at 0.98).
     laws = {"reference": (base, gpost.paper_priors(), 0.9),
             "lockhart": (gj.reference(growth_law="lockhart"), gpost.lockhart_priors(), 0.98)}
-    if args.quick:
-        law_base, priors, accept = laws["lockhart"]
-        laws["lockhart"] = (law_base, tuple(dataclasses.replace(p, nodes=min(p.nodes, 11)) for p in priors), accept)
     results, report["posterior"] = {}, {}
     for law, (law_base, priors, accept) in laws.items():
         law_inputs = ex.to_inputs(exp, "forward", law_base, cfg.t0, cfg.t1)

@@ -6,6 +6,13 @@ seed 20261121. Ground truth and noise are written beside each CSV as JSON.
 synthetic_forward.csv — forward drive (published 0/150 kPa pulse, shipped PID),
 reference parameters except Y = 9000 Pa, catheter length 4 mm + 4 mm/s·t,
 0.01–10 s at 100 Hz; Gaussian noise σ = 0.2 mm on length, σ = 500 Pa on pressure.
+
+reference_lengths.csv — noise-free robot length (m) at 0.01–10 s made by the *reference*
+configuration (rtol 1e-7), for the tests and benchmarks that check the fast configuration against
+it and its fits against data it did not make: five Y across the paper's box and 20 seeded
+Latin-hypercube Y under the published pulse; other demands (pulse trains of other timing and
+amplitude, a step and a ramp given as data); and the Lockhart growth law.
+Cases and their parameters are listed in reference_lengths.json.
 """
 
 from __future__ import annotations
@@ -30,7 +37,7 @@ def make_forward(path: Path = HERE / "synthetic_forward.csv") -> Path:
     catheter = 0.004 + 0.004 * time
     params = gj.replace(gj.reference("forward"), **TRUTH)
     inputs = gj.Inputs(catheter_length=gj.Sampled(jnp.asarray(time), jnp.asarray(catheter)), pressure_demand=gj.published_pulse())
-    config = gj.Config(t1=float(time[-1]), rtol=1e-7, atol=1e-7)
+    config = gj.Config(fidelity="reference", t1=float(time[-1]), rtol=1e-7, atol=1e-7)
     ts = np.concatenate([[config.t0], time])
     traj = gj.simulate(params, inputs, config, ts=ts)
     assert int(traj.status) == gj.OK, gj.status_name(traj.status)
@@ -44,11 +51,112 @@ def make_forward(path: Path = HERE / "synthetic_forward.csv") -> Path:
         "truth": TRUTH,
         "noise_sd": NOISE,
         "inputs": "published pulse 0/150 kPa, period 1.3 s, width 90 %, delay 0.26 s; catheter 0.004 + 0.004 t m",
-        "solver": {"rtol": 1e-7, "atol": 1e-7},
+        "solver": {"fidelity": "reference", "rtol": 1e-7, "atol": 1e-7},
     }
     path.with_suffix(".json").write_text(json.dumps(meta, indent=2) + "\n")
     return path
 
 
+GRID_Y = (6000.0, 7920.0, 10000.0, 12000.0, 14000.0)
+TRUTH_RTOL = 1e-7
+
+
+def other_pulse_samples(time):
+    """The second demand: 0/150 kPa, period 1.6 s, width 80 %, delay 0.3 s, as a sampled column (Pa)."""
+    return np.asarray(gj.PulseTrain(150e3, 1.6, 0.8, 0.3)(jnp.asarray(time)))
+
+
+# Demands beyond the published pulse train (Pa): analytic trains, and steps and ramps given as data.
+DEMANDS = {
+    "published": "PulseTrain 0/150 kPa, period 1.3 s, width 90 %, delay 0.26 s",
+    "sampled": "0/150 kPa, period 1.6 s, width 80 %, delay 0.3 s, sampled every 10 ms",
+    "pulse300": "PulseTrain 0/300 kPa, period 2.5 s, width 40 %, delay 0.5 s",
+    "pulse50": "PulseTrain 0/50 kPa, period 1.0 s, width 60 %, delay 0.1 s",
+    "step": "step 0 -> 120 kPa at 0.5 s, sampled every 10 ms",
+    "ramp": "ramp 0 -> 250 kPa over 0-6 s, then 0 from 8 s, sampled every 10 ms",
+}
+LOCKHART = {"growth_law": "lockhart", "Y": 5068.0, "phi_L": 2.1e-3, "n_L": 0.253}
+
+
+def demand(name: str, grid):
+    """The named demand (see DEMANDS) as a signal; sampled ones on ``grid`` (s)."""
+    if name == "published":
+        return gj.published_pulse()
+    if name == "pulse300":
+        return gj.PulseTrain(300e3, 2.5, 0.4, 0.5)
+    if name == "pulse50":
+        return gj.PulseTrain(50e3, 1.0, 0.6, 0.1)
+    if name == "sampled":
+        values = other_pulse_samples(grid)
+    elif name == "step":
+        values = np.where(grid >= 0.5, 120e3, 0.0)
+    elif name == "ramp":
+        values = np.where(grid < 8.0, 250e3 * np.minimum(grid / 6.0, 1.0), 0.0)
+    else:
+        raise ValueError(f"unknown demand {name!r}")
+    return gj.Sampled(jnp.asarray(grid), jnp.asarray(values))
+
+
+def reference_cases() -> dict:
+    """{case name: (parameter overrides, demand name)} of the reference-made length traces."""
+    from scipy.stats import qmc
+
+    cases = {f"published_Y{y:.0f}": ({"Y": y}, "published") for y in GRID_Y}
+    cases.update({f"sampled_Y{y:.0f}": ({"Y": y}, "sampled") for y in (6000.0, 10000.0)})
+    cases.update({"pulse50_Y6000": ({"Y": 6000.0}, "pulse50"), "step_Y8000": ({"Y": 8000.0}, "step"),
+                  "ramp_Y12000": ({"Y": 12000.0}, "ramp")})
+    cases.update({"lockhart_published": (LOCKHART, "published"), "lockhart_sampled": (LOCKHART, "sampled")})
+    draws = 5e3 + 10e3 * qmc.LatinHypercube(d=1, seed=np.random.default_rng(SEED)).random(20)[:, 0]
+    cases.update({f"published_lhs{k:02d}": ({"Y": float(np.round(y, 1))}, "published") for k, y in enumerate(draws)})
+    cases["pulse300_Y10000"] = ({"Y": 10000.0}, "pulse300")
+    return cases
+
+
+def case_parameters(overrides: dict):
+    """Forward-drive parameters of a reference case."""
+    overrides = dict(overrides)
+    law = overrides.pop("growth_law", "reference")
+    return gj.replace(gj.reference("forward", growth_law=law), **overrides)
+
+
+def reference_inputs(demand_name: str):
+    """Inputs of a reference case: catheter 0.004 + 0.004 t m and the named demand."""
+    grid = np.round(np.arange(0, 1001) * 0.01, 10)
+    catheter = gj.Sampled(jnp.asarray(grid), jnp.asarray(0.004 + 0.004 * grid))
+    return gj.Inputs(catheter_length=catheter, pressure_demand=demand(demand_name, grid))
+
+
+def make_reference_lengths(path: Path = HERE / "reference_lengths.csv") -> Path:
+    """Simulate every reference case; the files are rewritten after each case, and a case the reference
+    solver cannot finish is listed under "failed" rather than written."""
+    time = np.round(np.arange(1, 1001) * 0.01, 10)
+    config = gj.Config(fidelity="reference", t1=float(time[-1]), rtol=TRUTH_RTOL)
+    ts = np.concatenate([[config.t0], time])
+    columns, meta, failed = {}, {}, {}
+    for name, (overrides, demand_name) in reference_cases().items():
+        traj = gj.simulate(case_parameters(overrides), reference_inputs(demand_name), config, ts=ts)
+        if int(traj.status) != gj.OK:
+            failed[name] = {"status": gj.status_name(traj.status), "t_final_s": float(traj.t_final)}
+            print(name, "FAILED", failed[name], flush=True)
+        else:
+            columns[name] = np.asarray(traj.length)[1:]
+            meta[name] = {"parameters": overrides, "demand": demand_name}
+            print(name, f"{float(columns[name][-1]) * 1e3:.3f} mm", flush=True)
+        ex.write_csv(path, time, columns)
+        info = {"configuration": {"fidelity": "reference", "rtol": TRUTH_RTOL}, "seed": SEED,
+                "catheter_length_m": "0.004 + 0.004 t", "cases": meta, "failed": failed, "demands": DEMANDS}
+        path.with_suffix(".json").write_text(json.dumps(info, indent=2) + "\n")
+    return path
+
+
+def read_reference_lengths(path: Path = HERE / "reference_lengths.csv"):
+    """(time s (T,), {case: length m (T,)}, {case: {"parameters", "demand"}}) of the shipped reference traces."""
+    table = np.genfromtxt(path, delimiter=",", names=True)
+    names = [n for n in table.dtype.names if n != "time_s"]
+    cases = json.loads(path.with_suffix(".json").read_text())["cases"]
+    return np.asarray(table["time_s"]), {n: np.asarray(table[n]) for n in names}, cases
+
+
 if __name__ == "__main__":
     print(make_forward())
+    print(make_reference_lengths())

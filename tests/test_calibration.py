@@ -1,38 +1,55 @@
 """Calibration: recovery of known parameters by the fit, NUTS diagnostics and posterior coverage on a test problem."""
 
+import sys
+
 import numpy as np
 import pytest
+from conftest import REPO
 
 import growjax as gj
+from growjax import experiment as ex
 from growjax import fit as gf
 from growjax import posterior as gpost
 
 TRUTH_Y = 9000.0
 NOISE = 2e-4  # m
 
+sys.path.insert(0, str(REPO / "data"))
+import make_synthetic as mk  # noqa: E402
+
 
 def _synthetic(t1, seed):
-    """Length data made by the quasi-static model itself (Y = 9 kPa, σ = 0.2 mm), so any bias is the estimator's."""
-    cfg = gj.QuasiStaticConfig(t1=t1)
-    t = np.array([0.0, 100.0])
-    inputs = gj.Inputs(catheter_length=gj.Sampled(t, 0.004 + 0.004 * t), pressure_demand=gj.published_pulse())
+    """Length data made by the fast configuration itself (Y = 9 kPa, σ = 0.2 mm): any bias is the estimator's.
+
+    For the sampler's own checks only; fits are judged on reference-made data below."""
+    cfg = gj.Config(t1=t1)
+    inputs = mk.reference_inputs("published")
     traj = gj.simulate(gj.replace(gj.reference(), Y=TRUTH_Y), inputs, cfg)
     times = np.arange(0.01, t1 + 1e-9, 0.01)
     clean = np.interp(times, np.asarray(traj.time), np.asarray(traj.length))
     return cfg, inputs, times, clean + np.random.default_rng(seed).normal(0.0, NOISE, times.size)
 
 
-def test_fit_recovers_the_yield_pressure_from_every_start():
-    cfg, inputs, times, length = _synthetic(2.0, seed=11)
-    res = gf.fit(times, length, inputs, free=["Y"], config=cfg, n_starts=3, sweep_n=16, seed=1)
-    est = res.estimate["robot.yield_pressure"]
-    lo, hi = res.interval_90["robot.yield_pressure"]
-    assert res.status == "converged"
-    assert abs(est - TRUTH_Y) < 0.01 * TRUTH_Y
-    assert lo < TRUTH_Y < hi
-    assert res.rmse_length_m == pytest.approx(NOISE, rel=0.15)
-    starts = [s["estimate"]["robot.yield_pressure"] for s in res.starts]
-    assert len(starts) == 3 and np.ptp(starts) < 1e-6 * est  # every start reaches the same optimum
+GRID = ["published_Y6000", "published_Y7920", "published_Y10000", "published_Y12000", "published_Y14000"]
+
+
+def test_fit_intervals_cover_the_truth_on_data_made_by_the_reference():
+    """Five Y across the paper's box, 10 s, noise 0.2 mm: the fast model's 90 % intervals cover ≥ 4 of 5."""
+    time, lengths, cases = mk.read_reference_lengths()
+    inputs = mk.reference_inputs("published")
+    covered, errors = 0, []
+    for k, name in enumerate(GRID):
+        truth = cases[name]["parameters"]["Y"]
+        data = lengths[name] + np.random.default_rng(100 + k).normal(0.0, NOISE, time.size)
+        res = gf.fit(time, data, inputs, free=["Y"], config=gj.Config(t1=10.0), n_starts=1, sweep_n=8,
+                     sigma_length=NOISE)
+        lo, hi = res.interval_90["robot.yield_pressure"]
+        covered += lo < truth < hi
+        errors.append((res.estimate["robot.yield_pressure"] - truth) / res.standard_error["robot.yield_pressure"])
+        assert res.status == "converged"
+        assert res.rmse_length_m == pytest.approx(NOISE, rel=0.1)  # the fit reaches the noise, no further
+    assert covered >= 4, errors
+    assert np.max(np.abs(errors)) < 3.5, errors  # no estimate far outside its interval
 
 
 @pytest.mark.slow
@@ -45,8 +62,12 @@ def test_fit_names_ext_and_n_as_undetermined():
     assert res.interval_90["robot.yield_pressure"] is not None
 
 
-def test_nuts_on_the_test_problem_is_converged_and_covers_the_truth():
-    cfg, inputs, times, length = _synthetic(0.8, seed=13)
+def test_nuts_on_reference_made_data_is_converged_and_covers_the_truth(synthetic_experiment):
+    """Direct NUTS through the fast model on the shipped reference-made experiment (Y = 9 kPa), first 0.8 s."""
+    exp = synthetic_experiment.window(0.8)
+    cfg = gj.Config(t1=0.8)
+    inputs = ex.to_inputs(exp, "forward", gj.reference(), cfg.t0, cfg.t1)
+    times, length = exp.time, exp["robot_length_m"]
     priors = gpost.paper_priors()[:1]
     res = gpost.sample(times, length, inputs, config=cfg, priors=priors, chains=2, warmup=80, samples=80,
                        seed=3, progress=False)

@@ -8,8 +8,8 @@ import pytest
 import growjax as gj
 from growjax import hydraulics as hy
 from growjax._smooth import bracketed_root, smooth_ramp, smooth_step
-from growjax.fluid import Fluid, bulk_modulus, water
-from growjax.robot import catheter_friction_gain, robot_pressure
+from growjax.fluid import Fluid, bulk_modulus, pressure_at_stored_fraction, stored_volume_fraction, water
+from growjax.robot import catheter_friction_gain, rod_balance, rod_pressure
 
 
 def test_water_properties_match_the_stock_table():
@@ -22,6 +22,21 @@ def test_water_properties_match_the_stock_table():
 @pytest.mark.parametrize("p, expected", [(0.0, 2.815e7), (8e3, 3.200e7), (150e3, 1.272e8), (373.3e3, 3.391e8)])
 def test_mixture_bulk_modulus_table(p, expected):
     assert float(bulk_modulus(Fluid(), p)) == pytest.approx(expected, rel=2e-3)
+
+
+@pytest.mark.parametrize("air", [0.0, 0.005, 0.02])
+def test_stored_volume_law_is_the_integral_of_the_compressibility_and_inverts(air):
+    """The fast configuration's closed-form storage ∫₀ᵖ dp'/E(p') against quadrature, and its inverse."""
+    from scipy.integrate import quad
+
+    fluid = gj.replace(gj.reference(), **{"fluid.air_fraction": air}).fluid
+    p0 = float(gj.reference().tube.initial_pressure)
+    for p in (-50e3, 1e3, 150e3, 373e3, 2e6):
+        exact = quad(lambda q: 1.0 / float(bulk_modulus(fluid, q)), p0, p, limit=200, epsabs=0, epsrel=1e-12)[0]
+        closed = float(stored_volume_fraction(fluid, p) - stored_volume_fraction(fluid, p0))
+        assert closed == pytest.approx(exact, rel=1e-6, abs=1e-15)
+        s = stored_volume_fraction(fluid, p)
+        assert float(pressure_at_stored_fraction(fluid, s)) == pytest.approx(p, rel=1e-9, abs=1e-3)
 
 
 def test_pressure_limit_is_373_kpa():
@@ -44,34 +59,36 @@ def test_check_valve_blocks_reverse_flow_unless_bypass_opens():
     args = {"crack_pressure": y, "crack_width": 50.0}
     reverse = hy.check_valve_flow(cv, fl, -50e3, 50e3, **args)
     assert -1e-10 < float(reverse) < 0  # only the 1e-12 m² leak
-    through_network = hy.valve_network_flow(cv, dv, fl, -50e3, 50e3, y, 50.0, 10.0)
+    net = hy.valve_network(cv, dv, fl, y, 50.0, 10.0)
+    through_network = hy.valve_network_flow(net, -50e3, 50e3)
     assert float(through_network) < -1e-4  # the 3-way valve bypasses the check valve
     # Below cracking, forward flow is leak-only, through the check valve and the network alike.
-    below = hy.valve_network_flow(cv, dv, fl, 0.5 * y, 0.5 * y, y, 50.0, 10.0)
+    below = hy.valve_network_flow(net, 0.5 * y, 0.5 * y)
     assert 0 < float(below) < 1e-10
     # Above cracking the valve passes the growth flow of PHYSICS.md §7 (168 kPa → 6.7 mm/s).
-    q = hy.valve_network_flow(cv, dv, fl, 168e3, 60e3, y, 50.0, 10.0)
+    q = hy.valve_network_flow(net, 168e3, 60e3)
     assert float(q) / p.robot.area == pytest.approx(6.7e-3, rel=0.05)
 
 
 def test_network_flow_never_bypasses_forward():
     p = gj.reference()
+    net = hy.valve_network(p.check_valve, p.valve, p.fluid, 7920.0, 50.0, 10.0)
     dps = jnp.linspace(0.0, 7e3, 50)
-    q = jax.vmap(lambda d: hy.valve_network_flow(p.check_valve, p.valve, p.fluid, d, 5e3, 7920.0, 50.0, 10.0))(dps)
+    q = jax.vmap(lambda d: hy.valve_network_flow(net, d, 5e3))(dps)
     assert float(jnp.max(q)) < 1e-10
 
 
 def test_catheter_friction_assists_growth_as_shipped():
     r = gj.reference().robot
     assert float(catheter_friction_gain(r, 0.04)) == pytest.approx(0.1758, rel=1e-3)
-    p_r = robot_pressure(r, 150e3, 0.0, 0.03, 0.04, 0.0, (1e-6, 1e-6))
+    p_r = rod_pressure(rod_balance(r, (1e-6, 1e-6)), 150e3, 0.0, 0.03, 0.04, 0.0)
     assert float(p_r) == pytest.approx(-18.45e3, rel=2e-3)  # PHYSICS.md §7
 
 
 def test_velocity_term_is_negligible_in_the_shipped_model():
     r = gj.reference().robot
-    lo = robot_pressure(r, 150e3, 0.0, 0.03, 0.04, 0.0, (1e-6, 1e-6))
-    hi = robot_pressure(r, 150e3, 0.01, 0.03, 0.04, 0.0, (1e-6, 1e-6))
+    lo = rod_pressure(rod_balance(r, (1e-6, 1e-6)), 150e3, 0.0, 0.03, 0.04, 0.0)
+    hi = rod_pressure(rod_balance(r, (1e-6, 1e-6)), 150e3, 0.01, 0.03, 0.04, 0.0)
     assert 0 < float(hi - lo) * r.area < 1e-10  # N, the ~1e-11 N of PHYSICS.md §7
 
 

@@ -54,7 +54,7 @@ def test_axis_rejects_bad_boxes():
 
 
 def test_emulator_of_the_model_is_within_its_measured_error():
-    cfg = gj.QuasiStaticConfig(t1=0.8)
+    cfg = gj.Config(t1=0.8)
     t = np.array([0.0, 100.0])
     inputs = gj.Inputs(catheter_length=gj.Sampled(t, 0.004 + 0.004 * t), pressure_demand=gj.published_pulse())
     times = np.arange(0.01, 0.8, 0.01)

@@ -1,4 +1,4 @@
-"""Whole-model behaviour: conservation, limits, yield, gradients, LHS corners and the paper's numbers."""
+"""Whole-model behaviour of the fast configuration: volume, yield, the pressure limit, gradients, batches, the paper."""
 
 import jax
 import jax.numpy as jnp
@@ -11,50 +11,46 @@ import growjax as gj
 from growjax import experiment as ex
 from growjax.fluid import bulk_modulus
 from growjax.metrics import length_rmse
-from growjax.model import FORWARD_SCALES
 
 
-def _stored_volume(pipe, fluid, p0, p1):
-    """Liquid volume (m³) stored in a rigid chamber between gauge pressures p0 and p1: ∫ V/E(p) dp."""
-    return quad(lambda p: float(pipe.volume / bulk_modulus(fluid, p)), p0, p1, limit=200)[0]
+def _stored(params, p0, p1):
+    """Liquid volume (m³) the rigid lumped lines (hoses and tank) store from p0 to p1 Pa: ∫ V/E(p) dp by quadrature."""
+    volume = params.pump.n_syringes * params.tube.volume + params.tank.volume
+    return quad(lambda p: volume / float(bulk_modulus(params.fluid, p)), p0, p1, limit=200, epsrel=1e-10)[0]
 
 
-def _volume_defect(params, traj):
-    x_p, _, p_tube, _, p_tank, xi, _, _ = np.asarray(traj.final_state) * np.asarray(FORWARD_SCALES)
-    delivered = params.pump.n_syringes * params.pump.syringe_area * x_p
-    robot = params.robot.area * xi
-    stored = params.pump.n_syringes * _stored_volume(params.tube, params.fluid, params.tube.initial_pressure, p_tube)
-    stored += _stored_volume(params.tank, params.fluid, params.tank.initial_pressure, p_tank)
-    return delivered - robot - stored, delivered
+EDGE_TIMES = np.unique(np.concatenate([np.linspace(0.001, 3.0, 61)] + [
+    e + np.array([-1e-3, -1e-4, 0.0, 1e-4, 1e-3, 1e-2]) for e in (0.26, 1.43, 1.56, 2.73)]))  # rises and falls
 
 
-def test_volume_is_conserved_with_rigid_walls_and_nearly_with_flexible():
+@pytest.mark.parametrize("demand", [gj.published_pulse(), gj.PulseTrain(300e3, 0.7, 0.5, 0.05)], ids=["published", "300kPa"])
+def test_volume_balance_holds_through_every_demand_edge(demand):
+    """Delivered = grown + stored at every save time, the stored volume from the sensed pressure by quadrature."""
     rigid = gj.replace(gj.reference(), **{"tube.diameter_compliance": 0.0})
-    traj = gj.simulate(rigid, forward_inputs(), SHORT)
-    defect, delivered = _volume_defect(rigid, traj)
-    assert int(traj.status) == gj.OK and delivered > 1e-8
-    assert abs(defect) < 1e-6 * delivered + 1e-13  # solver tolerance
-    flexible = gj.reference()
-    traj = gj.simulate(flexible, forward_inputs(), SHORT)
-    defect_flex, delivered = _volume_defect(flexible, traj)
-    # The hoses' wall strain holds k_p·p·πdL/2 ≈ 3.8e-15 m³/Pa each; at ~150 kPa that is ~1.1e-9 m³ in all.
-    wall = 2 * np.pi * flexible.tube.hydraulic_diameter / 2 * flexible.tube.length * flexible.tube.diameter_compliance
-    p_tube = float(traj.final_state[2]) * FORWARD_SCALES[2]
-    assert defect_flex == pytest.approx(wall * (p_tube - flexible.tube.initial_pressure), rel=0.05)
+    inputs = gj.Inputs(catheter_length=gj.Constant(0.02), pressure_demand=demand)
+    traj = gj.simulate(rigid, inputs, SHORT, ts=EDGE_TIMES)
+    assert int(traj.status) == gj.OK
+    delivered = rigid.pump.n_syringes * rigid.pump.syringe_area * np.asarray(traj.syringe_displacement)
+    grown = rigid.robot.area * (np.asarray(traj.length) - rigid.robot.initial_length)
+    pressure = np.asarray(traj.pressure)  # from the first sample (t0), where the lumped lines start equalised
+    stored = np.array([_stored(rigid, pressure[0], p) for p in pressure])
+    defect = delivered - grown - stored
+    scale = np.max(np.abs(delivered))
+    assert scale > 5e-8
+    assert np.max(np.abs(defect)) < 1e-3 * scale  # the issue's 0.1 % of the delivered volume
 
 
 def test_zero_demand_never_grows_the_robot():
     traj = gj.simulate(gj.reference(), forward_inputs(amplitude=0.0), SHORT)
     assert int(traj.status) == gj.OK
     assert float(jnp.max(traj.length)) <= gj.reference().robot.initial_length + 1e-9
-    assert float(traj.length[-1]) < gj.reference().robot.initial_length  # it fed the lines instead
 
 
 def test_growth_only_above_the_yield_pressure():
     params = gj.reference()
     y = params.robot.yield_pressure
     below = gj.simulate(params, forward_inputs(amplitude=0.9 * y, catheter=0.0), SHORT)
-    assert float(below.length[-1]) < float(below.length[30])  # no growth after the lines settle
+    assert float(jnp.max(below.length)) <= params.robot.initial_length + 1e-9
     traj = gj.simulate(params, forward_inputs(amplitude=150e3), SHORT)
     growing = np.asarray(traj.robot_flow) > 1e-10
     assert growing.sum() > 100
@@ -62,49 +58,67 @@ def test_growth_only_above_the_yield_pressure():
     assert drop.min() > y  # the check valve is open only above cracking (= Y as shipped)
 
 
-def test_pressure_limit_stops_and_flags_the_run():
-    traj = gj.simulate(gj.reference(), forward_inputs(amplitude=600e3), SHORT)
-    limit = float(gj.pressure_limit(gj.reference().robot))
-    assert int(traj.status) == gj.PRESSURE_LIMIT
+def _assert_stopped_at_the_limit(traj, latest, limit=373.333e3):
+    assert int(traj.status) == gj.PRESSURE_LIMIT, gj.status_name(traj.status)
     t_cross = float(traj.limit_time)
-    assert 0.26 < t_cross < 0.4 and float(traj.t_final) == pytest.approx(t_cross)
+    assert 0.0 < t_cross < latest and float(traj.t_final) == pytest.approx(t_cross)
     t = np.asarray(traj.time)
     assert np.all(np.isnan(np.asarray(traj.pressure)[t > t_cross + 1e-9]))
-    before = np.asarray(traj.pressure)[t <= t_cross]
-    assert np.nanmax(before) <= limit * 1.001
+    assert np.nanmax(np.asarray(traj.pressure)[t <= t_cross]) <= limit * 1.001
+    return t_cross
 
 
-GRAD_NAMES = ("Y", "ext", "n", "check_valve.max_open_pressure", "fluid.air_fraction")
+@pytest.mark.parametrize("amplitude", [400e3, 600e3, 2e6])
+def test_forward_demands_beyond_the_membrane_limit_stop_with_status_1(amplitude):
+    """Pulses and a step at 400 kPa–2 MPa: the run stops at the crossing, never with a solver failure."""
+    pulse = gj.simulate(gj.reference(), forward_inputs(amplitude=amplitude), SHORT)
+    t_pulse = _assert_stopped_at_the_limit(pulse, 0.6)
+    assert t_pulse > 0.26  # after the first rise
+    step = gj.Inputs(catheter_length=gj.Constant(0.02),
+                     pressure_demand=gj.Sampled(np.array([0.0, 0.1, 0.1 + 1e-9, 100.0]), np.array([0.0, 0.0, amplitude, amplitude])))
+    _assert_stopped_at_the_limit(gj.simulate(gj.reference(), step, SHORT), 0.6)
 
 
-def test_gradients_match_central_differences(shared_experiment):
-    """d(final length, RMSE)/d(θ) by forward-mode AD through the solver against central differences."""
-    exp = shared_experiment
-    cfg = gj.Config(t1=1.5, rtol=1e-7, atol=1e-7, adjoint="forward")
+@pytest.mark.parametrize("rate", [500.0, 2000.0])
+def test_inverse_drive_pushing_a_blocked_robot_stops_with_status_1(rate):
+    """The stepper feeding a robot that cannot grow (Y = 1 MPa) compresses the lines past the limit.
+
+    A thinner membrane (10 µm: limit 107 kPa) puts the limit below the ~190 kPa at which the shipped
+    stepper stalls against the syringes."""
+    params = gj.replace(gj.reference("inverse"), Y=1e6, t=1e-5)
+    times = 0.05 + np.arange(1000) / rate  # the same number of edges: one compiled solver
+    inputs = gj.Inputs(catheter_length=gj.Constant(0.0), steps=gj.StepSchedule(times, np.arange(1, 1001, dtype=float)))
+    traj = gj.simulate(params, inputs, gj.Config(drive="inverse", t1=3.0))
+    _assert_stopped_at_the_limit(traj, 3.0, float(gj.pressure_limit(params.robot)))
+
+
+GRAD_NAMES = ("Y", "check_valve.max_open_pressure", "fluid.air_fraction")
+
+
+@pytest.mark.parametrize("adjoint", ["forward", pytest.param("reverse", marks=pytest.mark.slow)])
+def test_gradients_match_central_differences(synthetic_experiment, adjoint):
+    """d(final length, RMSE)/dθ through the solver (jacfwd or grad) against central differences."""
+    exp = synthetic_experiment
+    cfg = gj.Config(t1=1.5, rtol=1e-8, adjoint=adjoint)
     p0 = gj.reference()
     inputs = ex.to_inputs(exp, "forward", p0, cfg.t0, cfg.t1)
-    ts = np.linspace(cfg.t0, cfg.t1, 151)
+    breaks = gj.input_breaks(inputs, cfg)
     theta0 = jnp.array([float(gj.get(p0, name)) for name in GRAD_NAMES])
 
-    @jax.jit
     def outputs(theta):
-        traj = gj.simulate(gj.replace(p0, **dict(zip(GRAD_NAMES, theta))), inputs, cfg, ts=ts)
+        traj = gj.simulate(gj.replace(p0, **dict(zip(GRAD_NAMES, theta))), inputs, cfg, breaks=breaks)
         return jnp.stack([traj.length[-1], length_rmse(traj, exp.time, exp["robot_length_m"], cfg.t0, cfg.t1)])
 
-    jac = np.asarray(jax.jit(jax.jacfwd(outputs))(theta0))
+    jac_fn = jax.jacfwd(outputs) if adjoint == "forward" else jax.jacrev(outputs)
+    jac = np.asarray(jax.jit(jac_fn)(theta0))
+    run = jax.jit(outputs)
     for i, name in enumerate(GRAD_NAMES):
         h = 1e-3 * float(theta0[i])
-        fd = np.asarray(outputs(theta0.at[i].add(h)) - outputs(theta0.at[i].add(-h))) / (2 * h)
-        # Tolerance: 1 % plus the finite differences' own noise floor. Adaptive steps move the length by
-        # ~rtol·L ≈ 1e-9 m between the ±h runs, i.e. ~1e-6 m over the whole parameter value at h = 1e-3 θ;
-        # 10 µm (length) / 1 µm (RMSE) over the whole value is allowed, 200× below Y's 2.3 mm effect.
-        atol = np.array([1e-5, 1e-6]) / float(theta0[i])
+        fd = np.asarray(run(theta0.at[i].add(h)) - run(theta0.at[i].add(-h))) / (2 * h)
+        # 1 % plus the differences' own floor: adaptive steps move the length by ~rtol·L between the ±h runs.
+        atol = np.array([1e-6, 1e-7]) / float(theta0[i])
         assert np.all(np.abs(jac[:, i] - fd) <= 1e-2 * np.abs(fd) + atol), (name, jac[:, i], fd)
-    # Y, the check valve and the entrained air matter; ext and n do not (PHYSICS.md: ~1e-11 N).
-    for i in (0, 3, 4):
-        assert abs(jac[0, i]) * float(theta0[i]) > 1e-4
-    for i in (1, 2):
-        assert abs(jac[0, i]) * float(theta0[i]) < 1e-6
+        assert abs(jac[0, i]) * float(theta0[i]) > 1e-5  # each matters (> 10 µm over its whole value)
 
 
 def test_paper_box_corners_run_bad_member_is_isolated_and_paper_rmse_is_reproduced(shared_experiment):
@@ -116,9 +130,10 @@ def test_paper_box_corners_run_bad_member_is_isolated_and_paper_rmse_is_reproduc
     ns, ys, es = (jnp.array([m[i] for m in members]) for i in range(3))
     cfg = gj.Config(t1=10.0)
     inputs = ex.to_inputs(shared_experiment, "forward", p0)
+    breaks = gj.input_breaks(inputs, cfg)
 
     def run(n, y, e):
-        traj = gj.simulate(gj.replace(p0, n=n, Y=y, ext=e), inputs, cfg)
+        traj = gj.simulate(gj.replace(p0, n=n, Y=y, ext=e), inputs, cfg, breaks=breaks)
         exp = shared_experiment
         return traj, length_rmse(traj, exp.time, exp["robot_length_m"], cfg.t0, cfg.t1)
 
@@ -137,7 +152,7 @@ def test_paper_box_corners_run_bad_member_is_isolated_and_paper_rmse_is_reproduc
 
 def test_inverse_model_tracks_and_steps_the_syringe(shared_experiment):
     params = gj.reference("inverse")
-    cfg = gj.Config(drive="inverse", rtol=1e-5, atol=1e-5)
+    cfg = gj.Config(drive="inverse")
     inputs = ex.to_inputs(shared_experiment, "inverse", params)
     traj = gj.simulate(params, inputs, cfg)
     assert int(traj.status) == gj.OK
@@ -146,11 +161,20 @@ def test_inverse_model_tracks_and_steps_the_syringe(shared_experiment):
     # The rotor lags its detent under load by a fraction of a step (holding stiffness ≈ 6.7 N·m/rad).
     assert abs(float(traj.syringe_displacement[-1]) - steps * per_step) < 0.3 * per_step
     rmse = float(length_rmse(traj, shared_experiment.time, shared_experiment["robot_length_m"], 0.001, 10.0))
-    assert rmse < 5e-3  # paper: 2.5 mm; growjax's reference: ~3.5 mm (README)
+    assert rmse < 5e-3  # paper: 2.5 mm; growjax: ~3.5 mm (README)
 
 
-def test_simulate_rejects_a_bad_configuration():
+def test_bad_input_is_named():
     with pytest.raises(ValueError, match="drive"):
         gj.Config(drive="sideways")
+    with pytest.raises(ValueError, match="fidelity"):
+        gj.Config(fidelity="quick")
     with pytest.raises(ValueError, match="t1"):
         gj.Config(t0=1.0, t1=0.5)
+    inputs = forward_inputs()
+    with pytest.raises(ValueError, match="sorted"):
+        gj.simulate(gj.reference(), inputs, SHORT, ts=np.array([0.5, 0.2]))
+    with pytest.raises(ValueError, match="finite"):
+        gj.simulate(gj.reference(), inputs, SHORT, ts=np.array([0.1, np.nan]))
+    with pytest.raises(ValueError, match=r"within \[t0, t1\]"):
+        gj.simulate(gj.reference(), inputs, SHORT, ts=np.array([0.1, 5.0]))

@@ -1,20 +1,16 @@
-"""growjax: a differentiable JAX simulator of the MAMMOBOT hydraulic soft growing robot."""
+"""growjax: a differentiable JAX simulator of the MAMMOBOT hydraulic soft growing robot.
+
+Importing growjax turns on float64 in JAX for the process (``jax_enable_x64``): the model
+spans pressures of 1e5 Pa and compliances of 1e-13 m³/Pa, which float32 cannot resolve.
+"""
 
 import jax
 
 jax.config.update("jax_enable_x64", True)
 
-from growjax.model import (
-    OK,
-    PRESSURE_LIMIT,
-    SOLVER_FAILED,
-    Config,
-    Network,
-    Trajectory,
-    network,
-    simulate,
-    status_name,
-)
+from growjax import effects
+from growjax.config import Config
+from growjax.effects import Effect
 from growjax.params import (
     Parameters,
     as_dict,
@@ -23,8 +19,8 @@ from growjax.params import (
     reference,
     replace,
     validate,
+    with_effects,
 )
-from growjax.quasistatic import QuasiStaticConfig
 from growjax.robot import pressure_limit
 from growjax.signals import (
     Constant,
@@ -34,6 +30,8 @@ from growjax.signals import (
     StepSchedule,
     published_pulse,
 )
+from growjax.simulate import input_breaks, simulate
+from growjax.trajectory import OK, PRESSURE_LIMIT, SOLVER_FAILED, Trajectory, status_name
 
 __all__ = [
     "OK",
@@ -41,17 +39,17 @@ __all__ = [
     "SOLVER_FAILED",
     "Config",
     "Constant",
+    "Effect",
     "Inputs",
-    "Network",
     "Parameters",
     "PulseTrain",
-    "QuasiStaticConfig",
     "Sampled",
     "StepSchedule",
     "Trajectory",
     "as_dict",
+    "effects",
     "get",
-    "network",
+    "input_breaks",
     "parameter_names",
     "pressure_limit",
     "published_pulse",
@@ -60,5 +58,6 @@ __all__ = [
     "simulate",
     "status_name",
     "validate",
+    "with_effects",
 ]
-__version__ = "0.1.0"
+__version__ = "0.2.0"

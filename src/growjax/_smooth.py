@@ -31,33 +31,55 @@ def smooth_abs_power(x, exponent, eps):
     return x * (x * x + eps * eps) ** (0.5 * (exponent - 1.0))
 
 
+def _implicit_tangent(g, y):
+    return y / g(jnp.ones_like(y))
+
+
+def newton_root(residual: Callable, x0, iterations: int):
+    """Root of a smooth scalar ``residual`` by ``iterations`` unrolled Newton steps from ``x0``.
+
+    For well-conditioned residuals with a close start (an inverse law, a nearly linear
+    balance). Derivatives are implicit (``jax.lax.custom_root``), never through the iterations.
+    """
+
+    def solve(f, x):
+        for _ in range(iterations):
+            fx, dfx = jax.jvp(f, (x,), (jnp.ones_like(x),))
+            x = x - fx / dfx
+        return x
+
+    return jax.lax.custom_root(residual, x0, solve, _implicit_tangent)
+
+
 def _safeguarded_newton_step(f, x, lo, hi):
     """One step for a decreasing f: shrink [lo, hi] around the root, then Newton if it stays inside, else bisect."""
     fx, dfx = jax.jvp(f, (x,), (jnp.ones_like(x),))
     lo = jnp.where(fx > 0, x, lo)
     hi = jnp.where(fx > 0, hi, x)
     newton = x - fx / jnp.where(dfx < 0, dfx, -1.0)
-    ok = (dfx < 0) & (newton > lo) & (newton < hi)
+    ok = (dfx < 0) & (newton >= lo) & (newton <= hi)
     x_new = jnp.where(fx == 0, x, jnp.where(ok, newton, 0.5 * (lo + hi)))
     return x_new, lo, hi
 
 
 def bracketed_root(
-    residual: Callable, lower, upper, *, max_iter: int = 60, xtol: float = 1e-13
+    residual: Callable, lower, upper, *, x0=None, max_iter: int = 60, xtol: float = 1e-13, atol: float = 0.0
 ):
     """Root of a scalar, monotonically decreasing ``residual`` on ``[lower, upper]``.
 
-    The caller guarantees ``residual(lower) ≥ 0 ≥ residual(upper)``. Newton steps
-    are taken while they stay inside the shrinking bracket, bisection otherwise,
-    so the iteration cannot diverge. Differentiation uses the implicit function
-    theorem (``jax.lax.custom_root``), not the iterations.
+    The caller guarantees ``residual(lower) ≥ 0 ≥ residual(upper)``. Newton steps are
+    taken while they stay inside the shrinking bracket, bisection otherwise, so the
+    iteration cannot diverge; it stops when a step or the bracket falls below
+    ``xtol`` × the bracket's magnitude + ``atol`` (in the unit of x; needed where the bracket
+    can shrink to nothing, e.g. at an equilibrium). ``x0`` (default the midpoint) is the start. Differentiation uses the
+    implicit function theorem (``jax.lax.custom_root``), not the iterations.
     """
 
     def solve(f, x0):
         def cond(carry):
             _, lo, hi, step, it = carry
-            scale = jnp.maximum(jnp.abs(hi) + jnp.abs(lo), 1e-300)
-            return (it < max_iter) & (jnp.abs(step) > xtol * scale) & (hi - lo > xtol * scale)
+            tol = xtol * (jnp.abs(hi) + jnp.abs(lo)) + atol
+            return (it < max_iter) & (jnp.abs(step) > tol) & (hi - lo > tol)
 
         def body(carry):
             x, lo, hi, _, it = carry
@@ -68,30 +90,6 @@ def bracketed_root(
         init = (x0, lo, hi, jnp.asarray(jnp.inf, x0.dtype), 0)
         return jax.lax.while_loop(cond, body, init)[0]
 
-    def tangent_solve(g, y):
-        return y / g(jnp.ones_like(y))
+    start = 0.5 * (lower + upper) if x0 is None else jnp.clip(x0, jnp.minimum(lower, upper), jnp.maximum(lower, upper))
+    return jax.lax.custom_root(residual, jax.lax.stop_gradient(start), solve, _implicit_tangent)
 
-    x0 = 0.5 * (lower + upper)
-    return jax.lax.custom_root(residual, x0, solve, tangent_solve)
-
-
-def unrolled_root(residual: Callable, lower, upper, *, iterations: int = 12):
-    """Root of a scalar, monotonically decreasing ``residual`` on ``[lower, upper]``, in a fixed number of steps.
-
-    Like :func:`bracketed_root` (Newton inside a shrinking bracket, bisection otherwise,
-    implicit differentiation), but with ``iterations`` steps unrolled: no data-dependent
-    loop, so under ``vmap`` and inside a fixed-step scan it fuses into straight-line code.
-    Use it where the residual is well conditioned enough to converge in that many steps.
-    """
-
-    def solve(f, x0):
-        lo, hi = jnp.minimum(lower, upper), jnp.maximum(lower, upper)
-        x = x0
-        for _ in range(iterations):
-            x, lo, hi = _safeguarded_newton_step(f, x, lo, hi)
-        return x
-
-    def tangent_solve(g, y):
-        return y / g(jnp.ones_like(y))
-
-    return jax.lax.custom_root(residual, 0.5 * (lower + upper), solve, tangent_solve)

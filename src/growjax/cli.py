@@ -38,6 +38,13 @@ def default_data_path() -> Path:
     return Path(str(resources.files("growjax") / "datasets" / "synthetic_forward.csv"))
 
 
+def make_config(args, drive: str = "forward", **extra):
+    """The :class:`growjax.Config` named by the common options (--fidelity, --rtol, --t-end)."""
+    import growjax as gj
+
+    return gj.Config(fidelity=args.fidelity, drive=drive, t1=args.t_end, rtol=args.rtol, atol=args.rtol, **extra)
+
+
 def simulate_command(args) -> dict:
     import jax
 
@@ -52,7 +59,7 @@ def simulate_command(args) -> dict:
     overrides = dict(parse_param(p) for p in args.param)
     params = gj.replace(params, **overrides) if overrides else params
     gj.validate(params)
-    config = gj.Config(drive=args.drive, t1=args.t_end, rtol=args.rtol, atol=args.rtol)
+    config = make_config(args, args.drive)
     inputs = ex.to_inputs(exp, args.drive, params, config.t0, config.t1)
     ts = exp.time[(exp.time >= config.t0) & (exp.time <= config.t1)]
     ts = np.unique(np.concatenate([[config.t0], ts, [config.t1]]))
@@ -137,10 +144,7 @@ def sweep_command(args) -> dict:
     exp = ex.read(data).window(args.t_end + 1e-9)
     base = gj.reference("forward")
     dims = tuple(sw.parse_dimension(p, base) for p in args.param) if args.param else sw.paper_box()
-    if args.fidelity == "quasistatic":
-        config = gj.QuasiStaticConfig(t1=args.t_end)
-    else:
-        config = gj.Config(t1=args.t_end, rtol=1e-4, atol=1e-4)
+    config = make_config(args)
     inputs = ex.to_inputs(exp, "forward", base, config.t0, config.t1)
     measured = (exp.time, exp["robot_length_m"]) if "robot_length_m" in exp else None
     result = sw.lhs_sweep(args.n, base, inputs, config, dims, seed=args.seed, measured=measured,
@@ -194,10 +198,7 @@ def fit_command(args) -> dict:
     if "robot_length_m" not in exp:
         raise ValueError(f"{data} has no robot_length_m column to fit")
     base = gj.reference(args.drive)
-    if args.drive == "forward":
-        config = gj.QuasiStaticConfig(t1=args.t_end)
-    else:
-        config = gj.Config(drive="inverse", t1=args.t_end, rtol=1e-5, atol=1e-5, adjoint="forward")
+    config = make_config(args, args.drive, adjoint="forward")
     inputs = ex.to_inputs(exp, args.drive, base, config.t0, config.t1)
     pressure = exp["pressure_Pa"] if "pressure_Pa" in exp else None  # noqa: SIM401 (Experiment is not a dict)
     result = gf.fit(exp.time, exp["robot_length_m"], inputs, free=args.free or ["Y"], base=base, config=config,
@@ -208,7 +209,7 @@ def fit_command(args) -> dict:
     traj = gj.simulate(fitted, inputs, config)
     fig = trajectory_figure(traj, out / "fit.png", measured=(exp.time, exp["robot_length_m"]),
                             title=f"fit of {', '.join(result.names)}: RMSE {1e3 * result.rmse_length_m:.2f} mm")
-    summary = {"data": str(data), "drive": args.drive, "t_end_s": args.t_end, "model": type(config).__name__,
+    summary = {"data": str(data), "drive": args.drive, "t_end_s": args.t_end, "fidelity": config.fidelity,
                **result.summary(), "figure": str(fig)}
     return summary
 
@@ -221,12 +222,12 @@ def posterior_command(args) -> dict:
     data = Path(args.data) if args.data else default_data_path()
     exp = ex.read(data).window(args.t_end + 1e-9)
     base = gj.reference("forward", growth_law=args.law)
-    config = gj.QuasiStaticConfig(t1=args.t_end)
+    config = make_config(args, adjoint="forward")
     inputs = ex.to_inputs(exp, "forward", base, config.t0, config.t1)
     priors = gpost.paper_priors() if args.law == "reference" else gpost.lockhart_priors()
     res = gpost.sample(exp.time, exp["robot_length_m"], inputs, base, config, priors=priors, chains=args.chains,
                        warmup=args.warmup, samples=args.samples, seed=args.seed, progress=True,
-                       emulate=not args.direct)
+                       emulate=args.emulate)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     res.idata.to_netcdf(str(out / "posterior.nc"))
@@ -242,7 +243,6 @@ def build_parser():
     sim.add_argument("--drive", choices=["forward", "inverse"], default="forward")
     sim.add_argument("--t-end", type=float, default=10.0, help="end time, s (default 10)")
     sim.add_argument("--param", action="append", default=[], metavar="NAME=VALUE", help="override a parameter (SI units), e.g. Y=8000")
-    sim.add_argument("--rtol", type=float, default=1e-6, help="solver tolerance on scaled states")
     sim.add_argument("--out", default="out", help="output folder (trajectory.csv, trajectory.png)")
     sim.add_argument("--json", help="also write the JSON summary to this file")
 
@@ -255,8 +255,6 @@ def build_parser():
     swp.add_argument("--t-end", type=float, default=10.0, help="end time, s (default 10)")
     swp.add_argument("--sobol", action="store_true", help="also compute Sobol indices of RMSE and final length")
     swp.add_argument("--sobol-n", type=int, default=256, help="Saltelli base points (power of 2; runs = N·(d+2))")
-    swp.add_argument("--fidelity", choices=["quasistatic", "reference"], default="quasistatic",
-                     help="quasi-static reduced model (default, fast) or the reference model (slow)")
     swp.add_argument("--chunk-size", type=int, default=None, help="sets per compiled call (default: memory-sized)")
     swp.add_argument("--out", default="out", help="output folder (sweep.csv, sweep.png, sobol.png)")
     swp.add_argument("--json", help="also write the JSON summary to this file")
@@ -276,14 +274,21 @@ def build_parser():
     post.add_argument("--t-end", type=float, default=10.0, help="end time, s (default 10)")
     post.add_argument("--law", choices=["reference", "lockhart"], default="reference",
                       help="growth law: the published velocity term (default) or Lockhart's")
-    post.add_argument("--direct", action="store_true",
-                      help="run the model in every gradient instead of the validated emulator (slow)")
+    post.add_argument("--emulate", action="store_true",
+                      help="sample through a validated tensor-grid emulator instead of the model itself (worth it when "
+                           "the data leave directions flat, as ext and n of the published law: NUTS then runs to its "
+                           "maximum tree depth, and each gradient through the model costs ~0.1 s)")
     post.add_argument("--chains", type=int, default=4)
     post.add_argument("--warmup", type=int, default=500)
     post.add_argument("--samples", type=int, default=500)
     post.add_argument("--seed", type=int, default=0)
     post.add_argument("--out", default="out", help="output folder (posterior.nc)")
     post.add_argument("--json", help="also write the JSON summary to this file")
+    for command in (sim, swp, fit, post):
+        command.add_argument("--fidelity", choices=["fast", "reference"], default="fast",
+                             help="fast configuration (default) or the reference network (slow; for checks)")
+        command.add_argument("--rtol", type=float, default=None,
+                             help="solver tolerance on scaled states (default: 3e-5 fast, 1e-6 reference)")
     return parser
 
 

@@ -26,7 +26,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from growjax import params as gp
-from growjax.model import OK, simulate
+from growjax.simulate import simulate
+from growjax.trajectory import OK
 
 
 @dataclasses.dataclass(frozen=True)

@@ -22,8 +22,9 @@ from scipy import stats
 
 from growjax import params as gp
 from growjax import sweep as sw
-from growjax.model import OK, Config, simulate
-from growjax.quasistatic import QuasiStaticConfig
+from growjax.config import Config
+from growjax.simulate import input_breaks, simulate
+from growjax.trajectory import OK
 
 # Multi-start boxes: the paper's investigation where it has one, else [θ/2, 2θ] around the reference.
 PAPER_RANGES = {d.name: (d.low, d.high) for d in sw.paper_box()}
@@ -86,6 +87,7 @@ class Problem(eqx.Module):
     times: jax.Array  # (m,) s
     length: jax.Array  # (m,) m
     pressure: jax.Array | None  # (m,) Pa or None
+    breaks: tuple  # (jump times, slope-break times) of the inputs, s
     names: tuple = eqx.field(static=True)
     config: object = eqx.field(static=True)
     sigma_length: float = eqx.field(static=True, default=1e-3)
@@ -98,7 +100,7 @@ class Problem(eqx.Module):
     def _residuals(self, z):
         theta = self.refs * jnp.exp(z)
         p = gp.replace(self.base, **{n: theta[i] for i, n in enumerate(self.names)})
-        traj = simulate(p, self.inputs, self.config)
+        traj = simulate(p, self.inputs, self.config, breaks=self.breaks)
         r = (jnp.interp(self.times, traj.time, traj.length) - self.length) / self.sigma_length
         if self.pressure is not None:
             r = jnp.concatenate([r, (jnp.interp(self.times, traj.time, traj.pressure) - self.pressure) / self.sigma_pressure])
@@ -115,11 +117,12 @@ def make_problem(base, names, inputs, config, times, length, pressure=None, wind
                  sigma_length=1e-3, sigma_pressure=5e3) -> Problem:
     """The :class:`Problem` for the parameters ``names`` on the data inside ``window`` (default: the config's)."""
     names = tuple(gp.resolve_name(base, n) for n in names)
+    config = config.replace(adjoint="forward")
     refs = jnp.asarray([float(gp.get(base, n)) for n in names])
     t0, t1 = window if window is not None else (config.t0, config.t1)
     keep = (np.asarray(times) >= t0) & (np.asarray(times) <= t1)
     pick = (lambda a: None if a is None else jnp.asarray(np.asarray(a)[keep]))
-    return Problem(base, inputs, refs, pick(times), pick(length), pick(pressure), names, config,
+    return Problem(base, inputs, refs, pick(times), pick(length), pick(pressure), input_breaks(inputs, config), names, config,
                    sigma_length, sigma_pressure)
 
 
@@ -144,7 +147,7 @@ def fit(
     inputs,
     free: Sequence[str] = ("Y",),
     base: gp.Parameters | None = None,
-    config: Config | QuasiStaticConfig | None = None,
+    config: Config | None = None,
     pressure=None,
     window=None,
     n_starts: int = 3,
@@ -160,7 +163,7 @@ def fit(
     :func:`default_range`. Returns the best optimum over the starts.
     """
     base = base if base is not None else gp.reference()
-    config = config if config is not None else QuasiStaticConfig()
+    config = (config if config is not None else Config()).replace(adjoint="forward")  # Jacobians by jvp
     names = tuple(gp.resolve_name(base, n) for n in free)
     refs = np.array([float(gp.get(base, n)) for n in names])
     if np.any(refs <= 0):

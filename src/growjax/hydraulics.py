@@ -3,14 +3,16 @@
 Sign convention (Simscape): pressures are gauge, Pa; a flow q (m³/s) is positive
 from port A to port B. Each component is a small pytree of parameters plus pure
 functions of pressures and flows; no component has a state except the pipeline
-chambers, whose derivatives are computed here and integrated by :mod:`growjax.model`.
+chambers, whose derivatives are computed here and integrated by the assemblies (:mod:`growjax.reference_model`, :mod:`growjax.fast_model`).
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 
 from growjax._smooth import smooth_ramp, smooth_step
@@ -24,7 +26,7 @@ def critical_pressure(p_avg, b_lam):
 
 def orifice_flow(conductance, dp, p_cr):
     """Regularised square-root law q = k Δp / (Δp² + p_cr²)^¼, m³/s; ``conductance`` k = C_D A √(2/ρ)."""
-    return conductance * dp / (dp * dp + p_cr * p_cr) ** 0.25
+    return conductance * dp * jax.lax.rsqrt(jnp.sqrt(dp * dp + p_cr * p_cr))
 
 
 def orifice_pressure_drop(conductance, q, p_cr):
@@ -167,10 +169,8 @@ class CheckValve(eqx.Module):
 
 def check_valve_flow(cv: CheckValve, fluid: Fluid, dp, p_avg, crack_pressure, crack_width):
     """Flow A→B (m³/s) at Δp = p_A − p_B; the opening starts smoothly (C¹) over ``crack_width`` Pa."""
-    gain = (cv.area_max - cv.leak_area) / (cv.max_open_pressure - crack_pressure)
-    area = jnp.minimum(cv.leak_area + gain * smooth_ramp(dp - crack_pressure, crack_width), cv.area_max)
-    p_cr = critical_pressure(p_avg, cv.b_lam)
-    return orifice_flow(orifice_conductance(area, cv.discharge_coefficient, fluid), dp, p_cr)
+    net = valve_network(cv, DirectionalValve(), fluid, crack_pressure, crack_width, 1.0)
+    return _check_flow(net, dp, critical_pressure(p_avg, net.check_laminar_ratio))
 
 
 class DirectionalValve(eqx.Module):
@@ -185,9 +185,39 @@ class DirectionalValve(eqx.Module):
     b_lam: float = 0.999
 
 
-def valve_network_flow(
-    cv: CheckValve, dv: DirectionalValve, fluid: Fluid, dp, p_avg, crack_pressure, crack_width, switch_width
-):
+class ValveNetwork(NamedTuple):
+    """Constants of the check valve ∥ 3-way bypass network, computed once per solve (:func:`valve_network`)."""
+
+    crack: jax.Array  # Pa, cracking pressure of the check valve
+    crack_width: float  # Pa
+    switch_width: float  # Pa
+    check_leak: jax.Array  # m²
+    check_gain: jax.Array  # m²/Pa, opening per Pa above cracking
+    check_area_max: jax.Array  # m²
+    check_k: jax.Array  # C_D √(2/ρ), per m² of opening
+    check_laminar_ratio: jax.Array  # B_lam
+    bypass_leak: jax.Array  # m²
+    bypass_span: jax.Array  # m², full minus leak area
+    bypass_k: jax.Array  # C_D √(2/ρ)
+    bypass_laminar_ratio: jax.Array  # B_lam
+
+
+def valve_network(cv: CheckValve, dv: DirectionalValve, fluid: Fluid, crack_pressure, crack_width, switch_width) -> ValveNetwork:
+    """The :class:`ValveNetwork` constants for a check valve cracking at ``crack_pressure`` (Pa)."""
+    root = jnp.sqrt(2.0 / fluid.density)
+    gain = (cv.area_max - cv.leak_area) / (cv.max_open_pressure - crack_pressure)
+    return ValveNetwork(
+        crack_pressure, crack_width, switch_width, cv.leak_area, gain, cv.area_max, cv.discharge_coefficient * root,
+        cv.b_lam, dv.leak_area, dv.area_max - dv.leak_area, dv.discharge_coefficient * root, dv.b_lam,
+    )
+
+
+def _check_flow(net: ValveNetwork, dp, p_cr):
+    area = jnp.minimum(net.check_leak + net.check_gain * smooth_ramp(dp - net.crack, net.crack_width), net.check_area_max)
+    return orifice_flow(net.check_k * area, dp, p_cr)
+
+
+def valve_network_flow(net: ValveNetwork, dp, p_avg):
     """Flow into the robot (m³/s) from node P through the check valve and the 3-way valve, Δp = P − p_robot.
 
     The spool is +1 exactly when flow enters the robot, i.e. when Δp ≥ 0. The bypass
@@ -196,9 +226,20 @@ def valve_network_flow(
     orifice in series with the check valve is omitted: its resistance is < 1e-5 of the
     check valve's (PHYSICS.md §7), a relative flow error below 1e-5.
     """
-    q_check = check_valve_flow(cv, fluid, dp, p_avg, crack_pressure, crack_width)
-    bypass_open = 1.0 - smooth_step(dp + switch_width, switch_width)
-    area_at = dv.leak_area + (dv.area_max - dv.leak_area) * bypass_open
-    p_cr = critical_pressure(p_avg, dv.b_lam)
-    q_bypass = orifice_flow(orifice_conductance(area_at, dv.discharge_coefficient, fluid), dp, p_cr)
+    q_check = _check_flow(net, dp, critical_pressure(p_avg, net.check_laminar_ratio))
+    bypass_open = 1.0 - smooth_step(dp + net.switch_width, net.switch_width)
+    area_at = net.bypass_leak + net.bypass_span * bypass_open
+    q_bypass = orifice_flow(net.bypass_k * area_at, dp, critical_pressure(p_avg, net.bypass_laminar_ratio))
     return q_check + q_bypass
+
+def line_pressure_drop(tube: Pipeline, orifice: Orifice, tank: Pipeline, fluid: Fluid, flow, n_syringes, p_avg):
+    """Pressure drop (Pa) from the syringe outlets to the tank chamber at total pump flow ``flow`` (m³/s).
+
+    Series path of the lines at quasi-steady flow: each hose (both resistive halves) at flow/n, the
+    orifice and one resistive half of the tank at the whole flow; ``p_avg`` (Pa) sets the orifice's
+    laminar transition. Used where the hoses and tank are lumped into one chamber.
+    """
+    k_or = orifice_conductance(orifice.area, orifice.discharge_coefficient, fluid)
+    hoses = 2.0 * pipeline_half_pressure_drop(tube, fluid, flow / n_syringes)
+    orifice_drop = orifice_pressure_drop(k_or, flow, critical_pressure(p_avg, orifice.b_lam))
+    return hoses + orifice_drop + pipeline_half_pressure_drop(tank, fluid, flow)

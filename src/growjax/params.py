@@ -27,11 +27,15 @@ from growjax.motor import PID, StepperMotor
 from growjax.pump import SyringePump
 from growjax.robot import GrowingRobot
 
-DRIVES = ("forward", "inverse")
+from growjax.config import DRIVES
 
 
 class Parameters(eqx.Module):
-    """Every physical parameter of the MAMMOBOT drive chain, grouped by subsystem (see each block's docstring)."""
+    """Every physical parameter of the MAMMOBOT drive chain, grouped by subsystem (see each block's docstring).
+
+    ``effects`` holds the physical effects added to the published model (:mod:`growjax.effects`);
+    their parameters are addressed as ``effect_name.field``.
+    """
 
     fluid: Fluid
     pump: SyringePump
@@ -44,6 +48,7 @@ class Parameters(eqx.Module):
     robot: GrowingRobot
     pid: PID
     motor: StepperMotor
+    effects: tuple = ()
 
 
 ALIASES = {
@@ -96,11 +101,17 @@ def reference(drive: str = "forward", growth_law: str = "reference") -> Paramete
 
 
 def _blocks(params: Parameters):
-    return {f.name: getattr(params, f.name) for f in dataclasses.fields(params)}
+    """{name: module} of every parameter block, effects included (by their catalogue name)."""
+    blocks = {f.name: getattr(params, f.name) for f in dataclasses.fields(params) if f.name != "effects"}
+    for effect in params.effects:
+        if effect.name in blocks:
+            raise ValueError(f"effect {effect.name!r} appears twice or clashes with a parameter block")
+        blocks[effect.name] = effect
+    return blocks
 
 
 def parameter_names(params: Parameters) -> list[str]:
-    """Qualified names ``block.field`` of every numeric parameter."""
+    """Qualified names ``block.field`` of every numeric parameter (effects as ``effect_name.field``)."""
     names = []
     for block_name, block in _blocks(params).items():
         for f in dataclasses.fields(block):
@@ -126,7 +137,7 @@ def resolve_name(params: Parameters, name: str) -> str:
 def get(params: Parameters, name: str):
     """Value of the parameter ``name``."""
     block, field = resolve_name(params, name).split(".")
-    return getattr(getattr(params, block), field)
+    return getattr(_blocks(params)[block], field)
 
 
 def replace(params: Parameters, **values) -> Parameters:
@@ -135,8 +146,16 @@ def replace(params: Parameters, **values) -> Parameters:
     for name, value in values.items():
         block, field = resolve_name(params, name).split(".")
         by_block.setdefault(block, {})[field] = value
+    effects = tuple(dataclasses.replace(e, **by_block.pop(e.name)) if e.name in by_block else e for e in params.effects)
     updates = {b: dataclasses.replace(getattr(params, b), **kw) for b, kw in by_block.items()}
-    return dataclasses.replace(params, **updates)
+    return dataclasses.replace(params, effects=effects, **updates)
+
+
+def with_effects(params: Parameters, *effects) -> Parameters:
+    """``params`` with the given effects added (or replaced, by catalogue name)."""
+    names = {e.name for e in effects}
+    kept = tuple(e for e in params.effects if e.name not in names)
+    return dataclasses.replace(params, effects=kept + tuple(effects))
 
 
 def as_dict(params: Parameters) -> dict[str, float]:
@@ -171,11 +190,44 @@ _RANGES = {
 }
 
 
+def _ranges(params: Parameters) -> dict:
+    ranges = dict(_RANGES)
+    for e in params.effects:
+        for field, (lo, hi) in e.ranges.items():
+            ranges[f"{e.name}.{field}"] = (lo, hi, e.units.get(field, ""))
+    return ranges
+
+
+def admissible_rows(base: Parameters, names, values) -> np.ndarray:
+    """Which rows of ``values`` (n, d) for the parameters ``names`` are finite and in their physical ranges.
+
+    Vectorised over rows (a batch is checked in one pass, not one :func:`validate` per row); the
+    parameters not in ``names`` are validated once, and a problem there raises ValueError.
+    """
+    values = np.atleast_2d(np.asarray(values, float))
+    names = [resolve_name(base, n) for n in names]
+    ranges = _ranges(base)
+    ok = np.all(np.isfinite(values), axis=1)
+    for j, q in enumerate(names):
+        if q in ranges:
+            lo, hi, _ = ranges[q]
+            ok &= (values[:, j] >= lo) & (values[:, j] <= hi)
+    radii = {q: values[:, j] for j, q in enumerate(names) if q in ("robot.inner_radius", "robot.outer_radius")}
+    if radii:
+        inner = radii.get("robot.inner_radius", float(base.robot.inner_radius))
+        outer = radii.get("robot.outer_radius", float(base.robot.outer_radius))
+        ok &= np.asarray(inner < outer)
+    if np.any(ok):
+        validate(replace(base, **dict(zip(names, map(float, values[np.argmax(ok)])))))
+    return ok
+
+
 def validate(params: Parameters) -> None:
     """Raise ValueError naming the first parameter that is non-finite or outside its physical range.
 
     Works on concrete (possibly batched) values, never inside ``jit``.
     """
+    ranges = _ranges(params)
     for q in parameter_names(params):
         v = get(params, q)
         if v is None or isinstance(v, jax.core.Tracer):
@@ -183,8 +235,8 @@ def validate(params: Parameters) -> None:
         a = np.asarray(v, dtype=float)
         if not np.all(np.isfinite(a)):
             raise ValueError(f"parameter {q} is not finite: {v}")
-        if q in _RANGES:
-            lo, hi, unit = _RANGES[q]
+        if q in ranges:
+            lo, hi, unit = ranges[q]
             if np.any(a < lo) or np.any(a > hi):
                 raise ValueError(f"parameter {q} = {v} {unit} is outside its physical range [{lo}, {hi}] {unit}")
     r = params.robot

@@ -29,8 +29,7 @@ import optimistix as optx
 from growjax import emulator as em
 from growjax import params as gp
 from growjax.emulator import predicted_length
-from growjax.model import Config
-from growjax.quasistatic import QuasiStaticConfig
+from growjax.config import Config
 
 
 @dataclasses.dataclass(frozen=True)
@@ -138,7 +137,7 @@ def sample(
     length,
     inputs,
     base: gp.Parameters | None = None,
-    config: Config | QuasiStaticConfig | None = None,
+    config: Config | None = None,
     priors: Sequence[Prior] | None = None,
     chains: int = 4,
     warmup: int = 500,
@@ -148,7 +147,7 @@ def sample(
     target_accept: float = 0.9,
     window=None,
     progress: bool = True,
-    emulate: bool | em.Emulator = True,
+    emulate: bool | em.Emulator = False,
 ) -> PosteriorResult:
     """NUTS over the priors and σ given a measured length (m) at ``times`` (s); chains vectorised.
 
@@ -166,7 +165,7 @@ def sample(
     from numpyro.infer import MCMC, NUTS, Predictive
 
     base = base if base is not None else gp.reference()
-    config = config if config is not None else QuasiStaticConfig()
+    config = (config if config is not None else Config()).replace(adjoint="forward")
     priors = tuple(priors) if priors is not None else paper_priors()
     t, y = _window(times, length, config, window)
     start = time.perf_counter()

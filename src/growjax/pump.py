@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 
 import equinox as eqx
+import jax.numpy as jnp
 
 from growjax._smooth import smooth_ramp
 
@@ -86,3 +87,29 @@ def platform_force(pump: SyringePump, drive_force, syringe_pressure, x_platform,
 def syringe_volume_delivered(pump: SyringePump, x_platform):
     """Liquid volume pushed out of all syringes, m³."""
     return pump.n_syringes * pump.syringe_area * x_platform
+
+
+def _ramp_balance(damping, stop, drive, width):
+    """u ≥ 0 with damping·u + stop·smooth_ramp(u, width) = drive ≥ 0 (exact: quadratic inside the band, linear beyond)."""
+    quadratic = 2.0 * drive / (damping + jnp.sqrt(damping * damping + 2.0 * stop * drive / width))
+    linear = (drive + 0.5 * stop * width) / (damping + stop)
+    return jnp.where(drive <= (damping + 0.5 * stop) * width, quadratic, linear)
+
+
+def platform_velocity(pump: SyringePump, drive_force, line_pressure, line_resistance, x_platform, width):
+    """Velocity (m/s) of a massless platform: the exact root of :func:`platform_force` = 0.
+
+    The syringes see the line pressure plus a linear line drop, p_s = P + R·n·A_s·v
+    (``line_resistance`` R in Pa·s/m³ of total flow). The balance
+    F₀ − B v + n K_p (pen_E·ramp(−v) − pen_R·ramp(v)) = 0, with F₀ = drive − n A_s P and
+    B = b_p + n² A_s² R, is linear outside the end stops' velocity band and quadratic inside
+    it, so the root has a closed form on each side of v = 0.
+    """
+    n, a_s = pump.n_syringes, pump.syringe_area
+    damping = pump.screw_damping + n * n * a_s * a_s * line_resistance
+    f0 = drive_force - n * a_s * line_pressure
+    pen_full = smooth_ramp(-x_platform, width)  # beyond the full mark: resists withdrawal
+    pen_empty = smooth_ramp(x_platform - pump.syringe_stroke, width)  # beyond the empty mark: resists pushing
+    push = _ramp_balance(damping, n * pump.penetration_coefficient * pen_empty, jnp.maximum(f0, 0.0), width)
+    pull = _ramp_balance(damping, n * pump.penetration_coefficient * pen_full, jnp.maximum(-f0, 0.0), width)
+    return jnp.where(f0 >= 0.0, push, -pull)

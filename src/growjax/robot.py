@@ -4,28 +4,31 @@ The robot is a massless single-acting cylinder of annular area A_r = π(r_o² �
 The Simulink force S_F (eq. 1) acts on its rod, so the rod balance A_r p_r + S_F − F_c = 0
 gives the robot pressure p_r needed to move at velocity v:
 
-    p_r = Y + F_AC/A_r − P·2π r_i μ_c L_c/A_r + sgn(v)|v/ext|^n + (F_c + F_hs − F_extra)/A_r
+    p_r = Y + F_AC/A_r − P·2π r_i μ_c L_c/A_r + ψ(v) + (F_c + F_hs + F_e)/A_r
 
-Note the catheter-friction term enters with the sign that *assists* growth, as in the
-shipped model (PHYSICS.md §8.4). ``extra_force`` is where candidate effects plug in.
+with F_c the cylinder's end stops, F_hs the rod hard stop and F_e the forces of added
+effects (:mod:`growjax.effects`), all opposing the motion. The catheter-friction term enters
+with the sign that *assists* growth, as in the shipped model (PHYSICS.md §8.4).
 
-Two growth laws set the velocity term (``GrowingRobot.growth_law``):
+Two growth laws set the velocity term ψ(v) (``GrowingRobot.growth_law``):
 
 * ``"reference"`` — the shipped diagram's sgn(v)|v/ext|^n (Pa). With the published ext it is
   ~1e-10 of the other forces (PHYSICS.md §9), so ext and n cannot be identified.
-* ``"lockhart"`` — Lockhart's law v = φ_L·((p_r − p_0)/p_ref)^(n_L) above yield, with φ_L a
-  velocity (m/s) at the reference excess p_ref = 1 kPa; p_0 is the rest pressure above
-  (Y and the other rod forces). Its inverse, p_ref·sgn(v)|v/φ_L|^(1/n_L), replaces the
-  velocity term, so the everting membrane adds a physically sized resistance in series
-  with the check valve and φ_L, n_L shape the growth rate. This is a deviation from the
-  reference added beside it, not in place of it (PHYSICS.md: "add better-posed variants").
+* ``"lockhart"`` — Lockhart's law v = φ_L·((p_r − p_0)/p_ref)^(n_L) while the robot grows,
+  with φ_L a velocity (m/s) at the reference excess p_ref = 1 kPa and p_0 the rest pressure.
+  Its inverse ψ(v) = p_ref·(v/φ_L)^(1/n_L) for v > 0 (and 0 while it holds or retracts: the law
+  describes irreversible extension of the membrane) gives the everting membrane a physically
+  sized resistance in series with the check valve. A deviation added beside the reference,
+  not in place of it (PHYSICS.md: "add better-posed variants").
 """
 
 from __future__ import annotations
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 
+from growjax import hydraulics as hy
 from growjax._smooth import smooth_abs_power, smooth_ramp
 from growjax.pump import cylinder_stop_force
 
@@ -94,50 +97,144 @@ def catheter_friction_gain(robot: GrowingRobot, catheter_length):
     return 2.0 * jnp.pi * robot.inner_radius * robot.catheter_friction * catheter_length / robot.area
 
 
-def velocity_pressure(robot: GrowingRobot, velocity, velocity_eps):
-    """Velocity term of the rod balance, Pa (regularised at v = 0 over ``velocity_eps`` m/s).
+class RodBalance(eqx.Module):
+    """Constants of the rod balance of a :class:`GrowingRobot`, computed once per solve (:func:`rod_balance`).
 
-    Reference: sgn(v)|v/ext|^n (eq. 1). Lockhart: p_ref·sgn(v)|v/φ_L|^(1/n_L), the inverse of
-    v = φ_L((p_r − p_0)/p_ref)^(n_L).
+    Pressures in Pa, lengths in m; ``*_per_area`` terms are forces (N) divided by A_r.
     """
+
+    area: jax.Array  # A_r, m²
+    rest: jax.Array  # Y + F_AC/A_r, Pa
+    friction: jax.Array  # 2π r_i μ_c / A_r, per m of catheter (–/m)
+    law_scale: jax.Array  # 1/ext (reference) or 1/φ_L (Lockhart), s/m
+    law_exponent: jax.Array  # n (reference) or 1/n_L (Lockhart)
+    stop_per_area: jax.Array  # K_p/A_r, N·s/m² per m²
+    extend_limit: jax.Array  # stroke − L0, m of displacement
+    retract_limit: jax.Array  # −L0
+    initial_length: jax.Array  # L0, m
+    hard_bound: jax.Array  # m
+    hard_stiffness_per_area: jax.Array  # Pa/m
+    hard_damping_per_area: jax.Array  # Pa·s/m
+    velocity_eps: float  # m/s
+    stop_width: float  # m
+    growth_law: str = eqx.field(static=True)
+
+
+def rod_balance(robot: GrowingRobot, widths) -> RodBalance:
+    """The :class:`RodBalance` of ``robot``; ``widths`` = (velocity_eps m/s, stop_width m) of the regularisations."""
+    velocity_eps, stop_width = widths
+    area = robot.area
     if robot.growth_law == "lockhart":
-        phi = robot.lockhart_rate
-        return LOCKHART_PRESSURE_SCALE * smooth_abs_power(velocity / phi, 1.0 / robot.lockhart_exponent, velocity_eps / phi)
-    return smooth_abs_power(velocity / robot.extensibility, robot.growth_exponent, velocity_eps / robot.extensibility)
+        scale, exponent = 1.0 / robot.lockhart_rate, 1.0 / robot.lockhart_exponent
+    else:
+        scale, exponent = 1.0 / robot.extensibility, robot.growth_exponent
+    return RodBalance(
+        area=area, rest=robot.yield_pressure + robot.active_channel_force / area,
+        friction=2.0 * jnp.pi * robot.inner_radius * robot.catheter_friction / area,
+        law_scale=scale, law_exponent=exponent, stop_per_area=robot.penetration_coefficient / area,
+        extend_limit=robot.stroke - robot.initial_length, retract_limit=-robot.initial_length,
+        initial_length=robot.initial_length, hard_bound=robot.hard_stop_bound,
+        hard_stiffness_per_area=robot.hard_stop_stiffness / area, hard_damping_per_area=robot.hard_stop_damping / area,
+        velocity_eps=velocity_eps, stop_width=stop_width, growth_law=robot.growth_law,
+    )
+
+
+def growth_pressure(rod: RodBalance, velocity):
+    """Growth-law term ψ(v) of the rod balance, Pa (regularised at v = 0 over ``rod.velocity_eps`` m/s).
+
+    Reference: sgn(v)|v/ext|^n (eq. 1). Lockhart: p_ref (v/φ_L)^(1/n_L) for v > 0, 0 otherwise
+    (the inverse of v = φ_L((p_r − p_0)/p_ref)^(n_L)).
+    """
+    eps = rod.velocity_eps
+    if rod.growth_law == "lockhart":
+        growth = smooth_ramp(velocity, eps) * rod.law_scale
+        return LOCKHART_PRESSURE_SCALE * smooth_abs_power(growth, rod.law_exponent, eps * rod.law_scale)
+    return smooth_abs_power(velocity * rod.law_scale, rod.law_exponent, eps * rod.law_scale)
+
+
+def velocity_pressure(robot: GrowingRobot, velocity, velocity_eps):
+    """ψ(v) of ``robot``'s growth law, Pa (see :func:`growth_pressure`)."""
+    return growth_pressure(rod_balance(robot, (velocity_eps, 1e-6)), velocity)
 
 
 def hard_stop_force(robot: GrowingRobot, length, velocity, width):
     """Rod hard-stop force (N, opposing motion beyond ±bound; reference 'smooth' model over ``width`` m)."""
-    x = length - robot.initial_length
-    pen_up = smooth_ramp(x - robot.hard_stop_bound, width)
-    pen_lo = smooth_ramp(-robot.hard_stop_bound - x, width)
-    k, d = robot.hard_stop_stiffness, robot.hard_stop_damping
-    gate_up = jnp.clip(pen_up / width, 0.0, 1.0)
-    gate_lo = jnp.clip(pen_lo / width, 0.0, 1.0)
-    return k * (pen_up - pen_lo) + d * velocity * (gate_up + gate_lo)
+    rod = rod_balance(robot, (1e-6, width))
+    return rod.area * _hard_stop_pressure(rod, length, velocity)
 
 
-def robot_pressure(robot: GrowingRobot, sensor_pressure, velocity, length, catheter_length, extra_force, widths):
+def _hard_stop_pressure(rod: RodBalance, length, velocity):
+    width = rod.stop_width
+    x = length - rod.initial_length
+    pen_up = smooth_ramp(x - rod.hard_bound, width)
+    pen_lo = smooth_ramp(-rod.hard_bound - x, width)
+    gate = jnp.clip(pen_up / width, 0.0, 1.0) + jnp.clip(pen_lo / width, 0.0, 1.0)
+    return rod.hard_stiffness_per_area * (pen_up - pen_lo) + rod.hard_damping_per_area * velocity * gate
+
+
+def rod_pressure(rod: RodBalance, sensor_pressure, velocity, length, catheter_length, force):
     """Robot chamber pressure p_r (Pa) satisfying the massless rod balance at velocity ``velocity`` (m/s).
 
-    ``widths`` = (velocity_eps m/s, stop_width m). ``extra_force`` (N) pushes the rod outward.
+    ``force`` (N) is the sum of the added effects' forces opposing growth.
     """
-    velocity_eps, stop_width = widths
-    displacement = length - robot.initial_length
-    stop = cylinder_stop_force(
-        robot.penetration_coefficient,
-        displacement,
-        velocity,
-        robot.stroke - robot.initial_length,
-        -robot.initial_length,
-        stop_width,
-    )
-    static = (
-        robot.yield_pressure
-        + robot.active_channel_force / robot.area
-        - catheter_friction_gain(robot, catheter_length) * sensor_pressure
-    )
-    dynamic = velocity_pressure(robot, velocity, velocity_eps) + (
-        stop + hard_stop_force(robot, length, velocity, stop_width) - extra_force
-    ) / robot.area
-    return static + dynamic
+    displacement = length - rod.initial_length
+    stops = rod.stop_per_area * (
+        cylinder_stop_force(1.0, displacement, velocity, rod.extend_limit, rod.retract_limit, rod.stop_width)
+    ) + _hard_stop_pressure(rod, length, velocity)
+    rest = rod.rest - rod.friction * catheter_length * sensor_pressure
+    return rest + growth_pressure(rod, velocity) + stops + force / rod.area
+
+
+def inflow(rod: RodBalance, valves, pressure, length, catheter_length, effect_force, iterations: int = 8):
+    """Flow into the robot (m³/s) and its pressure (Pa) at node pressure ``pressure`` (Pa) before the valves.
+
+    Solves the series balance of the valve network (check valve ∥ bypass,
+    :func:`growjax.hydraulics.valve_network_flow` with constants ``valves``) and the rod:
+    q = Q_valves(P − p_r), p_r = rod_pressure(v = q/A_r). With p_rest the rod pressure at rest
+    and s = sign(P − p_rest) the direction of motion, the unknown is the pressure the motion
+    adds, x = s·(p_r − p_rest) ∈ (0, X), X = |P − p_rest|:
+
+        f(x) = ln(s·(p_r(v(P − p_rest − s·x)) − p_rest)) − ln x = 0,    decreasing in x.
+
+    In z = ln(x/(X − x)) both ends of f are asymptotically linear (power laws of the growth
+    law at x → 0, of the valve at x → X), so ``iterations`` Newton steps from z = 0, each
+    capped at ±8, reach the root for every growth law (fixed cost: vectorises under ``vmap``);
+    derivatives are implicit. ``iterations = 0`` takes one fixed-point pass instead, exact when
+    the motion's pressure is negligible against the valve's (the published law: x ~ 1e-5 Pa).
+    ``effect_force(v)`` (N) is the effects' force opposing growth at velocity v (non-decreasing).
+    """
+    tiny = 1e-30  # Pa: floor inside the logarithms
+
+    def p_robot(v):
+        return rod_pressure(rod, pressure, v, length, catheter_length, effect_force(v))
+
+    def valves_at(delta):
+        return hy.valve_network_flow(valves, delta, pressure - 0.5 * delta)
+
+    p_rest = p_robot(jnp.zeros_like(pressure))
+    delta0 = pressure - p_rest
+    if iterations == 0:
+        delta = delta0 - (p_robot(valves_at(delta0) / rod.area) - p_rest)
+        return valves_at(delta), pressure - delta
+
+    s = jnp.where(delta0 >= 0.0, 1.0, -1.0)
+    span = jnp.maximum(jnp.abs(delta0), 1e-12)
+
+    def residual(z):
+        x = span * jax.nn.sigmoid(z)
+        excess = s * (p_robot(valves_at(delta0 - s * x) / rod.area) - p_rest)
+        return jnp.log(jnp.maximum(excess, 0.0) + tiny) - jnp.log(x + tiny)
+
+    def solve(f, z):
+        def newton(_, z):
+            fz, dfz = jax.jvp(f, (z,), (jnp.ones_like(z),))
+            return z - jnp.clip(fz / jnp.where(dfz < 0.0, dfz, -1.0), -8.0, 8.0)
+
+        return jax.lax.fori_loop(0, iterations, newton, z)
+
+    def tangent(g, y):
+        return y / g(jnp.ones_like(y))
+
+    z = jax.lax.custom_root(residual, jnp.zeros_like(delta0), solve, tangent)
+    delta = delta0 - s * span * jax.nn.sigmoid(z)
+    return valves_at(delta), pressure - delta

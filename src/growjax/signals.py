@@ -1,7 +1,8 @@
 """Inputs of the model as data: pulse trains, sampled series and step schedules.
 
-Every signal is a pytree with a ``__call__(t)`` that is pure in ``t`` and a
-``jump_times(t0, t1)`` listing discontinuities the solver must step onto.
+Every signal is a pytree with a ``__call__(t)`` that is pure in ``t``, a
+``jump_times(t0, t1)`` listing its discontinuities and a ``kink_times(t0, t1)`` listing
+its significant slope breaks: the solvers step onto both, so no step straddles an edge.
 Sampled series are interpolated linearly and extrapolated linearly from the two
 end samples, as Simulink's From Workspace block does.
 """
@@ -9,6 +10,7 @@ end samples, as Simulink's From Workspace block does.
 from __future__ import annotations
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -22,6 +24,9 @@ class Constant(eqx.Module):
         return jnp.asarray(self.value, float) + 0.0 * t
 
     def jump_times(self, t0, t1):
+        return np.zeros(0)
+
+    def kink_times(self, t0, t1):
         return np.zeros(0)
 
 
@@ -39,28 +44,64 @@ class PulseTrain(eqx.Module):
         return jnp.where(on, self.amplitude, 0.0)
 
     def jump_times(self, t0, t1):
-        k = np.arange(int(np.ceil((t1 - self.delay) / self.period)) + 1)
-        rise = self.delay + k * self.period
-        fall = rise + self.width * self.period
+        period, delay, width = float(self.period), float(self.delay), float(self.width)
+        k = np.arange(max(int(np.ceil((t1 - delay) / period)), 0) + 1)
+        rise = delay + k * period
+        fall = rise + width * period
         edges = np.concatenate([rise, fall])
         return np.sort(edges[(edges > t0) & (edges < t1)])
 
+    def kink_times(self, t0, t1):
+        return np.zeros(0)
+
 
 class Sampled(eqx.Module):
-    """Piecewise-linear series through (``times`` s, ``values``) with linear extrapolation."""
+    """Piecewise-linear series through (``times`` s, ``values``) with linear extrapolation.
 
-    times: jnp.ndarray
-    values: jnp.ndarray
+    On a uniform time grid (detected at construction) the segment is found by division,
+    otherwise by binary search.
+    """
+
+    times: jax.Array
+    values: jax.Array
+    spacing: float | None = eqx.field(static=True, default=None)
+
+    def __init__(self, times, values, spacing: float | None = None):
+        self.times = jnp.asarray(times, float)
+        self.values = jnp.asarray(values, float)
+        if spacing is None and not isinstance(times, jax.core.Tracer):
+            t = np.asarray(times, float)
+            d = np.diff(t)
+            if d.size and d[0] > 0 and np.allclose(d, d[0], rtol=1e-9, atol=0.0):
+                spacing = float((t[-1] - t[0]) / (t.size - 1))
+        self.spacing = spacing
 
     def __call__(self, t):
-        ts, vs = jnp.asarray(self.times), jnp.asarray(self.values)
-        i = jnp.clip(jnp.searchsorted(ts, t, side="right") - 1, 0, ts.shape[-1] - 2)
+        ts, vs = self.times, self.values
+        n = ts.shape[-1]
+        if self.spacing is not None:
+            i = jnp.floor((t - ts[0]) / self.spacing).astype(int)
+        else:
+            i = jnp.searchsorted(ts, t, side="right") - 1
+        i = jnp.clip(i, 0, n - 2)
         t_a, t_b = ts[i], ts[i + 1]
         w = (t - t_a) / (t_b - t_a)
         return vs[i] + w * (vs[i + 1] - vs[i])
 
     def jump_times(self, t0, t1):
         return np.zeros(0)
+
+    def kink_times(self, t0, t1, threshold: float = 0.01):
+        """Samples where the slope changes by more than ``threshold`` of the series' range per sample step."""
+        t, v = np.asarray(self.times, float), np.asarray(self.values, float)
+        if t.size < 3:
+            return np.zeros(0)
+        slope = np.diff(v) / np.diff(t)
+        change = np.abs(np.diff(slope)) * np.minimum(np.diff(t)[1:], np.diff(t)[:-1])
+        span = float(np.ptp(v))
+        keep = change > threshold * span if span > 0 else np.zeros(change.size, bool)
+        times = t[1:-1][keep]
+        return times[(times > t0) & (times < t1)]
 
 
 class StepSchedule(eqx.Module):
@@ -78,6 +119,9 @@ class StepSchedule(eqx.Module):
     def jump_times(self, t0, t1):
         t = np.asarray(self.times)
         return t[(t > t0) & (t < t1)]
+
+    def kink_times(self, t0, t1):
+        return np.zeros(0)
 
 
 def published_pulse() -> PulseTrain:
@@ -102,5 +146,11 @@ class Inputs(eqx.Module):
 
     def jump_times(self, t0, t1):
         """All input discontinuities in (t0, t1), s, sorted."""
-        ts = np.concatenate([self.pressure_demand.jump_times(t0, t1), self.steps.jump_times(t0, t1)])
+        ts = np.concatenate([self.pressure_demand.jump_times(t0, t1), self.steps.jump_times(t0, t1),
+                             self.catheter_length.jump_times(t0, t1)])
+        return np.unique(ts)
+
+    def kink_times(self, t0, t1):
+        """Significant slope breaks of the inputs in (t0, t1), s, sorted."""
+        ts = np.concatenate([self.pressure_demand.kink_times(t0, t1), self.catheter_length.kink_times(t0, t1)])
         return np.unique(ts)

@@ -4,8 +4,10 @@ A sweep is a box of parameters (:class:`Dimension`), a design of points in it, a
 ``jit(vmap(...))`` of the model that scores every point against a measured length
 (RMSE over a window) and reports the final length and the run status. Points are
 evaluated in equal chunks (one compiled shape, memory bounded), each chunk split across
-all devices JAX sees (``jax.sharding``). A member that fails (solver failure, pressure
-limit, invalid parameter) is flagged with its reason; the others are unaffected.
+all devices JAX sees (``jax.sharding``), also across the processes and hosts of a
+``jax.distributed.initialize`` run (each runs the same sweep and gets the full result). A member
+that fails (solver failure, pressure limit, invalid parameter) is flagged with its reason; the
+others are unaffected.
 """
 
 from __future__ import annotations
@@ -23,11 +25,12 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from growjax import params as gp
 from growjax.metrics import length_rmse
-from growjax.model import OK, PRESSURE_LIMIT, SOLVER_FAILED, Config, simulate
-from growjax.quasistatic import QuasiStaticConfig
+from growjax.config import Config
+from growjax.simulate import input_breaks, simulate
+from growjax.trajectory import OK, PRESSURE_LIMIT, SOLVER_FAILED
 
 INVALID_PARAMETER = 3
-QUASI_STATIC = QuasiStaticConfig()  # default configuration of sweeps
+FAST = Config()  # default configuration of sweeps
 REASONS = {OK: "ok", PRESSURE_LIMIT: "pressure_limit", SOLVER_FAILED: "solver_failed", INVALID_PARAMETER: "invalid_parameter"}
 
 
@@ -143,24 +146,19 @@ class SweepResult:
 
 
 def _valid_rows(names, values, base: gp.Parameters) -> np.ndarray:
-    """Rows whose parameter values are finite and pass :func:`growjax.validate`."""
-    ok = np.all(np.isfinite(values), axis=1)
-    for i in np.flatnonzero(ok):
-        try:
-            gp.validate(gp.replace(base, **dict(zip(names, map(float, values[i])))))
-        except ValueError:
-            ok[i] = False
-    return ok
+    """Rows whose parameter values are finite and inside their physical ranges (:func:`growjax.params.admissible_rows`)."""
+    return gp.admissible_rows(base, names, values)
 
 
 def make_member(base: gp.Parameters, names: Sequence[str], inputs, config, measured=None, window=None):
     """Function θ (d,) → (rmse m, final length m, status) of one member; pure, ``vmap``-able."""
     names = tuple(names)
     t_start, t_end = window if window is not None else (config.t0, config.t1)
+    breaks = input_breaks(inputs, config)
 
     def member(theta):
         p = gp.replace(base, **{n: theta[i] for i, n in enumerate(names)})
-        traj = simulate(p, inputs, config)
+        traj = simulate(p, inputs, config, breaks=breaks)
         finite = jnp.isfinite(traj.length)
         final = traj.length[jnp.maximum(jnp.sum(finite) - 1, 0)]
         if measured is None:
@@ -191,12 +189,29 @@ def _mesh(devices=None) -> Mesh:
     return Mesh(np.asarray(devices if devices is not None else jax.devices()), ("batch",))
 
 
+def _put(block: np.ndarray, sharding: NamedSharding) -> jax.Array:
+    """Host rows → one array sharded over the mesh. Under ``jax.distributed`` (several processes,
+    every one holding the same ``block``) each process fills only the shards on its own devices."""
+    if jax.process_count() == 1:
+        return jax.device_put(block, sharding)
+    return jax.make_array_from_callback(block.shape, sharding, lambda index: block[index])
+
+
+def _get(outputs):
+    """Sharded outputs → host arrays; under ``jax.distributed`` gathered from all processes, so each has them all."""
+    if jax.process_count() == 1:
+        return jax.device_get(outputs)
+    from jax.experimental import multihost_utils
+
+    return multihost_utils.process_allgather(outputs, tiled=True)
+
+
 def evaluate(
     values,
     names: Sequence[str],
     base: gp.Parameters,
     inputs,
-    config: Config | QuasiStaticConfig = QUASI_STATIC,
+    config: Config = FAST,
     measured=None,
     window=None,
     chunk_size: int | None = None,
@@ -252,8 +267,8 @@ def evaluate(
 
         chunks = tqdm(chunks, desc="sweep", unit="chunk", total=n_chunks)
     for c in chunks:
-        block = jax.device_put(padded[c * chunk:(c + 1) * chunk], sharding)
-        outs.append(jax.device_get(compiled(block)))
+        block = _put(padded[c * chunk:(c + 1) * chunk], sharding)
+        outs.append(_get(compiled(block)))
     wall_s = time.perf_counter() - start
 
     rmse, final, status = (np.concatenate([o[k] for o in outs])[:n] for k in range(3))
@@ -267,7 +282,7 @@ def lhs_sweep(
     n: int,
     base: gp.Parameters,
     inputs,
-    config: Config | QuasiStaticConfig = QUASI_STATIC,
+    config: Config = FAST,
     dims: Sequence[Dimension] | None = None,
     seed: int = 0,
     **kwargs,
@@ -282,7 +297,7 @@ def sobol_indices(
     dims: Sequence[Dimension],
     base: gp.Parameters,
     inputs,
-    config: Config | QuasiStaticConfig = QUASI_STATIC,
+    config: Config = FAST,
     n_base: int = 256,
     seed: int = 0,
     n_bootstrap: int = 1000,

@@ -1,0 +1,89 @@
+"""How to simulate: the configuration (fidelity), drive, window, tolerances and switch widths."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+DRIVES = ("forward", "inverse")
+FIDELITIES = ("fast", "reference")
+
+# Default tolerances (on states scaled to O(1)) per fidelity.
+_DEFAULT_RTOL = {"fast": 3e-5, "reference": 1e-6}
+_DEFAULT_MAX_STEPS = {"fast": 20_000, "reference": 200_000}
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class Config:
+    """Static settings of a simulation (hashable: a static argument of ``jit``).
+
+    Attributes:
+        fidelity: ``"fast"`` (lumped lines, massless platform, Rosenbrock solver: :mod:`growjax.fast_model`)
+            or ``"reference"`` (the shipped network node by node, Kvaerno5: :mod:`growjax.reference_model`).
+        drive: ``"forward"`` (pressure demand, PID, ideal torque) or ``"inverse"`` (desired length, stepper).
+        t0, t1: integration window, s (the shipped model starts at 0.001 s).
+        save_dt: spacing of the default save grid, s.
+        rtol, atol: step-size control on the scaled states (None: 3e-5 fast, 1e-6 reference).
+        max_steps: solver step budget (None: 20 000 fast, 200 000 reference).
+        stop_at_pressure_limit: stop the run (status 1) when the sensed pressure crosses the membrane
+            limit; otherwise the crossing is only flagged (``limit_time``) and the run goes on.
+        velocity_eps: regularisation of |v|^n at v = 0, m/s.
+        stop_width: C¹ band of end stops, m (and m/s for their velocity gate).
+        crack_width: C¹ band of the check-valve opening, Pa.
+        switch_width: band over which the bypass opens as the valve pressure drop turns negative, Pa.
+        flow_width: band of the nozzle's loss-coefficient switch, m³/s.
+        adjoint: ``"reverse"`` (checkpointed, for ``jax.grad``) or ``"forward"`` (for ``jax.jvp``/``jacfwd``).
+    """
+
+    fidelity: str = "fast"
+    drive: str = "forward"
+    t0: float = 0.001
+    t1: float = 10.0
+    save_dt: float = 0.01
+    rtol: float | None = None
+    atol: float | None = None
+    max_steps: int | None = None
+    stop_at_pressure_limit: bool = True
+    velocity_eps: float = 1e-6
+    stop_width: float = 1e-6
+    crack_width: float = 50.0
+    switch_width: float = 10.0
+    flow_width: float = 1e-10
+    adjoint: str = "reverse"
+
+    def __post_init__(self):
+        if self.fidelity not in FIDELITIES:
+            raise ValueError(f"fidelity must be one of {FIDELITIES}, got {self.fidelity!r}")
+        if self.drive not in DRIVES:
+            raise ValueError(f"drive must be one of {DRIVES}, got {self.drive!r}")
+        if not (math.isfinite(self.t0) and math.isfinite(self.t1)) or not self.t1 > self.t0:
+            raise ValueError(f"t1 ({self.t1} s) must be after t0 ({self.t0} s)")
+        if not self.save_dt > 0:
+            raise ValueError(f"save_dt must be positive, got {self.save_dt} s")
+        if self.adjoint not in ("reverse", "forward"):
+            raise ValueError(f"adjoint must be 'reverse' or 'forward', got {self.adjoint!r}")
+        for name in ("rtol", "atol"):
+            v = getattr(self, name)
+            if v is not None and not 0 < v < 1:
+                raise ValueError(f"{name} must be in (0, 1), got {v}")
+
+    @property
+    def tolerances(self) -> tuple[float, float]:
+        """(rtol, atol) in use."""
+        rtol = self.rtol if self.rtol is not None else _DEFAULT_RTOL[self.fidelity]
+        return rtol, self.atol if self.atol is not None else rtol
+
+    @property
+    def step_budget(self) -> int:
+        return self.max_steps if self.max_steps is not None else _DEFAULT_MAX_STEPS[self.fidelity]
+
+    def save_grid(self) -> np.ndarray:
+        """Default output times, s: every ``save_dt`` from t0, and t1."""
+        n = max(1, math.ceil((self.t1 - self.t0) / self.save_dt - 1e-9))
+        return np.append(self.t0 + self.save_dt * np.arange(n), self.t1)
+
+    def replace(self, **changes) -> Config:
+        """A copy with the given fields changed."""
+        return dataclasses.replace(self, **changes)

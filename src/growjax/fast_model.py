@@ -1,0 +1,259 @@
+"""The fast configuration: the same components with the lines lumped, solved by an L-stable Rosenbrock method.
+
+Three reductions of the reference assembly (:mod:`growjax.reference_model`), each of a mode far
+faster than anything the robot's length shows (PHYSICS.md §7):
+
+* the hoses, orifice, tank and node P form one chamber: their series drops equalise in
+  < 15 µs; the pump sees the series drop of the lines at its flow
+  (:func:`growjax.hydraulics.line_pressure_drop`), and the sensor reads the chamber;
+* the forward drive's platform is massless (its mode is 8 ns): its velocity balances the drive
+  against the screws, the line drop and the syringes' end stop, in closed form
+  (:func:`growjax.pump.platform_velocity`); the lines' drop is taken at its laminar slope;
+* the state of the chamber is the liquid volume it stores, not its pressure. The pressure
+  follows from the exact stored-volume law of the liquid–air mixture
+  (:func:`growjax.fluid.pressure_at_stored_fraction`), so the volume balance is a linear
+  invariant of the ODE, which a Rosenbrock method keeps to rounding error through every
+  pulse edge.
+
+Everything else, the rod and valve balance (:func:`growjax.robot.inflow`), the motor, the
+PID and every added effect (:mod:`growjax.effects`), is the same code as the reference's.
+The remaining stiffness (the opened bypass, ~1e5 s⁻¹; the stepper rotor, ~3e5 s⁻¹) is
+damped by the L-stable ROS34PW2 method (:mod:`growjax._rosenbrock`) with the exact Jacobian,
+at steps set by the slow dynamics, with input edges declared to the step-size controller.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import diffrax
+import jax
+import jax.numpy as jnp
+
+from growjax import effects as fx
+from growjax import hydraulics as hy
+from growjax._rosenbrock import Rosenbrock
+from growjax.config import Config
+from growjax.effects import Instant, Rod
+from growjax.fluid import StorageLaw, pressure_at_stored_fraction, storage_law, stored_volume_fraction
+from growjax.motor import (
+    ideal_torque_drive_force,
+    motor_derivatives,
+    motor_equilibrium_offset,
+    pid_output,
+    winding_voltages,
+)
+from growjax.params import Parameters
+from growjax.hydraulics import ValveNetwork, valve_network
+from growjax.pump import platform_velocity, syringe_load_force
+from growjax.robot import RodBalance, inflow, pressure_limit, rod_balance
+from growjax.trajectory import finish, pressure_limit_event, save_at
+
+FORWARD_STATES = ("stored_volume", "x_platform", "robot_displacement", "wall_strain", "z_integral", "z_filter")
+FORWARD_SCALES = (1e-6, 1e-2, 1e-4, 1e-6, 1e6, 1e7)  # error control weights the length 100x more than the pressure loop
+INVERSE_STATES = ("stored_volume", "rotor_angle", "rotor_speed", "current_a", "current_b", "robot_displacement", "wall_strain")
+INVERSE_SCALES = (1e-7, 1e-2, 1.0, 1.0, 1.0, 1e-3, 1e-7)
+
+
+def layout(params: Parameters, drive: str) -> tuple[tuple, tuple]:
+    """(state names, scales) of the fast configuration for a drive, effect states last."""
+    names, scales = (FORWARD_STATES, FORWARD_SCALES) if drive == "forward" else (INVERSE_STATES, INVERSE_SCALES)
+    extra = tuple(f"{e.name}.{s}" for e in params.effects for s in e.state_names)
+    return names + extra, scales + fx.state_scales(params.effects, drive)
+
+
+class Prepared(NamedTuple):
+    """Constants of the hot laws, computed once per solve (not in every evaluation of the vector field)."""
+
+    storage: StorageLaw
+    valves: ValveNetwork
+    rod: RodBalance
+    line_resistance: jax.Array  # Pa·s/m³
+    inflow_iterations: int
+
+
+def prepare(params: Parameters, config: Config) -> Prepared:
+    """The :class:`Prepared` constants of ``params`` under ``config``."""
+    robot = params.robot
+    crack = robot.yield_pressure if params.check_valve.crack_pressure is None else params.check_valve.crack_pressure
+    valves = valve_network(params.check_valve, params.valve, params.fluid, crack, config.crack_width, config.switch_width)
+    rod = rod_balance(robot, (config.velocity_eps, config.stop_width))
+    # The published law's velocity term is ~1e-10 of the rod forces: one fixed-point pass is exact.
+    iterations = 0 if robot.growth_law == "reference" and not any(e.velocity_dependent for e in params.effects) else 8
+    return Prepared(storage_law(params.fluid), valves, rod, line_resistance(params), iterations)
+
+
+# -- the lumped chamber ----------------------------------------------------------------------------------
+
+
+def lines_volume(params: Parameters, wall_strain):
+    """Volume of the lumped chamber, m³: the hoses at wall strain δ (m) and the tank."""
+    tube = params.tube
+    hoses = params.pump.n_syringes * jnp.pi * (tube.hydraulic_diameter + wall_strain) ** 2 / 4.0 * tube.length
+    return hoses + params.tank.volume
+
+
+def stored_volume(params: Parameters, pressure, wall_strain):
+    """Liquid volume in the lumped chamber beyond its unstrained volume at gauge 0, m³ (pressure in Pa)."""
+    volume = lines_volume(params, wall_strain)
+    return volume * (1.0 + stored_volume_fraction(params.fluid, pressure)) - lines_volume(params, 0.0)
+
+
+def line_pressure(params: Parameters, stored, wall_strain, storage: StorageLaw | None = None):
+    """Gauge pressure of the lumped chamber, Pa, holding ``stored`` m³ (inverse of :func:`stored_volume`)."""
+    volume = lines_volume(params, wall_strain)
+    law = storage if storage is not None else storage_law(params.fluid)
+    return pressure_at_stored_fraction(law, (stored + lines_volume(params, 0.0)) / volume - 1.0)
+
+
+def initial_state(params: Parameters, config: Config) -> jax.Array:
+    """Scaled state at t0: syringes full, robot at its initial length, hoses and tank at their initial pressures."""
+    tube, tank = params.tube, params.tank
+    n = params.pump.n_syringes
+    wall0 = tube.diameter_compliance * tube.initial_pressure
+    hose = jnp.pi * (tube.hydraulic_diameter + wall0) ** 2 / 4.0 * tube.length
+    stored = n * (hose * (1.0 + stored_volume_fraction(params.fluid, tube.initial_pressure)) - tube.volume)
+    stored = stored + tank.volume * stored_volume_fraction(params.fluid, tank.initial_pressure)
+    zero = jnp.zeros_like(stored)
+    if config.drive == "forward":
+        base = [stored, zero, zero, zero + wall0, zero, zero]
+    else:
+        base = [stored, zero, zero, zero, zero, zero, zero + wall0]
+    y = jnp.concatenate([jnp.stack(base), fx.initial_states(params.effects, params, config.drive)])
+    return y / jnp.asarray(layout(params, config.drive)[1])
+
+
+# -- the vector field -----------------------------------------------------------------------------------
+
+
+def _robot_side(params, inputs, prep, t, pressure, displacement, effect_states):
+    """Flow into the robot, its pressure and length at chamber pressure ``pressure``."""
+    length = params.robot.initial_length + displacement - fx.length_offset(params.effects, effect_states)
+    catheter = jnp.maximum(inputs.catheter_length(t), 0.0)
+
+    def effect_force(v):
+        return fx.rod_force(params.effects, effect_states, Rod(t, pressure, v, length, catheter))
+
+    q, p_r = inflow(prep.rod, prep.valves, pressure, length, catheter, effect_force, prep.inflow_iterations)
+    return q, p_r, length
+
+
+def line_resistance(params: Parameters):
+    """Resistance of the lines from the syringes to the chamber, Pa·s/m³: the slope of
+    :func:`growjax.hydraulics.line_pressure_drop` at zero flow and gauge 0. The drop it gives,
+    n² A_s² R ≈ 35 N·s/m against the screws' 1.2e5 N·s/m, changes the platform speed by < 3e-4,
+    so its turbulent part and its pressure dependence are left out of the fast configuration."""
+
+    def drop(q):
+        return hy.line_pressure_drop(params.tube, params.orifice, params.tank, params.fluid, q,
+                                     params.pump.n_syringes, jnp.zeros_like(q))
+
+    zero = jnp.zeros_like(jnp.asarray(params.tank.area, float))
+    return jax.jvp(drop, (zero,), (jnp.ones_like(zero),))[1]
+
+
+def _wall_rate(params, pressure, wall):
+    tube = params.tube
+    return (tube.diameter_compliance * pressure - wall) / tube.wall_time_constant
+
+
+def _forward_rates(t, y, params, inputs, config, prep):
+    """Unscaled rates and the instant's outputs of the forward drive."""
+    stored, x_p, xi, wall, z_i, z_d = y[:6]
+    e = y[6:]
+    pump = params.pump
+    pressure = line_pressure(params, stored, wall, prep.storage)
+    u, dz_i, dz_d = pid_output(params.pid, inputs.pressure_demand(t) - pressure, z_i, z_d)
+    commanded = ideal_torque_drive_force(pump.syringe_area, pump.n_syringes, u)
+    drive = fx.applied_drive(params.effects, e, commanded)
+    v_p = platform_velocity(pump, drive, pressure, prep.line_resistance, x_p, config.stop_width)
+    q_r, p_r, length = _robot_side(params, inputs, prep, t, pressure, xi, e)
+    leak = fx.chamber_outflow(params.effects, e, t, pressure)
+    area = prep.rod.area
+    instant = Instant(t, pressure, p_r, q_r, q_r / area, length, commanded)
+    rates = jnp.concatenate([
+        jnp.stack([pump.n_syringes * pump.syringe_area * v_p - q_r - leak, v_p, q_r / area,
+                   _wall_rate(params, pressure, wall), dz_i, dz_d]),
+        fx.rates(params.effects, e, instant),
+    ])
+    return rates, (length, pressure, q_r, x_p, p_r)
+
+
+def _inverse_rates(t, y, params, inputs, config, prep):
+    """Unscaled rates and the instant's outputs of the inverse (stepper) drive."""
+    stored, angle, omega, i_a, i_b, xi, wall = y[:7]
+    e = y[7:]
+    pump, motor = params.pump, params.motor
+    ratio = pump.screw_ratio
+    x_p, v_p = angle / ratio, omega / ratio
+    pressure = line_pressure(params, stored, wall, prep.storage)
+    v_a, v_b = winding_voltages(motor, inputs.steps(t))
+    torque, di_a, di_b = motor_derivatives(motor, angle + motor_equilibrium_offset(motor), omega, i_a, i_b, v_a, v_b)
+    applied = fx.applied_drive(params.effects, e, torque)
+    # Each motor drives one screw and one syringe; the platform mass is shared between the screws.
+    syringe_pressure = pressure + prep.line_resistance * pump.n_syringes * pump.syringe_area * v_p
+    load = -syringe_load_force(pump, syringe_pressure, x_p, v_p, config.stop_width) / (pump.n_syringes * ratio)
+    inertia = motor.rotor_inertia + pump.platform_mass / (pump.n_syringes * ratio**2)
+    damping = motor.rotor_damping + pump.screw_viscous_friction
+    d_omega = (applied - damping * omega - load) / inertia
+    q_r, p_r, length = _robot_side(params, inputs, prep, t, pressure, xi, e)
+    leak = fx.chamber_outflow(params.effects, e, t, pressure)
+    area = prep.rod.area
+    instant = Instant(t, pressure, p_r, q_r, q_r / area, length, torque)
+    rates = jnp.concatenate([
+        jnp.stack([pump.n_syringes * pump.syringe_area * v_p - q_r - leak, omega, d_omega, di_a, di_b,
+                   q_r / area, _wall_rate(params, pressure, wall)]),
+        fx.rates(params.effects, e, instant),
+    ])
+    return rates, (length, pressure, q_r, x_p, p_r)
+
+
+def _rates(t, y, params, inputs, config, prep):
+    return (_forward_rates if config.drive == "forward" else _inverse_rates)(t, y, params, inputs, config, prep)
+
+
+def vector_field(t, ys, args):
+    """Scaled vector field for diffrax: ``args`` = (params, inputs, config, prepared constants)."""
+    params, inputs, config, prep = args
+    scales = jnp.asarray(layout(params, config.drive)[1])
+    return _rates(t, ys * scales, params, inputs, config, prep)[0] / scales
+
+
+def pressure_of(params: Parameters, config: Config, ys, storage: StorageLaw | None = None):
+    """Chamber pressure (Pa) of a scaled state."""
+    scales = layout(params, config.drive)[1]
+    wall_index = 3 if config.drive == "forward" else 6
+    return line_pressure(params, ys[0] * scales[0], ys[wall_index] * scales[wall_index], storage)
+
+
+# -- the solve ------------------------------------------------------------------------------------------
+
+
+def solve(params: Parameters, inputs, config: Config, ts, jump_ts, step_ts):
+    """Integrate the fast configuration and return a :class:`growjax.trajectory.Trajectory` on ``ts``."""
+    rtol, atol = config.tolerances
+    prep = prepare(params, config)
+    args = (params, inputs, config, prep)
+    limit = pressure_limit(params.robot)
+    event = None
+    if config.stop_at_pressure_limit:
+        event = pressure_limit_event(lambda t, y: pressure_of(params, config, y, prep.storage), limit)
+    controller = diffrax.ClipStepSizeController(
+        diffrax.PIDController(rtol=rtol, atol=atol, pcoeff=0.0, icoeff=1.0, dtmax=0.1),
+        step_ts=step_ts, jump_ts=jump_ts)
+    adjoint = diffrax.ForwardMode() if config.adjoint == "forward" else diffrax.RecursiveCheckpointAdjoint()
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(vector_field), Rosenbrock(), config.t0, config.t1, 1e-6, initial_state(params, config),
+        args=args, saveat=save_at(ts), stepsize_controller=controller, adjoint=adjoint, event=event,
+        max_steps=config.step_budget, throw=False,
+    )
+    scales = jnp.asarray(layout(params, config.drive)[1])
+    saved = sol.ys[0]
+    finite = jnp.all(jnp.isfinite(saved), axis=1)
+    safe = jnp.where(finite[:, None], saved, initial_state(params, config))
+    _, (length, pressure, q_r, x_p, p_r) = jax.vmap(lambda t, y: _rates(t, y * scales, params, inputs, config, prep))(ts, safe)
+    nan = jnp.where(finite, 0.0, jnp.nan)
+    outputs = {"length": length + nan, "pressure": pressure + nan, "robot_flow": q_r + nan,
+               "syringe_displacement": x_p + nan, "robot_pressure": p_r + nan}
+    demand = jax.vmap(inputs.pressure_demand)(ts)
+    return finish(sol, ts, outputs, limit, demand, config.stop_at_pressure_limit)

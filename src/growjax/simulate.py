@@ -1,0 +1,87 @@
+"""``simulate(params, inputs, config)``: the one entry point above both configurations."""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from growjax import effects as fx
+from growjax import fast_model, reference_model
+from growjax.config import Config
+from growjax.trajectory import Trajectory
+
+_PAD_BLOCK = 32
+
+
+def _traced(tree) -> bool:
+    return any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(tree))
+
+
+def _as_arrays(tree):
+    """Python numbers in a pytree as float arrays, so ``jit`` traces them instead of recompiling per value."""
+
+    def convert(x):
+        if isinstance(x, (float, int)) and not isinstance(x, bool):
+            return jnp.asarray(x, float)
+        return x
+
+    return jax.tree_util.tree_map(convert, tree)
+
+
+def _padded(times, t1: float) -> jax.Array:
+    """Times padded beyond t1 (never reached) to a multiple of a block, so inputs with a similar number of
+    edges share one compiled solver."""
+    times = np.asarray(times, float).ravel()
+    size = _PAD_BLOCK * max(1, -(-times.size // _PAD_BLOCK))
+    return jnp.asarray(np.concatenate([np.sort(times), np.full(size - times.size, t1 + 1.0)]))
+
+
+def input_breaks(inputs, config: Config) -> tuple[jax.Array, jax.Array]:
+    """(jump times, slope-break times) of ``inputs`` inside the window, padded: what the solvers step onto.
+
+    Needs concrete inputs; under a trace, compute it outside and pass it to :func:`simulate`.
+    """
+    try:
+        jumps = inputs.jump_times(config.t0, config.t1)
+        kinks = inputs.kink_times(config.t0, config.t1)
+    except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
+        raise ValueError(
+            "the inputs are traced, so their discontinuities cannot be found here: compute "
+            "growjax.input_breaks(inputs, config) outside the transformation and pass it as breaks="
+        ) from None
+    return _padded(jumps, config.t1), _padded(np.setdiff1d(kinks, jumps), config.t1)
+
+
+def simulate(params, inputs, config: Config = Config(), ts=None, breaks=None) -> Trajectory:
+    """Simulate the robot: (parameters, inputs, configuration) → :class:`growjax.Trajectory`.
+
+    Pure and usable under ``jax.jit``, ``jax.vmap``, ``jax.grad`` and ``jax.jvp`` with respect to
+    any leaf of ``params`` (effects included). ``config.fidelity`` picks the configuration:
+    ``"fast"`` (default; :mod:`growjax.fast_model`) or ``"reference"`` (:mod:`growjax.reference_model`).
+    ``ts`` (s, sorted, within [t0, t1]) is the save grid, default ``config.save_grid()``.
+    ``breaks`` = (jump times, slope-break times) of the inputs, found from ``inputs`` when they
+    are concrete (:func:`input_breaks`). A failed solve is reported in ``status``, never raised.
+    """
+    if ts is None:
+        ts = config.save_grid()
+    if not _traced(ts):
+        t = np.asarray(ts, float)
+        if t.ndim != 1 or t.size < 1 or not np.all(np.isfinite(t)):
+            raise ValueError("ts must be a 1-D array of finite times (s)")
+        if np.any(np.diff(t) < 0):
+            raise ValueError("ts must be sorted")
+        if t[0] < config.t0 - 1e-12 or t[-1] > config.t1 + 1e-12:
+            raise ValueError(f"ts must lie within [t0, t1] = [{config.t0}, {config.t1}] s")
+    if breaks is None:
+        breaks = input_breaks(inputs, config)
+    jump_ts, step_ts = breaks
+    return _solve(_as_arrays(params), _as_arrays(inputs), config, jnp.asarray(ts, float), jump_ts, step_ts)
+
+
+@eqx.filter_jit
+def _solve(params, inputs, config: Config, ts, jump_ts, step_ts) -> Trajectory:
+    params = fx.apply_all(params)
+    solve = fast_model.solve if config.fidelity == "fast" else reference_model.solve
+    return solve(params, inputs, config, ts, jump_ts, step_ts)
