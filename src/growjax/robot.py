@@ -220,10 +220,12 @@ def inflow(rod: RodBalance, valves, pressure, length, catheter_length, effect_fo
     s = jnp.where(delta0 >= 0.0, 1.0, -1.0)
     span = jnp.maximum(jnp.abs(delta0), 1e-12)
 
+    def excess(x):
+        return s * (p_robot(valves_at(delta0 - s * x) / rod.area) - p_rest)
+
     def residual(z):
         x = span * jax.nn.sigmoid(z)
-        excess = s * (p_robot(valves_at(delta0 - s * x) / rod.area) - p_rest)
-        return jnp.log(jnp.maximum(excess, 0.0) + tiny) - jnp.log(x + tiny)
+        return jnp.log(jnp.maximum(excess(x), 0.0) + tiny) - jnp.log(x + tiny)
 
     def solve(f, z):
         def newton(_, z):
@@ -232,9 +234,15 @@ def inflow(rod: RodBalance, valves, pressure, length, catheter_length, effect_fo
 
         return jax.lax.fori_loop(0, iterations, newton, z)
 
-    def tangent(g, y):
-        return y / g(jnp.ones_like(y))
+    def no_tangent(g, y):  # the root's derivative is taken below, not through the logit
+        return jnp.zeros_like(y)
 
-    z = jax.lax.custom_root(residual, jnp.zeros_like(delta0), solve, tangent)
-    delta = delta0 - s * span * jax.nn.sigmoid(z)
+    z = jax.lax.stop_gradient(jax.lax.custom_root(residual, jnp.zeros_like(delta0), solve, no_tangent))
+    # Derivatives by the implicit function theorem on g(x) = excess(x) − x, whose slope is ≤ −1 (never
+    # singular, unlike the log–logit form's where the sigmoid saturates): one Newton step in x from the
+    # root, its slope held constant, carries dx/dθ = −(∂g/∂θ)/g′ and leaves the value at the root.
+    x_root = jax.lax.stop_gradient(span * jax.nn.sigmoid(z))
+    g_root, slope = jax.jvp(lambda x: excess(x) - x, (x_root,), (jnp.ones_like(x_root),))
+    x = x_root - (g_root - jax.lax.stop_gradient(g_root)) / jax.lax.stop_gradient(jnp.minimum(slope, -1.0))
+    delta = delta0 - s * x
     return valves_at(delta), pressure - delta

@@ -1,0 +1,113 @@
+"""Agreement of the fast configuration with the reference over 0–10 s, per point of the paper's box and per input.
+
+Run: ``python benchmarks/agreement.py [--quick] [--out benchmarks/results/agreement.json]``.
+
+Points: the 8 corners and 8 Latin-hypercube points (seed 0) of the box of each growth law
+(reference law: n 0.9–1.1, Y 5–15 kPa, ext 4000–10000; Lockhart law: Y 5–15 kPa,
+φ_L 3e-4–3e-3 m/s, n_L 0.25–1). Inputs: the published pulse train and demands given as
+data or of other timing (data/make_synthetic.py ``DEMANDS``). For each (law, point, input):
+length RMSE and max |difference| (mm) of the fast configuration (default tolerance) against
+the reference (rtol 1e-7), the targets 0.05 mm and 0.15 mm, and the fast configuration's
+volume balance (delivered − grown − stored, stored from the sensed pressure by quadrature,
+rigid hoses) as a share of the delivered volume (target 0.1 %). ``--quick`` takes 2 corners
+and 2 LHS points per law and 3 inputs. The reference is slow (~10–20 s per 10 s run after a
+~70 s compile per law and input type): the full table takes hours on 2 cores.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy.integrate import quad
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "data"))
+
+import growjax as gj  # noqa: E402
+import make_synthetic as mk  # noqa: E402
+from growjax import sweep as sw  # noqa: E402
+from growjax.fluid import bulk_modulus  # noqa: E402
+
+BOXES = {
+    "reference": (sw.Dimension("n", 0.9, 1.1), sw.Dimension("Y", 5e3, 15e3), sw.Dimension("ext", 4000.0, 10000.0)),
+    "lockhart": (sw.Dimension("Y", 5e3, 15e3), sw.Dimension("phi_L", 3e-4, 3e-3, log=True), sw.Dimension("n_L", 0.25, 1.0)),
+}
+
+
+def points(law: str, quick: bool) -> list[dict]:
+    """Corners then Latin-hypercube points of a law's box, as parameter overrides."""
+    dims = BOXES[law]
+    corners = [dict(zip([d.name for d in dims], c)) for c in itertools.product(*[(d.low, d.high) for d in dims])]
+    lhs = [dict(zip([d.name for d in dims], map(float, row))) for row in sw.latin_hypercube(dims, 8, seed=0)]
+    if quick:
+        corners, lhs = [corners[0], corners[-1]], lhs[:2]
+    return [dict(kind="corner", **c) for c in corners] + [dict(kind="lhs", **p) for p in lhs]
+
+
+def volume_balance(params, traj) -> float:
+    """max |delivered − grown − stored| / max |delivered| over the save grid (rigid hoses assumed)."""
+    delivered = params.pump.n_syringes * params.pump.syringe_area * np.asarray(traj.syringe_displacement)
+    grown = params.robot.area * (np.asarray(traj.length) - params.robot.initial_length)
+    volume = params.pump.n_syringes * params.tube.volume + params.tank.volume
+    p = np.asarray(traj.pressure)
+    stored = np.array([quad(lambda q: volume / float(bulk_modulus(params.fluid, q)), p[0], pk, limit=200)[0] for pk in p])
+    return float(np.max(np.abs(delivered - grown - stored)) / max(np.max(np.abs(delivered)), 1e-30))
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "agreement.json"))
+    args = ap.parse_args(argv)
+    demands = ["published", "sampled", "step"] if args.quick else list(mk.DEMANDS)
+    fast_cfg = gj.Config(t1=10.0)
+    ref_cfg = gj.Config(fidelity="reference", t1=10.0, rtol=1e-7)
+    ts = fast_cfg.save_grid()
+    rows = []
+    print(f"{'law':9s} {'point':42s} {'input':10s} {'RMSE mm':>8s} {'max mm':>8s} {'volume':>9s}  status")
+    for law in BOXES:
+        for point, demand in itertools.product(points(law, args.quick), demands):
+            overrides = {k: v for k, v in point.items() if k != "kind"}
+            params = gj.replace(gj.reference(growth_law=law), **overrides)
+            inputs = mk.reference_inputs(demand)
+            start = time.perf_counter()
+            fast = gj.simulate(params, inputs, fast_cfg, ts=ts)
+            ref = gj.simulate(params, inputs, ref_cfg, ts=ts)
+            rigid = gj.replace(params, **{"tube.diameter_compliance": 0.0})
+            vol = volume_balance(rigid, gj.simulate(rigid, inputs, fast_cfg, ts=ts))
+            row = {"law": law, "point": point, "input": demand, "fast_status": gj.status_name(fast.status),
+                   "reference_status": gj.status_name(ref.status), "volume_defect_share": vol,
+                   "wall_s": time.perf_counter() - start}
+            if int(fast.status) == gj.OK and int(ref.status) == gj.OK:
+                d = np.asarray(fast.length - ref.length)
+                row.update(rmse_mm=1e3 * float(np.sqrt(np.mean(d**2))), max_mm=1e3 * float(np.max(np.abs(d))))
+            rows.append(row)
+            label = ", ".join(f"{k}={v:.4g}" for k, v in overrides.items())
+            print(f"{law:9s} {point['kind'] + ' ' + label:42s} {demand:10s} {row.get('rmse_mm', np.nan):8.4f} "
+                  f"{row.get('max_mm', np.nan):8.4f} {vol:9.2e}  fast {row['fast_status']}, reference {row['reference_status']}",
+                  flush=True)
+    done = [r for r in rows if "rmse_mm" in r]
+    summary = {
+        "n": len(rows), "n_compared": len(done),
+        "rmse_mm_max": max((r["rmse_mm"] for r in done), default=None),
+        "max_mm_max": max((r["max_mm"] for r in done), default=None),
+        "volume_defect_share_max": max(r["volume_defect_share"] for r in rows),
+        "targets": {"rmse_mm": 0.05, "max_mm": 0.15, "volume_defect_share": 1e-3},
+        "reference_failures": [r for r in rows if r["reference_status"] != "ok"],
+    }
+    summary["pass"] = bool(done) and summary["rmse_mm_max"] <= 0.05 and summary["max_mm_max"] <= 0.15 \
+        and summary["volume_defect_share_max"] <= 1e-3
+    print(json.dumps({k: v for k, v in summary.items() if k != "reference_failures"}, indent=1))
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps({"summary": summary, "rows": rows}, indent=1) + "\n")
+    return summary
+
+
+if __name__ == "__main__":
+    main()
