@@ -18,6 +18,7 @@ import diffrax
 import jax
 import jax.numpy as jnp
 
+from growjax import _assembly as assembly
 from growjax import effects as fx
 from growjax import hydraulics as hy
 from growjax._smooth import bracketed_root
@@ -43,9 +44,7 @@ INVERSE_SCALES = (1e-2, 1.0, 1.0, 1.0, 1e5, 1e-7, 1e5, 1e-3)
 
 def layout(params: Parameters, drive: str) -> tuple[tuple, tuple]:
     """(state names, scales) of the reference configuration for a drive, effect states last."""
-    names, scales = (FORWARD_STATES, FORWARD_SCALES) if drive == "forward" else (INVERSE_STATES, INVERSE_SCALES)
-    extra = tuple(f"{e.name}.{s}" for e in params.effects for s in e.state_names)
-    return names + extra, scales + fx.state_scales(params.effects, drive)
+    return assembly.layout(params, drive, (FORWARD_STATES, FORWARD_SCALES), (INVERSE_STATES, INVERSE_SCALES))
 
 
 class Network(NamedTuple):
@@ -173,15 +172,8 @@ def _inverse_rates(t, y, params, inputs, config, prep):
     return rates, (net, x_p)
 
 
-def _rates(t, y, params, inputs, config, prep):
-    return (_forward_rates if config.drive == "forward" else _inverse_rates)(t, y, params, inputs, config, prep)
-
-
-def vector_field(t, ys, args):
-    """Scaled vector field for diffrax: ``args`` = (params, inputs, config, prepared constants)."""
-    params, inputs, config, prep = args
-    scales = jnp.asarray(layout(params, config.drive)[1])
-    return _rates(t, ys * scales, params, inputs, config, prep)[0] / scales
+# The scaled field diffrax integrates: ``vector_field(t, ys, (params, inputs, config, prep))``.
+_rates, vector_field = assembly.vector_fields(_forward_rates, _inverse_rates, lambda p, d: layout(p, d))
 
 
 def initial_state(params: Parameters, config: Config) -> jax.Array:
