@@ -24,16 +24,17 @@ at steps set by the slow dynamics, with input edges declared to the step-size co
 
 from __future__ import annotations
 
-from typing import NamedTuple
+import functools
 
-import diffrax
+import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from growjax import _assembly as assembly
 from growjax import effects as fx
 from growjax import hydraulics as hy
-from growjax._rosenbrock import Rosenbrock
+from growjax._rosenbrock import evaluate, integrate
 from growjax.config import Config
 from growjax.effects import Instant, Rod
 from growjax.fluid import StorageLaw, pressure_at_stored_fraction, storage_law, stored_volume_fraction
@@ -48,7 +49,7 @@ from growjax.params import Parameters
 from growjax.hydraulics import ValveNetwork, valve_network
 from growjax.pump import platform_velocity, syringe_load_force
 from growjax.robot import RodBalance, inflow, pressure_limit, rod_balance
-from growjax.trajectory import finish, pressure_limit_event, save_at
+from growjax.trajectory import finish
 
 FORWARD_STATES = ("stored_volume", "x_platform", "robot_displacement", "wall_strain", "z_integral", "z_filter")
 FORWARD_SCALES = (1e-6, 1e-2, 1e-4, 1e-6, 1e6, 1e7)  # error control weights the length 100x more than the pressure loop
@@ -61,14 +62,14 @@ def layout(params: Parameters, drive: str) -> tuple[tuple, tuple]:
     return assembly.layout(params, drive, (FORWARD_STATES, FORWARD_SCALES), (INVERSE_STATES, INVERSE_SCALES))
 
 
-class Prepared(NamedTuple):
+class Prepared(eqx.Module):
     """Constants of the hot laws, computed once per solve (not in every evaluation of the vector field)."""
 
     storage: StorageLaw
     valves: ValveNetwork
     rod: RodBalance
     line_resistance: jax.Array  # Pa·s/m³
-    inflow_iterations: int
+    inflow_iterations: int = eqx.field(static=True)
 
 
 def prepare(params: Parameters, config: Config) -> Prepared:
@@ -221,31 +222,181 @@ def pressure_of(params: Parameters, config: Config, ys, storage: StorageLaw | No
 # -- the solve ------------------------------------------------------------------------------------------
 
 
-def solve(params: Parameters, inputs, config: Config, ts, jump_ts, step_ts):
-    """Integrate the fast configuration and return a :class:`growjax.trajectory.Trajectory` on ``ts``."""
+OUTPUTS = ("length", "pressure", "robot_flow", "syringe_displacement", "robot_pressure")
+
+
+class Run(eqx.Module):
+    """The differentiable part of a solve: outputs on the save grid (field → (T,)), the final state (n,) and time (s)."""
+
+    outputs: dict
+    final_state: jax.Array
+    t_final: jax.Array
+
+
+def _relative_size(theta, direction):
+    """How large a direction is relative to the values it perturbs: max |d| / max(|θ|, |d|) over the leaves (–)."""
+    ratios = [jnp.max(jnp.abs(d) / jnp.maximum(jnp.maximum(jnp.abs(x), jnp.abs(d)), 1e-300))
+              for x, d in zip(jax.tree_util.tree_leaves(theta), jax.tree_util.tree_leaves(direction))
+              if jnp.issubdtype(jnp.result_type(d), jnp.floating) and jnp.size(d)]
+    return jnp.max(jnp.stack(ratios)) if ratios else jnp.asarray(0.0)
+
+
+def _shifted(theta, direction, step):
+    """θ + step·d, leaf by leaf (leaves that are not floating point are left alone)."""
+    def shift(x, d):
+        if jnp.issubdtype(jnp.result_type(x), jnp.floating) and jnp.size(x):
+            return x + step * d
+        return x
+
+    return jax.tree_util.tree_map(shift, theta, direction)
+
+
+def _integrate(params, inputs, config: Config, ts, jump_ts, step_ts, directions=None):
+    """(Run, tangent Run with a leading axis p or None, status, accepted steps).
+
+    ``directions`` = (parameter tangents, input tangents), each leaf with a leading axis p: the
+    sensitivities along them are integrated with the state, under its error control. Their field
+    is the central difference quotient of the vector field along each direction (as CVODES does by
+    default), (f(y + εS, θ + εd) − f(y − εS, θ − εd))/2ε, with ε fixed per direction so that the
+    parameters move by (machine ε)^⅓ of themselves: one batched evaluation of the primal field
+    serves all directions. (Forward-mode ``jvp`` batched over directions is exact but XLA:CPU
+    miscompiles it inside this field; see tests/test_gradients.py.)
+    """
     rtol, atol = config.tolerances
-    prep = prepare(params, config)
-    args = (params, inputs, config, prep)
-    limit = pressure_limit(params.robot)
+    scales = jnp.asarray(layout(params, config.drive)[1])
+
+    def prepared(p, i):
+        return p, i, prepare(p, config)
+
+    theta = prepared(params, inputs)
+
+    def field(t, y, th=theta):
+        p, i, pr = th
+        return vector_field(t, y, (p, i, config, pr))
+
+    def outputs(t, y, th=theta):
+        p, i, pr = th
+        length, pressure, q_r, x_p, p_r = _rates(t, y * scales, p, i, config, pr)[1]
+        return dict(zip(OUTPUTS, (length, pressure, q_r, x_p, p_r)))
+
     event = None
     if config.stop_at_pressure_limit:
-        event = pressure_limit_event(lambda t, y: pressure_of(params, config, y, prep.storage), limit)
-    controller = diffrax.ClipStepSizeController(
-        diffrax.PIDController(rtol=rtol, atol=atol, pcoeff=0.0, icoeff=1.0, dtmax=0.1),
-        step_ts=step_ts, jump_ts=jump_ts)
-    adjoint = diffrax.ForwardMode() if config.adjoint == "forward" else diffrax.RecursiveCheckpointAdjoint()
-    sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(vector_field), Rosenbrock(), config.t0, config.t1, 1e-6, initial_state(params, config),
-        args=args, saveat=save_at(ts), stepsize_controller=controller, adjoint=adjoint, event=event,
-        max_steps=config.step_budget, throw=False,
-    )
-    scales = jnp.asarray(layout(params, config.drive)[1])
-    saved = sol.ys[0]
-    finite = jnp.all(jnp.isfinite(saved), axis=1)
-    safe = jnp.where(finite[:, None], saved, initial_state(params, config))
-    _, (length, pressure, q_r, x_p, p_r) = jax.vmap(lambda t, y: _rates(t, y * scales, params, inputs, config, prep))(ts, safe)
+        limit = pressure_limit(params.robot)
+
+        def event(t, y):  # decreases through 0 where the sensed pressure crosses the limit
+            return 1.0 - pressure_of(params, config, y, theta[2].storage) / limit
+
+    times = jnp.concatenate([jump_ts, step_ts])
+    order = jnp.argsort(times)
+    is_jump = jnp.concatenate([jnp.ones(jump_ts.shape, bool), jnp.zeros(step_ts.shape, bool)])
+    y0 = initial_state(params, config)
+    common = dict(breaks=times[order], jumps=is_jump[order], rtol=rtol, atol=atol, max_steps=config.step_budget,
+                  event=event)
+    if directions is None:
+        run = integrate(field, y0, config.t0, config.t1, **common)
+    else:
+        d_params, d_inputs = directions
+        size = jax.vmap(lambda dp, di: _relative_size((params, inputs), (dp, di)))(d_params, d_inputs)  # (p,)
+        step = jnp.where(size > 0, jnp.finfo(y0.dtype).eps ** (1 / 3) / jnp.where(size > 0, size, 1.0), 0.0)
+        signed = jnp.concatenate([step, -step])  # (2p,): central differences
+        both = jax.tree_util.tree_map(lambda d: jnp.concatenate([d, d]), (d_params, d_inputs))
+        moved = jax.vmap(lambda dp, di, e: prepared(*_shifted((params, inputs), (dp, di), e)))(*both, signed)
+        quotient = jnp.where(step > 0, 0.5 / jnp.where(step > 0, step, 1.0), 0.0)[:, None]
+        n_dir = step.shape[0]
+
+        def central(values):  # (2p, …) at θ ± εd → (p, …)
+            return (values[:n_dir] - values[n_dir:]) * quotient.reshape((-1,) + (1,) * (values.ndim - 1))
+
+        s0 = central(jax.vmap(lambda th: initial_state(th[0], config))(moved))
+
+        def tangent_field(t, y, sens):
+            shifted = jax.vmap(lambda s, e, th: field(t, y + e * s, th))(jnp.concatenate([sens, sens]), signed, moved)
+            return field(t, y), central(shifted)
+
+        run = integrate(field, y0, config.t0, config.t1, tangent_field=tangent_field, s0=s0,
+                        s_atol=atol * jnp.maximum(size, 1e-12), **common)
+    block = evaluate(run.steps, ts)  # (T, 1 + p, n)
+    # Outputs from the saved states; a non-finite state (a failed run) is evaluated at the initial state instead.
+    finite = jnp.all(jnp.isfinite(block[:, 0]), axis=1)
+    saved = jnp.where(finite[:, None], block[:, 0], y0)
     nan = jnp.where(finite, 0.0, jnp.nan)
-    outputs = {"length": length + nan, "pressure": pressure + nan, "robot_flow": q_r + nan,
-               "syringe_displacement": x_p + nan, "robot_pressure": p_r + nan}
+    values = jax.vmap(outputs)(ts, saved)
+    primal = Run({k: v + nan for k, v in values.items()}, run.y_final[0], run.t_final)
+    tangent = None
+    if directions is not None:
+        def output_tangents(t, y, sens):
+            shifted = jax.vmap(lambda s, e, th: outputs(t, y + e * s, th))(jnp.concatenate([sens, sens]), signed, moved)
+            return {k: central(shifted[k]) for k in OUTPUTS}
+
+        d_values = jax.vmap(output_tangents, out_axes=1)(ts, saved, block[:, 1:])  # field → (p, T)
+        tangent = Run(d_values, run.y_final[1:], jnp.zeros(run.y_final.shape[0] - 1))
+    return primal, tangent, run.status, run.steps.count
+
+
+def _tangent_solver(config: Config):
+    """``(params, inputs, ts, jump_ts, step_ts, d_params, d_inputs) → (Run, tangent Run, status, steps)`` for
+    directions with a leading axis p, batched over directions by merging them into one solve (``custom_vmap``)."""
+
+    def plain(params, inputs, ts, jump_ts, step_ts, d_params, d_inputs):
+        return _integrate(params, inputs, config, ts, jump_ts, step_ts, (d_params, d_inputs))
+
+    solver = jax.custom_batching.custom_vmap(plain)
+
+    @solver.def_vmap
+    def merge_directions(axis_size, in_batched, params, inputs, ts, jump_ts, step_ts, d_params, d_inputs):
+        args = (params, inputs, ts, jump_ts, step_ts, d_params, d_inputs)
+        if any(jax.tree_util.tree_leaves(in_batched[:5])):  # the point itself is batched: a solve per member
+            axes = jax.tree_util.tree_map(lambda b: 0 if b else None, in_batched)
+            out = jax.vmap(plain, in_axes=axes)(*args)
+            return out, jax.tree_util.tree_map(lambda _: True, out)
+
+        def flat(x, batched):  # (axis_size, p, …) → (axis_size·p, …)
+            x = x if batched else jnp.broadcast_to(x, (axis_size,) + jnp.shape(x))
+            return x.reshape((axis_size * x.shape[1],) + x.shape[2:])
+
+        dp = jax.tree_util.tree_map(flat, d_params, in_batched[5])
+        di = jax.tree_util.tree_map(flat, d_inputs, in_batched[6])
+        primal, tangent, status, n_steps = solver(params, inputs, ts, jump_ts, step_ts, dp, di)
+        tangent = jax.tree_util.tree_map(lambda x: x.reshape((axis_size, -1) + x.shape[1:]), tangent)
+        unbatched = jax.tree_util.tree_map(lambda _: False, (primal, status, n_steps))
+        return (primal, tangent, status, n_steps), (unbatched[0], jax.tree_util.tree_map(lambda _: True, tangent),
+                                                    unbatched[1], unbatched[2])
+
+    return solver
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(2,))
+def _run(params, inputs, config: Config, ts, jump_ts, step_ts):
+    """(Run, status, accepted steps) of the fast configuration; derivatives by error-controlled forward sensitivities."""
+    primal, _, status, n_steps = _integrate(params, inputs, config, ts, jump_ts, step_ts)
+    return primal, status, n_steps
+
+
+@_run.defjvp
+def _run_jvp(config, primals, tangents):
+    params, inputs, ts, jump_ts, step_ts = primals
+    d_params, d_inputs = tangents[0], tangents[1]
+
+    def one(x):
+        return jnp.asarray(x)[None]
+
+    primal, tangent, status, n_steps = _tangent_solver(config)(params, inputs, ts, jump_ts, step_ts,
+                                                               jax.tree_util.tree_map(one, d_params),
+                                                               jax.tree_util.tree_map(one, d_inputs))
+    tangent = jax.tree_util.tree_map(lambda x: x[0], tangent)
+    zero = np.zeros((), dtype=jax.dtypes.float0)
+    return (primal, status, n_steps), (tangent, zero, zero)
+
+
+def solve(params: Parameters, inputs, config: Config, ts, jump_ts, step_ts):
+    """Integrate the fast configuration and return a :class:`growjax.trajectory.Trajectory` on ``ts``.
+
+    Differentiable in ``params`` and ``inputs`` in forward mode (``jax.jvp``, ``jax.jacfwd``): the
+    sensitivities are integrated with the state under the same error control
+    (:func:`growjax._rosenbrock.integrate`), and a batch of directions is one solve. Reverse mode
+    (``jax.grad``) is not supported by this configuration.
+    """
+    run, status, n_steps = _run(params, inputs, config, ts, jump_ts, step_ts)
     demand = jax.vmap(inputs.pressure_demand)(ts)
-    return finish(sol, ts, outputs, limit, demand, config.stop_at_pressure_limit)
+    return finish(ts, run.outputs, pressure_limit(params.robot), demand, config.stop_at_pressure_limit,
+                  t_final=run.t_final, status=status, n_steps=n_steps, final_state=run.final_state)

@@ -34,7 +34,7 @@ from growjax.motor import (
 from growjax.params import Parameters
 from growjax.pump import platform_force, syringe_load_force
 from growjax.robot import RodBalance, pressure_limit, rod_balance, rod_pressure
-from growjax.trajectory import finish, pressure_limit_event, save_at
+from growjax.trajectory import finish, pressure_limit_event, save_at, solver_status
 
 FORWARD_STATES = ("x_platform", "v_platform", "p_tube", "wall_strain", "p_tank", "robot_displacement", "z_integral", "z_filter")
 FORWARD_SCALES = (1e-3, 1e-3, 1e5, 1e-7, 1e5, 1e-3, 1e4, 1e5)
@@ -221,4 +221,5 @@ def solve(params: Parameters, inputs, config: Config, ts, jump_ts, step_ts):
     outputs = {"length": length + nan, "pressure": pressure + nan, "robot_flow": q_r + nan,
                "syringe_displacement": x_p + nan, "robot_pressure": p_r + nan}
     demand = jax.vmap(inputs.pressure_demand)(ts)
-    return finish(sol, ts, outputs, limit, demand, config.stop_at_pressure_limit)
+    return finish(ts, outputs, limit, demand, config.stop_at_pressure_limit, t_final=sol.ts[1][-1],
+                  status=solver_status(sol), n_steps=sol.stats["num_accepted_steps"], final_state=sol.ys[1][-1])

@@ -20,11 +20,14 @@ def _traced(tree) -> bool:
 
 
 def _as_arrays(tree):
-    """Python numbers in a pytree as float arrays, so ``jit`` traces them instead of recompiling per value."""
+    """Python numbers in a pytree as float arrays, so ``jit`` traces them instead of recompiling per value.
+
+    NumPy scalars, not JAX arrays: making a device array per leaf costs ~0.1 ms each, more than a simulation's step loop.
+    """
 
     def convert(x):
         if isinstance(x, (float, int)) and not isinstance(x, bool):
-            return jnp.asarray(x, float)
+            return np.asarray(x, np.float64)
         return x
 
     return jax.tree_util.tree_map(convert, tree)

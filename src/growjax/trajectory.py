@@ -65,16 +65,20 @@ def save_at(ts) -> diffrax.SaveAt:
     return diffrax.SaveAt(subs=[diffrax.SubSaveAt(ts=ts), diffrax.SubSaveAt(t1=True)])
 
 
-def finish(sol: diffrax.Solution, ts, outputs: dict, limit, demand, stop_at_limit: bool) -> Trajectory:
-    """A :class:`Trajectory` from a diffrax solution saved with :func:`save_at` and the outputs computed
-    from its saved states (``outputs``: field → (T,) array).
+def solver_status(sol: diffrax.Solution):
+    """A diffrax solution's result as an integrator status: 0 reached t1, 1 stopped by the event, 2 failed."""
+    return jnp.where(sol.result == diffrax.RESULTS.successful, 0,
+                     jnp.where(sol.result == diffrax.RESULTS.event_occurred, 1, 2))
 
-    Samples after the end of the integration are NaN. The pressure limit is flagged at the
-    event (when it stopped the run) or at the first save time above it (when it did not).
+
+def finish(ts, outputs: dict, limit, demand, stop_at_limit: bool, *, t_final, status, n_steps, final_state) -> Trajectory:
+    """A :class:`Trajectory` from the outputs on ``ts`` (field → (T,) array) and the integrator's end.
+
+    ``status`` is the integrator's: 0 reached t1, 1 stopped by the pressure-limit event, 2 failed.
+    Samples after ``t_final`` are NaN. The pressure limit is flagged at the event (when it stopped
+    the run) or at the first save time above it (when it did not).
     """
-    t_final = sol.ts[1][-1]
-    event = sol.result == diffrax.RESULTS.event_occurred
-    ok = (sol.result == diffrax.RESULTS.successful) | event
+    event = status == 1
     after = ts > t_final + 1e-12
     clean = {k: jnp.where(after, jnp.nan, v) for k, v in outputs.items()}
     finite = jnp.all(jnp.stack([jnp.all(jnp.isfinite(v) | after) for v in clean.values()]))
@@ -82,12 +86,12 @@ def finish(sol: diffrax.Solution, ts, outputs: dict, limit, demand, stop_at_limi
     first_above = ts[jnp.argmax(above)]
     stopped = event & stop_at_limit
     limit_time = jnp.where(stopped, t_final, jnp.where(jnp.any(above), first_above, jnp.nan))
-    failed = ~ok | ~finite
-    status = jnp.where(stopped, PRESSURE_LIMIT,
-                       jnp.where(failed, SOLVER_FAILED, jnp.where(jnp.isfinite(limit_time), PRESSURE_LIMIT, OK)))
+    failed = (status == 2) | ~finite
+    code = jnp.where(stopped, PRESSURE_LIMIT,
+                     jnp.where(failed, SOLVER_FAILED, jnp.where(jnp.isfinite(limit_time), PRESSURE_LIMIT, OK)))
     return Trajectory(
         time=ts, length=clean["length"], pressure=clean["pressure"], robot_flow=clean["robot_flow"],
         syringe_displacement=clean["syringe_displacement"], robot_pressure=clean["robot_pressure"],
-        pressure_demand=demand, status=status, limit_time=limit_time, t_final=t_final,
-        n_steps=sol.stats["num_accepted_steps"], final_state=sol.ys[1][-1],
+        pressure_demand=demand, status=code, limit_time=limit_time, t_final=t_final,
+        n_steps=n_steps, final_state=final_state,
     )
