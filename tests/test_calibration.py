@@ -33,12 +33,9 @@ def _synthetic(t1, seed):
 GRID = ["published_Y6000", "published_Y7920", "published_Y10000", "published_Y12000", "published_Y14000"]
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "known defect (issue 9, open): the forward-mode tangent of the fast configuration is not error-controlled, "
-    "and where the bypass opens inside a step (t ≈ 8 s here) the W-method's Jacobian from the step's start lacks "
-    "the stiff mode, so dL/dY explodes (1e12 instead of 3e-6 m/Pa) and Levenberg–Marquardt stalls at its start"))
 def test_fit_intervals_cover_the_truth_on_data_made_by_the_reference():
-    """Five Y across the paper's box, 10 s, noise 0.2 mm: the fast model's 90 % intervals cover ≥ 4 of 5."""
+    """Five Y across the paper's box, 10 s, noise 0.2 mm: the fast model's 90 % intervals (noise and its
+    measured model error) cover ≥ 4 of 5."""
     time, lengths, cases = mk.read_reference_lengths()
     inputs = mk.reference_inputs("published")
     covered, errors = 0, []
@@ -69,6 +66,7 @@ def test_fit_names_ext_and_n_as_undetermined():
 @pytest.mark.xfail(strict=True, reason=(
     "open (issue 9): on the first 0.8 s of the reference-made experiment the fast model's 90 % interval of Y "
     "(~9100–9300 Pa) excludes the true 9000 Pa; not yet explained (suspect: the initial drain transient)"))
+@pytest.mark.slow
 def test_nuts_on_reference_made_data_is_converged_and_covers_the_truth(synthetic_experiment):
     """Direct NUTS through the fast model on the shipped reference-made experiment (Y = 9 kPa), first 0.8 s."""
     exp = synthetic_experiment.window(0.8)

@@ -35,6 +35,7 @@ def test_simulate_command_reports_bad_input(tmp_path):
     assert done.returncode == 2 and "millimetres" in done.stderr
 
 
+@pytest.mark.slow
 def test_posterior_command_writes_inference_data_and_the_issue_keys(tmp_path):
     cmd = [sys.executable, "-m", "growjax.cli", "posterior", "--t-end", "0.8", "--chains", "2", "--warmup", "40",
            "--samples", "40", "--emulate", "--out", str(tmp_path), "--json", str(tmp_path / "p.json")]

@@ -53,6 +53,7 @@ def test_axis_rejects_bad_boxes():
         em.Axis("Y", 0.0, 2.0, 5, log=True)
 
 
+@pytest.mark.slow
 def test_emulator_of_the_model_is_within_its_measured_error():
     cfg = gj.Config(t1=0.8)
     t = np.array([0.0, 100.0])

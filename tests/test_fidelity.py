@@ -44,6 +44,7 @@ def test_fast_length_agrees_with_the_reference(reference_traces, name):
     assert np.ptp(lengths[name]) > 5e-4  # the robot moved: the agreement is not about a robot at rest
 
 
+@pytest.mark.slow
 def test_effects_plug_into_both_configurations_and_they_agree():
     """A pull on the rod, a leak from the chamber and a lag with a state of its own, from one definition each."""
     effects = (fx.ActiveChannelForce(force=0.05), fx.FluidLeak(conductance=5e-14), fx.ActuationLag(time_constant=0.05))
@@ -65,6 +66,7 @@ def test_effects_plug_into_both_configurations_and_they_agree():
     np.testing.assert_allclose(np.asarray(gj.simulate(zero, inputs, short, ts=ts).length), np.asarray(base.length), rtol=0, atol=2e-6)
 
 
+@pytest.mark.slow
 def test_effect_parameters_are_differentiable_leaves():
     inputs = mk.reference_inputs("published")
     cfg = gj.Config(t1=1.5, adjoint="forward")

@@ -60,7 +60,7 @@ def test_lockhart_law_makes_phi_and_n_matter_where_ext_and_n_do_not():
         return float(tr.length[-1])
 
     ref = [final(gj.replace(gj.reference(), ext=e, n=n)) for e, n in [(4000.0, 0.9), (10000.0, 1.1)]]
-    assert abs(ref[0] - ref[1]) < 1e-9  # the published velocity term: no effect
+    assert abs(ref[0] - ref[1]) < 1e-6  # the published velocity term: no effect beyond the solver tolerance (0.1 µm)
     slow, fast = final(_lockhart(phi_L=3e-4)), final(_lockhart(phi_L=3e-3))
     soft, stiff = final(_lockhart(phi_L=1e-3, n_L=0.5)), final(_lockhart(phi_L=1e-3, n_L=1.5))
     base = final(gj.reference())

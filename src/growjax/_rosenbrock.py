@@ -194,6 +194,7 @@ def integrate(
     tangent_field: Callable | None = None,
     s0: jax.Array | None = None,
     s_atol: jax.Array | None = None,
+    s_rtol: float | None = None,
     dt0: float = 1e-5,
     dtmax: float = 0.1,
     event: Callable | None = None,
@@ -209,7 +210,8 @@ def integrate(
         rtol, atol: error control on the scaled states (weighted RMS norm).
         max_steps: budget of accepted steps (the size of the recorded dense solution).
         tangent_field: ``(t, y, S) → (f(t, y), S')`` with S of shape (p, n); None: no sensitivities.
-        s0: (p, n) sensitivities at t0.  s_atol: (p,) absolute tolerance of each sensitivity row.
+        s0: (p, n) sensitivities at t0.  s_atol: (p,) absolute tolerance of each sensitivity row;
+            s_rtol: their relative tolerance (default ``rtol``).
         event: ``g(t, y)``, decreasing through zero where the run must stop (e.g. 1 − p/p_limit).
 
     The state block is (1 + p, n): row 0 the state, rows 1… the sensitivities. Every row shares
@@ -223,12 +225,15 @@ def integrate(
     if tangent_field is None:
         z0 = y0[None]
         tol_abs = jnp.full((1, 1), atol, dtype)
+        tol_rel = jnp.full((1, 1), rtol, dtype)
 
         def block(t, z):
             return field(t, z[0])[None]
     else:
         z0 = jnp.concatenate([y0[None], jnp.asarray(s0, dtype)])
         tol_abs = jnp.concatenate([jnp.full((1,), atol, dtype), jnp.asarray(s_atol, dtype)])[:, None]
+        s_rel = rtol if s_rtol is None else s_rtol
+        tol_rel = jnp.concatenate([jnp.full((1,), rtol, dtype), jnp.full((z0.shape[0] - 1,), s_rel, dtype)])[:, None]
 
         def block(t, z):
             f, ds = tangent_field(t, z[0], z[1:])
@@ -282,7 +287,7 @@ def integrate(
             ks = stage(i, ks, block(t + c[i] * h, y + jnp.tensordot(alpha[i], ks, 1)))
         y1 = y + jnp.tensordot(b, ks, 1)
         err = jnp.tensordot(b_err, ks, 1)
-        scale = tol_abs + rtol * jnp.maximum(jnp.abs(y), jnp.abs(y1))
+        scale = tol_abs + tol_rel * jnp.maximum(jnp.abs(y), jnp.abs(y1))
         err_norm = jax.lax.stop_gradient(jnp.max(jnp.sqrt(jnp.mean((err / scale) ** 2, axis=1))))
 
         # The field after the step: its right limit starts the next step; across a jump, the left limit

@@ -235,6 +235,29 @@ def posterior_command(args) -> dict:
             "inference_data": str(out / "posterior.nc")}
 
 
+def discover_command(args) -> dict:
+    import growjax as gj
+    from growjax import discover as gd
+    from growjax import experiment as ex
+    from growjax.plotting import discovery_figure
+
+    data = Path(args.data) if args.data else default_data_path()
+    exp = ex.read(data).window(args.t_end + 1e-9)
+    if "robot_length_m" not in exp:
+        raise ValueError(f"{data} has no robot_length_m column to explain")
+    config = make_config(args, args.drive, adjoint="forward")
+    base = gj.reference(args.drive)
+    inputs = ex.to_inputs(exp, args.drive, base, config.t0, config.t1)
+    keep = (exp.time >= config.t0) & (exp.time <= config.t1)
+    res = gd.discover(exp.time[keep], exp["robot_length_m"][keep], inputs, base=base, config=config,
+                      candidates=args.candidates or None, progress=True)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    figure = discovery_figure(res, out / "discover.png", title=f"{data.name}: {res.effect}")
+    print(gd.summary_text(res), file=sys.stderr)
+    return {"data": str(data), "drive": args.drive, "t_end_s": args.t_end, **res.report(), "figure": str(figure)}
+
+
 def build_parser():
     parser = argparse.ArgumentParser(prog="growjax", description="MAMMOBOT growing-robot simulator")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -284,7 +307,19 @@ def build_parser():
     post.add_argument("--seed", type=int, default=0)
     post.add_argument("--out", default="out", help="output folder (posterior.nc)")
     post.add_argument("--json", help="also write the JSON summary to this file")
-    for command in (sim, swp, fit, post):
+    dis = sub.add_parser("discover", help="find the physical effect the base model misses (catalogue of effects)")
+    dis.add_argument("data", nargs="?", help="experiment CSV or folder (default: shipped synthetic data)")
+    dis.add_argument("--drive", choices=["forward", "inverse"], default="forward")
+    dis.add_argument("--t-end", type=float, default=10.0, help="end time, s (default 10)")
+    dis.add_argument("--candidates", nargs="+", metavar="NAME", help="catalogue effects to test (default: all)")
+    dis.add_argument("--out", default="out", help="output folder (discover.png)")
+    dis.add_argument("--json", help="also write the JSON report to this file")
+
+    from growjax import control as gcontrol
+
+    ctl = sub.add_parser("control", help="length control design: open-loop profile, feedback, MPC")
+    gcontrol.add_arguments(ctl)
+    for command in (sim, swp, fit, post, dis):
         command.add_argument("--fidelity", choices=["fast", "reference"], default="fast",
                              help="fast configuration (default) or the reference network (slow; for checks)")
         command.add_argument("--rtol", type=float, default=None,
@@ -305,6 +340,12 @@ def main(argv=None) -> int:
             summary = fit_command(args)
         elif args.command == "posterior":
             summary = posterior_command(args)
+        elif args.command == "discover":
+            summary = discover_command(args)
+        elif args.command == "control":
+            from growjax import control as gcontrol
+
+            summary = gcontrol.command(args)
         else:
             summary = simulate_command(args)
     except (ExperimentError, ValueError) as err:

@@ -14,7 +14,13 @@ this one definition:
 * states of its own (``state_names``), with :meth:`Effect.rates` and :meth:`Effect.length_offset`.
 
 A rod force must not decrease with the robot velocity (friction-like); the rod balance
-relies on that monotonicity to have one root.
+relies on that monotonicity to have one root. An effect whose rod force depends on the velocity
+says so (``velocity_dependent``): the fast configuration then solves the rod balance by Newton
+iterations instead of one fixed-point pass.
+
+The catalogue (:data:`CATALOGUE`, name → class): ``active_channel_force``, ``fluid_leak``,
+``actuation_lag``, ``trapped_air``, ``catheter_friction``, ``lumen_friction``,
+``growth_rate_limit``, ``retraction_folding``.
 """
 
 from __future__ import annotations
@@ -25,12 +31,18 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from growjax._smooth import smooth_ramp
+
+FRICTION_VELOCITY = 1e-4  # m/s: velocity over which a friction force turns from one sign to the other
+RAMP_VELOCITY = 1e-6  # m/s: C¹ band of the ramps max(v, 0) of the velocity
+
 
 class Rod(NamedTuple):
     """The growing element as an effect sees it in the rod balance (SI units).
 
     t: s.  pressure: sensed pressure P before the check valve, Pa.  velocity: robot
     velocity (inflow / A_r), m/s.  length: robot length, m.  catheter_length: m.
+    inner_radius: r_i of the robot, m.  area: its annular piston area A_r = π(r_o² − r_i²), m².
     """
 
     t: jax.Array
@@ -38,6 +50,8 @@ class Rod(NamedTuple):
     velocity: jax.Array
     length: jax.Array
     catheter_length: jax.Array
+    inner_radius: jax.Array
+    area: jax.Array
 
 
 class Instant(NamedTuple):
@@ -184,7 +198,112 @@ class TrappedAir(Effect):
         return dataclasses.replace(params, fluid=fluid)
 
 
-CATALOGUE = {cls.name: cls for cls in (ActiveChannelForce, FluidLeak, ActuationLag, TrappedAir)}
+def friction_sign(velocity):
+    """Smooth sign of the robot velocity (m/s), tanh(v / 1e-4 m/s): increasing, odd, ±1 beyond ~0.3 mm/s."""
+    return jnp.tanh(velocity / FRICTION_VELOCITY)
+
+
+class CatheterFriction(Effect):
+    """Friction between catheter and membrane that resists the motion, of the paper's eq. 4 form.
+
+    F = μ·P·2π r_i·L_c·s(v), with P the sensed pressure (taken ≥ 0: the contact cannot pull),
+    r_i the robot's inner radius, L_c the catheter length in contact and s the smooth sign of the
+    robot velocity (:func:`friction_sign`). The shipped model's own catheter term (μ_c = 0.01)
+    *assists* growth (PHYSICS.md §8.4); this one opposes growth and retraction alike.
+
+    Attributes:
+        coefficient: μ (–) (0 = absent).
+    """
+
+    name: ClassVar[str] = "catheter_friction"
+    description: ClassVar[str] = "catheter-membrane friction μ·P·2π r_i·L_c resisting the motion (paper eq. 4)"
+    units: ClassVar[dict] = {"coefficient": "-"}
+    ranges: ClassVar[dict] = {"coefficient": (0.0, 0.1)}
+    velocity_dependent: ClassVar[bool] = True
+    coefficient: float = 0.0
+
+    def rod_force(self, rod, state):
+        normal = jnp.maximum(rod.pressure, 0.0) * 2.0 * jnp.pi * rod.inner_radius * rod.catheter_length  # N
+        return self.coefficient * normal * friction_sign(rod.velocity)
+
+
+class LumenFriction(Effect):
+    """Friction of the duct wall on the everted robot, opposing the tip's motion: F = c·L·s(v).
+
+    c = μ_s·w is the friction force per unit everted length (μ_s the wall friction coefficient,
+    w the wall's normal load per unit length), L the robot length, s the smooth sign of the
+    robot velocity (:func:`friction_sign`).
+
+    Attributes:
+        force_per_length: c, N/m (0 = absent).
+    """
+
+    name: ClassVar[str] = "lumen_friction"
+    description: ClassVar[str] = "duct-wall friction c·L on the everted length, opposing the tip's motion"
+    units: ClassVar[dict] = {"force_per_length": "N/m"}
+    ranges: ClassVar[dict] = {"force_per_length": (0.0, 10.0)}
+    velocity_dependent: ClassVar[bool] = True
+    force_per_length: float = 0.0
+
+    def rod_force(self, rod, state):
+        return self.force_per_length * rod.length * friction_sign(rod.velocity)
+
+
+class GrowthRateLimit(Effect):
+    """Membrane-limited growth speed: growing at v > 0 needs Δp = p_ref·(κ·v)^m more rod pressure.
+
+    The inverse of a Lockhart-type law v = (Δp/p_ref)^(1/m)/κ, with p_ref = 1 kPa and m = 4 fixed
+    (the calibration found Lockhart's exponent n_L ≈ 0.25, m = 1/n_L). Zero while the robot holds
+    or retracts (a C¹ ramp of v). Rod force A_r·Δp.
+
+    Attributes:
+        inverse_speed: κ, s/m: the inverse of the growth speed at 1 kPa of excess pressure (0 = absent).
+    """
+
+    name: ClassVar[str] = "growth_rate_limit"
+    description: ClassVar[str] = "membrane-limited growth: extra pressure p_ref·(κ·v)^4 to grow at speed v"
+    units: ClassVar[dict] = {"inverse_speed": "s/m"}
+    ranges: ClassVar[dict] = {"inverse_speed": (0.0, 2000.0)}
+    velocity_dependent: ClassVar[bool] = True
+    reference_pressure: ClassVar[float] = 1e3  # Pa: p_ref
+    exponent: ClassVar[float] = 4.0  # m = 1/n_L
+    inverse_speed: float = 0.0
+
+    def rod_force(self, rod, state):
+        growth = self.inverse_speed * smooth_ramp(rod.velocity, RAMP_VELOCITY)  # κ·v (–)
+        return rod.area * self.reference_pressure * growth**self.exponent
+
+
+class RetractionFolding(Effect):
+    """Folding on retraction: only k = 1 − f of the volume returned while retracting shortens the robot.
+
+    The rest folds inside the robot (``folded_length``, F) and is not recovered when it grows
+    again: dF/dt = f·max(−v, 0) (a C¹ ramp) and the length is L0 + ξ + F, with ξ the robot
+    displacement the volume makes.
+
+    Attributes:
+        folding_fraction: f = 1 − k (–), in [0, 1] (0 = absent).
+    """
+
+    name: ClassVar[str] = "retraction_folding"
+    description: ClassVar[str] = "a fraction f of the retracting robot folds inside instead of shortening it"
+    units: ClassVar[dict] = {"folding_fraction": "-"}
+    ranges: ClassVar[dict] = {"folding_fraction": (0.0, 1.0)}
+    state_names: ClassVar[tuple] = ("folded_length",)
+    folding_fraction: float = 0.0
+
+    def state_scales(self, drive):
+        return (1e-4,) if drive == "forward" else (1e-3,)  # m, as the robot displacement
+
+    def rates(self, instant, state):
+        return jnp.stack([self.folding_fraction * smooth_ramp(-instant.velocity, RAMP_VELOCITY)])
+
+    def length_offset(self, state):
+        return -state[0]  # length = L0 + ξ − offset = L0 + ξ + F
+
+
+CATALOGUE = {cls.name: cls for cls in (ActiveChannelForce, FluidLeak, ActuationLag, TrappedAir, CatheterFriction,
+                                       LumenFriction, GrowthRateLimit, RetractionFolding)}
 
 
 # -- what the assemblies call: the sum over a tuple of effects -------------------------------------------

@@ -132,7 +132,8 @@ def _robot_side(params, inputs, prep, t, pressure, displacement, effect_states):
     catheter = jnp.maximum(inputs.catheter_length(t), 0.0)
 
     def effect_force(v):
-        return fx.rod_force(params.effects, effect_states, Rod(t, pressure, v, length, catheter))
+        return fx.rod_force(params.effects, effect_states, Rod(t, pressure, v, length, catheter,
+                                                               params.robot.inner_radius, prep.rod.area))
 
     q, p_r = inflow(prep.rod, prep.valves, pressure, length, catheter, effect_force, prep.inflow_iterations)
     return q, p_r, length
@@ -221,6 +222,9 @@ def pressure_of(params: Parameters, config: Config, ys, storage: StorageLaw | No
 
 # -- the solve ------------------------------------------------------------------------------------------
 
+
+# Loosest of rtol and this bounds the sensitivities' error control (see _integrate).
+SENSITIVITY_TOL_FLOOR = 1e-6
 
 OUTPUTS = ("length", "pressure", "robot_flow", "syringe_displacement", "robot_pressure")
 
@@ -313,8 +317,10 @@ def _integrate(params, inputs, config: Config, ts, jump_ts, step_ts, directions=
             shifted = jax.vmap(lambda s, e, th: field(t, y + e * s, th))(jnp.concatenate([sens, sens]), signed, moved)
             return field(t, y), central(shifted)
 
-        run = integrate(field, y0, config.t0, config.t1, tangent_field=tangent_field, s0=s0,
-                        s_atol=atol * jnp.maximum(size, 1e-12), **common)
+        # The difference quotients carry roundoff of ~1e-10 relative: tighter sensitivity control only burns steps.
+        s_rtol, s_atol = max(rtol, SENSITIVITY_TOL_FLOOR), max(atol, SENSITIVITY_TOL_FLOOR)
+        run = integrate(field, y0, config.t0, config.t1, tangent_field=tangent_field, s0=s0, s_rtol=s_rtol,
+                        s_atol=s_atol * jnp.maximum(size, 1e-12), **{**common, "max_steps": 2 * config.step_budget})
     block = evaluate(run.steps, ts)  # (T, 1 + p, n)
     # Outputs from the saved states; a non-finite state (a failed run) is evaluated at the initial state instead.
     finite = jnp.all(jnp.isfinite(block[:, 0]), axis=1)
@@ -329,6 +335,9 @@ def _integrate(params, inputs, config: Config, ts, jump_ts, step_ts, directions=
             return {k: central(shifted[k]) for k in OUTPUTS}
 
         d_values = jax.vmap(output_tangents, out_axes=1)(ts, saved, block[:, 1:])  # field → (p, T)
+        # A tangent solve that stopped early (step budget) has no sensitivities past its end: NaN, never frozen.
+        reached = (ts <= run.t_final) | (run.status == 1)
+        d_values = {k: jnp.where(reached, v, jnp.nan) for k, v in d_values.items()}
         tangent = Run(d_values, run.y_final[1:], jnp.zeros(run.y_final.shape[0] - 1))
     return primal, tangent, run.status, run.steps.count
 
@@ -376,13 +385,15 @@ def _run(params, inputs, config: Config, ts, jump_ts, step_ts):
 def _run_jvp(config, primals, tangents):
     params, inputs, ts, jump_ts, step_ts = primals
     d_params, d_inputs = tangents[0], tangents[1]
+    # The primal is a plain solve: under jax.linearize (optimistix, numpyro) it must not depend on the
+    # tangents, whose error control moves the steps of the solve that carries them.
+    primal, _, status, n_steps = _integrate(params, inputs, config, ts, jump_ts, step_ts)
 
     def one(x):
         return jnp.asarray(x)[None]
 
-    primal, tangent, status, n_steps = _tangent_solver(config)(params, inputs, ts, jump_ts, step_ts,
-                                                               jax.tree_util.tree_map(one, d_params),
-                                                               jax.tree_util.tree_map(one, d_inputs))
+    tangent = _tangent_solver(config)(params, inputs, ts, jump_ts, step_ts,
+                                      jax.tree_util.tree_map(one, d_params), jax.tree_util.tree_map(one, d_inputs))[1]
     tangent = jax.tree_util.tree_map(lambda x: x[0], tangent)
     zero = np.zeros((), dtype=jax.dtypes.float0)
     return (primal, status, n_steps), (tangent, zero, zero)

@@ -143,3 +143,29 @@ def posterior_figures(idata, sites, folder, prefix: str = ""):
     az.plot_pair(idata, var_names=list(sites), kind="kde", marginals=True, figsize=(8, 8), textsize=9)
     pair = _save(plt.gcf(), Path(folder) / f"{prefix}pair.png")
     return trace, pair
+
+
+def discovery_figure(result, path, title: str = ""):
+    """Measured length and the base / extended fits (mm), and their residuals over time (mm)."""
+    t = np.asarray(result.times)
+    fig, (ax_l, ax_r) = plt.subplots(2, 1, figsize=(8, 6), sharex=True, constrained_layout=True)
+    ax_l.plot(t, 1e3 * np.asarray(result.measured), ".", ms=2, color="0.5", label="measured")
+    ax_l.plot(t, 1e3 * np.asarray(result.before), color="C0", lw=1.2,
+              label=f"base model (RMSE {1e3 * result.rmse_before_m:.2f} mm)")
+    if result.effects:
+        ax_l.plot(t, 1e3 * np.asarray(result.after), color="C3", lw=1.2,
+                  label=f"+ {', '.join(result.effects)} (RMSE {1e3 * result.rmse_after_m:.2f} mm)")
+    ax_l.set_ylabel("length (mm)")
+    ax_l.legend(loc="best", fontsize=8)
+    ax_r.plot(t, 1e3 * (np.asarray(result.before) - np.asarray(result.measured)), color="C0", lw=0.8, label="base")
+    if result.effects:
+        ax_r.plot(t, 1e3 * (np.asarray(result.after) - np.asarray(result.measured)), color="C3", lw=0.8, label="extended")
+    ax_r.axhline(0.0, color="k", lw=0.5)
+    ax_r.set_ylabel("model − measured (mm)")
+    ax_r.set_xlabel("time (s)")
+    ax_r.legend(loc="best", fontsize=8)
+    if title:
+        ax_l.set_title(title)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path

@@ -101,7 +101,8 @@ def network(params: Parameters, inputs, config: Config, prep: Prepared, t, v_pla
     catheter = jnp.maximum(inputs.catheter_length(t), 0.0)
 
     def rod(sensor, v):
-        force = fx.rod_force(params.effects, effect_states, Rod(t, sensor, v, length, catheter))
+        force = fx.rod_force(params.effects, effect_states, Rod(t, sensor, v, length, catheter,
+                                                                params.robot.inner_radius, prep.rod.area))
         return rod_pressure(prep.rod, sensor, v, length, catheter, force)
 
     def branch(delta):

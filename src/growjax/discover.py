@@ -1,0 +1,481 @@
+"""Missing physics: where model and measurement disagree, which catalogue effect explains it, and how sure.
+
+The workflow (:func:`discover`), on a measured length L(t):
+
+1. **Base fit.** The base model's free parameters (default the yield pressure Y) are fitted by
+   least squares, in the *superset* model that carries every candidate effect at zero (which is
+   the base model exactly), so every later fit runs through the same compiled program.
+2. **Locate.** The residuals r = L_model − L_meas are summarised over time and by phase (growing,
+   holding, retracting; pressure rising or falling) (:func:`locate`). The noise σ is estimated from
+   successive differences of r (a smooth misfit barely enters them), and the misfit test asks whether
+   the residuals carry more than that noise: a lag-1 autocorrelation z-score and the ratio RMSE/σ.
+3. **Test each candidate.** Each effect parameter η is fitted jointly with the base parameters.
+   Its score is the likelihood ratio 2ΔlogL = (RSS_base − RSS_k)/σ² of the nested models; under
+   the null (effect absent, η on the boundary 0) it is distributed as ½χ²₀ + ½χ²₁, and the
+   threshold is set so that the *family* of K candidates gives a false positive with probability
+   ``false_positive_rate`` (Bonferroni). A Laplace estimate of the log Bayes factor against a uniform
+   prior on the effect's physical range is reported beside it (``log_bayes_factor``).
+4. **Confounding.** A candidate whose η correlates with a base parameter beyond
+   ``confounding_correlation`` in the joint fit is reported ``confounded`` with that parameter if it
+   clears the threshold, or if, with the base parameters held at their given values, it alone explains
+   the data as well as refitting them does (within the threshold) while the given values themselves
+   fit significantly worse: the effect and the base parameter trade one for the other.
+5. **Add and iterate.** The best candidate is added; the remaining ones are tested again on top of it
+   (up to ``max_effects``). An effect is claimed only if, once added, the misfit test passes; if
+   structure remains that no candidate removes, the answer is ``unexplained``; with no misfit and no
+   candidate over the threshold, ``none``.
+
+Effect parameters are moved in u with η = s·softplus(u) (η ≥ 0) or η = s·u for effects whose range
+allows both signs; s is a tenth of the range's upper end. Intervals on η are Gauss–Newton (delta
+method) at σ, clipped to the physical range.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+import time
+from collections.abc import Sequence
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from scipy import stats
+
+from growjax import effects as fx
+from growjax import params as gp
+from growjax.config import Config
+from growjax.simulate import input_breaks, simulate
+
+Z90 = float(stats.norm.ppf(0.95))
+PHASES = ("growing", "holding", "retracting", "pressure_rising", "pressure_falling")
+
+
+def candidate_parameter(name: str) -> tuple[str, str, tuple[float, float]]:
+    """(qualified parameter name ``effect.field``, unit, physical range) of the catalogue effect ``name``."""
+    if name not in fx.CATALOGUE:
+        raise ValueError(f"unknown effect {name!r}; the catalogue has {sorted(fx.CATALOGUE)}")
+    cls = fx.CATALOGUE[name]
+    (field, rng), = cls.ranges.items()
+    return f"{name}.{field}", cls.units.get(field, ""), tuple(map(float, rng))
+
+
+# -- residuals: noise, misfit, phases --------------------------------------------------------------------
+
+
+def noise_from_differences(residual) -> float:
+    """White-noise σ (m) of a residual series from its successive differences: var(Δr)/2 (von Neumann)."""
+    d = np.diff(np.asarray(residual, float))
+    return float(np.sqrt(np.mean(d**2) / 2.0))
+
+
+def misfit_test(residual, sigma: float, z_limit: float = 4.0, ratio_limit: float = 1.2) -> dict:
+    """Whether the residuals (m) carry structure beyond white noise of scale ``sigma`` (m).
+
+    Two statistics: the lag-1 autocorrelation ρ̂ (its z-score ρ̂·√m is N(0, 1) for white noise) and
+    the ratio RMSE/σ (≈ 1 for white noise). Structured if z > ``z_limit`` or the ratio > ``ratio_limit``.
+    """
+    r = np.asarray(residual, float)
+    m = r.size
+    c = r - r.mean()
+    rho = float(np.sum(c[1:] * c[:-1]) / max(np.sum(c * c), 1e-300))
+    z = rho * math.sqrt(m)
+    rmse = float(np.sqrt(np.mean(r**2)))
+    ratio = rmse / sigma if sigma > 0 else math.inf
+    return {"rmse_m": rmse, "noise_sigma_m": float(sigma), "rmse_over_noise": ratio, "lag1_autocorrelation": rho,
+            "autocorrelation_z": z, "structured": bool(z > z_limit or ratio > ratio_limit)}
+
+
+def phases(times, length, pressure, rate_tol: float = 2e-4) -> dict[str, np.ndarray]:
+    """Boolean masks (m,) of the phases of a simulated run: growing / holding / retracting by the
+    length rate against ``rate_tol`` (m/s), pressure rising / falling by the sign of dP/dt."""
+    t = np.asarray(times, float)
+    v = np.gradient(np.asarray(length, float), t)
+    dp = np.gradient(np.asarray(pressure, float), t)
+    return {"growing": v > rate_tol, "holding": np.abs(v) <= rate_tol, "retracting": v < -rate_tol,
+            "pressure_rising": dp > 0, "pressure_falling": dp < 0}
+
+
+def locate(times, residual, length, pressure) -> dict:
+    """Where the misfit lives: RMSE and mean residual (m) per phase, and per second of the run."""
+    r = np.asarray(residual, float)
+    t = np.asarray(times, float)
+    out = {}
+    for name, mask in phases(t, length, pressure).items():
+        n = int(mask.sum())
+        out[name] = {"share_of_time": n / r.size,
+                     "rmse_m": float(np.sqrt(np.mean(r[mask] ** 2))) if n else None,
+                     "mean_m": float(np.mean(r[mask])) if n else None}
+    edges = np.arange(math.floor(t[0]), math.ceil(t[-1]) + 1.0)
+    by_second = []
+    for a, b in itertools.pairwise(edges):
+        mask = (t >= a) & (t < b)
+        if mask.any():
+            by_second.append({"t0_s": float(a), "t1_s": float(b), "rmse_m": float(np.sqrt(np.mean(r[mask] ** 2))),
+                              "mean_m": float(np.mean(r[mask]))})
+    return {"by_phase": out, "by_second": by_second}
+
+
+# -- the candidate fits: one compiled program over candidates ---------------------------------------------
+
+
+class Candidates(eqx.Module):
+    """The superset model and the data: one least-squares problem per candidate, the candidate given as data.
+
+    The superset carries every candidate effect (K of them); at zero they are the base model exactly.
+    A model is (``mask`` (K,): which effects are on; ``select`` (p + K, q): which coordinates move).
+    The full coordinate vector is z = (ln(θ_base/θ_ref) (p,), u (K,)), z = z_fixed + select·w with w (q,)
+    the fitted coordinates, so every candidate has the same shapes and runs through one program.
+    """
+
+    base: gp.Parameters
+    inputs: object
+    refs: jax.Array  # (p,) SI
+    scales: jax.Array  # (K,) s
+    signed: jax.Array  # (K,) bool: η = s·u instead of s·softplus(u)
+    times: jax.Array  # (m,) s
+    length: jax.Array  # (m,) m
+    breaks: tuple
+    base_names: tuple = eqx.field(static=True)
+    effect_names: tuple = eqx.field(static=True)
+    config: Config = eqx.field(static=True)
+
+    def effect_values(self, u, mask):
+        """η (K,) in SI from u (K,) under the candidate ``mask`` (K,)."""
+        eta = self.scales * jnp.where(self.signed, u, jax.nn.softplus(u))
+        return jnp.where(mask > 0, eta, 0.0)
+
+    def parameters(self, z, mask):
+        p = len(self.base_names)
+        theta = self.refs * jnp.exp(z[:p])
+        eta = self.effect_values(z[p:], mask)
+        values = {n: theta[i] for i, n in enumerate(self.base_names)}
+        values.update({n: eta[k] for k, n in enumerate(self.effect_names)})
+        return gp.replace(self.base, **values)
+
+    def model_length(self, z, mask):
+        """(length (m,) m, pressure (m,) Pa) of the model at coordinates z (p + K,)."""
+        traj = simulate(self.parameters(z, mask), self.inputs, self.config, ts=self.times, breaks=self.breaks)
+        return traj.length, traj.pressure
+
+    def residuals(self, w, model):
+        """Residuals (m,) in units of 1 mm at the fitted coordinates w (q,) of ``model`` = (mask, select, z_fixed)."""
+        mask, select, z_fixed = model
+        length, _ = self.model_length(z_fixed + select @ w, mask)
+        r = (length - self.length) / 1e-3
+        return jnp.where(jnp.isfinite(r), r, 1e3)  # a failed run is a very bad fit, not a crash
+
+
+def _fit_one(problem: Candidates, w0, mask, select, z_fixed, max_steps: int):
+    solver = optx.LevenbergMarquardt(rtol=1e-5, atol=1e-5)
+    model = (mask, select, z_fixed)
+    sol = optx.least_squares(problem.residuals, solver, w0, args=model, max_steps=max_steps, throw=False)
+    r = problem.residuals(sol.value, model)
+    jac = jax.jacfwd(problem.residuals)(sol.value, model)
+    return z_fixed + select @ sol.value, r, jac, sol.result == optx.RESULTS.successful
+
+
+@eqx.filter_jit
+def _fit_model(problem: Candidates, w0, mask, select, z_fixed, max_steps: int):
+    """Levenberg–Marquardt for one model: (z (p + K,), residuals (m,), Jacobian (m, q), converged).
+
+    Every candidate has the same shapes, so one compiled program serves every fit of :func:`discover`.
+    (Under ``vmap`` over candidates the fast solver's merged-direction rule meets batched constants
+    that ``custom_vmap`` does not accept; the fits run one after another through this program.)
+    """
+    return _fit_one(problem, w0, mask, select, z_fixed, max_steps)
+
+
+@eqx.filter_jit
+def _trace(z, problem: Candidates, mask):
+    return problem.model_length(z, mask)
+
+
+def make_candidates(times, length, inputs, effect_names: Sequence[str], base: gp.Parameters,
+                    base_names: Sequence[str], config: Config) -> Candidates:
+    """The :class:`Candidates` problem on the data (times (m,) s, length (m,) m)."""
+    superset = gp.with_effects(base, *[fx.CATALOGUE[n]() for n in effect_names])
+    base_names = tuple(gp.resolve_name(superset, n) for n in base_names)
+    qualified = tuple(candidate_parameter(n)[0] for n in effect_names)
+    ranges = [candidate_parameter(n)[2] for n in effect_names]
+    refs = jnp.asarray([float(gp.get(superset, n)) for n in base_names])
+    if np.any(np.asarray(refs) <= 0):
+        raise ValueError(f"base parameters must be positive to be fitted in log coordinates: {base_names}")
+    scales = jnp.asarray([0.1 * hi for lo, hi in ranges])
+    signed = jnp.asarray([lo < 0 for lo, hi in ranges])
+    config = config.replace(adjoint="forward")
+    return Candidates(superset, inputs, refs, scales, signed, jnp.asarray(times, float), jnp.asarray(length, float),
+                      input_breaks(inputs, config), base_names, qualified, config)
+
+
+@dataclasses.dataclass
+class CandidateFit:
+    """One fitted model: the effects on, its estimates and 90 % intervals (SI), correlations, residuals."""
+
+    effects: tuple
+    estimate: dict
+    interval_90: dict
+    correlation: dict  # effect parameter → {base parameter: correlation}
+    rss_mm2: float
+    residual_m: np.ndarray
+    converged: bool
+    z: np.ndarray
+    mask: np.ndarray
+
+
+def _summarise(problem: Candidates, z, r, jac, mask, select, sigma_m, converged, effects) -> CandidateFit:
+    """Estimates, delta-method intervals and correlations of one fit at noise ``sigma_m`` (m)."""
+    z, r, jac, select = np.asarray(z), np.asarray(r), np.asarray(jac), np.asarray(select)
+    p = len(problem.base_names)
+    moved = np.flatnonzero(select.sum(axis=1) > 0)  # coordinates of z that were fitted
+    j = jac @ np.linalg.pinv(select[moved])  # d r / d z_moved (select is a 0/1 selection)
+    sigma = sigma_m / 1e-3
+    cov_free = sigma**2 * np.linalg.pinv(j.T @ j, rcond=1e-12, hermitian=True)
+    refs, scales, signed = (np.asarray(a) for a in (problem.refs, problem.scales, problem.signed))
+    names, values, derivs, ranges = [], [], [], []
+    for i in moved:
+        if i < p:
+            names.append(problem.base_names[i])
+            values.append(refs[i] * math.exp(z[i]))
+            derivs.append(values[-1])  # dθ/dz
+            ranges.append((0.0, math.inf))
+        else:
+            k, u = i - p, z[i]
+            names.append(problem.effect_names[k])
+            values.append(scales[k] * (u if signed[k] else float(jax.nn.softplus(u))))
+            derivs.append(scales[k] * (1.0 if signed[k] else float(jax.nn.sigmoid(u))))
+            ranges.append(candidate_parameter(problem.effect_names[k].split(".")[0])[2])
+    d = np.asarray(derivs)
+    cov = cov_free * np.outer(d, d)
+    sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    estimate = dict(zip(names, map(float, values)))
+    interval = {n: (float(max(values[i] - Z90 * sd[i], ranges[i][0])), float(min(values[i] + Z90 * sd[i], ranges[i][1])))
+                for i, n in enumerate(names)}
+    corr = {n: {b: float(cov[i, jb] / max(sd[i] * sd[jb], 1e-300)) for jb, b in enumerate(names)
+                if b in problem.base_names}
+            for i, n in enumerate(names) if n not in problem.base_names}
+    return CandidateFit(effects, estimate, interval, corr, float(np.sum(r**2)), r * 1e-3, bool(converged), z,
+                        np.asarray(mask))
+
+
+# -- the workflow ---------------------------------------------------------------------------------------
+
+
+@dataclasses.dataclass
+class DiscoveryResult:
+    """What :func:`discover` found (see :meth:`report` for the JSON form)."""
+
+    effect: str  # a catalogue name, "none", "unexplained" or "confounded"
+    effects: list  # catalogue names added, in order
+    parameters: dict  # {qualified name: {"estimate", "interval_90", "unit"}} of the final model
+    rmse_before_m: float
+    rmse_after_m: float
+    noise_sigma_m: float
+    threshold: float
+    evidence: dict  # per round, per candidate
+    confounded_with: dict
+    where: dict  # before / after, by phase
+    misfit_before: dict
+    misfit_after: dict
+    separating_measurement: dict
+    wall_s: float
+    times: np.ndarray = dataclasses.field(repr=False, default=None)
+    measured: np.ndarray = dataclasses.field(repr=False, default=None)
+    before: np.ndarray = dataclasses.field(repr=False, default=None)
+    after: np.ndarray = dataclasses.field(repr=False, default=None)
+
+    def report(self) -> dict:
+        return {k: v for k, v in dataclasses.asdict(self).items() if k not in ("times", "measured", "before", "after")}
+
+
+SEPARATING = {
+    "active_channel_force": "the robot pressure during retraction, or a load cell on the active channel",
+    "catheter_friction": "runs at two catheter insertion depths (the friction scales with the catheter length)",
+    "lumen_friction": "growth in free air against growth in a duct phantom (the friction scales with the length)",
+    "actuation_lag": "the syringe displacement or the line pressure at a step of the demand",
+    "fluid_leak": "the pressure decay with the robot held at a fixed length",
+    "trapped_air": "the line pressure at a step of the demand (its rise time scales with the compliance)",
+    "growth_rate_limit": "growth at two pressure amplitudes (the cap shows as a speed that no longer rises)",
+    "retraction_folding": "the length after a full retraction cycle, or the volume returned against the length lost",
+}
+
+
+def discover(
+    times,
+    length,
+    inputs,
+    *,
+    base: gp.Parameters | None = None,
+    config: Config | None = None,
+    base_names: Sequence[str] = ("Y",),
+    candidates: Sequence[str] | None = None,
+    false_positive_rate: float = 0.05,
+    confounding_correlation: float = 0.95,
+    max_effects: int = 2,
+    max_steps: int = 40,
+    progress: bool = False,
+) -> DiscoveryResult:
+    """Find which catalogue effect the measured ``length`` (m) at ``times`` (s) needs beyond the base model.
+
+    ``inputs``: the experiment's :class:`growjax.Inputs`; ``base``: the base parameters (default the
+    published set of ``config.drive``), whose values are also the reference against which a base
+    parameter's shift counts as confounding; ``base_names``: base parameters refitted with every
+    candidate. See the module docstring for the procedure and its thresholds.
+    """
+    start = time.perf_counter()
+    config = config if config is not None else Config()
+    base = base if base is not None else gp.reference(config.drive)
+    candidates = tuple(candidates) if candidates else tuple(fx.CATALOGUE)
+    times, length = np.asarray(times, float), np.asarray(length, float)
+    problem = make_candidates(times, length, inputs, candidates, base, base_names, config)
+    p, k_all = len(problem.base_names), len(candidates)
+    q = p + max_effects  # fitted coordinates: the base parameters, the new candidate, the effects already added
+    u_start = np.where(np.asarray(problem.signed), 0.0, math.log(math.expm1(0.2)))  # η = 0.02 of the range's top
+    threshold = float(stats.chi2.isf(2.0 * false_positive_rate / k_all, df=1))  # ½χ²₀ + ½χ²₁, Bonferroni
+
+    def model(effects_on: Sequence[int], fit_base: bool, z_now):
+        """(w0 (q,), mask (K,), select (p + K, q), z_fixed (p + K,)) of a model with ``effects_on`` fitted."""
+        mask, select = np.zeros(k_all), np.zeros((p + k_all, q))
+        z_fixed, w0 = np.array(z_now, float), np.zeros(q)
+        if fit_base:
+            select[np.arange(p), np.arange(p)] = 1.0
+            w0[:p], z_fixed[:p] = z_fixed[:p], 0.0
+        for col, k in enumerate(effects_on):
+            mask[k] = 1.0
+            select[p + k, p + col] = 1.0
+            w0[p + col] = z_fixed[p + k] if k in added_index else u_start[k]
+            z_fixed[p + k] = 0.0
+        return w0, mask, select, z_fixed
+
+    def fit_batch(models, desc):
+        """Fit the models, one after another through the one compiled program."""
+        out = []
+        for m in _bar(progress, models, desc):
+            z, r, jac, ok = _fit_model(problem, *(jnp.asarray(a) for a in m), max_steps)
+            out.append((np.asarray(z), np.asarray(r), np.asarray(jac), bool(ok), m))
+        return out
+
+    def summarise(out, sigma, effects):
+        z, r, jac, ok, (_, mask, select, _) = out
+        return _summarise(problem, z, r, jac, mask, select, sigma, ok, effects)
+
+    z0 = np.concatenate([np.zeros(p), np.zeros(k_all)])
+    added, added_index = [], []
+    # Round 1: the base model and every candidate on it, with the base parameters refitted jointly.
+    outs = fit_batch([model((), True, z0)] + [model((k,), True, z0) for k in range(k_all)], "round 1")
+    sigma = noise_from_differences(outs[0][1] * 1e-3)
+    base_fit = summarise(outs[0], sigma, ())
+    fits = {candidates[k]: summarise(outs[k + 1], sigma, (candidates[k],)) for k in range(k_all)}
+    # The same candidates with the base parameters held at their given values.
+    held = fit_batch([model((), False, z0)] + [model((k,), False, z0) for k in range(k_all)], "base held")
+    rss_given = float(np.sum(held[0][1] ** 2))
+    held_lr = {candidates[k]: max(rss_given - float(np.sum(held[k + 1][1] ** 2)), 0.0) / (sigma / 1e-3) ** 2
+               for k in range(k_all)}
+    # With the base held, does the effect alone explain the data as well as refitting the base does?
+    held_trades = {candidates[k]: (float(np.sum(held[k + 1][1] ** 2)) - base_fit.rss_mm2) / (sigma / 1e-3) ** 2
+                   < threshold for k in range(k_all)}
+
+    base_z = np.asarray(base_fit.z)
+    before_trace, pressure_trace = (np.asarray(a) for a in _trace(jnp.asarray(base_z), problem,
+                                                                  jnp.asarray(np.zeros(k_all))))
+    misfit_before = misfit_test(base_fit.residual_m, sigma)
+    current = base_fit
+    evidence, confounded = [], {}
+    for round_no in range(max_effects):
+        if round_no > 0:
+            if not misfit_test(current.residual_m, sigma)["structured"]:
+                break
+            others = [k for k in range(k_all) if k not in added_index]
+            outs = fit_batch([model(tuple(added_index) + (k,), True, current.z) for k in others], f"round {round_no + 1}")
+            fits = {candidates[k]: summarise(o, sigma, tuple(added) + (candidates[k],)) for k, o in zip(others, outs)}
+        scores = {}
+        for name, fitted in fits.items():
+            qname, unit, rng = candidate_parameter(name)
+            lr = max(current.rss_mm2 - fitted.rss_mm2, 0.0) / (sigma / 1e-3) ** 2
+            sd = max((fitted.interval_90[qname][1] - fitted.interval_90[qname][0]) / (2 * Z90), 1e-300)
+            corr = fitted.correlation.get(qname, {})
+            worst, c = max(corr.items(), key=lambda kv: abs(kv[1]), default=(None, 0.0))
+            h = held_lr[name] if round_no == 0 else 0.0
+            trades = round_no == 0 and h > threshold and held_trades[name]
+            scores[name] = {
+                "parameter": qname, "unit": unit, "estimate": fitted.estimate[qname],
+                "interval_90": fitted.interval_90[qname], "lr_statistic": lr,
+                "p_value": float(0.5 * stats.chi2.sf(lr, df=1)) if lr > 0 else 1.0,
+                "log_bayes_factor": 0.5 * lr + math.log(math.sqrt(2 * math.pi) * sd / (rng[1] - max(rng[0], 0.0))),
+                "rmse_m": float(np.sqrt(np.mean(fitted.residual_m**2))),
+                "lr_statistic_base_held": h, "correlation_with_base": corr,
+                "clears_threshold": bool(lr > threshold),
+                "confounded": bool(abs(c) > confounding_correlation and (lr > threshold or trades)),
+            }
+            if scores[name]["confounded"]:
+                confounded[name] = {"parameter": worst, "correlation": c, "lr_statistic": lr,
+                                    "lr_statistic_base_held": h, "separate_by": SEPARATING.get(name, "")}
+        evidence.append(scores)
+        clean = {n: s for n, s in scores.items() if s["clears_threshold"] and not s["confounded"]}
+        if not clean:
+            break
+        best = max(clean, key=lambda n: clean[n]["lr_statistic"])
+        added.append(best)
+        added_index.append(candidates.index(best))
+        current = fits[best]
+
+    misfit_after = misfit_test(current.residual_m, sigma)
+    after_trace = np.asarray(_trace(jnp.asarray(current.z), problem, jnp.asarray(current.mask))[0])
+    if added and not misfit_after["structured"]:
+        effect = added[0]
+    elif added:
+        effect = "unexplained"  # candidates helped but structure remains: no catalogue effect is claimed
+    elif confounded:
+        effect = "confounded"
+    else:
+        effect = "unexplained" if misfit_after["structured"] else "none"
+    units = {candidate_parameter(n)[0]: candidate_parameter(n)[1] for n in candidates}
+    parameters = {n: {"estimate": v, "interval_90": current.interval_90[n], "unit": units.get(n, _unit(n))}
+                  for n, v in current.estimate.items()}
+    return DiscoveryResult(
+        effect=effect, effects=added, parameters=parameters, rmse_before_m=misfit_before["rmse_m"],
+        rmse_after_m=misfit_after["rmse_m"], noise_sigma_m=sigma, threshold=threshold, evidence=evidence,
+        confounded_with=confounded,
+        where={"before": locate(times, base_fit.residual_m, before_trace, pressure_trace),
+               "after": locate(times, current.residual_m, after_trace, pressure_trace)},
+        misfit_before=misfit_before, misfit_after=misfit_after,
+        separating_measurement={n: SEPARATING.get(n, "") for n in confounded},
+        wall_s=time.perf_counter() - start, times=times, measured=length, before=before_trace, after=after_trace,
+    )
+
+
+def _bar(enabled: bool, items, desc: str):
+    """``items`` with a progress bar on the terminal when ``enabled``."""
+    if not enabled:
+        return items
+    from tqdm.auto import tqdm
+
+    return tqdm(items, desc=desc, unit="fit", leave=True)
+
+
+def _unit(name: str) -> str:
+    return {"robot.yield_pressure": "Pa", "robot.extensibility": "(m/s)·Pa^(-1/n)", "robot.growth_exponent": "-",
+            "robot.lockhart_rate": "m/s", "robot.lockhart_exponent": "-"}.get(name, "")
+
+
+def summary_text(result: DiscoveryResult) -> str:
+    """A readable summary of a :class:`DiscoveryResult` for the terminal."""
+    lines = [f"effect: {result.effect}" + (f" (added: {', '.join(result.effects)})" if result.effects else ""),
+             f"length RMSE {1e3 * result.rmse_before_m:.3f} mm before, {1e3 * result.rmse_after_m:.3f} mm after; "
+             f"noise σ {1e3 * result.noise_sigma_m:.3f} mm; threshold 2ΔlogL > {result.threshold:.2f}"]
+    for name, p in result.parameters.items():
+        lo, hi = p["interval_90"]
+        lines.append(f"  {name} = {p['estimate']:.4g} {p['unit']} (90 %: {lo:.4g} – {hi:.4g})")
+    for k, scores in enumerate(result.evidence):
+        lines.append(f"round {k + 1}:")
+        for name, s in sorted(scores.items(), key=lambda kv: -kv[1]["lr_statistic"]):
+            flag = "confounded" if s["confounded"] else ("clears" if s["clears_threshold"] else "")
+            lines.append(f"  {name:22s} 2ΔlogL {s['lr_statistic']:8.2f}  {s['parameter']} = {s['estimate']:.3g} "
+                         f"{s['unit']}  {flag}")
+    for name, c in result.confounded_with.items():
+        lines.append(f"confounded: {name} with {c['parameter']} (correlation {c['correlation']:.3f}); "
+                     f"separate by {c['separate_by']}")
+    return "\n".join(lines)

@@ -1,0 +1,136 @@
+"""Control design on the model: linearisation, profile limits, tuning, disturbance rejection (short windows)."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import growjax as gj
+from growjax import control as gc
+
+T = 1.5
+
+
+@pytest.fixture(scope="module")
+def target():
+    return gc.ramp_with_pauses(t_end=T, start=0.010, speed=4e-3, move=0.5, pause=0.25)
+
+
+def test_linearisation_matches_finite_differences_and_small_step():
+    pytest.importorskip("control")
+    p = gj.reference("forward")
+    sys = gc.linearize(p, "forward", pressure=150e3, settle=1.0)
+    op = sys.operating_point
+    assert op["growing"] and 3e-3 < op["growth_speed_m_s"] < 8e-3  # ~5 mm/s at 150 kPa
+    plant, y, inputs = gc.operating_point(p, "forward", 150e3, settle=1.0)
+
+    def f(y, u):
+        return plant.field(1.0, y, eqx.tree_at(lambda i: i.pressure_demand, inputs, gj.Constant(u)))
+
+    h = 1e-6
+    for j in range(y.size):  # A column by column against central differences of the nonlinear field
+        e = jnp.zeros_like(y).at[j].set(h)
+        fd = (f(y + e, 150e3) - f(y - e, 150e3)) / (2 * h)
+        np.testing.assert_allclose(sys.A[:, j], fd, rtol=1e-4, atol=1e-6 * np.max(np.abs(sys.A)))
+    fd_b = (f(y, 150e3 + 10.0) - f(y, 150e3 - 10.0)) / 20.0
+    np.testing.assert_allclose(sys.B[:, 0], fd_b, rtol=1e-4, atol=1e-12)
+
+    # small step of the demand: nonlinear response minus the unstepped run, against the linear step response
+    dt, du = 0.4, 2e3
+    ts = 1.0 + jnp.linspace(0.02, dt, 20)
+
+    @jax.jit
+    def run(u):
+        i = eqx.tree_at(lambda i: i.pressure_demand, inputs, gj.Constant(u))
+        return plant.advance(y, i, 1.0, 1.0 + dt, ts)[1][0]
+
+    delta = np.asarray(run(150e3 + du) - run(150e3))
+    import control
+
+    tl = np.concatenate([[0.0], np.asarray(ts) - 1.0])
+    lin = control.forced_response(sys, T=tl, U=np.full(tl.size, du), X0=0).outputs[1:]
+    assert delta[-1] > 1e-5  # the step speeds growth: the length gains ~tens of µm in 0.4 s
+    np.testing.assert_allclose(delta, lin, rtol=0.05, atol=0.02 * np.max(np.abs(delta)))
+
+
+@pytest.mark.slow
+def test_optimised_profile_respects_limits_and_improves(target):
+    p = gc.plant_params("forward", target)
+    lim = gc.Limits(max_demand=200e3, pressure_limit=float(gj.pressure_limit(p.robot)), syringe_stroke=0.05)
+    prof = gc.optimize_profile(p, target, T, knot_dt=0.3, iterations=3, lim=lim)
+    assert prof.cost_history[-1] < prof.cost_history[0]
+    assert np.all(prof.demand >= 0.0) and np.all(prof.demand <= lim.max_demand + 1e-6)
+    tr = gc.simulate_profile(p, target, prof, gj.Config(t1=T))
+    assert int(tr.status) == 0 and float(np.nanmax(tr.pressure)) < lim.pressure_limit
+    disp = np.asarray(tr.syringe_displacement)
+    assert np.all(np.abs(disp) < lim.syringe_stroke)
+    assert np.max(np.abs(np.diff(disp) / np.diff(np.asarray(tr.time)))) < lim.max_syringe_speed
+    assert prof.rmse_m < 1e-3
+
+
+def _pid(log_gains=gc.DEFAULT_LOG_GAINS):
+    knots = jnp.asarray([0.0, T + 0.1])
+    return gc.LengthPID(jnp.asarray(log_gains), knots, jnp.asarray([110e3, 110e3]))
+
+
+def test_feedback_rejects_a_disturbance_the_open_loop_does_not(target):
+    """An active-channel pull of 0.05 N (≈ 8 kPa on the membrane) slows the open-loop robot; the length loop holds."""
+    base = gc.plant_params("forward", target)
+    pid = _pid((7.7, 7.9, 4.5))
+    out = {}
+    for force in (0.0, 0.05):
+        p = gj.with_effects(base, gj.effects.ActiveChannelForce(force=force))
+        closed = gc.run_closed_loop(gc.Plant.make(p, gj.Config(t1=T)), pid, target, T)
+        inputs = gj.Inputs(catheter_length=gc.catheter_signal(target), pressure_demand=gj.Sampled(
+            np.concatenate([[0.0], closed.tick_time + pid.dt]), np.concatenate([[110e3], closed.command])))
+        ts = target.time[target.time <= T]
+        # the open loop replays the undisturbed closed loop's demand
+        if force == 0.0:
+            replay = inputs
+        tr = gj.simulate(p, replay, gj.Config(t1=T), ts=ts)
+        out[force] = (closed.rmse_m, gc.rmse(ts, np.asarray(tr.length), target), closed.pressure_limit_crossed)
+    (c0, o0, x0), (c1, o1, x1) = out[0.0], out[0.05]
+    assert not (x0 or x1)
+    assert abs(o0 - c0) < 2e-4  # the replay reproduces the closed loop when nothing changes
+    assert o1 > o0 + 3e-4  # the pull costs the open loop > 0.3 mm
+    assert c1 < c0 + 0.5 * (o1 - o0)  # the loop removes more than half of that
+
+
+@pytest.mark.slow
+def test_tuning_reduces_the_cost_it_optimises(target):
+    p = gc.plant_params("forward", target)
+    cost = gc.pid_cost_fn(p, target, T, _pid())
+    res = gc.tune_pid(cost, jnp.asarray([6.3, 6.0, 4.0]), iterations=2)
+    assert res.cost_history[-1] < 0.9 * res.cost_history[0]
+    assert res.cost_history[-1] == pytest.approx(float(cost(jnp.asarray(res.log_gains))), rel=1e-9)
+
+
+def test_step_controller_steps_back_and_respects_the_step_rate():
+    tg = gc.Target(np.arange(0.01, 2.0, 0.01), 0.010 + 6e-3 * np.sin(np.pi * np.arange(0.01, 2.0, 0.01) / 2.0) ** 2,
+                   np.zeros(199))
+    p = gc.plant_params("inverse", tg)
+    ctrl = gc.StepController(rate=20.0, lead=0.05)
+    res = gc.run_closed_loop(gc.Plant.make(p, gj.Config(drive="inverse", t1=2.0)), ctrl, tg, 2.0)
+    steps = np.diff(np.concatenate([[0.0], res.command]))
+    assert np.max(steps) >= 1 and np.min(steps) <= -1  # it steps forward and back
+    assert np.max(np.abs(steps)) <= 1  # one step per tick, ticks at ≤ the motor's step rate
+    # full steps place the robot on a 3.1 mm grid: the error is quantisation-bound (step/√12 ≈ 0.9 mm at best)
+    assert res.rmse_m < 0.6 * gc.step_length(p) and not res.pressure_limit_crossed
+
+
+@pytest.mark.slow
+def test_control_notebook_executes():
+    """The walkthrough (linearise → optimise → tune → evaluate) runs top to bottom on its quick setting."""
+    import os
+    from pathlib import Path
+
+    nbformat = pytest.importorskip("nbformat")
+    nbclient = pytest.importorskip("nbclient")
+    path = Path(__file__).resolve().parents[1] / "notebooks" / "control_design.ipynb"
+    nb = nbformat.read(path, as_version=4)
+    os.environ["GROWJAX_NOTEBOOK_QUICK"] = "1"
+    nbclient.NotebookClient(nb, timeout=900, kernel_name="python3",
+                            resources={"metadata": {"path": str(path.parent)}}).execute()
+    text = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", []))
+    assert "closed-loop RMSE" in text

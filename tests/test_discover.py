@@ -1,0 +1,81 @@
+"""Missing physics: the misfit statistics, and the whole workflow on shipped reference-made examples."""
+
+import json
+
+import numpy as np
+import pytest
+from conftest import REPO
+
+import growjax as gj
+from growjax import discover as gd
+from growjax import experiment as ex
+
+EXAMPLES = REPO / "data" / "discovery"
+
+
+def _smooth_bump(t, height):
+    return height * np.exp(-0.5 * ((t - 5.0) / 1.0) ** 2)
+
+
+def test_noise_from_differences_ignores_a_smooth_misfit():
+    t = np.arange(0.01, 10.0, 0.01)
+    noise = np.random.default_rng(0).normal(0.0, 2e-4, t.size)
+    sigma = gd.noise_from_differences(noise + _smooth_bump(t, 1e-3))
+    assert sigma == pytest.approx(2e-4, rel=0.06)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_misfit_test_passes_white_noise_and_flags_structure(seed):
+    t = np.arange(0.01, 10.0, 0.01)
+    noise = np.random.default_rng(seed).normal(0.0, 2e-4, t.size)
+    assert not gd.misfit_test(noise, gd.noise_from_differences(noise))["structured"]
+    bumped = noise + _smooth_bump(t, 3e-4)  # 1.5 σ at its peak: small against each point, clear over the run
+    verdict = gd.misfit_test(bumped, gd.noise_from_differences(bumped))
+    assert verdict["structured"] and verdict["autocorrelation_z"] > 4.0
+
+
+def test_phases_split_a_pulse_into_growing_holding_and_retracting():
+    t = np.linspace(0.0, 3.0, 301)
+    length = np.interp(t, [0, 1, 2, 3], [0.0, 0.01, 0.01, 0.005])
+    pressure = np.interp(t, [0, 0.5, 3], [0.0, 1e5, 0.0])
+    masks = gd.phases(t, length, pressure)
+    assert masks["growing"][50] and masks["holding"][150] and masks["retracting"][250]
+    assert masks["pressure_rising"][20] and masks["pressure_falling"][200]
+
+
+def test_candidate_parameters_are_named_with_units_and_ranges():
+    for name in gj.effects.CATALOGUE:
+        qualified, unit, (lo, hi) = gd.candidate_parameter(name)
+        assert qualified.startswith(name + ".") and unit and hi > max(lo, 0.0)
+    with pytest.raises(ValueError, match="catalogue"):
+        gd.candidate_parameter("gremlins")
+
+
+def _example(name):
+    exp = ex.read(EXAMPLES / f"{name}.csv")
+    truth = json.loads((EXAMPLES / f"{name}.json").read_text())
+    return exp, truth
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["clean", "active_channel_force", "outside_oscillating_force"])
+def test_discover_on_reference_made_examples(name):
+    """10 s, noise 0.2 mm, made by the reference configuration: clean → none; a pull → named or confounded
+    with Y; an effect outside the catalogue → no catalogue effect claimed."""
+    exp, truth = _example(name)
+    cfg = gj.Config(t1=10.0)
+    inputs = ex.to_inputs(exp, "forward", gj.reference(), cfg.t0, cfg.t1)
+    keep = exp.time >= cfg.t0
+    res = gd.discover(exp.time[keep], exp["robot_length_m"][keep], inputs, config=cfg)
+    if name == "clean":
+        assert res.effect == "none", gd.summary_text(res)
+    elif truth.get("in_catalogue"):
+        assert res.effect in (truth["effect"], "confounded"), gd.summary_text(res)
+        if res.effect == "confounded":
+            assert truth["effect"] in res.confounded_with
+        else:
+            lo, hi = res.parameters[truth["parameter"]]["interval_90"]
+            assert lo <= truth["magnitude"] <= hi
+            assert res.rmse_after_m < 1.2 * truth["noise_sd"]["robot_length_m"]
+    else:
+        assert res.effect in ("none", "unexplained", "confounded"), gd.summary_text(res)
