@@ -8,6 +8,7 @@ import pytest
 NOTEBOOK = Path(__file__).resolve().parents[1] / "notebooks" / "posterior_analysis.ipynb"
 
 
+@pytest.mark.slow  # ~5 min on 2 cores (the emulator's grid and NUTS); the control notebook is slow as well
 def test_posterior_analysis_notebook_executes():
     nbformat = pytest.importorskip("nbformat")
     nbclient = pytest.importorskip("nbclient")

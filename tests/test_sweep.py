@@ -112,11 +112,12 @@ def test_sweep_command_writes_table_figures_and_summary(tmp_path):
     assert bad.returncode == 2 and "LOW < HIGH" in bad.stderr
 
 
-def test_paper_sweep_finds_the_published_yield_pressure_and_rmse(shared_experiment):
+@pytest.mark.parametrize("n_sets", [48, pytest.param(500, marks=pytest.mark.slow)])
+def test_paper_sweep_finds_the_published_yield_pressure_and_rmse(shared_experiment, n_sets):
     exp = shared_experiment
     base = gj.reference()
     inputs = ex.to_inputs(exp, "forward", base)
-    res = sw.lhs_sweep(500, base, inputs, gj.Config(), seed=0, measured=(exp.time, exp["robot_length_m"]))
+    res = sw.lhs_sweep(n_sets, base, inputs, gj.Config(), seed=0, measured=(exp.time, exp["robot_length_m"]))
     best = res.best()
     assert res.failed.sum() == 0
     assert 7.0e3 < best["parameters"]["robot.yield_pressure"] < 9.0e3  # paper: ≈ 7.9 kPa
