@@ -238,8 +238,9 @@ class Run(eqx.Module):
 
 
 def _relative_size(theta, direction):
-    """How large a direction is relative to the values it perturbs: max |d| / max(|θ|, |d|) over the leaves (–)."""
-    ratios = [jnp.max(jnp.abs(d) / jnp.maximum(jnp.maximum(jnp.abs(x), jnp.abs(d)), 1e-300))
+    """How large a direction is relative to the values it perturbs: max |d|/|θ| over the leaves (–), |d|/|d| = 1
+    where θ = 0 (a parameter of 3e-13 m³/(s·Pa) moved along d = 1 must be shifted by ε·3e-13, not by ε)."""
+    ratios = [jnp.max(jnp.abs(d) / jnp.maximum(jnp.where(jnp.abs(x) > 0, jnp.abs(x), jnp.abs(d)), 1e-300))
               for x, d in zip(jax.tree_util.tree_leaves(theta), jax.tree_util.tree_leaves(direction))
               if jnp.issubdtype(jnp.result_type(d), jnp.floating) and jnp.size(d)]
     return jnp.max(jnp.stack(ratios)) if ratios else jnp.asarray(0.0)

@@ -219,7 +219,7 @@ def _source_experiment(kind: str, t_end: float, dt: float) -> tuple[ex.Experimen
         folder = ex.shared_experiment_dir()
         if folder is not None:
             exp = ex.read(folder / "experiment.csv")
-            return exp, (f"public MAMMOBOT experiment ({folder / 'experiment.csv'}): its catheter_length_m, "
+            return exp, ("public MAMMOBOT experiment (../shared/data/mammobot/experiment.csv): its catheter_length_m, "
                          "published pulse 0/150 kPa (period 1.3 s, width 90 %, delay 0.26 s)")
     elif kind != "synthetic":
         raise ValueError(f"inputs must be 'public', 'synthetic' or a growjax.Inputs, got {kind!r}")
@@ -235,7 +235,7 @@ def _source_experiment(kind: str, t_end: float, dt: float) -> tuple[ex.Experimen
 
 
 def _grid(t_end: float, dt: float) -> np.ndarray:
-    n = int(round(t_end / dt))
+    n = round(t_end / dt)
     return np.round(np.arange(1, n + 1) * dt, 10)
 
 
