@@ -1,16 +1,11 @@
 """Missing physics: the misfit statistics, and the whole workflow on shipped reference-made examples."""
 
-import json
-
 import numpy as np
 import pytest
-from conftest import REPO
 
 import growjax as gj
 from growjax import discover as gd
 from growjax import experiment as ex
-
-EXAMPLES = REPO / "data" / "discovery"
 
 
 def _smooth_bump(t, height):
@@ -52,9 +47,12 @@ def test_candidate_parameters_are_named_with_units_and_ranges():
 
 
 def _example(name):
-    exp = ex.read(EXAMPLES / f"{name}.csv")
-    truth = json.loads((EXAMPLES / f"{name}.json").read_text())
-    return exp, truth
+    """A reference-made experiment (10 s, noise 0.2 mm, the shipped synthetic inputs) and its truth."""
+    from growjax import synthetic as sy
+
+    effect = {"clean": None, "outside_oscillating_force": "oscillating_force"}.get(name, name)
+    exp = sy.make_experiment(effect, seed=20261122, inputs="synthetic", noise_pressure_Pa=None)
+    return exp, exp.metadata
 
 
 @pytest.mark.slow

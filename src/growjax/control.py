@@ -40,9 +40,6 @@ from growjax import effects as fx
 from growjax import fast_model as fm
 from growjax import reference_model as rm
 from growjax._rosenbrock import evaluate, integrate
-from growjax.effects import Instant
-from growjax.motor import motor_derivatives, motor_equilibrium_offset
-from growjax.pump import syringe_load_force
 
 PRESSURE_MARGIN = 0.9  # demand ceiling as a fraction of the membrane limit
 
@@ -150,29 +147,7 @@ def microstep_voltages(motor, command):
 
 def _microstep_rates(t, y, params, inputs, config, prep):
     """The fast configuration's stepper drive with a microstepping driver (``inputs.steps`` continuous)."""
-    stored, angle, omega, i_a, i_b, xi, wall = y[:7]
-    e = y[7:]
-    pump, motor = params.pump, params.motor
-    ratio = pump.screw_ratio
-    x_p, v_p = angle / ratio, omega / ratio
-    pressure = fm.line_pressure(params, stored, wall, prep.storage)
-    v_a, v_b = microstep_voltages(motor, inputs.steps(t))
-    torque, di_a, di_b = motor_derivatives(motor, angle + motor_equilibrium_offset(motor), omega, i_a, i_b, v_a, v_b)
-    applied = fx.applied_drive(params.effects, e, torque)
-    syringe_pressure = pressure + prep.line_resistance * pump.n_syringes * pump.syringe_area * v_p
-    load = -syringe_load_force(pump, syringe_pressure, x_p, v_p, config.stop_width) / (pump.n_syringes * ratio)
-    inertia = motor.rotor_inertia + pump.platform_mass / (pump.n_syringes * ratio**2)
-    damping = motor.rotor_damping + pump.screw_viscous_friction
-    d_omega = (applied - damping * omega - load) / inertia
-    q_r, p_r, length = fm._robot_side(params, inputs, prep, t, pressure, xi, e)
-    leak = fx.chamber_outflow(params.effects, e, t, pressure)
-    instant = Instant(t, pressure, p_r, q_r, q_r / prep.rod.area, length, torque)
-    rates = jnp.concatenate([
-        jnp.stack([pump.n_syringes * pump.syringe_area * v_p - q_r - leak, omega, d_omega, di_a, di_b,
-                   q_r / prep.rod.area, fm._wall_rate(params, pressure, wall)]),
-        fx.rates(params.effects, e, instant),
-    ])
-    return rates, (length, pressure, q_r, x_p, p_r)
+    return fm._inverse_rates(t, y, params, inputs, config, prep, driver=microstep_voltages)
 
 
 # -- the plant, integrated from any state -------------------------------------------------------------------
