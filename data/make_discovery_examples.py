@@ -4,9 +4,8 @@ Run from the repository root: ``python data/make_discovery_examples.py`` (a few 
 configuration compiles once, then each 10 s solve takes tens of seconds). Deterministic.
 
 data/discovery/<name>.csv + <name>.json — 0.01–10 s at 100 Hz, forward drive, made by
-:func:`growjax.synthetic.make_experiment` (reference configuration, rtol 1e-6) on the public
-experiment's inputs (its catheter length and the published 0/150 kPa pulse; where
-../shared/data/mammobot is absent, the shipped synthetic_forward.csv inputs: the JSON says which),
+:func:`growjax.synthetic.make_experiment` (reference configuration, rtol 1e-6) on synthetic inputs
+(catheter 0.004 + 0.004 t m and the published 0/150 kPa pulse; no public data are copied),
 Gaussian noise σ = 0.2 mm on the length and 500 Pa on the pressure. The JSON sidecar holds the truth
 (effect, parameter, magnitude), the noise, the seed and the inputs:
 
@@ -63,7 +62,7 @@ def make_examples(out: Path = OUT, names=None) -> list[Path]:
         if names and name not in names:
             continue
         start = clock.time()
-        exp = sy.make_experiment(effect, magnitude, seed=SEED + k, noise_m=NOISE_M, drive="forward", inputs="public",
+        exp = sy.make_experiment(effect, magnitude, seed=SEED + k, noise_m=NOISE_M, drive="forward", inputs="synthetic",
                                  t_end=T_END)
         meta = dict(exp.metadata, example=name)
         path = sy.SyntheticExperiment(exp.time, exp.series, exp.source, meta).write(out / f"{name}.csv")
