@@ -31,6 +31,7 @@ supported (the loop's length is not static).
 from __future__ import annotations
 
 import dataclasses
+import functools
 from typing import Callable, NamedTuple
 
 import jax
@@ -186,6 +187,7 @@ def integrate(
     t0: float,
     t1: float,
     *,
+    args=None,
     breaks: jax.Array,
     jumps: jax.Array,
     rtol: float,
@@ -199,20 +201,27 @@ def integrate(
     dtmax: float = 0.1,
     event: Callable | None = None,
     tableau: RosenbrockTableau = ROS34PW2,
+    batched: bool = False,
 ) -> Result:
     """Integrate y' = f(t, y) from t0 to t1 (y: flat (n,) array of states scaled to O(1)), and optionally
     its forward sensitivities S' = ∂f/∂y S + ∂f/∂θ d (one row per direction d) under the same error control.
 
     Args:
-        field: f(t, y) → (n,).
+        field: f(t, y, args) → (n,).
+        args: the field's parameters (a pytree), passed to every callback.
         breaks: sorted, distinct times (s) the steps land on (input jumps and slope breaks); any beyond t1 are ignored.
         jumps: bool flags, same shape: a jump (approached from the left, left from the right).
         rtol, atol: error control on the scaled states (weighted RMS norm).
         max_steps: budget of accepted steps (the size of the recorded dense solution).
-        tangent_field: ``(t, y, S) → (f(t, y), S')`` with S of shape (p, n); None: no sensitivities.
+        tangent_field: ``(t, y, S, args) → (f(t, y), S')`` with S of shape (p, n); None: no sensitivities.
         s0: (p, n) sensitivities at t0.  s_atol: (p,) absolute tolerance of each sensitivity row;
             s_rtol: their relative tolerance (default ``rtol``).
-        event: ``g(t, y)``, decreasing through zero where the run must stop (e.g. 1 − p/p_limit).
+        event: ``g(t, y, args)``, decreasing through zero where the run must stop (e.g. 1 − p/p_limit).
+        batched: ``y0``, ``args``, ``breaks``, ``jumps`` (and ``s0``, ``s_atol``) carry a leading batch axis B
+            of independent problems, stepped together: one loop while any member runs, each member's
+            attempt a no-op once it has stopped, its steps written in place. (``jax.vmap`` of the
+            unbatched loop would instead select between the old and new step records of every member
+            at every attempt: O(B · max_steps) per attempt.) Every output gains the leading axis.
 
     The state block is (1 + p, n): row 0 the state, rows 1… the sensitivities. Every row shares
     W = I − hγJ, J the state's Jacobian (the block-diagonal W a W-method allows). The error norm
@@ -220,52 +229,57 @@ def integrate(
     (a stiff mode switched on inside it) rejects the step.
     """
     y0 = jnp.asarray(y0)
-    n = y0.shape[0]
+    n = y0.shape[-1]
     dtype = y0.dtype
-    if tangent_field is None:
-        z0 = y0[None]
-        tol_abs = jnp.full((1, 1), atol, dtype)
-        tol_rel = jnp.full((1, 1), rtol, dtype)
-
-        def block(t, z):
-            return field(t, z[0])[None]
-    else:
-        z0 = jnp.concatenate([y0[None], jnp.asarray(s0, dtype)])
-        tol_abs = jnp.concatenate([jnp.full((1,), atol, dtype), jnp.asarray(s_atol, dtype)])[:, None]
-        s_rel = rtol if s_rtol is None else s_rtol
-        tol_rel = jnp.concatenate([jnp.full((1,), rtol, dtype), jnp.full((z0.shape[0] - 1,), s_rel, dtype)])[:, None]
-
-        def block(t, z):
-            f, ds = tangent_field(t, z[0], z[1:])
-            return jnp.concatenate([f[None], ds])
-
-    def block_slopes(t, z):
-        """(F, ∂F/∂t, J) at (t, z): the block field, its time derivative (forward difference) and the state's Jacobian."""
-        f = block(t, z)
-        dt = _time_step(t)
-        f_t = jax.lax.stop_gradient((block(t + dt, jax.lax.stop_gradient(z)) - jax.lax.stop_gradient(f)) / dt)
-        return f, f_t, _jacobian(field, t, z[0], f[0])
-
-    t_start, t_end = jnp.asarray(t0, dtype), jnp.asarray(t1, dtype)
     alpha, gamma = jnp.asarray(tableau.alpha, dtype), jnp.asarray(tableau.gamma, dtype)
     c, gamma_sum = jnp.asarray(tableau.c, dtype), jnp.asarray(tableau.gamma_sum, dtype)
     b, b_err = jnp.asarray(tableau.b, dtype), jnp.asarray(tableau.b - tableau.b_hat, dtype)
     g = tableau.gamma_diag
     k_order = tableau.order
-    breaks = jnp.concatenate([jnp.asarray(breaks, dtype).ravel(), jnp.full((1,), jnp.inf, dtype)])
-    jumps = jnp.concatenate([jnp.asarray(jumps, bool).ravel(), jnp.zeros((1,), bool)])
     inf = jnp.asarray(jnp.inf, dtype)
     eye = jnp.eye(n, dtype=dtype)
+    t_start, t_end = jnp.asarray(t0, dtype), jnp.asarray(t1, dtype)
 
-    f_first, f_t0, jac0 = block_slopes(t_start, z0)
-    zeros_m = jnp.zeros((max_steps,) + z0.shape, dtype)
-    steps0 = Steps(jnp.full((max_steps,), inf), jnp.full((max_steps,), inf), zeros_m, zeros_m, zeros_m, zeros_m,
-                   jnp.asarray(0))
-    first_break = jnp.searchsorted(breaks, t_start, side="right")
-    carry0 = _Carry(t_start, z0, f_first, jac0, f_t0, jnp.asarray(1.0, dtype), jnp.asarray(dt0, dtype),
-                    jnp.asarray(False), first_break, steps0, jnp.asarray(-1), jnp.asarray(0))
+    def problem(y0, args, breaks, jumps, s0, s_atol):
+        """One member's (block start z0, absolute and relative tolerances, breaks, jump flags)."""
+        if tangent_field is None:
+            z0 = y0[None]
+            tol_abs = jnp.full((1, 1), atol, dtype)
+            tol_rel = jnp.full((1, 1), rtol, dtype)
+        else:
+            z0 = jnp.concatenate([y0[None], jnp.asarray(s0, dtype)])
+            tol_abs = jnp.concatenate([jnp.full((1,), atol, dtype), jnp.asarray(s_atol, dtype)])[:, None]
+            s_rel = rtol if s_rtol is None else s_rtol
+            tol_rel = jnp.concatenate([jnp.full((1,), rtol, dtype), jnp.full((z0.shape[0] - 1,), s_rel, dtype)])[:, None]
+        breaks = jnp.concatenate([jnp.asarray(breaks, dtype).ravel(), jnp.full((1,), jnp.inf, dtype)])
+        jumps = jnp.concatenate([jnp.asarray(jumps, bool).ravel(), jnp.zeros((1,), bool)])
+        return z0, tol_abs, tol_rel, breaks, jumps
 
-    def attempt(carry: _Carry):
+    def block(t, z, args):
+        if tangent_field is None:
+            return field(t, z[0], args)[None]
+        f, ds = tangent_field(t, z[0], z[1:], args)
+        return jnp.concatenate([f[None], ds])
+
+    def block_slopes(t, z, args):
+        """(F, ∂F/∂t, J) at (t, z): the block field, its time derivative (forward difference) and the state's Jacobian."""
+        f = block(t, z, args)
+        dt = _time_step(t)
+        f_t = jax.lax.stop_gradient((block(t + dt, jax.lax.stop_gradient(z), args) - jax.lax.stop_gradient(f)) / dt)
+        return f, f_t, _jacobian(lambda t, y: field(t, y, args), t, z[0], f[0])
+
+    def init(z0, args, breaks):
+        f_first, f_t0, jac0 = block_slopes(t_start, z0, args)
+        zeros_m = jnp.zeros((max_steps,) + z0.shape, dtype)
+        steps0 = Steps(jnp.full((max_steps,), inf), jnp.full((max_steps,), inf), zeros_m, zeros_m, zeros_m, zeros_m,
+                       jnp.asarray(0))
+        first_break = jnp.searchsorted(breaks, t_start, side="right")
+        return _Carry(t_start, z0, f_first, jac0, f_t0, jnp.asarray(1.0, dtype), jnp.asarray(dt0, dtype),
+                      jnp.asarray(False), first_break, steps0, jnp.asarray(-1), jnp.asarray(0))
+
+    def attempt(prob, carry: _Carry):
+        z0_, tol_abs, tol_rel, breaks, jumps, args = prob
+        live = carry.status < 0  # False only for a finished member of a batch
         t, y, f0, jac, f_t = carry.t, carry.y, carry.f, carry.jac, carry.f_t
         h = jnp.minimum(carry.h, t_end - t)
         t_break, is_jump = breaks[carry.brk], jumps[carry.brk]
@@ -284,7 +298,7 @@ def integrate(
 
         ks = stage(0, jnp.zeros((tableau.stages,) + y.shape, dtype), f0)
         for i in range(1, tableau.stages):
-            ks = stage(i, ks, block(t + c[i] * h, y + jnp.tensordot(alpha[i], ks, 1)))
+            ks = stage(i, ks, block(t + c[i] * h, y + jnp.tensordot(alpha[i], ks, 1), args))
         y1 = y + jnp.tensordot(b, ks, 1)
         err = jnp.tensordot(b_err, ks, 1)
         scale = tol_abs + tol_rel * jnp.maximum(jnp.abs(y), jnp.abs(y1))
@@ -293,15 +307,15 @@ def integrate(
         # The field after the step: its right limit starts the next step; across a jump, the left limit
         # closes this step's interpolant.
         t_after = jnp.where(is_jump, jnp.nextafter(t_break, inf), t_next)
-        f1, f_t1, jac1 = block_slopes(t_after, y1)
-        f1_left = jax.lax.cond(is_jump, lambda: block(t_next, y1), lambda: f1)
+        f1, f_t1, jac1 = block_slopes(t_after, y1, args)
+        f1_left = jax.lax.cond(is_jump, lambda: block(t_next, y1, args), lambda: f1)
         # J must describe the field over the whole step (see the module docstring).
         change = w_inv @ ((h * g) * (jac1 - jac))  # W₀⁻¹ (W₀ − W₁)
         bound = jnp.max(jnp.sum(jnp.abs(change), axis=1))  # ≥ its spectral radius: refine only where it binds
         variation = jax.lax.stop_gradient(jax.lax.cond(bound > 1.0, _spectral_radius, lambda m: bound, change))
         variation = jnp.where(is_jump, 0.0, variation)  # across a jump J may change: the step ends there
         finite = jnp.all(jnp.isfinite(y1)) & jnp.isfinite(err_norm) & jnp.all(jnp.isfinite(jac1))
-        accept = finite & (err_norm <= 1.0) & (variation <= 1.0)
+        accept = live & finite & (err_norm <= 1.0) & (variation <= 1.0)
 
         # PI step-size control (Gustafsson; gains 0.6/k, 0.2/k measured best here), no growth right after a rejection.
         safe_err = jnp.maximum(err_norm, 1e-10)
@@ -314,32 +328,46 @@ def integrate(
         # After a step shortened onto a break, keep the size the controller had proposed.
         h_new = jnp.where(accept & on_break, jnp.maximum(h_new, jnp.minimum(carry.h, dtmax)), h_new)
 
-        # The row after the last accepted step is scratch: written by every attempt, kept by an accepted one.
+        # The row after the last accepted step is scratch: written by every live attempt, kept by an accepted one.
         k = carry.steps.count
         row = jnp.minimum(k, max_steps - 1)
         st = carry.steps
-        new_steps = Steps(st.t0.at[row].set(t), st.t1.at[row].set(t_next), st.y0.at[row].set(y),
-                          st.y1.at[row].set(y1), st.f0.at[row].set(f0), st.f1.at[row].set(f1_left),
-                          k + jnp.where(accept, 1, 0))
+
+        def put(buffer, value):  # a stopped member rewrites its row unchanged
+            return buffer.at[row].set(jnp.where(live, value, buffer[row]))
+
+        new_steps = Steps(put(st.t0, t), put(st.t1, t_next), put(st.y0, y), put(st.y1, y1), put(st.f0, f0),
+                          put(st.f1, f1_left), k + jnp.where(accept, 1, 0))
         status = carry.status
         if event is not None:
-            status = jnp.where(accept & (event(t_next, y1[0]) < 0.0), EVENT, status)
+            status = jnp.where(accept & (event(t_next, y1[0], args) < 0.0), EVENT, status)
         status = jnp.where(accept & (t_next >= t_end) & (status < 0), OK, status)
-        too_small = ~accept & (h_new < 1e-14 * jnp.maximum(1.0, jnp.abs(t)))
+        too_small = live & ~accept & (h_new < 1e-14 * jnp.maximum(1.0, jnp.abs(t)))
         out_of_budget = accept & (k + 1 >= max_steps) & (status < 0)
         status = jnp.where(too_small | out_of_budget, FAILED, status)
         keep = jax.tree_util.tree_map(lambda new, old: jnp.where(accept, new, old),
                                       (t_after, y1, f1, jac1, f_t1, jnp.maximum(err_norm, 1e-4)),
                                       (t, y, f0, jac, f_t, carry.err))
-        return _Carry(*keep, h=h_new, rejected_last=~accept, brk=carry.brk + jnp.where(accept & on_break, 1, 0),
-                      steps=new_steps, status=status, rejected=carry.rejected + jnp.where(accept, 0, 1))
+        return _Carry(*keep, h=jnp.where(live, h_new, carry.h), rejected_last=jnp.where(live, ~accept, carry.rejected_last),
+                      brk=carry.brk + jnp.where(accept & on_break, 1, 0), steps=new_steps, status=status,
+                      rejected=carry.rejected + jnp.where(live & ~accept, 1, 0))
 
-    final = jax.lax.while_loop(lambda c: c.status < 0, attempt, carry0)
-    steps = final.steps
-    t_final, y_final = final.t, final.y
-    if event is not None:
-        t_final, y_final = _locate_event(event, steps, final.status == EVENT, y_final)
-    return Result(steps, t_final, y_final, final.status, final.rejected)
+    def finish(prob, final: _Carry):
+        t_final, y_final = final.t, final.y
+        if event is not None:
+            args = prob[-1]
+            t_final, y_final = _locate_event(lambda t, y: event(t, y, args), final.steps, final.status == EVENT, y_final)
+        return Result(final.steps, t_final, y_final, final.status, final.rejected)
+
+    if not batched:
+        prob = (*problem(y0, args, breaks, jumps, s0, s_atol), args)
+        final = jax.lax.while_loop(lambda c: c.status < 0, functools.partial(attempt, prob), init(prob[0], args, prob[3]))
+        return finish(prob, final)
+    probs = jax.vmap(problem)(y0, args, breaks, jumps, s0, s_atol)
+    probs = (*probs, args)
+    carry0 = jax.vmap(init)(probs[0], args, probs[3])
+    final = jax.lax.while_loop(lambda c: jnp.any(c.status < 0), lambda c: jax.vmap(attempt)(probs, c), carry0)
+    return jax.vmap(finish)(probs, final)
 
 
 def _locate_event(event, steps: Steps, occurred, y_final, iterations: int = 60):

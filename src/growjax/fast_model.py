@@ -260,6 +260,63 @@ def _shifted(theta, direction, step):
     return jax.tree_util.tree_map(shift, theta, direction)
 
 
+def _member(params, inputs, config: Config, jump_ts, step_ts):
+    """One member's solver inputs: (θ = (params, inputs, prepared constants), scaled initial state, sorted
+    breaks, jump flags)."""
+    theta = (params, inputs, prepare(params, config))
+    times = jnp.concatenate([jump_ts, step_ts])
+    order = jnp.argsort(times)
+    is_jump = jnp.concatenate([jnp.ones(jump_ts.shape, bool), jnp.zeros(step_ts.shape, bool)])
+    return theta, initial_state(params, config), times[order], is_jump[order]
+
+
+def _callbacks(config: Config):
+    """(field, outputs, event) of the scaled state, each ``(t, y, θ)`` with θ from :func:`_member`."""
+
+    def field(t, y, th):
+        p, i, pr = th
+        return vector_field(t, y, (p, i, config, pr))
+
+    def outputs(t, y, th):
+        p, i, pr = th
+        scales = jnp.asarray(layout(p, config.drive)[1])
+        length, pressure, q_r, x_p, p_r = _rates(t, y * scales, p, i, config, pr)[1]
+        return dict(zip(OUTPUTS, (length, pressure, q_r, x_p, p_r)))
+
+    event = None
+    if config.stop_at_pressure_limit:
+        def event(t, y, th):  # decreases through 0 where the sensed pressure crosses the limit
+            p, _, pr = th
+            return 1.0 - pressure_of(p, config, y, pr.storage) / pressure_limit(p.robot)
+
+    return field, outputs, event
+
+
+def _saved(run, ts, y0):
+    """(state block on ts (T, 1 + p, n), the primal states there with a non-finite state replaced by y0,
+    NaN mask (T,))."""
+    block = evaluate(run.steps, ts)
+    finite = jnp.all(jnp.isfinite(block[:, 0]), axis=1)
+    return block, jnp.where(finite[:, None], block[:, 0], y0), jnp.where(finite, 0.0, jnp.nan)
+
+
+def _integrate_batch(params, inputs, config: Config, ts, jump_ts, step_ts):
+    """The plain solve of a batch (every argument with a leading axis B) in one loop: (Run, status, steps),
+    each with the leading axis B."""
+    rtol, atol = config.tolerances
+    field, outputs, event = _callbacks(config)
+    theta, y0, breaks, jumps = jax.vmap(lambda p, i, j, s: _member(p, i, config, j, s))(params, inputs, jump_ts, step_ts)
+    run = integrate(field, y0, config.t0, config.t1, args=theta, breaks=breaks, jumps=jumps, rtol=rtol, atol=atol,
+                    max_steps=config.step_budget, event=event, batched=True)
+
+    def member_outputs(run, ts, y0, th):
+        _, saved, nan = _saved(run, ts, y0)
+        values = jax.vmap(outputs, in_axes=(0, 0, None))(ts, saved, th)
+        return Run({k: v + nan for k, v in values.items()}, run.y_final[0], run.t_final)
+
+    return jax.vmap(member_outputs)(run, ts, y0, theta), run.status, run.steps.count
+
+
 def _integrate(params, inputs, config: Config, ts, jump_ts, step_ts, directions=None):
     """(Run, tangent Run with a leading axis p or None, status, accepted steps).
 
@@ -272,34 +329,9 @@ def _integrate(params, inputs, config: Config, ts, jump_ts, step_ts, directions=
     miscompiles it inside this field; see tests/test_gradients.py.)
     """
     rtol, atol = config.tolerances
-    scales = jnp.asarray(layout(params, config.drive)[1])
-
-    def prepared(p, i):
-        return p, i, prepare(p, config)
-
-    theta = prepared(params, inputs)
-
-    def field(t, y, th=theta):
-        p, i, pr = th
-        return vector_field(t, y, (p, i, config, pr))
-
-    def outputs(t, y, th=theta):
-        p, i, pr = th
-        length, pressure, q_r, x_p, p_r = _rates(t, y * scales, p, i, config, pr)[1]
-        return dict(zip(OUTPUTS, (length, pressure, q_r, x_p, p_r)))
-
-    event = None
-    if config.stop_at_pressure_limit:
-        limit = pressure_limit(params.robot)
-
-        def event(t, y):  # decreases through 0 where the sensed pressure crosses the limit
-            return 1.0 - pressure_of(params, config, y, theta[2].storage) / limit
-
-    times = jnp.concatenate([jump_ts, step_ts])
-    order = jnp.argsort(times)
-    is_jump = jnp.concatenate([jnp.ones(jump_ts.shape, bool), jnp.zeros(step_ts.shape, bool)])
-    y0 = initial_state(params, config)
-    common = dict(breaks=times[order], jumps=is_jump[order], rtol=rtol, atol=atol, max_steps=config.step_budget,
+    field, outputs, event = _callbacks(config)
+    theta, y0, breaks, jumps = _member(params, inputs, config, jump_ts, step_ts)
+    common = dict(args=theta, breaks=breaks, jumps=jumps, rtol=rtol, atol=atol, max_steps=config.step_budget,
                   event=event)
     if directions is None:
         run = integrate(field, y0, config.t0, config.t1, **common)
@@ -309,7 +341,8 @@ def _integrate(params, inputs, config: Config, ts, jump_ts, step_ts, directions=
         step = jnp.where(size > 0, jnp.finfo(y0.dtype).eps ** (1 / 3) / jnp.where(size > 0, size, 1.0), 0.0)
         signed = jnp.concatenate([step, -step])  # (2p,): central differences
         both = jax.tree_util.tree_map(lambda d: jnp.concatenate([d, d]), (d_params, d_inputs))
-        moved = jax.vmap(lambda dp, di, e: prepared(*_shifted((params, inputs), (dp, di), e)))(*both, signed)
+        moved = jax.vmap(lambda dp, di, e: _member(*_shifted((params, inputs), (dp, di), e), config, jump_ts,
+                                                   step_ts)[0])(*both, signed)
         quotient = jnp.where(step > 0, 0.5 / jnp.where(step > 0, step, 1.0), 0.0)[:, None]
         n_dir = step.shape[0]
 
@@ -318,25 +351,21 @@ def _integrate(params, inputs, config: Config, ts, jump_ts, step_ts, directions=
 
         s0 = central(jax.vmap(lambda th: initial_state(th[0], config))(moved))
 
-        def tangent_field(t, y, sens):
-            shifted = jax.vmap(lambda s, e, th: field(t, y + e * s, th))(jnp.concatenate([sens, sens]), signed, moved)
-            return field(t, y), central(shifted)
+        def tangent_field(t, y, sens, th):
+            shifted = jax.vmap(lambda s, e, m: field(t, y + e * s, m))(jnp.concatenate([sens, sens]), signed, moved)
+            return field(t, y, th), central(shifted)
 
         # The difference quotients carry roundoff of ~1e-10 relative: tighter sensitivity control only burns steps.
         s_rtol, s_atol = max(rtol, SENSITIVITY_TOL_FLOOR), max(atol, SENSITIVITY_TOL_FLOOR)
         run = integrate(field, y0, config.t0, config.t1, tangent_field=tangent_field, s0=s0, s_rtol=s_rtol,
                         s_atol=s_atol * jnp.maximum(size, 1e-12), **{**common, "max_steps": 2 * config.step_budget})
-    block = evaluate(run.steps, ts)  # (T, 1 + p, n)
-    # Outputs from the saved states; a non-finite state (a failed run) is evaluated at the initial state instead.
-    finite = jnp.all(jnp.isfinite(block[:, 0]), axis=1)
-    saved = jnp.where(finite[:, None], block[:, 0], y0)
-    nan = jnp.where(finite, 0.0, jnp.nan)
-    values = jax.vmap(outputs)(ts, saved)
+    block, saved, nan = _saved(run, ts, y0)
+    values = jax.vmap(outputs, in_axes=(0, 0, None))(ts, saved, theta)
     primal = Run({k: v + nan for k, v in values.items()}, run.y_final[0], run.t_final)
     tangent = None
     if directions is not None:
         def output_tangents(t, y, sens):
-            shifted = jax.vmap(lambda s, e, th: outputs(t, y + e * s, th))(jnp.concatenate([sens, sens]), signed, moved)
+            shifted = jax.vmap(lambda s, e, m: outputs(t, y + e * s, m))(jnp.concatenate([sens, sens]), signed, moved)
             return {k: central(shifted[k]) for k in OUTPUTS}
 
         d_values = jax.vmap(output_tangents, out_axes=1)(ts, saved, block[:, 1:])  # field → (p, T)
@@ -345,6 +374,29 @@ def _integrate(params, inputs, config: Config, ts, jump_ts, step_ts, directions=
         d_values = {k: jnp.where(reached, v, jnp.nan) for k, v in d_values.items()}
         tangent = Run(d_values, run.y_final[1:], jnp.zeros(run.y_final.shape[0] - 1))
     return primal, tangent, run.status, run.steps.count
+
+
+@functools.lru_cache(maxsize=None)
+def _plain_solver(config: Config):
+    """``(params, inputs, ts, jump_ts, step_ts) → (Run, status, steps)``; under ``vmap`` the members are
+    stepped together in one loop (:func:`_integrate_batch`) instead of a vmapped loop per member."""
+
+    def plain(params, inputs, ts, jump_ts, step_ts):
+        primal, _, status, n_steps = _integrate(params, inputs, config, ts, jump_ts, step_ts)
+        return primal, status, n_steps
+
+    solver = jax.custom_batching.custom_vmap(plain)
+
+    @solver.def_vmap
+    def together(axis_size, in_batched, *args):
+        def spread(x, batched):
+            return x if batched else jnp.broadcast_to(x, (axis_size,) + jnp.shape(x))
+
+        args = jax.tree_util.tree_map(spread, args, tuple(in_batched))
+        out = _integrate_batch(*args[:2], config, *args[2:])
+        return out, jax.tree_util.tree_map(lambda _: True, out)
+
+    return solver
 
 
 def _tangent_solver(config: Config):
@@ -382,8 +434,7 @@ def _tangent_solver(config: Config):
 @functools.partial(jax.custom_jvp, nondiff_argnums=(2,))
 def _run(params, inputs, config: Config, ts, jump_ts, step_ts):
     """(Run, status, accepted steps) of the fast configuration; derivatives by error-controlled forward sensitivities."""
-    primal, _, status, n_steps = _integrate(params, inputs, config, ts, jump_ts, step_ts)
-    return primal, status, n_steps
+    return _plain_solver(config)(params, inputs, ts, jump_ts, step_ts)
 
 
 @_run.defjvp
@@ -392,7 +443,7 @@ def _run_jvp(config, primals, tangents):
     d_params, d_inputs = tangents[0], tangents[1]
     # The primal is a plain solve: under jax.linearize (optimistix, numpyro) it must not depend on the
     # tangents, whose error control moves the steps of the solve that carries them.
-    primal, _, status, n_steps = _integrate(params, inputs, config, ts, jump_ts, step_ts)
+    primal, status, n_steps = _plain_solver(config)(params, inputs, ts, jump_ts, step_ts)
 
     def one(x):
         return jnp.asarray(x)[None]
