@@ -98,7 +98,7 @@ def test_sobol_indices_find_that_yield_pressure_dominates(setup):
 def test_sweep_command_writes_table_figures_and_summary(tmp_path):
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "growjax.cli", "sweep", str(REPO / "data" / "synthetic_forward.csv"), "--n", "16",
-           "--t-end", "2", "--seed", "5", "--sobol", "--sobol-n", "8", "--out", str(out), "--json", str(out / "s.json")]
+           "--t-end", "2", "--seed", "5", "--out", str(out), "--json", str(out / "s.json")]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, check=False)
     assert proc.returncode == 0, proc.stderr[-2000:]
     summary = json.loads((out / "s.json").read_text())
@@ -107,7 +107,7 @@ def test_sweep_command_writes_table_figures_and_summary(tmp_path):
     assert summary["wall_s"] > 0 and summary["compile_s"] > 0
     rows = (out / "sweep.csv").read_text().splitlines()
     assert len(rows) == 17 and rows[0].endswith("rmse_length_m,final_length_m,status")
-    assert (out / "sweep.png").stat().st_size > 10_000 and (out / "sobol.png").stat().st_size > 10_000
+    assert (out / "sweep.png").stat().st_size > 10_000  # (--sobol: test_sobol_indices_find_that_yield_pressure_dominates)
     bad = subprocess.run([sys.executable, "-m", "growjax.cli", "sweep", "--param", "Y=9:1"], capture_output=True, text=True, check=False)
     assert bad.returncode == 2 and "LOW < HIGH" in bad.stderr
 

@@ -160,9 +160,14 @@ def _jacobian(field, t, y, f0):
     primal field (one batched evaluation) cost a third of a forward-mode Jacobian here.
     """
     t, y, f0 = jax.lax.stop_gradient((t, y, f0))
-    dy = jnp.sqrt(jnp.finfo(y.dtype).eps) * jnp.maximum(jnp.abs(y), 1.0)
+    dy = _jacobian_steps(y)
     cols = jax.vmap(lambda d: field(t, y + d), out_axes=1)(jnp.diag(dy))
     return jax.lax.stop_gradient((cols - f0[:, None]) / dy[None, :])
+
+
+def _jacobian_steps(y):
+    """Forward-difference steps of the Jacobian's columns: √ε · max(|y|, 1)."""
+    return jnp.sqrt(jnp.finfo(y.dtype).eps) * jnp.maximum(jnp.abs(jax.lax.stop_gradient(y)), 1.0)
 
 
 def _time_step(t):
@@ -261,15 +266,28 @@ def integrate(
         f, ds = tangent_field(t, z[0], z[1:], args)
         return jnp.concatenate([f[None], ds])
 
-    def block_slopes(t, z, args):
-        """(F, ∂F/∂t, J) at (t, z): the block field, its time derivative (forward difference) and the state's Jacobian."""
-        f = block(t, z, args)
+    def block_slopes(t, z, args, t_left=None):
+        """(F, ∂F/∂t, J, F_left) at (t, z): the block field, its time derivative (forward difference), the
+        state's Jacobian and the block field at ``t_left`` (default t). The three block evaluations are one
+        vmapped call: each copy of the field in the program costs compile time."""
         dt = _time_step(t)
-        f_t = jax.lax.stop_gradient((block(t + dt, jax.lax.stop_gradient(z), args) - jax.lax.stop_gradient(f)) / dt)
-        return f, f_t, _jacobian(lambda t, y: field(t, y, args), t, z[0], f[0])
+        times = jnp.stack([t, t + dt, t if t_left is None else t_left])
+        if tangent_field is None:  # the Jacobian's columns join the same call
+            y = z[0]
+            dy = _jacobian_steps(y)
+            points = jnp.concatenate([jnp.broadcast_to(y, (3, n)), jax.lax.stop_gradient(y) + jnp.diag(dy)])
+            values = jax.vmap(field, in_axes=(0, 0, None))(jnp.concatenate([times, jnp.full((n,), t)]), points, args)
+            fs = values[:3, None]
+            jac = jax.lax.stop_gradient((values[3:].T - jax.lax.stop_gradient(values[0])[:, None]) / dy[None, :])
+        else:
+            fs = jax.vmap(block, in_axes=(0, None, None))(times, z, args)
+            jac = _jacobian(lambda t, y: field(t, y, args), t, z[0], fs[0, 0])
+        f = fs[0]
+        f_t = jax.lax.stop_gradient((fs[1] - jax.lax.stop_gradient(f)) / dt)
+        return f, f_t, jac, fs[2]
 
     def init(z0, args, breaks):
-        f_first, f_t0, jac0 = block_slopes(t_start, z0, args)
+        f_first, f_t0, jac0, _ = block_slopes(t_start, z0, args)
         zeros_m = jnp.zeros((max_steps,) + z0.shape, dtype)
         steps0 = Steps(jnp.full((max_steps,), inf), jnp.full((max_steps,), inf), zeros_m, zeros_m, zeros_m, zeros_m,
                        jnp.asarray(0))
@@ -297,8 +315,9 @@ def integrate(
             return ks.at[i].set(rhs @ w_inv.T)
 
         ks = stage(0, jnp.zeros((tableau.stages,) + y.shape, dtype), f0)
-        for i in range(1, tableau.stages):
-            ks = stage(i, ks, block(t + c[i] * h, y + jnp.tensordot(alpha[i], ks, 1), args))
+        # One traced copy of the field serves the later stages (α is strictly lower triangular).
+        ks = jax.lax.fori_loop(1, tableau.stages, lambda i, ks: stage(
+            i, ks, block(t + c[i] * h, y + jnp.tensordot(alpha[i], ks, 1), args)), ks)
         y1 = y + jnp.tensordot(b, ks, 1)
         err = jnp.tensordot(b_err, ks, 1)
         scale = tol_abs + tol_rel * jnp.maximum(jnp.abs(y), jnp.abs(y1))
@@ -307,8 +326,7 @@ def integrate(
         # The field after the step: its right limit starts the next step; across a jump, the left limit
         # closes this step's interpolant.
         t_after = jnp.where(is_jump, jnp.nextafter(t_break, inf), t_next)
-        f1, f_t1, jac1 = block_slopes(t_after, y1, args)
-        f1_left = jax.lax.cond(is_jump, lambda: block(t_next, y1, args), lambda: f1)
+        f1, f_t1, jac1, f1_left = block_slopes(t_after, y1, args, t_next)
         # J must describe the field over the whole step (see the module docstring).
         change = w_inv @ ((h * g) * (jac1 - jac))  # W₀⁻¹ (W₀ − W₁)
         bound = jnp.max(jnp.sum(jnp.abs(change), axis=1))  # ≥ its spectral radius: refine only where it binds

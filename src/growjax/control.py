@@ -205,7 +205,7 @@ class Plant(eqx.Module):
         ts = jnp.clip(ts, ta, tb)  # rounding of ta + k·dt must not leave the interval
         if self.config.fidelity == "fast":
             breaks = jnp.full((1,), tb + 1.0) if knots is None else jnp.concatenate([knots, jnp.full((1,), tb + 1.0)])
-            run = integrate(lambda t, z: self.field(t, z, inputs), y, ta, tb, breaks=breaks,
+            run = integrate(self.field, y, ta, tb, args=inputs, breaks=breaks,
                             jumps=jnp.zeros(breaks.shape, bool), rtol=rtol, atol=atol, max_steps=400, dtmax=0.05)
             ys = evaluate(run.steps, ts)[:, 0]
             y_end, status = run.y_final[0], run.status

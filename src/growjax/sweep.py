@@ -18,6 +18,7 @@ import math
 import time
 from collections.abc import Sequence
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -26,7 +27,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from growjax import params as gp
 from growjax.metrics import length_rmse
 from growjax.config import Config
-from growjax.simulate import input_breaks, simulate
+from growjax.simulate import _as_arrays, input_breaks, simulate
 from growjax.trajectory import OK, PRESSURE_LIMIT, SOLVER_FAILED
 
 INVALID_PARAMETER = 3
@@ -150,11 +151,11 @@ def _valid_rows(names, values, base: gp.Parameters) -> np.ndarray:
     return gp.admissible_rows(base, names, values)
 
 
-def make_member(base: gp.Parameters, names: Sequence[str], inputs, config, measured=None, window=None):
+def make_member(base: gp.Parameters, names: Sequence[str], inputs, config, measured=None, window=None, breaks=None):
     """Function θ (d,) → (rmse m, final length m, status) of one member; pure, ``vmap``-able."""
     names = tuple(names)
     t_start, t_end = window if window is not None else (config.t0, config.t1)
-    breaks = input_breaks(inputs, config)
+    breaks = input_breaks(inputs, config) if breaks is None else breaks
 
     def member(theta):
         p = gp.replace(base, **{n: theta[i] for i, n in enumerate(names)})
@@ -181,7 +182,7 @@ def _content_key(tree) -> tuple:
     for leaf in leaves:
         a = np.asarray(leaf)
         digest.update(str((a.dtype, a.shape)).encode())
-        digest.update(a.tobytes())
+        digest.update(repr(leaf).encode() if a.dtype == object else a.tobytes())
     return (str(treedef), digest.hexdigest())
 
 
@@ -248,15 +249,28 @@ def evaluate(
 
     sharding = NamedSharding(mesh, PartitionSpec("batch"))
     start = time.perf_counter()
-    key = (names, config, chunk, None if window is None else tuple(window), tuple(d.id for d in mesh.devices.flat), _content_key((base, inputs, measured)))
+    # The model's numbers (base, inputs, data) are arguments of the program, not constants in it: one
+    # compiled program serves every data set and base point of the same shapes.
+    breaks = input_breaks(inputs, config)
+    dynamic, static = eqx.partition((_as_arrays(base), _as_arrays(inputs), breaks, measured), eqx.is_array)
+    shapes = jax.tree_util.tree_map(lambda a: (a.shape, str(a.dtype)), dynamic)
+    key = (names, config, chunk, None if window is None else tuple(window), tuple(d.id for d in mesh.devices.flat),
+           str(jax.tree_util.tree_structure(dynamic)), str(jax.tree_util.tree_leaves(shapes)), _content_key(static))
     compiled = _COMPILED.get(key)
     if compiled is None:
-        member = make_member(base, names, inputs, config, measured, window)
-        batched = jax.jit(jax.vmap(member), in_shardings=sharding, out_shardings=sharding)
-        compiled = batched.lower(jax.ShapeDtypeStruct((chunk, len(names)), jnp.float64, sharding=sharding)).compile()
+        def member(theta, dynamic):
+            p, i, b, m = eqx.combine(dynamic, static)
+            return make_member(p, names, i, config, m, window, breaks=b)(theta)
+
+        replicated = NamedSharding(mesh, PartitionSpec())
+        batched = jax.jit(jax.vmap(member, in_axes=(0, None)), in_shardings=(sharding, replicated),
+                          out_shardings=sharding)
+        compiled = batched.lower(jax.ShapeDtypeStruct((chunk, len(names)), jnp.float64, sharding=sharding),
+                                 dynamic).compile()
         if len(_COMPILED) >= 8:
             _COMPILED.pop(next(iter(_COMPILED)))
         _COMPILED[key] = compiled
+    dynamic = jax.device_put(dynamic, NamedSharding(mesh, PartitionSpec()))
     compile_s = time.perf_counter() - start
 
     outs = []
@@ -268,7 +282,7 @@ def evaluate(
         chunks = tqdm(chunks, desc="sweep", unit="chunk", total=n_chunks)
     for c in chunks:
         block = _put(padded[c * chunk:(c + 1) * chunk], sharding)
-        outs.append(_get(compiled(block)))
+        outs.append(_get(compiled(block, dynamic)))
     wall_s = time.perf_counter() - start
 
     rmse, final, status = (np.concatenate([o[k] for o in outs])[:n] for k in range(3))
