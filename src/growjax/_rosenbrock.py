@@ -296,7 +296,7 @@ def integrate(
                       jnp.asarray(False), first_break, steps0, jnp.asarray(-1), jnp.asarray(0))
 
     def attempt(prob, carry: _Carry):
-        z0_, tol_abs, tol_rel, breaks, jumps, args = prob
+        _, tol_abs, tol_rel, breaks, jumps, args = prob
         live = carry.status < 0  # False only for a finished member of a batch
         t, y, f0, jac, f_t = carry.t, carry.y, carry.f, carry.jac, carry.f_t
         h = jnp.minimum(carry.h, t_end - t)
@@ -315,9 +315,8 @@ def integrate(
             return ks.at[i].set(rhs @ w_inv.T)
 
         ks = stage(0, jnp.zeros((tableau.stages,) + y.shape, dtype), f0)
-        # One traced copy of the field serves the later stages (α is strictly lower triangular).
-        ks = jax.lax.fori_loop(1, tableau.stages, lambda i, ks: stage(
-            i, ks, block(t + c[i] * h, y + jnp.tensordot(alpha[i], ks, 1), args)), ks)
+        for i in range(1, tableau.stages):
+            ks = stage(i, ks, block(t + c[i] * h, y + jnp.tensordot(alpha[i], ks, 1), args))
         y1 = y + jnp.tensordot(b, ks, 1)
         err = jnp.tensordot(b_err, ks, 1)
         scale = tol_abs + tol_rel * jnp.maximum(jnp.abs(y), jnp.abs(y1))

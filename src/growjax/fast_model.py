@@ -376,7 +376,7 @@ def _integrate(params, inputs, config: Config, ts, jump_ts, step_ts, directions=
     return primal, tangent, run.status, run.steps.count
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _plain_solver(config: Config):
     """``(params, inputs, ts, jump_ts, step_ts) → (Run, status, steps)``; under ``vmap`` the members are
     stepped together in one loop (:func:`_integrate_batch`) instead of a vmapped loop per member."""
