@@ -292,12 +292,15 @@ def _callbacks(config: Config):
     return field, outputs, event
 
 
-def _saved(run, ts, y0):
-    """(state block on ts (T, 1 + p, n), the primal states there with a non-finite state replaced by y0,
-    NaN mask (T,))."""
+def _primal(run, ts, y0, theta, outputs):
+    """(primal Run on ts, state block on ts (T, 1 + p, n), primal states there). A non-finite state (a failed
+    run) is evaluated at y0 instead and its outputs are NaN."""
     block = evaluate(run.steps, ts)
     finite = jnp.all(jnp.isfinite(block[:, 0]), axis=1)
-    return block, jnp.where(finite[:, None], block[:, 0], y0), jnp.where(finite, 0.0, jnp.nan)
+    saved = jnp.where(finite[:, None], block[:, 0], y0)
+    nan = jnp.where(finite, 0.0, jnp.nan)
+    values = jax.vmap(outputs, in_axes=(0, 0, None))(ts, saved, theta)
+    return Run({k: v + nan for k, v in values.items()}, run.y_final[0], run.t_final), block, saved
 
 
 def _integrate_batch(params, inputs, config: Config, ts, jump_ts, step_ts):
@@ -309,12 +312,8 @@ def _integrate_batch(params, inputs, config: Config, ts, jump_ts, step_ts):
     run = integrate(field, y0, config.t0, config.t1, args=theta, breaks=breaks, jumps=jumps, rtol=rtol, atol=atol,
                     max_steps=config.step_budget, event=event, batched=True)
 
-    def member_outputs(run, ts, y0, th):
-        _, saved, nan = _saved(run, ts, y0)
-        values = jax.vmap(outputs, in_axes=(0, 0, None))(ts, saved, th)
-        return Run({k: v + nan for k, v in values.items()}, run.y_final[0], run.t_final)
-
-    return jax.vmap(member_outputs)(run, ts, y0, theta), run.status, run.steps.count
+    primal = jax.vmap(lambda r, t, y, th: _primal(r, t, y, th, outputs)[0])(run, ts, y0, theta)
+    return primal, run.status, run.steps.count
 
 
 def _integrate(params, inputs, config: Config, ts, jump_ts, step_ts, directions=None):
@@ -359,9 +358,7 @@ def _integrate(params, inputs, config: Config, ts, jump_ts, step_ts, directions=
         s_rtol, s_atol = max(rtol, SENSITIVITY_TOL_FLOOR), max(atol, SENSITIVITY_TOL_FLOOR)
         run = integrate(field, y0, config.t0, config.t1, tangent_field=tangent_field, s0=s0, s_rtol=s_rtol,
                         s_atol=s_atol * jnp.maximum(size, 1e-12), **{**common, "max_steps": 2 * config.step_budget})
-    block, saved, nan = _saved(run, ts, y0)
-    values = jax.vmap(outputs, in_axes=(0, 0, None))(ts, saved, theta)
-    primal = Run({k: v + nan for k, v in values.items()}, run.y_final[0], run.t_final)
+    primal, block, saved = _primal(run, ts, y0, theta, outputs)
     tangent = None
     if directions is not None:
         def output_tangents(t, y, sens):
