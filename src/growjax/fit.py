@@ -145,9 +145,8 @@ def levenberg_marquardt(linearised, z0, max_steps: int = 100, tol: float = 1e-6)
 
     ``linearised(z) → (r (m,), J (m, p))``. Stops when an accepted step moves z by < tol·(1 + |z|) and the
     cost by < tol of itself. Returns (z, cost, converged, r, J at z). (optimistix's LM compiles the
-    model's primal and tangent solves several times into one program, ~100 s here, and needs ~30
-    iterations on residuals that carry the solver's tolerance-level noise; this loop compiles one
-    program and takes a handful.)
+    model's primal and tangent solves several times into one program and needs tens of iterations on
+    residuals that carry the solver's tolerance-level noise; this loop compiles one program.)
     """
     z = np.asarray(z0, float)
     r, jac = (np.asarray(a) for a in linearised(jnp.asarray(z)))
