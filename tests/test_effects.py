@@ -38,11 +38,6 @@ TS = np.concatenate([[FAST.t0], TIME])
 NOISE = 2e-4  # m: the rig's length noise
 RISES = (0.26, 1.56, 2.86)  # s: edges of the published pulse inside the window
 FALLS = (1.43, 2.73)
-# Known failure (reported; the fix belongs to growjax.robot.inflow, not to the effect).
-LUMEN_NEWTON = ("fast configuration: robot.inflow's 8 unguarded Newton steps do not converge in the creep regime of "
-                "a friction force while the robot retracts (P between p_rest − F/A_r and p_rest): at P = 6 kPa it "
-                "returns v = −2.8 mm/s where the root is −0.09 mm/s, so the robot retracts too far (0.13 mm more per "
-                "retraction than the reference) and the field is not smooth in the parameter")
 
 
 def _field(name):
@@ -253,8 +248,7 @@ def test_shipped_reference_traces_are_current(reference_traces):
         assert meta["cases"][name]["magnitude"] == sy.moderate_magnitude(name), name
 
 
-@pytest.mark.parametrize("name", ["none", *[pytest.param(n, marks=pytest.mark.xfail(reason=LUMEN_NEWTON, strict=True))
-                                             if n == "lumen_friction" else n for n in NAMES]])
+@pytest.mark.parametrize("name", ["none", *NAMES])
 def test_fast_agrees_with_the_reference_with_the_effect_on(traces, reference_traces, name):
     """0–3 s: within 0.05 mm RMSE and 0.15 mm max of the reference-made trace (noise 0.2 mm)."""
     lengths, _ = reference_traces
@@ -265,8 +259,7 @@ def test_fast_agrees_with_the_reference_with_the_effect_on(traces, reference_tra
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.xfail(reason=LUMEN_NEWTON, strict=True))
-                                  if n == "lumen_friction" else n for n in NAMES])
+@pytest.mark.parametrize("name", NAMES)
 def test_fast_agrees_with_a_live_reference_run(traces, inputs, name):
     """The same comparison against the reference configuration run here (about a minute to compile, then
     tens of seconds per effect on two cores)."""
@@ -301,16 +294,7 @@ def _unit(k, scale=1.0):
     return jnp.asarray(e)
 
 
-NOT_SMOOTH = {
-    "lumen_friction": LUMEN_NEWTON + " (NaN from 2.86 s); not run: 10 s",
-    # Passed at 6 % on one build and missed by 24 % after a rounding-level change of the solver (batched
-    # field evaluations): the derivative rests on the same unconverged Newton, so it is not asserted.
-    "catheter_friction": LUMEN_NEWTON + " (jvp 24 % off central differences, rounding-dependent); not run",
-}
-
-
-@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.xfail(reason=NOT_SMOOTH[n], run=False))
-                                  if n in NOT_SMOOTH else n for n in sy.ALL_EFFECTS])
+@pytest.mark.parametrize("name", list(sy.ALL_EFFECTS))
 def test_the_effect_parameter_is_a_differentiable_leaf(inputs, name):
     """d(final length)/dθ by forward mode (``jax.jvp`` along a unit tangent on θ in SI units, i.e. one column
     of ``jax.jacfwd``) through the fast configuration matches central differences (±5 % of θ) within 3 %, at the

@@ -42,12 +42,12 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 from scipy import stats
 
 from growjax import effects as fx
 from growjax import params as gp
 from growjax.config import Config
+from growjax.fit import LM_TOLERANCE, levenberg_marquardt
 from growjax.simulate import input_breaks, simulate
 
 Z90 = float(stats.norm.ppf(0.95))
@@ -169,24 +169,24 @@ class Candidates(eqx.Module):
         return jnp.where(jnp.isfinite(r), r, 1e3)  # a failed run is a very bad fit, not a crash
 
 
-def _fit_one(problem: Candidates, w0, mask, select, z_fixed, max_steps: int):
-    solver = optx.LevenbergMarquardt(rtol=1e-5, atol=1e-5)
-    model = (mask, select, z_fixed)
-    sol = optx.least_squares(problem.residuals, solver, w0, args=model, max_steps=max_steps, throw=False)
-    r = problem.residuals(sol.value, model)
-    jac = jax.jacfwd(problem.residuals)(sol.value, model)
-    return z_fixed + select @ sol.value, r, jac, sol.result == optx.RESULTS.successful
-
-
 @eqx.filter_jit
-def _fit_model(problem: Candidates, w0, mask, select, z_fixed, max_steps: int):
-    """Levenberg–Marquardt for one model: (z (p + K,), residuals (m,), Jacobian (m, q), converged).
+def _linearised(w, problem: Candidates, mask, select, z_fixed):
+    """Residuals r (m,) and Jacobian J (m, q) of one model at its fitted coordinates w (q,), in one
+    forward-mode pass. Every candidate has the same shapes, so one compiled program serves every fit
+    of :func:`discover` (the candidate is data: ``mask``, ``select``, ``z_fixed``)."""
+    model = (mask, select, z_fixed)
+    q = w.shape[0]
+    r, jac_t = jax.vmap(lambda v: jax.jvp(lambda x: problem.residuals(x, model), (w,), (v,)),
+                        out_axes=(None, 0))(jnp.eye(q, dtype=w.dtype))
+    return r, jac_t.T
 
-    Every candidate has the same shapes, so one compiled program serves every fit of :func:`discover`.
-    (Under ``vmap`` over candidates the fast solver's merged-direction rule meets batched constants
-    that ``custom_vmap`` does not accept; the fits run one after another through this program.)
-    """
-    return _fit_one(problem, w0, mask, select, z_fixed, max_steps)
+
+def _fit_model(problem: Candidates, w0, mask, select, z_fixed, max_steps: int):
+    """Levenberg–Marquardt for one model (:func:`growjax.fit.levenberg_marquardt` around :func:`_linearised`):
+    (z (p + K,), residuals (m,), Jacobian (m, q), converged)."""
+    w, _, ok, r, jac = levenberg_marquardt(lambda x: _linearised(x, problem, mask, select, z_fixed), w0, max_steps,
+                                           LM_TOLERANCE)
+    return np.asarray(z_fixed) + np.asarray(select) @ w, r, jac, ok
 
 
 @eqx.filter_jit

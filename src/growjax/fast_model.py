@@ -48,7 +48,7 @@ from growjax.motor import (
 from growjax.params import Parameters
 from growjax.hydraulics import ValveNetwork, valve_network
 from growjax.pump import platform_velocity, syringe_load_force
-from growjax.robot import RodBalance, inflow, pressure_limit, rod_balance
+from growjax.robot import INFLOW_MAX_ITERATIONS, RodBalance, inflow, pressure_limit, rod_balance
 from growjax.trajectory import finish
 
 FORWARD_STATES = ("stored_volume", "x_platform", "robot_displacement", "wall_strain", "z_integral", "z_filter")
@@ -79,7 +79,7 @@ def prepare(params: Parameters, config: Config) -> Prepared:
     valves = valve_network(params.check_valve, params.valve, params.fluid, crack, config.crack_width, config.switch_width)
     rod = rod_balance(robot, (config.velocity_eps, config.stop_width))
     # The published law's velocity term is ~1e-10 of the rod forces: one fixed-point pass is exact.
-    iterations = 0 if robot.growth_law == "reference" and not any(e.velocity_dependent for e in params.effects) else 8
+    iterations = 0 if robot.growth_law == "reference" and not any(e.velocity_dependent for e in params.effects) else INFLOW_MAX_ITERATIONS
     return Prepared(storage_law(params.fluid), valves, rod, line_resistance(params), iterations)
 
 

@@ -140,32 +140,46 @@ def _linearised(z, problem: Problem):
     return r, jac_t.T
 
 
-def levenberg_marquardt(linearised, z0, max_steps: int = 100, tol: float = 1e-6):
-    """Minimise ½‖r(z)‖² from z0 by Levenberg–Marquardt (Marquardt's scaling diag(JᵀJ)), driven from Python.
+def levenberg_marquardt(linearised, z0, max_steps: int = 100, tol: float = 1e-6, gain_tol: float = 1e-5,
+                        max_move: float = 3.0):
+    """Minimise ½‖r(z)‖² from z0 by Levenberg–Marquardt (Marquardt's scaling diag(JᵀJ), Nielsen's damping
+    update), driven from Python.
 
     ``linearised(z) → (r (m,), J (m, p))``. Stops when an accepted step moves z by < tol·(1 + |z|) and the
-    cost by < tol of itself. Returns (z, cost, converged, r, J at z). (optimistix's LM compiles the
+    cost by < tol of itself, or when a full Gauss–Newton step, ½gᵀ(JᵀJ)⁺g, would gain < ``gain_tol`` of the
+    cost (at the solver's noise floor, or a parameter drifting to the edge of its range). A step moves each
+    coordinate by at most ``max_move`` (clipped one by one); a point whose residuals or Jacobian are not finite is rejected.
+    Returns (z, cost, converged, r, J at z). (optimistix's LM compiles the
     model's primal and tangent solves several times into one program and needs tens of iterations on
     residuals that carry the solver's tolerance-level noise; this loop compiles one program.)
     """
     z = np.asarray(z0, float)
     r, jac = (np.asarray(a) for a in linearised(jnp.asarray(z)))
     cost = 0.5 * float(r @ r)
-    damping = 1e-3
+    damping, growth = 1e-3, 2.0
     for _ in range(max_steps):
         jtj, g = jac.T @ jac, jac.T @ r
+        if 0.5 * float(g @ np.linalg.pinv(jtj, rcond=1e-12, hermitian=True) @ g) <= gain_tol * cost:
+            return z, cost, True, r, jac  # a full Gauss–Newton step would gain < gain_tol of the cost
         scale = np.maximum(np.diag(jtj), 1e-12 * max(float(np.max(np.diag(jtj))), 1e-300))
         step = np.linalg.solve(jtj + damping * np.diag(scale), -g)
+        step = np.clip(step, -max_move, max_move)  # a coordinate running to its range's edge moves no others less
+        predicted = 0.5 * float(step @ (damping * scale * step - g))  # decrease the linear model promises
         r_new, jac_new = (np.asarray(a) for a in linearised(jnp.asarray(z + step)))
-        cost_new = 0.5 * float(r_new @ r_new) if np.all(np.isfinite(r_new)) else np.inf
+        ok = np.all(np.isfinite(r_new)) and np.all(np.isfinite(jac_new))
+        cost_new = 0.5 * float(r_new @ r_new) if ok else np.inf
         if cost_new <= cost:
             done = np.all(np.abs(step) < tol * (1.0 + np.abs(z))) and cost - cost_new <= tol * cost
+            gain = (cost - cost_new) / max(predicted, 1e-300)
             z, r, jac, cost = z + step, r_new, jac_new, cost_new
-            damping = max(damping / 3.0, 1e-9)
+            # Nielsen's update: keep the damping where the linear model predicted well, relax it slowly
+            damping = max(damping * max(1.0 / 3.0, 1.0 - (2.0 * min(gain, 1.0) - 1.0) ** 3), 1e-9)
+            growth = 2.0
             if done:
                 return z, cost, True, r, jac
         else:
-            damping *= 4.0
+            damping *= growth
+            growth *= 2.0
             if damping > 1e12:  # no descent left at the solver's resolution: a minimum
                 return z, cost, True, r, jac
     return z, cost, False, r, jac

@@ -34,6 +34,9 @@ from growjax.pump import cylinder_stop_force
 
 GROWTH_LAWS = ("reference", "lockhart")
 LOCKHART_PRESSURE_SCALE = 1e3  # Pa: p_ref of the Lockhart law
+INFLOW_MAX_ITERATIONS = 40  # cap on the rod balance's Newton steps (a few usually suffice)
+INFLOW_LOGIT_TOL = 1e-12  # stop the rod balance's Newton once its logit moves less
+BRACKET_LOGIT = 40.0  # the rod balance's root is sought in z ∈ (−40, 40), x/X ∈ (4e-18, 1 − 4e-18)
 
 
 class GrowingRobot(eqx.Module):
@@ -185,7 +188,7 @@ def rod_pressure(rod: RodBalance, sensor_pressure, velocity, length, catheter_le
     return rest + growth_pressure(rod, velocity) + stops + force / rod.area
 
 
-def inflow(rod: RodBalance, valves, pressure, length, catheter_length, effect_force, iterations: int = 8):
+def inflow(rod: RodBalance, valves, pressure, length, catheter_length, effect_force, iterations: int = INFLOW_MAX_ITERATIONS):
     """Flow into the robot (m³/s) and its pressure (Pa) at node pressure ``pressure`` (Pa) before the valves.
 
     Solves the series balance of the valve network (check valve ∥ bypass,
@@ -197,9 +200,11 @@ def inflow(rod: RodBalance, valves, pressure, length, catheter_length, effect_fo
         f(x) = ln(s·(p_r(v(P − p_rest − s·x)) − p_rest)) − ln x = 0,    decreasing in x.
 
     In z = ln(x/(X − x)) both ends of f are asymptotically linear (power laws of the growth
-    law at x → 0, of the valve at x → X), so ``iterations`` Newton steps from z = 0, each
-    capped at ±8, reach the root for every growth law (fixed cost: vectorises under ``vmap``);
-    derivatives are implicit. ``iterations = 0`` takes one fixed-point pass instead, exact when
+    law at x → 0, of the valve at x → X). Safeguarded Newton steps from z = 0, each capped at ±8,
+    bisect the bracket the evaluations have found where a step would leave it, and stop once z
+    moves < 1e-12 (or after ``iterations``): the root for every growth law and effect force,
+    converged to roundoff (the sensitivities' difference quotients amplify any residual of it).
+    Derivatives are implicit. ``iterations = 0`` takes one fixed-point pass instead, exact when
     the motion's pressure is negligible against the valve's (the published law: x ~ 1e-5 Pa).
     ``effect_force(v)`` (N) is the effects' force opposing growth at velocity v (non-decreasing).
     """
@@ -228,11 +233,24 @@ def inflow(rod: RodBalance, valves, pressure, length, catheter_length, effect_fo
         return jnp.log(jnp.maximum(excess(x), 0.0) + tiny) - jnp.log(x + tiny)
 
     def solve(f, z):
-        def newton(_, z):
+        # Newton inside a bracket [lo, hi] that every evaluation narrows (f decreases in z); a step that
+        # leaves the bracket bisects it instead, so steep stretches (a friction force turning over
+        # FRICTION_VELOCITY) cannot throw the iterate off.
+        def newton(carry):
+            z, lo, hi, _, k = carry
             fz, dfz = jax.jvp(f, (z,), (jnp.ones_like(z),))
-            return z - jnp.clip(fz / jnp.where(dfz < 0.0, dfz, -1.0), -8.0, 8.0)
+            lo, hi = jnp.where(fz > 0.0, z, lo), jnp.where(fz > 0.0, hi, z)
+            step = z - jnp.clip(fz / jnp.where(dfz < 0.0, dfz, -1.0), -8.0, 8.0)
+            inside = (step > lo) & (step < hi) & jnp.isfinite(step)
+            z_new = jnp.where(inside, step, 0.5 * (lo + hi))
+            return z_new, lo, hi, jnp.max(jnp.abs(z_new - z)), k + 1
 
-        return jax.lax.fori_loop(0, iterations, newton, z)
+        def moving(carry):
+            return (carry[3] > INFLOW_LOGIT_TOL) & (carry[4] < iterations)
+
+        bound = jnp.full_like(z, BRACKET_LOGIT)
+        start = (z, -bound, bound, jnp.asarray(jnp.inf, z.dtype), 0)
+        return jax.lax.while_loop(moving, newton, start)[0]
 
     def no_tangent(g, y):  # the root's derivative is taken below, not through the logit
         return jnp.zeros_like(y)
