@@ -1,6 +1,6 @@
 """The discovery matrix: every catalogue effect × two magnitudes × seeds, plus clean seeds.
 
-Run: ``python benchmarks/discover.py [--seeds 10] [--clean 20] [--t-end 10] [--effects NAME ...]``
+Run: ``python benchmarks/discover.py [--seeds 10] [--clean 20] [--t-end 10] [--effects NAME ...] [--factors 1 2]``
 → ``benchmarks/results/discover.json``. Data come from :func:`growjax.synthetic.make_experiment`
 (the reference configuration; one noise-free trace per effect and magnitude, seeds add noise), and
 every run is :func:`growjax.discover.discover` over the whole catalogue on the fast configuration.
@@ -56,11 +56,13 @@ def main() -> None:
     parser.add_argument("--clean", type=int, default=20)
     parser.add_argument("--t-end", type=float, default=10.0)
     parser.add_argument("--effects", nargs="+", default=list(fx.CATALOGUE))
+    parser.add_argument("--factors", nargs="+", type=float, default=[1.0, 2.0],
+                        help="magnitudes as multiples of each effect's moderate magnitude (default 1 2)")
     parser.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "discover.json"))
     args = parser.parse_args()
     runs = []
     for effect in args.effects:
-        for factor in (1.0, 2.0):
+        for factor in args.factors:
             magnitude = factor * sy.moderate_magnitude(effect)
             for seed in range(args.seeds):
                 runs.append(one_run(effect, magnitude, 1000 + seed, args.t_end))

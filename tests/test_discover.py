@@ -77,3 +77,42 @@ def test_discover_on_reference_made_examples(name):
             assert res.rmse_after_m < 1.2 * truth["noise_sd"]["robot_length_m"]
     else:
         assert res.effect in ("none", "unexplained", "confounded"), gd.summary_text(res)
+
+
+# -- the small version CI runs: shipped reference-made examples, first 3 s, three candidates ----------------
+
+SMALL_CANDIDATES = ("active_channel_force", "fluid_leak", "retraction_folding")
+SMALL_T_END = 3.0  # s: two retractions of the published pulse
+
+
+def _shipped(name):
+    """A shipped example of data/discovery/ (reference-made, noise 0.2 mm) on 0–3 s, and its truth."""
+    import json
+    from pathlib import Path
+
+    folder = Path(__file__).resolve().parents[1] / "data" / "discovery"
+    cfg = gj.Config(t1=SMALL_T_END)
+    exp = ex.read(folder / f"{name}.csv").window(SMALL_T_END + 1e-9)
+    inputs = ex.to_inputs(exp, "forward", gj.reference(), cfg.t0, cfg.t1)
+    keep = (exp.time >= cfg.t0) & (exp.time <= cfg.t1)
+    res = gd.discover(exp.time[keep], exp["robot_length_m"][keep], inputs, config=cfg, candidates=SMALL_CANDIDATES)
+    return res, json.loads((folder / f"{name}.json").read_text())
+
+
+def test_discover_names_a_hidden_folding_and_recovers_its_size():
+    """Retraction folding (30 % of the returning volume) hidden by the reference configuration: named, its
+    90 % interval covers 0.3, and the misfit falls to the noise."""
+    res, truth = _shipped("retraction_folding")
+    assert res.effect == "retraction_folding", gd.summary_text(res)
+    lo, hi = res.parameters[truth["parameter"]]["interval_90"]
+    assert lo <= truth["magnitude"] <= hi, gd.summary_text(res)
+    assert res.misfit_before["structured"] and not res.misfit_after["structured"]
+    assert res.rmse_after_m < 1.2 * truth["noise_sd"]["robot_length_m"] < res.rmse_before_m
+
+
+def test_discover_reports_none_on_clean_data():
+    """No effect hidden: no candidate clears the family-wise threshold and the base model fits to the noise."""
+    res, truth = _shipped("clean")
+    assert res.effect == "none", gd.summary_text(res)
+    assert not res.effects and not res.confounded_with
+    assert res.rmse_after_m < 1.2 * truth["noise_sd"]["robot_length_m"]

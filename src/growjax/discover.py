@@ -20,7 +20,10 @@ The workflow (:func:`discover`), on a measured length L(t):
    clears the threshold, or if, with the base parameters held at their given values, it alone explains
    the data as well as refitting them does (within the threshold) while the given values themselves
    fit significantly worse: the effect and the base parameter trade one for the other.
-5. **Add and iterate.** The best candidate is added; the remaining ones are tested again on top of it
+5. **Rivals.** When another candidate also clears the threshold and its 2ΔlogL falls short of the best's by
+   less than the threshold, the data do not tell the two effects apart: neither is added, both are reported
+   ``confounded`` (``rival_effects``), with the measurements that would separate them.
+6. **Add and iterate.** The best candidate is added; the remaining ones are tested again on top of it
    (up to ``max_effects``). An effect is claimed only if, once added, the misfit test passes; if
    structure remains that no candidate removes, the answer is ``unexplained``; with no misfit and no
    candidate over the threshold, ``none``.
@@ -418,6 +421,18 @@ def discover(
         if not clean:
             break
         best = max(clean, key=lambda n: clean[n]["lr_statistic"])
+        lr_best = scores[best]["lr_statistic"]
+        rivals = [n for n, s in scores.items()
+                  if n != best and s["clears_threshold"] and s["lr_statistic"] > lr_best - threshold]
+        if rivals:  # another effect explains the data about as well: name neither
+            for name in (best, *rivals):
+                others = [r for r in (best, *rivals) if r != name]
+                confounded.setdefault(name, {"parameter": None, "correlation": None,
+                                             "lr_statistic": scores[name]["lr_statistic"],
+                                             "lr_statistic_base_held": scores[name]["lr_statistic_base_held"],
+                                             "separate_by": SEPARATING.get(name, "")})
+                confounded[name]["rival_effects"] = others
+            break
         added.append(best)
         added_index.append(candidates.index(best))
         current = fits[best]
@@ -476,6 +491,7 @@ def summary_text(result: DiscoveryResult) -> str:
             lines.append(f"  {name:22s} 2ΔlogL {s['lr_statistic']:8.2f}  {s['parameter']} = {s['estimate']:.3g} "
                          f"{s['unit']}  {flag}")
     for name, c in result.confounded_with.items():
-        lines.append(f"confounded: {name} with {c['parameter']} (correlation {c['correlation']:.3f}); "
-                     f"separate by {c['separate_by']}")
+        with_ = [f"{c['parameter']} (correlation {c['correlation']:.3f})"] if c["parameter"] else []
+        with_ += [f"the effect {r}" for r in c.get("rival_effects", ())]
+        lines.append(f"confounded: {name} with {' and '.join(with_)}; separate by {c['separate_by']}")
     return "\n".join(lines)
