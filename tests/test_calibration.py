@@ -116,3 +116,40 @@ def test_emulated_and_direct_posteriors_agree_on_the_test_problem():
     direct = gpost.sample(times, length, inputs, emulate=False, **kw).summary["parameters"]["Y"]
     assert emulated["mean"] == pytest.approx(direct["mean"], abs=0.3 * direct["sd"])
     assert emulated["sd"] == pytest.approx(direct["sd"], rel=0.2)
+
+
+def _numeric(residuals):
+    """``linearised`` for :func:`growjax.fit.levenberg_marquardt` from NumPy residuals (forward differences)."""
+
+    def linearised(z):
+        z = np.asarray(z, float)
+        r = residuals(z)
+        h = 1e-7 * (1.0 + np.abs(z))
+        jac = np.stack([(residuals(z + h[i] * np.eye(z.size)[i]) - r) / h[i] for i in range(z.size)], axis=1)
+        return r, jac
+
+    return linearised
+
+
+def test_levenberg_marquardt_solves_rosenbrock_and_stops_on_a_parameter_running_off_its_range():
+    rosenbrock = _numeric(lambda z: np.array([10.0 * (z[1] - z[0] ** 2), 1.0 - z[0]]))
+    z, cost, ok, _, _ = gf.levenberg_marquardt(rosenbrock, np.array([-1.2, 1.0]), max_steps=100)
+    assert ok and np.allclose(z, [1.0, 1.0], atol=1e-5) and cost < 1e-10
+    # η = softplus(u) best at 0 (u → −∞): stops, converged, with the other coordinate fitted.
+    drift = _numeric(lambda z: np.array([np.logaddexp(0.0, z[0]), z[1] - 2.0, 0.1]))
+    z, _, ok, _, _ = gf.levenberg_marquardt(drift, np.array([1.0, 0.0]), max_steps=40)
+    assert ok and z[0] < -3.0 and z[1] == pytest.approx(2.0, abs=1e-6)
+
+
+def test_levenberg_marquardt_rejects_points_where_the_model_fails():
+    # ln z is NaN for z < 0; the first Gauss–Newton step from z = 20 lands there (20 − 32 = −12).
+    calls = []
+
+    def residuals(z):
+        calls.append(float(z[0]))
+        with np.errstate(invalid="ignore"):
+            return np.array([np.log(z[0]) - np.log(4.0)])
+
+    z, _, ok, r, jac = gf.levenberg_marquardt(_numeric(residuals), np.array([20.0]), max_steps=60, max_move=100.0)
+    assert min(calls) < 0.0  # a failed point was tried...
+    assert ok and z[0] == pytest.approx(4.0, rel=1e-6) and np.all(np.isfinite(jac))  # ...and not taken

@@ -148,10 +148,10 @@ def levenberg_marquardt(linearised, z0, max_steps: int = 100, tol: float = 1e-6,
     ``linearised(z) → (r (m,), J (m, p))``. Stops when an accepted step moves z by < tol·(1 + |z|) and the
     cost by < tol of itself, or when a full Gauss–Newton step, ½gᵀ(JᵀJ)⁺g, would gain < ``gain_tol`` of the
     cost (at the solver's noise floor, or a parameter drifting to the edge of its range). A step moves each
-    coordinate by at most ``max_move`` (clipped one by one); a point whose residuals or Jacobian are not finite is rejected.
-    Returns (z, cost, converged, r, J at z). (optimistix's LM compiles the
-    model's primal and tangent solves several times into one program and needs tens of iterations on
-    residuals that carry the solver's tolerance-level noise; this loop compiles one program.)
+    coordinate by at most ``max_move`` (clipped one by one); a point whose residuals or Jacobian are not
+    finite is rejected. Returns (z, cost, converged, r, J at z). (optimistix's LM compiles the model's
+    primal and tangent solves several times into one program and needs tens of iterations on residuals
+    that carry the solver's tolerance-level noise; this loop compiles one program.)
     """
     z = np.asarray(z0, float)
     r, jac = (np.asarray(a) for a in linearised(jnp.asarray(z)))

@@ -188,7 +188,8 @@ def rod_pressure(rod: RodBalance, sensor_pressure, velocity, length, catheter_le
     return rest + growth_pressure(rod, velocity) + stops + force / rod.area
 
 
-def inflow(rod: RodBalance, valves, pressure, length, catheter_length, effect_force, iterations: int = INFLOW_MAX_ITERATIONS):
+def inflow(rod: RodBalance, valves, pressure, length, catheter_length, effect_force,
+           iterations: int = INFLOW_MAX_ITERATIONS):
     """Flow into the robot (m³/s) and its pressure (Pa) at node pressure ``pressure`` (Pa) before the valves.
 
     Solves the series balance of the valve network (check valve ∥ bypass,
