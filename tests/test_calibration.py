@@ -153,3 +153,9 @@ def test_levenberg_marquardt_rejects_points_where_the_model_fails():
     z, _, ok, r, jac = gf.levenberg_marquardt(_numeric(residuals), np.array([20.0]), max_steps=60, max_move=100.0)
     assert min(calls) < 0.0  # a failed point was tried...
     assert ok and z[0] == pytest.approx(4.0, rel=1e-6) and np.all(np.isfinite(jac))  # ...and not taken
+
+
+def test_levenberg_marquardt_reports_a_start_where_the_model_fails():
+    failing = _numeric(lambda z: np.array([np.nan, z[0]]))
+    z, cost, ok, _, jac = gf.levenberg_marquardt(failing, np.array([1.0]))
+    assert not ok and cost == np.inf and z[0] == 1.0 and np.all(np.isfinite(jac))

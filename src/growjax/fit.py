@@ -149,13 +149,16 @@ def levenberg_marquardt(linearised, z0, max_steps: int = 100, tol: float = 1e-6,
     cost by < tol of itself, or when a full Gauss–Newton step, ½gᵀ(JᵀJ)⁺g, would gain < ``gain_tol`` of the
     cost (at the solver's noise floor, or a parameter drifting to the edge of its range). A step moves each
     coordinate by at most ``max_move`` (clipped one by one); a point whose residuals or Jacobian are not
-    finite is rejected. Returns (z, cost, converged, r, J at z). (optimistix's LM compiles the model's
-    primal and tangent solves several times into one program and needs tens of iterations on residuals
-    that carry the solver's tolerance-level noise; this loop compiles one program.)
+    finite is rejected (at z0 it ends the fit, not converged). Returns (z, cost, converged, r, J at z).
+    (optimistix's LM compiles the model's primal and tangent solves several times into one program and
+    needs tens of iterations on residuals that carry the solver's tolerance-level noise; this loop
+    compiles one program.)
     """
     z = np.asarray(z0, float)
     r, jac = (np.asarray(a) for a in linearised(jnp.asarray(z)))
     cost = 0.5 * float(r @ r)
+    if not (np.all(np.isfinite(r)) and np.all(np.isfinite(jac))):  # the model fails at the start: no descent
+        return z, np.inf, False, r, np.nan_to_num(jac, nan=0.0, posinf=0.0, neginf=0.0)
     damping, growth = 1e-3, 2.0
     for _ in range(max_steps):
         jtj, g = jac.T @ jac, jac.T @ r
