@@ -150,7 +150,7 @@ def test_levenberg_marquardt_rejects_points_where_the_model_fails():
         with np.errstate(invalid="ignore"):
             return np.array([np.log(z[0]) - np.log(4.0)])
 
-    z, _, ok, r, jac = gf.levenberg_marquardt(_numeric(residuals), np.array([20.0]), max_steps=60, max_move=100.0)
+    z, _, ok, _, jac = gf.levenberg_marquardt(_numeric(residuals), np.array([20.0]), max_steps=60, max_move=100.0)
     assert min(calls) < 0.0  # a failed point was tried...
     assert ok and z[0] == pytest.approx(4.0, rel=1e-6) and np.all(np.isfinite(jac))  # ...and not taken
 
