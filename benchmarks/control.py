@@ -78,7 +78,7 @@ def main():
     r = gc.run_closed_loop(gc.Plant.make(p, cfg_ev), pid, target, T, lim)
     record("forward feedback (length PID)", r, tuning_s=round(tuned.wall_s, 1))
     if not args.robust_only:
-        other_methods(args, res, record, target, T, ev, p, cfg_ev, lim)
+        other_methods(res, record, target, T, ev, p, cfg_ev, lim)
     robust_study(args, res, target, T, p, lim, prof, pid0, tuned)
     (HERE / "results").mkdir(exist_ok=True)
     name = "control_robust.json" if args.robust_only else "control.json"
@@ -86,7 +86,7 @@ def main():
     print("wrote", HERE / "results" / name)
 
 
-def other_methods(args, res, record, target, T, ev, p, cfg_ev, lim):
+def other_methods(res, record, target, T, ev, p, cfg_ev, lim):
     """MPC (forward) and both stepper designs, evaluated on ``ev``."""
     # forward drive: MPC
     r = gc.run_closed_loop(gc.Plant.make(p, cfg_ev), gc.MPC(), target, T, lim)
@@ -97,7 +97,7 @@ def other_methods(args, res, record, target, T, ev, p, cfg_ev, lim):
     # stepper drive
     pi = gc.plant_params("inverse", target)
     lim_i = gc.limits(pi)
-    lead, e_fast, ticks, counts = gc.optimize_steps(pi, target, T)
+    lead, _, ticks, counts = gc.optimize_steps(pi, target, T)
     ts = target.time[(target.time >= 0.001) & (target.time <= T)]
     tr = gc.simulate_steps(pi, target, ticks, counts, gj.Config(fidelity=ev, drive="inverse", t1=T), ts)
     r = gc._score(ts, np.asarray(tr.length), np.asarray(tr.pressure), counts, ticks, target, lim_i, int(tr.status))

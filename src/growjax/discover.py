@@ -50,7 +50,7 @@ from scipy import stats
 from growjax import effects as fx
 from growjax import params as gp
 from growjax.config import Config
-from growjax.fit import LM_TOLERANCE, levenberg_marquardt
+from growjax.fit import LM_TOLERANCE, levenberg_marquardt, linearise
 from growjax.simulate import input_breaks, simulate
 
 Z90 = float(stats.norm.ppf(0.95))
@@ -174,14 +174,10 @@ class Candidates(eqx.Module):
 
 @eqx.filter_jit
 def _linearised(w, problem: Candidates, mask, select, z_fixed):
-    """Residuals r (m,) and Jacobian J (m, q) of one model at its fitted coordinates w (q,), in one
-    forward-mode pass. Every candidate has the same shapes, so one compiled program serves every fit
-    of :func:`discover` (the candidate is data: ``mask``, ``select``, ``z_fixed``)."""
-    model = (mask, select, z_fixed)
-    q = w.shape[0]
-    r, jac_t = jax.vmap(lambda v: jax.jvp(lambda x: problem.residuals(x, model), (w,), (v,)),
-                        out_axes=(None, 0))(jnp.eye(q, dtype=w.dtype))
-    return r, jac_t.T
+    """Residuals r (m,) and Jacobian J (m, q) of one model at its fitted coordinates w (q,)
+    (:func:`growjax.fit.linearise`). Every candidate has the same shapes, so one compiled program serves
+    every fit of :func:`discover` (the candidate is data: ``mask``, ``select``, ``z_fixed``)."""
+    return linearise(lambda x: problem.residuals(x, (mask, select, z_fixed)), w)
 
 
 def _fit_model(problem: Candidates, w0, mask, select, z_fixed, max_steps: int):

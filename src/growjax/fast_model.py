@@ -79,7 +79,8 @@ def prepare(params: Parameters, config: Config) -> Prepared:
     valves = valve_network(params.check_valve, params.valve, params.fluid, crack, config.crack_width, config.switch_width)
     rod = rod_balance(robot, (config.velocity_eps, config.stop_width))
     # The published law's velocity term is ~1e-10 of the rod forces: one fixed-point pass is exact.
-    iterations = 0 if robot.growth_law == "reference" and not any(e.velocity_dependent for e in params.effects) else INFLOW_MAX_ITERATIONS
+    quasi_static = robot.growth_law == "reference" and not any(e.velocity_dependent for e in params.effects)
+    iterations = 0 if quasi_static else INFLOW_MAX_ITERATIONS
     return Prepared(storage_law(params.fluid), valves, rod, line_resistance(params), iterations)
 
 

@@ -131,13 +131,18 @@ def make_problem(base, names, inputs, config, times, length, pressure=None, wind
                    sigma_length, sigma_pressure)
 
 
+def linearise(residuals, z):
+    """(r (m,), J (m, p)) of ``residuals`` at z (p,) in one forward-mode pass: ``jax.jvp`` along the p unit
+    directions under ``vmap``, which the fast configuration merges into one solve carrying p sensitivities."""
+    p = z.shape[0]
+    r, jac_t = jax.vmap(lambda v: jax.jvp(residuals, (z,), (v,)), out_axes=(None, 0))(jnp.eye(p, dtype=z.dtype))
+    return r, jac_t.T
+
+
 @eqx.filter_jit
 def _linearised(z, problem: Problem):
-    """Residuals r (m,) and their Jacobian J (m, p) at z, in one forward-mode pass (one model solve carrying
-    p sensitivities): the only compiled program of a fit."""
-    p = z.shape[0]
-    r, jac_t = jax.vmap(lambda v: jax.jvp(problem.residuals, (z,), (v,)), out_axes=(None, 0))(jnp.eye(p, dtype=z.dtype))
-    return r, jac_t.T
+    """:func:`linearise` of the problem's residuals at z: the only compiled program of a fit."""
+    return linearise(problem.residuals, z)
 
 
 def levenberg_marquardt(linearised, z0, max_steps: int = 100, tol: float = 1e-6, gain_tol: float = 1e-5,
@@ -236,8 +241,8 @@ def fit(
     z0s = jnp.log(jnp.asarray(scout.values[order]) / refs)
     # One start after another through one compiled solver: under vmap every start would pay for the
     # slowest one's iterations and for both branches of each accept/reject decision.
-    # Stop when a step moves ln θ by < 1e-6 and the cost by < 1e-6 of itself: far inside any interval,
-    # and above the solver's own noise in the residuals (tighter only burns iterations).
+    # Stop when a step moves ln θ by < 1e-6 and the cost by < 1e-6 of itself (far inside any interval), or at
+    # the solver's noise floor in the residuals (see levenberg_marquardt: tighter only burns iterations).
     solved = [levenberg_marquardt(lambda z: _linearised(z, problem), z0, max_steps, LM_TOLERANCE) for z0 in z0s]
     zs, costs, oks = (np.asarray([s[k] for s in solved]) for k in range(3))
     starts = [{"start": dict(zip(names, map(float, scout.values[i]))),

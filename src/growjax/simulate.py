@@ -19,7 +19,7 @@ def _traced(tree) -> bool:
     return any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(tree))
 
 
-def _as_arrays(tree):
+def as_arrays(tree):
     """Python numbers in a pytree as float arrays, so ``jit`` traces them instead of recompiling per value.
 
     NumPy scalars, not JAX arrays: making a device array per leaf costs ~0.1 ms each, more than a simulation's step loop.
@@ -80,7 +80,7 @@ def simulate(params, inputs, config: Config = Config(), ts=None, breaks=None) ->
     if breaks is None:
         breaks = input_breaks(inputs, config)
     jump_ts, step_ts = breaks
-    return _solve(_as_arrays(params), _as_arrays(inputs), config, jnp.asarray(ts, float), jump_ts, step_ts)
+    return _solve(as_arrays(params), as_arrays(inputs), config, jnp.asarray(ts, float), jump_ts, step_ts)
 
 
 @eqx.filter_jit

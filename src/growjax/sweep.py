@@ -27,7 +27,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from growjax import params as gp
 from growjax.metrics import length_rmse
 from growjax.config import Config
-from growjax.simulate import _as_arrays, input_breaks, simulate
+from growjax.simulate import as_arrays, input_breaks, simulate
 from growjax.trajectory import OK, PRESSURE_LIMIT, SOLVER_FAILED
 
 INVALID_PARAMETER = 3
@@ -252,7 +252,7 @@ def evaluate(
     # The model's numbers (base, inputs, data) are arguments of the program, not constants in it: one
     # compiled program serves every data set and base point of the same shapes.
     breaks = input_breaks(inputs, config)
-    dynamic, static = eqx.partition((_as_arrays(base), _as_arrays(inputs), breaks, measured), eqx.is_array)
+    dynamic, static = eqx.partition((as_arrays(base), as_arrays(inputs), breaks, measured), eqx.is_array)
     shapes = jax.tree_util.tree_map(lambda a: (a.shape, str(a.dtype)), dynamic)
     key = (names, config, chunk, None if window is None else tuple(window), tuple(d.id for d in mesh.devices.flat),
            str(jax.tree_util.tree_structure(dynamic)), str(jax.tree_util.tree_leaves(shapes)), _content_key(static))
