@@ -29,10 +29,11 @@ from scipy.integrate import quad
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "data"))
 
-import growjax as gj  # noqa: E402
-import make_synthetic as mk  # noqa: E402
-from growjax import sweep as sw  # noqa: E402
-from growjax.fluid import bulk_modulus  # noqa: E402
+import make_synthetic as mk
+
+import growjax as gj
+from growjax import sweep as sw
+from growjax.fluid import bulk_modulus
 
 BOXES = {
     "reference": (sw.Dimension("n", 0.9, 1.1), sw.Dimension("Y", 5e3, 15e3), sw.Dimension("ext", 4000.0, 10000.0)),

@@ -15,7 +15,7 @@ TRUTH_Y = 9000.0
 NOISE = 2e-4  # m
 
 sys.path.insert(0, str(REPO / "data"))
-import make_synthetic as mk  # noqa: E402
+import make_synthetic as mk
 
 
 def _synthetic(t1, seed):

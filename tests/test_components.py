@@ -8,7 +8,13 @@ import pytest
 import growjax as gj
 from growjax import hydraulics as hy
 from growjax._smooth import bracketed_root, smooth_ramp, smooth_step
-from growjax.fluid import Fluid, bulk_modulus, pressure_at_stored_fraction, stored_volume_fraction, water
+from growjax.fluid import (
+    Fluid,
+    bulk_modulus,
+    pressure_at_stored_fraction,
+    stored_volume_fraction,
+    water,
+)
 from growjax.robot import catheter_friction_gain, rod_balance, rod_pressure
 
 

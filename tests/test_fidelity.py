@@ -11,7 +11,7 @@ import growjax as gj
 from growjax import effects as fx
 
 sys.path.insert(0, str(REPO / "data"))
-import make_synthetic as mk  # noqa: E402  (the cases' inputs, defined once where the traces are made)
+import make_synthetic as mk
 
 FAST = gj.Config(t1=10.0)
 

@@ -31,7 +31,13 @@ from growjax.signals import (
     published_pulse,
 )
 from growjax.simulate import input_breaks, simulate
-from growjax.trajectory import OK, PRESSURE_LIMIT, SOLVER_FAILED, Trajectory, status_name
+from growjax.trajectory import (
+    OK,
+    PRESSURE_LIMIT,
+    SOLVER_FAILED,
+    Trajectory,
+    status_name,
+)
 
 __all__ = [
     "OK",

@@ -37,7 +37,13 @@ from growjax import hydraulics as hy
 from growjax._rosenbrock import evaluate, integrate
 from growjax.config import Config
 from growjax.effects import Instant, Rod
-from growjax.fluid import StorageLaw, pressure_at_stored_fraction, storage_law, stored_volume_fraction
+from growjax.fluid import (
+    StorageLaw,
+    pressure_at_stored_fraction,
+    storage_law,
+    stored_volume_fraction,
+)
+from growjax.hydraulics import ValveNetwork, valve_network
 from growjax.motor import (
     ideal_torque_drive_force,
     motor_derivatives,
@@ -46,9 +52,14 @@ from growjax.motor import (
     winding_voltages,
 )
 from growjax.params import Parameters
-from growjax.hydraulics import ValveNetwork, valve_network
 from growjax.pump import platform_velocity, syringe_load_force
-from growjax.robot import INFLOW_MAX_ITERATIONS, RodBalance, inflow, pressure_limit, rod_balance
+from growjax.robot import (
+    INFLOW_MAX_ITERATIONS,
+    RodBalance,
+    inflow,
+    pressure_limit,
+    rod_balance,
+)
 from growjax.trajectory import finish
 
 FORWARD_STATES = ("stored_volume", "x_platform", "robot_displacement", "wall_strain", "z_integral", "z_filter")

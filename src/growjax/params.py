@@ -14,6 +14,7 @@ import equinox as eqx
 import jax
 import numpy as np
 
+from growjax.config import DRIVES
 from growjax.fluid import Fluid
 from growjax.hydraulics import (
     CheckValve,
@@ -26,8 +27,6 @@ from growjax.hydraulics import (
 from growjax.motor import PID, StepperMotor
 from growjax.pump import SyringePump
 from growjax.robot import GrowingRobot
-
-from growjax.config import DRIVES
 
 
 class Parameters(eqx.Module):

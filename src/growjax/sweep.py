@@ -25,8 +25,8 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from growjax import params as gp
-from growjax.metrics import length_rmse
 from growjax.config import Config
+from growjax.metrics import length_rmse
 from growjax.simulate import as_arrays, input_breaks, simulate
 from growjax.trajectory import OK, PRESSURE_LIMIT, SOLVER_FAILED
 
