@@ -9,7 +9,9 @@ The workflow (:func:`discover`), on a measured length L(t):
    holding, retracting; pressure rising or falling) (:func:`locate`). The noise σ is estimated from
    successive differences of r (a smooth misfit barely enters them), and the misfit test asks whether
    the residuals carry more than that noise: a lag-1 autocorrelation z-score and the ratio RMSE/σ.
-3. **Test each candidate.** Each effect parameter η is fitted jointly with the base parameters.
+3. **Test each candidate.** Each effect parameter η is fitted jointly with the base parameters, from
+   several starts (2, 6 and 20 % of its range's top; the misfit can have more than one minimum along an
+   effect, e.g. one per alignment of a lag with the pulse period), keeping the best fit.
    Its score is the likelihood ratio 2ΔlogL = (RSS_base − RSS_k)/σ² of the nested models; under
    the null (effect absent, η on the boundary 0) it is distributed as ½χ²₀ + ½χ²₁, and the
    threshold is set so that the *family* of K candidates gives a false positive with probability
@@ -54,6 +56,7 @@ from growjax.fit import LM_TOLERANCE, levenberg_marquardt, linearise
 from growjax.simulate import input_breaks, simulate
 
 Z90 = float(stats.norm.ppf(0.95))
+START_FRACTIONS = (0.02, 0.06, 0.2)  # starts of a new effect parameter, as fractions of its range's top
 PHASES = ("growing", "holding", "retracting", "pressure_rising", "pressure_falling")
 
 
@@ -315,6 +318,7 @@ def discover(
     confounding_correlation: float = 0.99,
     max_effects: int = 2,
     max_steps: int = 40,
+    multistart: bool = True,
     progress: bool = False,
 ) -> DiscoveryResult:
     """Find which catalogue effect the measured ``length`` (m) at ``times`` (s) needs beyond the base model.
@@ -322,7 +326,8 @@ def discover(
     ``inputs``: the experiment's :class:`growjax.Inputs`; ``base``: the base parameters (default the
     published set of ``config.drive``), whose values are also the reference against which a base
     parameter's shift counts as confounding; ``base_names``: base parameters refitted with every
-    candidate. See the module docstring for the procedure and its thresholds.
+    candidate; ``multistart``: fit each new candidate from every start in ``START_FRACTIONS`` (False:
+    from the first only, a third of the fits). See the module docstring for the procedure and its thresholds.
     """
     start = time.perf_counter()
     config = config if config is not None else Config()
@@ -332,11 +337,15 @@ def discover(
     problem = make_candidates(times, length, inputs, candidates, base, base_names, config)
     p, k_all = len(problem.base_names), len(candidates)
     q = p + max_effects  # fitted coordinates: the base parameters, the new candidate, the effects already added
-    u_start = np.where(np.asarray(problem.signed), 0.0, math.log(math.expm1(0.2)))  # η = 0.02 of the range's top
+    # u of each start (K, starts): η = s·softplus(u) with s a tenth of the top; signed effects start at 0, ±5 %.
+    fractions = START_FRACTIONS if multistart else START_FRACTIONS[:1]
+    u_starts = np.stack([np.where(np.asarray(problem.signed), u_signed, math.log(math.expm1(10.0 * f)))
+                         for f, u_signed in zip(fractions, (0.0, -0.5, 0.5))], axis=1)
     threshold = float(stats.chi2.isf(2.0 * false_positive_rate / k_all, df=1))  # ½χ²₀ + ½χ²₁, Bonferroni
 
-    def model(effects_on: Sequence[int], fit_base: bool, z_now):
-        """(w0 (q,), mask (K,), select (p + K, q), z_fixed (p + K,)) of a model with ``effects_on`` fitted."""
+    def model(effects_on: Sequence[int], fit_base: bool, z_now, start: int = 0):
+        """(w0 (q,), mask (K,), select (p + K, q), z_fixed (p + K,)) of a model with ``effects_on`` fitted, a new
+        candidate starting from its ``start``-th start."""
         mask, select = np.zeros(k_all), np.zeros((p + k_all, q))
         z_fixed, w0 = np.array(z_now, float), np.zeros(q)
         if fit_base:
@@ -345,16 +354,24 @@ def discover(
         for col, k in enumerate(effects_on):
             mask[k] = 1.0
             select[p + k, p + col] = 1.0
-            w0[p + col] = z_fixed[p + k] if k in added_index else u_start[k]
+            w0[p + col] = z_fixed[p + k] if k in added_index else u_starts[k, start]
             z_fixed[p + k] = 0.0
         return w0, mask, select, z_fixed
 
-    def fit_batch(models, desc):
-        """Fit the models, one after another through the one compiled program."""
+    def fit_batch(specs, desc):
+        """Fit the models (``specs``: arguments of ``model``), one after another through the one compiled
+        program; a model with a new candidate from each of its starts, keeping the lowest misfit."""
         out = []
-        for m in _bar(progress, models, desc):
-            z, r, jac, ok = _fit_model(problem, *(jnp.asarray(a) for a in m), max_steps)
-            out.append((np.asarray(z), np.asarray(r), np.asarray(jac), bool(ok), m))
+        for effects_on, fit_base, z_now in _bar(progress, specs, desc):
+            new = [k for k in effects_on if k not in added_index]
+            best = None
+            for start in range(u_starts.shape[1] if new else 1):
+                m = model(effects_on, fit_base, z_now, start)
+                z, r, jac, ok = _fit_model(problem, *(jnp.asarray(a) for a in m), max_steps)
+                fitted = (np.asarray(z), np.asarray(r), np.asarray(jac), bool(ok), m)
+                if best is None or float(fitted[1] @ fitted[1]) < float(best[1] @ best[1]):
+                    best = fitted
+            out.append(best)
         return out
 
     def summarise(out, sigma, effects):
@@ -364,12 +381,12 @@ def discover(
     z0 = np.concatenate([np.zeros(p), np.zeros(k_all)])
     added, added_index = [], []
     # Round 1: the base model and every candidate on it, with the base parameters refitted jointly.
-    outs = fit_batch([model((), True, z0)] + [model((k,), True, z0) for k in range(k_all)], "round 1")
+    outs = fit_batch([((), True, z0)] + [((k,), True, z0) for k in range(k_all)], "round 1")
     sigma = noise_from_differences(outs[0][1] * 1e-3)
     base_fit = summarise(outs[0], sigma, ())
     fits = {candidates[k]: summarise(outs[k + 1], sigma, (candidates[k],)) for k in range(k_all)}
     # The same candidates with the base parameters held at their given values.
-    held = fit_batch([model((), False, z0)] + [model((k,), False, z0) for k in range(k_all)], "base held")
+    held = fit_batch([((), False, z0)] + [((k,), False, z0) for k in range(k_all)], "base held")
     rss_given = float(np.sum(held[0][1] ** 2))
     held_lr = {candidates[k]: max(rss_given - float(np.sum(held[k + 1][1] ** 2)), 0.0) / (sigma / 1e-3) ** 2
                for k in range(k_all)}
@@ -388,7 +405,7 @@ def discover(
             if not misfit_test(current.residual_m, sigma)["structured"]:
                 break
             others = [k for k in range(k_all) if k not in added_index]
-            outs = fit_batch([model(tuple(added_index) + (k,), True, current.z) for k in others], f"round {round_no + 1}")
+            outs = fit_batch([(tuple(added_index) + (k,), True, current.z) for k in others], f"round {round_no + 1}")
             fits = {candidates[k]: summarise(o, sigma, tuple(added) + (candidates[k],)) for k, o in zip(others, outs)}
         scores = {}
         for name, fitted in fits.items():
