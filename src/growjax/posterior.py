@@ -28,8 +28,8 @@ import optimistix as optx
 
 from growjax import emulator as em
 from growjax import params as gp
-from growjax.emulator import predicted_length
 from growjax.config import Config
+from growjax.emulator import predicted_length
 
 
 @dataclasses.dataclass(frozen=True)
@@ -148,12 +148,17 @@ def sample(
     window=None,
     progress: bool = True,
     emulate: bool | em.Emulator = False,
+    max_tree_depth: int = 10,
+    chain_method: str | None = None,
 ) -> PosteriorResult:
-    """NUTS over the priors and σ given a measured length (m) at ``times`` (s); chains vectorised.
+    """NUTS over the priors and σ given a measured length (m) at ``times`` (s).
 
-    ``emulate``: True (default) samples through an :class:`~growjax.emulator.Emulator` of the
-    model built over the prior box (its validated RMS error joins the noise); an
-    ``Emulator`` is used as given; False runs the model in every gradient (forward mode).
+    ``emulate``: True samples through an :class:`~growjax.emulator.Emulator` of the model built over
+    the prior box (its validated RMS error joins the noise); an ``Emulator`` is used as given; False
+    (default) runs the model in every gradient (forward mode). ``max_tree_depth``: NUTS's cap on the
+    tree (at most 2^depth − 1 leapfrog steps per draw). ``chain_method``: NumPyro's; None runs the chains
+    ``"vectorized"`` through an emulator and ``"sequential"`` through the model, whose vmapped forward-mode
+    solve costs far more than the chains one after another (`benchmarks/nuts_direct.py` measures both).
 
     Returns InferenceData with posterior, pointwise log-likelihood (for LOO), posterior
     predictive of the length, observed data and sample stats, and a summary: per-parameter
@@ -182,14 +187,15 @@ def sample(
     model = functools.partial(growth_model, mean_length=mean, priors=priors, model_error=model_error)
 
     init_values, inverse_mass = precondition(model, priors, mean, y, seed, optimise=emulate is not False)
-    kernel = NUTS(model, dense_mass=dense_mass, target_accept_prob=target_accept,
+    kernel = NUTS(model, dense_mass=dense_mass, target_accept_prob=target_accept, max_tree_depth=max_tree_depth,
                   inverse_mass_matrix=inverse_mass if dense_mass else jnp.diag(inverse_mass),
                   init_strategy=numpyro.infer.init_to_value(values=init_values),
                   # through the ODE, forward mode is 5× cheaper than reverse mode through the scan
                   forward_mode_differentiation=emulate is False)
     mcmc = MCMC(kernel, num_warmup=warmup, num_samples=samples, num_chains=chains,
-                chain_method="vectorized", progress_bar=progress)
-    mcmc.run(jax.random.PRNGKey(seed), jnp.asarray(y), extra_fields=("diverging", "energy"))
+                chain_method=chain_method or ("sequential" if emulate is False else "vectorized"),
+                progress_bar=progress)
+    mcmc.run(jax.random.PRNGKey(seed), jnp.asarray(y), extra_fields=("diverging", "energy", "num_steps"))
     post = mcmc.get_samples(group_by_chain=False)
     pp = Predictive(model, posterior_samples=post)(jax.random.PRNGKey(seed + 1))
     idata = az.from_numpyro(mcmc, posterior_predictive={"length": np.asarray(pp["length"]).reshape(chains, samples, -1)})
