@@ -7,7 +7,9 @@ and the robust against point-estimate tuning of the PID over held-out parameter 
 Target: the measured length of the public experiment (../shared/data/mammobot), else the shipped
 synthetic data. Prints a table and writes benchmarks/results/control.json.
 
-    python benchmarks/control.py [--t-end 10] [--robust-only] [--train-draws 8] [--test-draws 32]
+    python benchmarks/control.py [--t-end 10] [--robust-only | --stepper-only] [--train-draws 8] [--test-draws 32]
+
+``--stepper-only`` runs the two stepper designs alone (→ benchmarks/results/control_stepper.json).
 """
 
 from __future__ import annotations
@@ -39,6 +41,7 @@ def main():
     ap.add_argument("--skip-reference", action="store_true")
     ap.add_argument("--robust-only", action="store_true",
                     help="only the profile, the point and the robust PID tuning and their held-out evaluation")
+    ap.add_argument("--stepper-only", action="store_true", help="only the stepper designs (open-loop and closed-loop)")
     args = ap.parse_args()
     T = args.t_end
     folder = ex.shared_experiment_dir()
@@ -52,6 +55,11 @@ def main():
                                 "peak_pressure_Pa": float(np.nanmax(r.pressure)), **extra}
         print(f"{name:38s} RMSE {1e3 * r.rmse_m:6.3f} mm  peak {np.nanmax(r.pressure) / 1e3:6.1f} kPa  "
               f"limit crossed {r.pressure_limit_crossed}  {extra}", flush=True)
+
+    if args.stepper_only:
+        stepper_methods(record, target, T, ev)
+        write(res, "control_stepper.json")
+        return
 
     # forward drive: open-loop profile
     p = gc.plant_params("forward", target)
@@ -80,8 +88,11 @@ def main():
     if not args.robust_only:
         other_methods(res, record, target, T, ev, p, cfg_ev, lim)
     robust_study(args, res, target, T, p, lim, prof, pid0, tuned)
+    write(res, "control_robust.json" if args.robust_only else "control.json")
+
+
+def write(res, name):
     (HERE / "results").mkdir(exist_ok=True)
-    name = "control_robust.json" if args.robust_only else "control.json"
     (HERE / "results" / name).write_text(json.dumps(res, indent=2, default=float) + "\n")
     print("wrote", HERE / "results" / name)
 
@@ -93,8 +104,12 @@ def other_methods(res, record, target, T, ev, p, cfg_ev, lim):
     res["mpc_step_s_median"] = float(np.median(r.step_s[1:]))
     res["mpc_step_s_p95"] = float(np.percentile(r.step_s[1:], 95))
     record("forward MPC", r, step_ms_median=round(1e3 * res["mpc_step_s_median"], 1))
+    stepper_methods(record, target, T, ev)
 
-    # stepper drive
+
+def stepper_methods(record, target, T, ev):
+    """The open-loop step schedule, the closed-loop full-step controller (both evaluated on ``ev``) and the
+    1/16-microstep controller (fast configuration: microstepping is modelled there only)."""
     pi = gc.plant_params("inverse", target)
     lim_i = gc.limits(pi)
     lead, _, ticks, counts = gc.optimize_steps(pi, target, T)
@@ -108,7 +123,6 @@ def other_methods(res, record, target, T, ev, p, cfg_ev, lim):
     ctrl16, _ = gc.tune_stepper(pi, target, T, microsteps=16)
     r = gc.run_closed_loop(gc.Plant.make(pi, gj.Config(drive="inverse", t1=T), microstep=True), ctrl16, target, T, lim_i)
     record("inverse feedback, 1/16 microstep (fast)", r, rate_Hz=ctrl16.rate, lead_s=ctrl16.lead)
-
 
 
 def robust_study(args, res, target, T, p, lim, prof, pid0, tuned):
