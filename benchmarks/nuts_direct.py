@@ -1,13 +1,15 @@
 """NUTS directly through the model (no emulator) on the public experiment, Lockhart growth law (issue 9).
 
 Run: ``python benchmarks/nuts_direct.py [--chains 4 --warmup 500 --samples 500] [--target-accept 0.98]
-[--max-tree-depth 10] [--out benchmarks/results/nuts_direct.json]``. Reads ``../shared/data/mammobot/experiment.csv`` (the
-shipped synthetic forward experiment when it is absent). Chains run one after another (vmapping the
-forward-mode solve over chains costs far more: ``--vectorised-gradient`` times it); every gradient is a
-forward-mode derivative of the 10 s simulation. The JSON holds the wall time (compile included), the
-time of one gradient (measured apart after compilation), the mean tree size while sampling, R-hat, bulk ESS, divergences and the posterior summary, against the targets
-(10 minutes, R-hat ≤ 1.01, no divergences). The projected sampling time of a full run is
-chains × (warm-up + draws) × mean tree size × gradient time: a short run (``--warmup 30 --samples 30``) profiles it.
+[--max-tree-depth 10] [--vectorised-gradient] [--out benchmarks/results/nuts_direct.json]``.
+
+Reads ``../shared/data/mammobot/experiment.csv`` (the shipped synthetic forward experiment when it is
+absent). Chains run one after another: vmapping the forward-mode solve over chains costs far more
+(``--vectorised-gradient`` times it). The JSON holds the wall time (compile included), the time of one
+gradient (measured apart, after compilation), the mean tree size while sampling, R-hat, bulk ESS,
+divergences and the posterior summary, against the targets (10 minutes, R-hat ≤ 1.01, no divergences).
+A full run's sampling time is chains × (warm-up + draws) × mean tree size × gradient time, so a short
+run (``--chains 1 --warmup 20 --samples 10``) profiles it.
 """
 
 from __future__ import annotations
@@ -49,6 +51,7 @@ def main():
     inputs = ex.to_inputs(exp, "forward", base, cfg.t0, cfg.t1)
     gradient_s = gradient_time(exp, inputs, base, cfg, 1)
     print(f"one gradient of the log density (one chain): {1e3 * gradient_s:.0f} ms", flush=True)
+    gradient_vec_s = None
     if args.vectorised_gradient:
         gradient_vec_s = gradient_time(exp, inputs, base, cfg, args.chains)
         print(f"one vmapped gradient ({args.chains} chains): {1e3 * gradient_vec_s:.0f} ms", flush=True)
@@ -63,7 +66,7 @@ def main():
            "chains": args.chains, "warmup": args.warmup, "samples": args.samples,
            "target_accept": args.target_accept, "max_tree_depth": args.max_tree_depth, "wall_s": res.wall_s,
            "chain_method": "sequential", "gradient_s_one_chain": gradient_s,
-           "gradient_s_vmapped_chains": gradient_vec_s if args.vectorised_gradient else None,
+           "gradient_s_vmapped_chains": gradient_vec_s,
            "tree_size_sampling_mean": steps,
            "projected_sampling_s_4x(500+500)": None if steps is None else 4 * 1000 * steps * gradient_s,
            "rhat_max": s["rhat_max"], "ess_bulk_min": s["ess_bulk_min"], "divergences": s["divergences"],
@@ -91,6 +94,7 @@ def gradient_time(exp, inputs, base, cfg, chains: int) -> float:
     for _ in range(3):
         jax.block_until_ready(grad(z))
     return (time.perf_counter() - start) / 3
+
 
 if __name__ == "__main__":
     main()
