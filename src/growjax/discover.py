@@ -364,14 +364,12 @@ def discover(
         out = []
         for effects_on, fit_base, z_now in _bar(progress, specs, desc):
             new = [k for k in effects_on if k not in added_index]
-            best = None
+            fits = []
             for start in range(u_starts.shape[1] if new else 1):
                 m = model(effects_on, fit_base, z_now, start)
                 z, r, jac, ok = _fit_model(problem, *(jnp.asarray(a) for a in m), max_steps)
-                fitted = (np.asarray(z), np.asarray(r), np.asarray(jac), bool(ok), m)
-                if best is None or float(fitted[1] @ fitted[1]) < float(best[1] @ best[1]):
-                    best = fitted
-            out.append(best)
+                fits.append((np.asarray(z), np.asarray(r), np.asarray(jac), bool(ok), m))
+            out.append(min(fits, key=lambda f: float(f[1] @ f[1])))
         return out
 
     def summarise(out, sigma, effects):
