@@ -119,6 +119,11 @@ def test_gradients_match_central_differences(synthetic_experiment, adjoint):
         atol = np.array([1e-6, 1e-7]) / float(theta0[i])
         assert np.all(np.abs(jac[:, i] - fd) <= 1e-2 * np.abs(fd) + atol), (name, jac[:, i], fd)
         assert abs(jac[0, i]) * float(theta0[i]) > 1e-5  # each matters (> 10 µm over its whole value)
+    if adjoint == "forward":  # at a batch of points (NUTS's vectorised chains) the members step together in one solve
+        other = theta0 * jnp.array([1.2, 0.9, 1.5])
+        batched = np.asarray(jax.jit(jax.vmap(jac_fn))(jnp.stack([theta0, other])))
+        for k, single in enumerate((jac, np.asarray(jax.jit(jac_fn)(other)))):
+            np.testing.assert_allclose(batched[k], single, rtol=1e-4, atol=1e-9)
 
 
 def test_paper_box_corners_run_bad_member_is_isolated_and_paper_rmse_is_reproduced(shared_experiment):

@@ -52,7 +52,7 @@ from scipy import stats
 from growjax import effects as fx
 from growjax import params as gp
 from growjax.config import Config
-from growjax.fit import LM_TOLERANCE, levenberg_marquardt, linearise
+from growjax.fit import LM_TOLERANCE, levenberg_marquardt
 from growjax.simulate import input_breaks, simulate
 
 Z90 = float(stats.norm.ppf(0.95))
@@ -168,32 +168,42 @@ class Candidates(eqx.Module):
         return traj.length, traj.pressure
 
     def residuals(self, w, model):
-        """Residuals (m,) in units of 1 mm at the fitted coordinates w (q,) of ``model`` = (mask, select, z_fixed)."""
+        """(residuals (m,) in units of 1 mm, model pressure (m,) Pa) at the fitted coordinates w (q,) of
+        ``model`` = (mask, select, z_fixed)."""
         mask, select, z_fixed = model
-        length, _ = self.model_length(z_fixed + select @ w, mask)
+        length, pressure = self.model_length(z_fixed + select @ w, mask)
         r = (length - self.length) / 1e-3
-        return jnp.where(jnp.isfinite(r), r, 1e3)  # a failed run is a very bad fit, not a crash
+        return jnp.where(jnp.isfinite(r), r, 1e3), pressure  # a failed run is a very bad fit, not a crash
 
 
 @eqx.filter_jit
 def _linearised(w, problem: Candidates, mask, select, z_fixed):
-    """Residuals r (m,) and Jacobian J (m, q) of one model at its fitted coordinates w (q,)
-    (:func:`growjax.fit.linearise`). Every candidate has the same shapes, so one compiled program serves
-    every fit of :func:`discover` (the candidate is data: ``mask``, ``select``, ``z_fixed``)."""
-    return linearise(lambda x: problem.residuals(x, (mask, select, z_fixed)), w)
+    """Residuals r (m,), Jacobian J (m, q) and the model's pressure (m,) Pa of one model at its fitted
+    coordinates w (q,), in one forward-mode pass (as :func:`growjax.fit.linearise`). Every candidate has the
+    same shapes, so this one compiled program serves every fit of :func:`discover` (the candidate is data:
+    ``mask``, ``select``, ``z_fixed``), and the traces reported come from it too."""
+    units = jnp.eye(w.shape[0], dtype=w.dtype)
+    (r, pressure), (jac_t, _) = jax.vmap(lambda v: jax.jvp(lambda x: problem.residuals(x, (mask, select, z_fixed)),
+                                                           (w,), (v,)),
+                                         out_axes=((None, None), 0))(units)
+    return r, jac_t.T, pressure
 
 
 def _fit_model(problem: Candidates, w0, mask, select, z_fixed, max_steps: int):
     """Levenberg–Marquardt for one model (:func:`growjax.fit.levenberg_marquardt` around :func:`_linearised`):
-    (z (p + K,), residuals (m,), Jacobian (m, q), converged)."""
-    w, _, ok, r, jac = levenberg_marquardt(lambda x: _linearised(x, problem, mask, select, z_fixed), w0, max_steps,
-                                           LM_TOLERANCE)
-    return np.asarray(z_fixed) + np.asarray(select) @ w, r, jac, ok
+    (z (p + K,), residuals (m,), Jacobian (m, q), converged, pressure (m,) Pa at the optimum)."""
+    pressures = {}
 
+    def linearised(x):
+        r, jac, pressure = _linearised(x, problem, mask, select, z_fixed)
+        pressures[np.asarray(x).tobytes()] = pressure
+        return r, jac
 
-@eqx.filter_jit
-def _trace(z, problem: Candidates, mask):
-    return problem.model_length(z, mask)
+    w, _, ok, r, jac = levenberg_marquardt(linearised, w0, max_steps, LM_TOLERANCE)
+    pressure = pressures.get(np.asarray(jnp.asarray(w)).tobytes())
+    if pressure is None:  # not expected: the optimum is always an evaluated point
+        pressure = _linearised(jnp.asarray(w), problem, mask, select, z_fixed)[2]
+    return np.asarray(z_fixed) + np.asarray(select) @ w, r, jac, ok, np.asarray(pressure)
 
 
 def make_candidates(times, length, inputs, effect_names: Sequence[str], base: gp.Parameters,
@@ -367,13 +377,13 @@ def discover(
             fits = []
             for start in range(u_starts.shape[1] if new else 1):
                 m = model(effects_on, fit_base, z_now, start)
-                z, r, jac, ok = _fit_model(problem, *(jnp.asarray(a) for a in m), max_steps)
-                fits.append((np.asarray(z), np.asarray(r), np.asarray(jac), bool(ok), m))
+                z, r, jac, ok, pressure = _fit_model(problem, *(jnp.asarray(a) for a in m), max_steps)
+                fits.append((np.asarray(z), np.asarray(r), np.asarray(jac), bool(ok), m, pressure))
             out.append(min(fits, key=lambda f: float(f[1] @ f[1])))
         return out
 
     def summarise(out, sigma, effects):
-        z, r, jac, ok, (_, mask, select, _) = out
+        z, r, jac, ok, (_, mask, select, _), _ = out
         return _summarise(problem, z, r, jac, mask, select, sigma, ok, effects)
 
     z0 = np.concatenate([np.zeros(p), np.zeros(k_all)])
@@ -392,9 +402,8 @@ def discover(
     held_trades = {candidates[k]: (float(np.sum(held[k + 1][1] ** 2)) - base_fit.rss_mm2) / (sigma / 1e-3) ** 2
                    < threshold for k in range(k_all)}
 
-    base_z = np.asarray(base_fit.z)
-    before_trace, pressure_trace = (np.asarray(a) for a in _trace(jnp.asarray(base_z), problem,
-                                                                  jnp.asarray(np.zeros(k_all))))
+    # The model's traces at the data's times: the length is the data plus the residual, the pressure comes with the fit.
+    before_trace, pressure_trace = length + base_fit.residual_m, outs[0][5]
     misfit_before = misfit_test(base_fit.residual_m, sigma)
     current = base_fit
     evidence, confounded = [], {}
@@ -449,7 +458,7 @@ def discover(
         current = fits[best]
 
     misfit_after = misfit_test(current.residual_m, sigma)
-    after_trace = np.asarray(_trace(jnp.asarray(current.z), problem, jnp.asarray(current.mask))[0])
+    after_trace = length + current.residual_m
     if added and not misfit_after["structured"]:
         effect = added[0]
     elif added:

@@ -315,17 +315,83 @@ def _primal(run, ts, y0, theta, outputs):
     return Run({k: v + nan for k, v in values.items()}, run.y_final[0], run.t_final), block, saved
 
 
-def _integrate_batch(params, inputs, config: Config, ts, jump_ts, step_ts):
-    """The plain solve of a batch (every argument with a leading axis B) in one loop: (Run, status, steps),
-    each with the leading axis B."""
+def _sensitivities(params, inputs, config: Config, jump_ts, step_ts, directions):
+    """One member's sensitivity problem along ``directions`` = (parameter tangents, input tangents), each leaf
+    with a leading axis p: (θ_s = (θ, θ moved by ±εd (2p, …), ±ε (2p,), 1/2ε (p,)), sizes |d|/|θ| (p,),
+    S0 (p, n)). See :func:`_integrate`."""
+    d_params, d_inputs = directions
+    theta = _member(params, inputs, config, jump_ts, step_ts)[0]
+    size = jax.vmap(lambda dp, di: _relative_size((params, inputs), (dp, di)))(d_params, d_inputs)  # (p,)
+    step = jnp.where(size > 0, jnp.finfo(jnp.result_type(float)).eps ** (1 / 3) / jnp.where(size > 0, size, 1.0), 0.0)
+    signed = jnp.concatenate([step, -step])  # (2p,): central differences
+    both = jax.tree_util.tree_map(lambda d: jnp.concatenate([d, d]), (d_params, d_inputs))
+    moved = jax.vmap(lambda dp, di, e: _member(*_shifted((params, inputs), (dp, di), e), config, jump_ts,
+                                               step_ts)[0])(*both, signed)
+    quotient = jnp.where(step > 0, 0.5 / jnp.where(step > 0, step, 1.0), 0.0)
+    theta_s = (theta, moved, signed, quotient)
+    s0 = _central(quotient, jax.vmap(lambda th: initial_state(th[0], config))(moved))
+    return theta_s, size, s0
+
+
+def _central(quotient, values):
+    """(values at θ + εd − values at θ − εd)/2ε: (2p, …) → (p, …)."""
+    n_dir = quotient.shape[0]
+    return (values[:n_dir] - values[n_dir:]) * quotient.reshape((-1,) + (1,) * (values.ndim - 1))
+
+
+def _sensitivity_callbacks(config: Config):
+    """(tangent field, output tangents) over θ_s from :func:`_sensitivities`: central difference quotients of
+    the primal field and outputs along every direction, in one batched evaluation."""
+    field, outputs, _ = _callbacks(config)
+
+    def tangent_field(t, y, sens, th):
+        theta, moved, signed, quotient = th
+        shifted = jax.vmap(lambda s, e, m: field(t, y + e * s, m))(jnp.concatenate([sens, sens]), signed, moved)
+        return field(t, y, theta), _central(quotient, shifted)
+
+    def output_tangents(t, y, sens, th):
+        _, moved, signed, quotient = th
+        shifted = jax.vmap(lambda s, e, m: outputs(t, y + e * s, m))(jnp.concatenate([sens, sens]), signed, moved)
+        return {k: _central(quotient, shifted[k]) for k in OUTPUTS}
+
+    return tangent_field, output_tangents
+
+
+def _tangent_run(run, ts, saved, block, th, output_tangents):
+    """Tangent :class:`Run` (outputs field → (p, T)) of one member from its state block on ts (T, 1 + p, n)."""
+    d_values = jax.vmap(output_tangents, in_axes=(0, 0, 0, None), out_axes=1)(ts, saved, block[:, 1:], th)
+    # A tangent solve that stopped early (step budget) has no sensitivities past its end: NaN, never frozen.
+    reached = (ts <= run.t_final) | (run.status == 1)
+    d_values = {k: jnp.where(reached, v, jnp.nan) for k, v in d_values.items()}
+    return Run(d_values, run.y_final[1:], jnp.zeros(run.y_final.shape[0] - 1))
+
+
+def _integrate_batch(params, inputs, config: Config, ts, jump_ts, step_ts, directions=None):
+    """The solve of a batch (every argument with a leading axis B; ``directions`` leaves (B, p, …)) in one loop:
+    (Run, tangent Run or None, status, steps), each with the leading axis B."""
     rtol, atol = config.tolerances
     field, outputs, event = _callbacks(config)
     theta, y0, breaks, jumps = jax.vmap(lambda p, i, j, s: _member(p, i, config, j, s))(params, inputs, jump_ts, step_ts)
-    run = integrate(field, y0, config.t0, config.t1, args=theta, breaks=breaks, jumps=jumps, rtol=rtol, atol=atol,
-                    max_steps=config.step_budget, event=event, batched=True)
+    common = {"breaks": breaks, "jumps": jumps, "rtol": rtol, "atol": atol, "event": event, "batched": True}
+    if directions is None:
+        run = integrate(field, y0, config.t0, config.t1, args=theta, max_steps=config.step_budget, **common)
+        primal = jax.vmap(lambda r, t, y, th: _primal(r, t, y, th, outputs)[0])(run, ts, y0, theta)
+        return primal, None, run.status, run.steps.count
+    theta_s, size, s0 = jax.vmap(lambda p, i, j, s, d: _sensitivities(p, i, config, j, s, d))(
+        params, inputs, jump_ts, step_ts, directions)
+    tangent_field, output_tangents = _sensitivity_callbacks(config)
+    s_rtol, s_atol = max(rtol, SENSITIVITY_TOL_FLOOR), max(atol, SENSITIVITY_TOL_FLOOR)
+    run = integrate(lambda t, y, th: field(t, y, th[0]), y0, config.t0, config.t1, args=theta_s,
+                    tangent_field=tangent_field, s0=s0, s_rtol=s_rtol, s_atol=s_atol * jnp.maximum(size, 1e-12),
+                    max_steps=2 * config.step_budget,
+                    **{**common, "event": None if event is None else (lambda t, y, th: event(t, y, th[0]))})
 
-    primal = jax.vmap(lambda r, t, y, th: _primal(r, t, y, th, outputs)[0])(run, ts, y0, theta)
-    return primal, run.status, run.steps.count
+    def member(r, t, y, th):
+        primal, block, saved = _primal(r, t, y, th[0], outputs)
+        return primal, _tangent_run(r, t, saved, block, th, output_tangents)
+
+    primal, tangent = jax.vmap(member)(run, ts, y0, theta_s)
+    return primal, tangent, run.status, run.steps.count
 
 
 def _integrate(params, inputs, config: Config, ts, jump_ts, step_ts, directions=None):
@@ -342,47 +408,21 @@ def _integrate(params, inputs, config: Config, ts, jump_ts, step_ts, directions=
     rtol, atol = config.tolerances
     field, outputs, event = _callbacks(config)
     theta, y0, breaks, jumps = _member(params, inputs, config, jump_ts, step_ts)
-    common = dict(args=theta, breaks=breaks, jumps=jumps, rtol=rtol, atol=atol, max_steps=config.step_budget,
-                  event=event)
+    common = {"breaks": breaks, "jumps": jumps, "rtol": rtol, "atol": atol, "max_steps": config.step_budget}
     if directions is None:
-        run = integrate(field, y0, config.t0, config.t1, **common)
-    else:
-        d_params, d_inputs = directions
-        size = jax.vmap(lambda dp, di: _relative_size((params, inputs), (dp, di)))(d_params, d_inputs)  # (p,)
-        step = jnp.where(size > 0, jnp.finfo(y0.dtype).eps ** (1 / 3) / jnp.where(size > 0, size, 1.0), 0.0)
-        signed = jnp.concatenate([step, -step])  # (2p,): central differences
-        both = jax.tree_util.tree_map(lambda d: jnp.concatenate([d, d]), (d_params, d_inputs))
-        moved = jax.vmap(lambda dp, di, e: _member(*_shifted((params, inputs), (dp, di), e), config, jump_ts,
-                                                   step_ts)[0])(*both, signed)
-        quotient = jnp.where(step > 0, 0.5 / jnp.where(step > 0, step, 1.0), 0.0)[:, None]
-        n_dir = step.shape[0]
-
-        def central(values):  # (2p, …) at θ ± εd → (p, …)
-            return (values[:n_dir] - values[n_dir:]) * quotient.reshape((-1,) + (1,) * (values.ndim - 1))
-
-        s0 = central(jax.vmap(lambda th: initial_state(th[0], config))(moved))
-
-        def tangent_field(t, y, sens, th):
-            shifted = jax.vmap(lambda s, e, m: field(t, y + e * s, m))(jnp.concatenate([sens, sens]), signed, moved)
-            return field(t, y, th), central(shifted)
-
-        # The difference quotients carry roundoff of ~1e-10 relative: tighter sensitivity control only burns steps.
-        s_rtol, s_atol = max(rtol, SENSITIVITY_TOL_FLOOR), max(atol, SENSITIVITY_TOL_FLOOR)
-        run = integrate(field, y0, config.t0, config.t1, tangent_field=tangent_field, s0=s0, s_rtol=s_rtol,
-                        s_atol=s_atol * jnp.maximum(size, 1e-12), **{**common, "max_steps": 2 * config.step_budget})
+        run = integrate(field, y0, config.t0, config.t1, args=theta, event=event, **common)
+        primal = _primal(run, ts, y0, theta, outputs)[0]
+        return primal, None, run.status, run.steps.count
+    theta_s, size, s0 = _sensitivities(params, inputs, config, jump_ts, step_ts, directions)
+    tangent_field, output_tangents = _sensitivity_callbacks(config)
+    # The difference quotients carry roundoff of ~1e-10 relative: tighter sensitivity control only burns steps.
+    s_rtol, s_atol = max(rtol, SENSITIVITY_TOL_FLOOR), max(atol, SENSITIVITY_TOL_FLOOR)
+    run = integrate(lambda t, y, th: field(t, y, th[0]), y0, config.t0, config.t1, args=theta_s,
+                    tangent_field=tangent_field, s0=s0, s_rtol=s_rtol, s_atol=s_atol * jnp.maximum(size, 1e-12),
+                    event=None if event is None else (lambda t, y, th: event(t, y, th[0])),
+                    **{**common, "max_steps": 2 * config.step_budget})
     primal, block, saved = _primal(run, ts, y0, theta, outputs)
-    tangent = None
-    if directions is not None:
-        def output_tangents(t, y, sens):
-            shifted = jax.vmap(lambda s, e, m: outputs(t, y + e * s, m))(jnp.concatenate([sens, sens]), signed, moved)
-            return {k: central(shifted[k]) for k in OUTPUTS}
-
-        d_values = jax.vmap(output_tangents, out_axes=1)(ts, saved, block[:, 1:])  # field → (p, T)
-        # A tangent solve that stopped early (step budget) has no sensitivities past its end: NaN, never frozen.
-        reached = (ts <= run.t_final) | (run.status == 1)
-        d_values = {k: jnp.where(reached, v, jnp.nan) for k, v in d_values.items()}
-        tangent = Run(d_values, run.y_final[1:], jnp.zeros(run.y_final.shape[0] - 1))
-    return primal, tangent, run.status, run.steps.count
+    return primal, _tangent_run(run, ts, saved, block, theta_s, output_tangents), run.status, run.steps.count
 
 
 @functools.cache
@@ -402,7 +442,8 @@ def _plain_solver(config: Config):
             return x if batched else jnp.broadcast_to(x, (axis_size,) + jnp.shape(x))
 
         args = jax.tree_util.tree_map(spread, args, tuple(in_batched))
-        out = _integrate_batch(*args[:2], config, *args[2:])
+        primal, _, status, n_steps = _integrate_batch(*args[:2], config, *args[2:])
+        out = (primal, status, n_steps)
         return out, jax.tree_util.tree_map(lambda _: True, out)
 
     return solver
@@ -420,9 +461,12 @@ def _tangent_solver(config: Config):
     @solver.def_vmap
     def merge_directions(axis_size, in_batched, params, inputs, ts, jump_ts, step_ts, d_params, d_inputs):
         args = (params, inputs, ts, jump_ts, step_ts, d_params, d_inputs)
-        if any(jax.tree_util.tree_leaves(in_batched[:5])):  # the point itself is batched: a solve per member
-            axes = jax.tree_util.tree_map(lambda b: 0 if b else None, in_batched)
-            out = jax.vmap(plain, in_axes=axes)(*args)
+        if any(jax.tree_util.tree_leaves(in_batched[:5])):  # the point itself is batched: members stepped together
+            def spread(x, batched):
+                return x if batched else jnp.broadcast_to(x, (axis_size,) + jnp.shape(x))
+
+            args = jax.tree_util.tree_map(spread, args, tuple(in_batched))
+            out = _integrate_batch(*args[:2], config, *args[2:5], directions=args[5:])
             return out, jax.tree_util.tree_map(lambda _: True, out)
 
         def flat(x, batched):  # (axis_size, p, …) → (axis_size·p, …)

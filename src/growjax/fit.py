@@ -213,7 +213,8 @@ def fit(
     """Fit ``free`` parameters to a measured length (m) at ``times`` (s) (and ``pressure``, Pa, if given).
 
     Starts: the ``n_starts`` best of a ``sweep_n``-point Latin hypercube over each parameter's
-    :func:`default_range`. Returns the best optimum over the starts.
+    :func:`default_range` (``sweep_n=0``: one start, at the values in ``base``). Returns the best optimum
+    over the starts.
 
     Intervals: Gauss–Newton s²(JᵀJ)⁻¹ for the measurement noise, plus the propagated model error:
     a smooth error δ(t) of the configuration against the reference (Gaussian process, sd
@@ -229,23 +230,29 @@ def fit(
         raise ValueError(f"fitted parameters must be positive, got {dict(zip(names, refs))}")
     start_clock = time.perf_counter()
 
-    dims = [sw.Dimension(n, *default_range(base, n), log=True) for n in names]
-    measured = (np.asarray(times), np.asarray(length))
-    scout = sw.lhs_sweep(sweep_n, base, inputs, config, dims, seed=seed, measured=measured, window=window)
-    order = [i for i in np.argsort(np.nan_to_num(scout.rmse, nan=np.inf)) if scout.status[i] == OK][:n_starts]
-    if not order:
-        raise RuntimeError("no start of the multi-start sweep simulated successfully")
+    if sweep_n < 0 or n_starts < 1:
+        raise ValueError(f"sweep_n must be >= 0 and n_starts >= 1, got {sweep_n} and {n_starts}")
+    if sweep_n == 0:  # no scouting sweep: start at the given values
+        start_values, order = refs[None, :], [0]
+    else:
+        dims = [sw.Dimension(n, *default_range(base, n), log=True) for n in names]
+        measured = (np.asarray(times), np.asarray(length))
+        scout = sw.lhs_sweep(sweep_n, base, inputs, config, dims, seed=seed, measured=measured, window=window)
+        start_values = scout.values
+        order = [i for i in np.argsort(np.nan_to_num(scout.rmse, nan=np.inf)) if scout.status[i] == OK][:n_starts]
+        if not order:
+            raise RuntimeError("no start of the multi-start sweep simulated successfully")
 
     problem = make_problem(base, names, inputs, config, times, length, pressure, window,
                            sigma_length, sigma_pressure)
-    z0s = jnp.log(jnp.asarray(scout.values[order]) / refs)
+    z0s = jnp.log(jnp.asarray(start_values[order]) / refs)
     # One start after another through one compiled solver: under vmap every start would pay for the
     # slowest one's iterations and for both branches of each accept/reject decision.
     # Stop when a step moves ln θ by < 1e-6 and the cost by < 1e-6 of itself (far inside any interval), or at
     # the solver's noise floor in the residuals (see levenberg_marquardt: tighter only burns iterations).
     solved = [levenberg_marquardt(lambda z: _linearised(z, problem), z0, max_steps, LM_TOLERANCE) for z0 in z0s]
     zs, costs, oks = (np.asarray([s[k] for s in solved]) for k in range(3))
-    starts = [{"start": dict(zip(names, map(float, scout.values[i]))),
+    starts = [{"start": dict(zip(names, map(float, start_values[i]))),
                "estimate": dict(zip(names, map(float, refs * np.exp(zs[k])))),
                "cost": float(costs[k]), "converged": bool(oks[k])} for k, i in enumerate(order)]
     k_best = int(np.argmin(costs))

@@ -157,8 +157,9 @@ def sample(
     the prior box (its validated RMS error joins the noise); an ``Emulator`` is used as given; False
     (default) runs the model in every gradient (forward mode). ``max_tree_depth``: NUTS's cap on the
     tree (at most 2^depth − 1 leapfrog steps per draw). ``chain_method``: NumPyro's; None runs the chains
-    ``"vectorized"`` through an emulator and ``"sequential"`` through the model, whose vmapped forward-mode
-    solve costs far more than the chains one after another (`benchmarks/nuts_direct.py` measures both).
+    ``"vectorized"`` through an emulator and ``"sequential"`` through the model: there the vmapped
+    forward-mode solve (members stepped together) costs what the chains cost one after another, and the
+    chains' trees, built in lockstep, would wait for the deepest (`benchmarks/nuts_direct.py` measures both).
 
     Returns InferenceData with posterior, pointwise log-likelihood (for LOO), posterior
     predictive of the length, observed data and sample stats, and a summary: per-parameter
