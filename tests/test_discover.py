@@ -38,6 +38,16 @@ def test_phases_split_a_pulse_into_growing_holding_and_retracting():
     assert masks["pressure_rising"][20] and masks["pressure_falling"][200]
 
 
+def test_a_correlated_effect_is_determined_only_when_its_interval_pins_its_size():
+    """The growth-rate cap recovered as 353 s/m (interval within a factor 2) is named despite its correlation with
+    Y; the public pull's interval 0.0038–0.0156 N around 0.0097 N is not; an interval touching 0 never is."""
+    assert gd._pinned(353.0, (320.0, 390.0))
+    assert gd._pinned(-8.7e-5, (-1.2e-4, -6e-5))  # a signed effect, on one side of 0
+    assert not gd._pinned(0.0097, (0.0038, 0.0156))
+    assert not gd._pinned(1.0, (0.0, 1.5))
+    assert not gd._pinned(-8.7e-5, (-1.7e-4, 3e-6))
+
+
 def test_candidate_parameters_are_named_with_units_and_ranges():
     for name in gj.effects.CATALOGUE:
         qualified, unit, (lo, hi) = gd.candidate_parameter(name)

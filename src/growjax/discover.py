@@ -18,10 +18,14 @@ The workflow (:func:`discover`), on a measured length L(t):
    ``false_positive_rate`` (Bonferroni). A Laplace estimate of the log Bayes factor against a uniform
    prior on the effect's physical range is reported beside it (``log_bayes_factor``).
 4. **Confounding.** A candidate whose η correlates with a base parameter beyond
-   ``confounding_correlation`` (0.99: the base parameter inflates its variance 50-fold) in the joint fit is reported ``confounded`` with that parameter if it
-   clears the threshold, or if, with the base parameters held at their given values, it alone explains
-   the data as well as refitting them does (within the threshold) while the given values themselves
-   fit significantly worse: the effect and the base parameter trade one for the other.
+   ``confounding_correlation`` (0.99: the base parameter inflates its variance 50-fold) in the joint fit is
+   reported ``confounded`` with that parameter if it clears the threshold, or if, with the base parameters
+   held at their given values, it alone explains the data as well
+   as refitting them does (within the threshold) while the given values themselves fit significantly worse: the effect and the base parameter
+   trade one for the other. A correlated candidate that clears the threshold with its magnitude *pinned*
+   (its 90 % interval, the correlation's inflation included, within a factor ``PINNED_FACTOR`` of the
+   estimate) is not confounded: refitting the base did not absorb it, and the data fix its size. Its
+   correlation is still reported.
 5. **Rivals.** When another candidate also clears the threshold and its 2ΔlogL falls short of the best's by
    less than the threshold, the data do not tell the two effects apart: neither is added, both are reported
    ``confounded`` (``rival_effects``), with the measurements that would separate them.
@@ -57,6 +61,7 @@ from growjax.simulate import input_breaks, simulate
 
 Z90 = float(stats.norm.ppf(0.95))
 START_FRACTIONS = (0.02, 0.06, 0.2)  # starts of a new effect parameter, as fractions of its range's top
+PINNED_FACTOR = 2.0  # a correlated effect whose 90 % interval lies within [η/2, 2η] is determined, not confounded
 PHASES = ("growing", "holding", "retracting", "pressure_rising", "pressure_falling")
 
 
@@ -353,9 +358,9 @@ def discover(
                          for f, u_signed in zip(fractions, (0.0, -0.5, 0.5))], axis=1)
     threshold = float(stats.chi2.isf(2.0 * false_positive_rate / k_all, df=1))  # ½χ²₀ + ½χ²₁, Bonferroni
 
-    def model(effects_on: Sequence[int], fit_base: bool, z_now, start: int = 0):
+    def model(effects_on: Sequence[int], fit_base: bool, z_now, start: int | None = 0):
         """(w0 (q,), mask (K,), select (p + K, q), z_fixed (p + K,)) of a model with ``effects_on`` fitted, a new
-        candidate starting from its ``start``-th start."""
+        candidate starting from its ``start``-th start (None: from its value in ``z_now``)."""
         mask, select = np.zeros(k_all), np.zeros((p + k_all, q))
         z_fixed, w0 = np.array(z_now, float), np.zeros(q)
         if fit_base:
@@ -364,18 +369,19 @@ def discover(
         for col, k in enumerate(effects_on):
             mask[k] = 1.0
             select[p + k, p + col] = 1.0
-            w0[p + col] = z_fixed[p + k] if k in added_index else u_starts[k, start]
+            w0[p + col] = z_fixed[p + k] if (k in added_index or start is None) else u_starts[k, start]
             z_fixed[p + k] = 0.0
         return w0, mask, select, z_fixed
 
-    def fit_batch(specs, desc):
+    def fit_batch(specs, desc, warm=()):
         """Fit the models (``specs``: arguments of ``model``), one after another through the one compiled
-        program; a model with a new candidate from each of its starts, keeping the lowest misfit."""
+        program; a model with a new candidate from each of its starts, keeping the lowest misfit (a model whose
+        index is in ``warm``: from its value in the spec's ``z_now`` only)."""
         out = []
-        for effects_on, fit_base, z_now in _bar(progress, specs, desc):
+        for i, (effects_on, fit_base, z_now) in enumerate(_bar(progress, specs, desc)):
             new = [k for k in effects_on if k not in added_index]
             fits = []
-            for start in range(u_starts.shape[1] if new else 1):
+            for start in ([None] if i in warm else range(u_starts.shape[1] if new else 1)):
                 m = model(effects_on, fit_base, z_now, start)
                 z, r, jac, ok, pressure = _fit_model(problem, *(jnp.asarray(a) for a in m), max_steps)
                 fits.append((np.asarray(z), np.asarray(r), np.asarray(jac), bool(ok), m, pressure))
@@ -393,8 +399,17 @@ def discover(
     sigma = noise_from_differences(outs[0][1] * 1e-3)
     base_fit = summarise(outs[0], sigma, ())
     fits = {candidates[k]: summarise(outs[k + 1], sigma, (candidates[k],)) for k in range(k_all)}
-    # The same candidates with the base parameters held at their given values.
-    held = fit_batch([((), False, z0)] + [((k,), False, z0) for k in range(k_all)], "base held")
+    # The same candidates with the base parameters held at their given values. The fit decides confounding only
+    # for a candidate correlated with a base parameter beyond the limit: from every start. Any other is fitted once
+    # (its value reported), from its joint fit's value or the first start where that is smaller (near η = 0
+    # softplus has no slope to climb).
+    u_joint = np.array([outs[k + 1][0][p + k] for k in range(k_all)])
+    u_held = np.where(np.asarray(problem.signed), u_joint, np.maximum(u_joint, u_starts[:, 0]))
+    correlated = [max(map(abs, fits[candidates[k]].correlation.get(candidate_parameter(candidates[k])[0], {}).values()),
+                      default=0.0) > confounding_correlation for k in range(k_all)]
+    held = fit_batch([((), False, z0)] + [((k,), False, np.where(np.arange(p + k_all) == p + k, u_held[k], z0))
+                                          for k in range(k_all)], "base held",
+                     warm={k + 1 for k in range(k_all) if not correlated[k]})
     rss_given = float(np.sum(held[0][1] ** 2))
     held_lr = {candidates[k]: max(rss_given - float(np.sum(held[k + 1][1] ** 2)), 0.0) / (sigma / 1e-3) ** 2
                for k in range(k_all)}
@@ -423,6 +438,7 @@ def discover(
             worst, c = max(corr.items(), key=lambda kv: abs(kv[1]), default=(None, 0.0))
             h = held_lr[name] if round_no == 0 else 0.0
             trades = round_no == 0 and h > threshold and held_trades[name]
+            pinned = lr > threshold and _pinned(fitted.estimate[qname], fitted.interval_90[qname])
             scores[name] = {
                 "parameter": qname, "unit": unit, "estimate": fitted.estimate[qname],
                 "interval_90": fitted.interval_90[qname], "lr_statistic": lr,
@@ -430,8 +446,8 @@ def discover(
                 "log_bayes_factor": 0.5 * lr + math.log(math.sqrt(2 * math.pi) * sd / (rng[1] - max(rng[0], 0.0))),
                 "rmse_m": float(np.sqrt(np.mean(fitted.residual_m**2))),
                 "lr_statistic_base_held": h, "correlation_with_base": corr,
-                "clears_threshold": bool(lr > threshold),
-                "confounded": bool(abs(c) > confounding_correlation and (lr > threshold or trades)),
+                "clears_threshold": bool(lr > threshold), "pinned": bool(pinned),
+                "confounded": bool(abs(c) > confounding_correlation and (lr > threshold or trades) and not pinned),
             }
             if scores[name]["confounded"]:
                 confounded[name] = {"parameter": worst, "correlation": c, "lr_statistic": lr,
@@ -480,6 +496,13 @@ def discover(
         separating_measurement={n: SEPARATING.get(n, "") for n in confounded},
         wall_s=time.perf_counter() - start, times=times, measured=length, before=before_trace, after=after_trace,
     )
+
+
+def _pinned(estimate: float, interval) -> bool:
+    """Whether a 90 % interval excludes zero and lies within a factor :data:`PINNED_FACTOR` of the estimate."""
+    lo, hi = interval
+    size = abs(estimate)
+    return lo * hi > 0 and min(abs(lo), abs(hi)) >= size / PINNED_FACTOR and max(abs(lo), abs(hi)) <= PINNED_FACTOR * size
 
 
 def _bar(enabled: bool, items, desc: str):
