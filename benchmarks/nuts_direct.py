@@ -1,7 +1,7 @@
 """NUTS directly through the model (no emulator) on the public experiment, Lockhart growth law (issue 9).
 
 Run: ``python benchmarks/nuts_direct.py [--chains 4 --warmup 500 --samples 500] [--target-accept 0.98]
-[--max-tree-depth 10] [--vectorised-gradient] [--out benchmarks/results/nuts_direct.json]``.
+[--max-tree-depth 10] [--vectorised-gradient] [--gradients-only] [--out benchmarks/results/nuts_direct.json]``.
 
 Reads ``../shared/data/mammobot/experiment.csv`` (the shipped synthetic forward experiment when it is
 absent). Chains run one after another: the forward-mode solve vmapped over chains costs about as much
@@ -43,6 +43,7 @@ def main():
     parser.add_argument("--max-tree-depth", type=int, default=10)
     parser.add_argument("--vectorised-gradient", action="store_true",
                         help="also time the gradient vmapped over the chains (members stepped together in one solve)")
+    parser.add_argument("--gradients-only", action="store_true", help="time the gradients and stop (no sampling)")
     parser.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "nuts_direct.json"))
     args = parser.parse_args()
     folder = ex.shared_experiment_dir()
@@ -56,6 +57,8 @@ def main():
     if args.vectorised_gradient:
         gradient_vec_s = gradient_time(exp, inputs, base, cfg, args.chains)
         print(f"one vmapped gradient ({args.chains} chains): {1e3 * gradient_vec_s:.0f} ms", flush=True)
+    if args.gradients_only:
+        return
     res = gpost.sample(exp.time, exp["robot_length_m"], inputs, base, cfg, priors=gpost.lockhart_priors(),
                        chains=args.chains, warmup=args.warmup, samples=args.samples, progress=True,
                        target_accept=args.target_accept, emulate=False, max_tree_depth=args.max_tree_depth,

@@ -403,7 +403,7 @@ def _integrate(params, inputs, config: Config, ts, jump_ts, step_ts, directions=
     default), (f(y + εS, θ + εd) − f(y − εS, θ − εd))/2ε, with ε fixed per direction so that the
     parameters move by (machine ε)^⅓ of themselves: one batched evaluation of the primal field
     serves all directions. (Forward-mode ``jvp`` batched over directions is exact but XLA:CPU
-    miscompiles it inside this field; see tests/test_gradients.py.)
+    miscompiled it inside this field when this solver was written.)
     """
     rtol, atol = config.tolerances
     field, outputs, event = _callbacks(config)
