@@ -89,6 +89,11 @@ class Effect(eqx.Module):
         """Typical magnitude of each state (for error control), in its SI unit."""
         return ()
 
+    def present(self) -> jax.Array:
+        """Whether any parameter of the effect is nonzero (bool array; every parameter at 0 means absent)."""
+        leaves = [jnp.any(jnp.asarray(x) != 0) for x in jax.tree_util.tree_leaves(self)]
+        return jnp.any(jnp.stack(leaves)) if leaves else jnp.asarray(False)
+
     def apply(self, params):
         """The parameters as changed by this effect (default: unchanged)."""
         return params

@@ -80,6 +80,7 @@ class Prepared(eqx.Module):
     valves: ValveNetwork
     rod: RodBalance
     line_resistance: jax.Array  # Pa·s/m³
+    newton: jax.Array | None  # bool: a velocity-dependent force is present (None: decided statically)
     inflow_iterations: int = eqx.field(static=True)
 
 
@@ -89,10 +90,16 @@ def prepare(params: Parameters, config: Config) -> Prepared:
     crack = robot.yield_pressure if params.check_valve.crack_pressure is None else params.check_valve.crack_pressure
     valves = valve_network(params.check_valve, params.valve, params.fluid, crack, config.crack_width, config.switch_width)
     rod = rod_balance(robot, (config.velocity_eps, config.stop_width))
-    # The published law's velocity term is ~1e-10 of the rod forces: one fixed-point pass is exact.
-    quasi_static = robot.growth_law == "reference" and not any(e.velocity_dependent for e in params.effects)
+    # The published law's velocity term is ~1e-10 of the rod forces: one fixed-point pass is exact, also while
+    # every velocity-dependent effect is at zero (decided at run time: a superset model's candidates switched off,
+    # where the Newton solve would triple the cost of every field evaluation).
+    velocity_effects = [e for e in params.effects if e.velocity_dependent]
+    quasi_static = robot.growth_law == "reference" and not velocity_effects
     iterations = 0 if quasi_static else INFLOW_MAX_ITERATIONS
-    return Prepared(storage_law(params.fluid), valves, rod, line_resistance(params), iterations)
+    newton = None
+    if robot.growth_law == "reference" and velocity_effects:
+        newton = jnp.any(jnp.stack([e.present() for e in velocity_effects]))
+    return Prepared(storage_law(params.fluid), valves, rod, line_resistance(params), newton, iterations)
 
 
 # -- the lumped chamber ----------------------------------------------------------------------------------
@@ -147,7 +154,8 @@ def _robot_side(params, inputs, prep, t, pressure, displacement, effect_states):
         return fx.rod_force(params.effects, effect_states, Rod(t, pressure, v, length, catheter,
                                                                params.robot.inner_radius, prep.rod.area))
 
-    q, p_r = inflow(prep.rod, prep.valves, pressure, length, catheter, effect_force, prep.inflow_iterations)
+    q, p_r = inflow(prep.rod, prep.valves, pressure, length, catheter, effect_force, prep.inflow_iterations,
+                    prep.newton)
     return q, p_r, length
 
 
@@ -328,9 +336,21 @@ def _sensitivities(params, inputs, config: Config, jump_ts, step_ts, directions)
     moved = jax.vmap(lambda dp, di, e: _member(*_shifted((params, inputs), (dp, di), e), config, jump_ts,
                                                step_ts)[0])(*both, signed)
     quotient = jnp.where(step > 0, 0.5 / jnp.where(step > 0, step, 1.0), 0.0)
+    if theta[2].newton is not None:  # Newton where the point or any shifted one needs it: one flag for all of them
+        newton = theta[2].newton | jnp.any(moved[2].newton)
+        theta = eqx.tree_at(lambda th: th[2].newton, theta, newton)
+        moved = eqx.tree_at(lambda th: th[2].newton, moved, newton)
     theta_s = (theta, moved, signed, quotient)
-    s0 = _central(quotient, jax.vmap(lambda th: initial_state(th[0], config))(moved))
+    s0 = _central(quotient, jax.vmap(lambda p: initial_state(p, config))(moved[0]))
     return theta_s, size, s0
+
+
+def _moved_axes(moved):
+    """``vmap`` axes of the shifted members: 0, except for the Newton flag they share (None)."""
+    axes = jax.tree_util.tree_map(lambda _: 0, moved)
+    if moved[2].newton is not None:
+        axes = eqx.tree_at(lambda th: th[2].newton, axes, None)
+    return axes
 
 
 def _central(quotient, values):
@@ -346,12 +366,14 @@ def _sensitivity_callbacks(config: Config):
 
     def tangent_field(t, y, sens, th):
         theta, moved, signed, quotient = th
-        shifted = jax.vmap(lambda s, e, m: field(t, y + e * s, m))(jnp.concatenate([sens, sens]), signed, moved)
+        shifted = jax.vmap(lambda s, e, m: field(t, y + e * s, m), in_axes=(0, 0, _moved_axes(moved)))(
+            jnp.concatenate([sens, sens]), signed, moved)
         return field(t, y, theta), _central(quotient, shifted)
 
     def output_tangents(t, y, sens, th):
         _, moved, signed, quotient = th
-        shifted = jax.vmap(lambda s, e, m: outputs(t, y + e * s, m))(jnp.concatenate([sens, sens]), signed, moved)
+        shifted = jax.vmap(lambda s, e, m: outputs(t, y + e * s, m), in_axes=(0, 0, _moved_axes(moved)))(
+            jnp.concatenate([sens, sens]), signed, moved)
         return {k: _central(quotient, shifted[k]) for k in OUTPUTS}
 
     return tangent_field, output_tangents

@@ -189,7 +189,7 @@ def rod_pressure(rod: RodBalance, sensor_pressure, velocity, length, catheter_le
 
 
 def inflow(rod: RodBalance, valves, pressure, length, catheter_length, effect_force,
-           iterations: int = INFLOW_MAX_ITERATIONS):
+           iterations: int = INFLOW_MAX_ITERATIONS, newton=None):
     """Flow into the robot (m³/s) and its pressure (Pa) at node pressure ``pressure`` (Pa) before the valves.
 
     Solves the series balance of the valve network (check valve ∥ bypass,
@@ -208,7 +208,14 @@ def inflow(rod: RodBalance, valves, pressure, length, catheter_length, effect_fo
     Derivatives are implicit. ``iterations = 0`` takes one fixed-point pass instead, exact when
     the motion's pressure is negligible against the valve's (the published law: x ~ 1e-5 Pa).
     ``effect_force(v)`` (N) is the effects' force opposing growth at velocity v (non-decreasing).
+    ``newton`` (bool array or None): where given, the Newton solve runs only where it is True and the
+    one pass where False (``lax.cond``: the pass alone is paid when every velocity-dependent force is
+    absent, e.g. the candidates of a superset model switched off).
     """
+    if iterations > 0 and newton is not None:
+        return jax.lax.cond(newton,
+                            lambda: inflow(rod, valves, pressure, length, catheter_length, effect_force, iterations),
+                            lambda: inflow(rod, valves, pressure, length, catheter_length, effect_force, 0))
     tiny = 1e-30  # Pa: floor inside the logarithms
 
     def p_robot(v):
