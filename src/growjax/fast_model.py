@@ -24,6 +24,7 @@ at steps set by the slow dynamics, with input edges declared to the step-size co
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 
 import equinox as eqx
@@ -261,13 +262,24 @@ class Run(eqx.Module):
     t_final: jax.Array
 
 
-def _relative_size(theta, direction):
-    """How large a direction is relative to the values it perturbs: max |d|/|θ| over the leaves (–), |d|/|d| = 1
-    where θ = 0 (a parameter of 3e-13 m³/(s·Pa) moved along d = 1 must be shifted by ε·3e-13, not by ε)."""
-    ratios = [jnp.max(jnp.abs(d) / jnp.maximum(jnp.where(jnp.abs(x) > 0, jnp.abs(x), jnp.abs(d)), 1e-300))
-              for x, d in zip(jax.tree_util.tree_leaves(theta), jax.tree_util.tree_leaves(direction))
+def _relative_size(theta, direction, typical):
+    """How large a direction is relative to the values it perturbs: max |d|/|θ| over the leaves (–). Where θ = 0
+    the leaf's ``typical`` size stands in (an effect parameter: the top of its physical range; a leak of
+    3e-13 m³/(s·Pa) absent at 0 and moved along d = 1 must be shifted by ε·1e-12, not by ε), and where that is
+    0 too, |d| itself."""
+    ratios = [jnp.max(jnp.abs(d) / jnp.maximum(jnp.where(jnp.abs(x) > 0, jnp.abs(x),
+                                                         jnp.where(jnp.abs(c) > 0, jnp.abs(c), jnp.abs(d))), 1e-300))
+              for x, d, c in zip(jax.tree_util.tree_leaves(theta), jax.tree_util.tree_leaves(direction),
+                                 jax.tree_util.tree_leaves(typical))
               if jnp.issubdtype(jnp.result_type(d), jnp.floating) and jnp.size(d)]
     return jnp.max(jnp.stack(ratios)) if ratios else jnp.asarray(0.0)
+
+
+def _typical(params: Parameters):
+    """``params`` with each effect's parameters set to the top of their physical ranges (their typical size)."""
+    effects = tuple(dataclasses.replace(e, **{f: max(abs(lo), abs(hi)) for f, (lo, hi) in e.ranges.items()})
+                    for e in params.effects)
+    return dataclasses.replace(params, effects=effects)
 
 
 def _shifted(theta, direction, step):
@@ -329,7 +341,8 @@ def _sensitivities(params, inputs, config: Config, jump_ts, step_ts, directions)
     S0 (p, n)). See :func:`_integrate`."""
     d_params, d_inputs = directions
     theta = _member(params, inputs, config, jump_ts, step_ts)[0]
-    size = jax.vmap(lambda dp, di: _relative_size((params, inputs), (dp, di)))(d_params, d_inputs)  # (p,)
+    typical = (_typical(params), inputs)
+    size = jax.vmap(lambda dp, di: _relative_size((params, inputs), (dp, di), typical))(d_params, d_inputs)  # (p,)
     step = jnp.where(size > 0, jnp.finfo(jnp.result_type(float)).eps ** (1 / 3) / jnp.where(size > 0, size, 1.0), 0.0)
     signed = jnp.concatenate([step, -step])  # (2p,): central differences
     both = jax.tree_util.tree_map(lambda d: jnp.concatenate([d, d]), (d_params, d_inputs))
