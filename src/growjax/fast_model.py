@@ -401,25 +401,34 @@ def _tangent_run(run, ts, saved, block, th, output_tangents):
     return Run(d_values, run.y_final[1:], jnp.zeros(run.y_final.shape[0] - 1))
 
 
+def _sensitivity_run(config: Config, y0, theta_s, size, s0, tangent_field, **kw):
+    """The state and its sensitivities integrated together (:func:`growjax._rosenbrock.integrate`; ``kw``: breaks,
+    jumps, batched), θ_s from :func:`_sensitivities`, with twice the step budget of a plain solve."""
+    rtol, atol = config.tolerances
+    field, _, event = _callbacks(config)
+    # The difference quotients carry roundoff of ~1e-10 relative: tighter sensitivity control only burns steps.
+    s_rtol, s_atol = max(rtol, SENSITIVITY_TOL_FLOOR), max(atol, SENSITIVITY_TOL_FLOOR)
+    return integrate(lambda t, y, th: field(t, y, th[0]), y0, config.t0, config.t1, args=theta_s,
+                     tangent_field=tangent_field, s0=s0, s_rtol=s_rtol, s_atol=s_atol * jnp.maximum(size, 1e-12),
+                     rtol=rtol, atol=atol, max_steps=2 * config.step_budget,
+                     event=None if event is None else (lambda t, y, th: event(t, y, th[0])), **kw)
+
+
 def _integrate_batch(params, inputs, config: Config, ts, jump_ts, step_ts, directions=None):
     """The solve of a batch (every argument with a leading axis B; ``directions`` leaves (B, p, …)) in one loop:
     (Run, tangent Run or None, status, steps), each with the leading axis B."""
     rtol, atol = config.tolerances
     field, outputs, event = _callbacks(config)
     theta, y0, breaks, jumps = jax.vmap(lambda p, i, j, s: _member(p, i, config, j, s))(params, inputs, jump_ts, step_ts)
-    common = {"breaks": breaks, "jumps": jumps, "rtol": rtol, "atol": atol, "event": event, "batched": True}
     if directions is None:
-        run = integrate(field, y0, config.t0, config.t1, args=theta, max_steps=config.step_budget, **common)
+        run = integrate(field, y0, config.t0, config.t1, args=theta, breaks=breaks, jumps=jumps, rtol=rtol, atol=atol,
+                        max_steps=config.step_budget, event=event, batched=True)
         primal = jax.vmap(lambda r, t, y, th: _primal(r, t, y, th, outputs)[0])(run, ts, y0, theta)
         return primal, None, run.status, run.steps.count
     theta_s, size, s0 = jax.vmap(lambda p, i, j, s, d: _sensitivities(p, i, config, j, s, d))(
         params, inputs, jump_ts, step_ts, directions)
     tangent_field, output_tangents = _sensitivity_callbacks(config)
-    s_rtol, s_atol = max(rtol, SENSITIVITY_TOL_FLOOR), max(atol, SENSITIVITY_TOL_FLOOR)
-    run = integrate(lambda t, y, th: field(t, y, th[0]), y0, config.t0, config.t1, args=theta_s,
-                    tangent_field=tangent_field, s0=s0, s_rtol=s_rtol, s_atol=s_atol * jnp.maximum(size, 1e-12),
-                    max_steps=2 * config.step_budget,
-                    **{**common, "event": None if event is None else (lambda t, y, th: event(t, y, th[0]))})
+    run = _sensitivity_run(config, y0, theta_s, size, s0, tangent_field, breaks=breaks, jumps=jumps, batched=True)
 
     def member(r, t, y, th):
         primal, block, saved = _primal(r, t, y, th[0], outputs)
@@ -443,21 +452,24 @@ def _integrate(params, inputs, config: Config, ts, jump_ts, step_ts, directions=
     rtol, atol = config.tolerances
     field, outputs, event = _callbacks(config)
     theta, y0, breaks, jumps = _member(params, inputs, config, jump_ts, step_ts)
-    common = {"breaks": breaks, "jumps": jumps, "rtol": rtol, "atol": atol, "max_steps": config.step_budget}
     if directions is None:
-        run = integrate(field, y0, config.t0, config.t1, args=theta, event=event, **common)
+        run = integrate(field, y0, config.t0, config.t1, args=theta, breaks=breaks, jumps=jumps, rtol=rtol, atol=atol,
+                        max_steps=config.step_budget, event=event)
         primal = _primal(run, ts, y0, theta, outputs)[0]
         return primal, None, run.status, run.steps.count
     theta_s, size, s0 = _sensitivities(params, inputs, config, jump_ts, step_ts, directions)
     tangent_field, output_tangents = _sensitivity_callbacks(config)
-    # The difference quotients carry roundoff of ~1e-10 relative: tighter sensitivity control only burns steps.
-    s_rtol, s_atol = max(rtol, SENSITIVITY_TOL_FLOOR), max(atol, SENSITIVITY_TOL_FLOOR)
-    run = integrate(lambda t, y, th: field(t, y, th[0]), y0, config.t0, config.t1, args=theta_s,
-                    tangent_field=tangent_field, s0=s0, s_rtol=s_rtol, s_atol=s_atol * jnp.maximum(size, 1e-12),
-                    event=None if event is None else (lambda t, y, th: event(t, y, th[0])),
-                    **{**common, "max_steps": 2 * config.step_budget})
+    run = _sensitivity_run(config, y0, theta_s, size, s0, tangent_field, breaks=breaks, jumps=jumps)
     primal, block, saved = _primal(run, ts, y0, theta, outputs)
     return primal, _tangent_run(run, ts, saved, block, theta_s, output_tangents), run.status, run.steps.count
+
+
+def _spread(args, in_batched, axis_size: int):
+    """``custom_vmap`` arguments with the unbatched ones broadcast to the batch's leading axis."""
+    def spread(x, batched):
+        return x if batched else jnp.broadcast_to(x, (axis_size,) + jnp.shape(x))
+
+    return jax.tree_util.tree_map(spread, tuple(args), tuple(in_batched))
 
 
 @functools.cache
@@ -473,10 +485,7 @@ def _plain_solver(config: Config):
 
     @solver.def_vmap
     def together(axis_size, in_batched, *args):
-        def spread(x, batched):
-            return x if batched else jnp.broadcast_to(x, (axis_size,) + jnp.shape(x))
-
-        args = jax.tree_util.tree_map(spread, args, tuple(in_batched))
+        args = _spread(args, in_batched, axis_size)
         primal, _, status, n_steps = _integrate_batch(*args[:2], config, *args[2:])
         out = (primal, status, n_steps)
         return out, jax.tree_util.tree_map(lambda _: True, out)
@@ -497,10 +506,7 @@ def _tangent_solver(config: Config):
     def merge_directions(axis_size, in_batched, params, inputs, ts, jump_ts, step_ts, d_params, d_inputs):
         args = (params, inputs, ts, jump_ts, step_ts, d_params, d_inputs)
         if any(jax.tree_util.tree_leaves(in_batched[:5])):  # the point itself is batched: members stepped together
-            def spread(x, batched):
-                return x if batched else jnp.broadcast_to(x, (axis_size,) + jnp.shape(x))
-
-            args = jax.tree_util.tree_map(spread, args, tuple(in_batched))
+            args = _spread(args, in_batched, axis_size)
             out = _integrate_batch(*args[:2], config, *args[2:5], directions=args[5:])
             return out, jax.tree_util.tree_map(lambda _: True, out)
 

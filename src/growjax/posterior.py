@@ -324,7 +324,8 @@ def predict(idata, priors, base, inputs, config, times, seed: int = 0, max_draws
 
 
 def sbc(emulator: em.Emulator, priors: Sequence[Prior], replicates: int = 100, warmup: int = 200,
-        samples: int = 200, seed: int = 0, noise_scale: float = 1e-3, level: float = 0.9) -> dict:
+        samples: int = 200, seed: int = 0, noise_scale: float = 1e-3, level: float = 0.9,
+        truth_model=None) -> dict:
     """Simulation-based calibration (Talts et al. 2018) of NUTS on :func:`growth_model`, all replicates at once.
 
     Each replicate draws θ and σ from the prior and a data set from the model (here its
@@ -333,6 +334,10 @@ def sbc(emulator: em.Emulator, priors: Sequence[Prior], replicates: int = 100, w
     (NumPyro's functional NUTS). A calibrated sampler ranks the truth uniformly among the
     draws and covers it with the central ``level`` interval in a share ``level`` of replicates.
 
+    ``truth_model({name: (replicates,) values}) → (replicates, m)`` clean lengths (m) at the emulator's
+    times: data from another configuration (the reference), plus σ-noise, so the check also sees the
+    emulated configuration's error against it; the likelihood then carries the emulator's RMS error.
+
     Returns ``ranks`` {site: (replicates,) ints in [0, samples]}, ``coverage`` {site: share},
     ``divergences`` (total) and ``draws`` (samples per replicate).
     """
@@ -340,10 +345,15 @@ def sbc(emulator: em.Emulator, priors: Sequence[Prior], replicates: int = 100, w
     from numpyro.infer.hmc import hmc
     from numpyro.infer.util import initialize_model
 
+    model_error = 0.0 if truth_model is None else float(emulator.error_rms)
     model = functools.partial(growth_model, mean_length=emulated_mean(emulator), priors=priors,
-                              noise_scale=noise_scale)
-    k_prior, k_init, k_run = jax.random.split(jax.random.PRNGKey(seed), 3)
+                              noise_scale=noise_scale, model_error=model_error)
+    k_prior, k_init, k_run, k_noise = jax.random.split(jax.random.PRNGKey(seed), 4)
     truth = Predictive(model, num_samples=replicates)(k_prior)
+    if truth_model is not None:
+        clean = jnp.asarray(truth_model({p.name: np.asarray(truth[p.site]) for p in priors}))
+        noise = jax.random.normal(k_noise, clean.shape, clean.dtype) * truth["sigma"][:, None]
+        truth = {**truth, "length": clean + noise}
     sites = [p.site for p in priors] + ["sigma"]
     info = initialize_model(k_init, model, model_args=(truth["length"][0],), dynamic_args=True)
     init_kernel, sample_kernel = hmc(potential_fn_gen=info.potential_fn, algo="NUTS")
