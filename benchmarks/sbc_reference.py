@@ -51,11 +51,11 @@ def main():
     reference = cfg.replace(fidelity="reference")
     breaks = gj.input_breaks(inputs, reference)
 
-    def truth_model(values):
+    def truth_model(values):  # {qualified name: (replicates,)} → (replicates, m) clean lengths, m
         out = []
-        for y in values["Y"]:
-            traj = gj.simulate(gj.replace(gj.reference(), Y=float(y)), inputs, reference, ts=times, breaks=breaks)
-            out.append(np.asarray(traj.length))
+        for i in range(len(next(iter(values.values())))):
+            params = gj.replace(gj.reference(), **{name: float(v[i]) for name, v in values.items()})
+            out.append(np.asarray(gj.simulate(params, inputs, reference, ts=times, breaks=breaks).length))
         return np.stack(out)
 
     res = gpost.sbc(emu, priors, replicates=args.replicates, warmup=args.warmup, samples=args.samples,

@@ -20,9 +20,10 @@ The workflow (:func:`discover`), on a measured length L(t):
 4. **Confounding.** A candidate whose η correlates with a base parameter beyond
    ``confounding_correlation`` (0.99: the base parameter inflates its variance 50-fold) in the joint fit is
    reported ``confounded`` with that parameter if it clears the threshold, or if, with the base parameters
-   held at their given values, it alone explains the data as well
-   as refitting them does (within the threshold) while the given values themselves fit significantly worse: the effect and the base parameter
-   trade one for the other. A correlated candidate that clears the threshold with its magnitude *pinned*
+   held at their given values, it alone explains the data as well as refitting them does (within the
+   threshold) while the given values themselves fit significantly worse: the effect and the base parameter
+   trade one for the other (these base-held fits run from every start; for an uncorrelated candidate, whose
+   base-held fit is only reported, from one). A correlated candidate that clears the threshold with its magnitude *pinned*
    (its 90 % interval, the correlation's inflation included, within a factor ``PINNED_FACTOR`` of the
    estimate) is not confounded: refitting the base did not absorb it, and the data fix its size. Its
    correlation is still reported.

@@ -334,7 +334,7 @@ def sbc(emulator: em.Emulator, priors: Sequence[Prior], replicates: int = 100, w
     (NumPyro's functional NUTS). A calibrated sampler ranks the truth uniformly among the
     draws and covers it with the central ``level`` interval in a share ``level`` of replicates.
 
-    ``truth_model({name: (replicates,) values}) → (replicates, m)`` clean lengths (m) at the emulator's
+    ``truth_model({qualified name: (replicates,) values}) → (replicates, m)`` clean lengths (m) at the emulator's
     times: data from another configuration (the reference), plus σ-noise, so the check also sees the
     emulated configuration's error against it; the likelihood then carries the emulator's RMS error.
 
