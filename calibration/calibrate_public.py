@@ -8,8 +8,10 @@ Steps (forward drive, fast configuration, 0–10 s):
 
 1. least-squares fit of Y (reference growth law) with its Gauss–Newton (Laplace) interval, and the fit of
    Y, ext and n that names the directions the data cannot determine;
-2. NUTS posterior of Y, ext, n and σ (reference law), 4 chains × 500 + 500, directly through the model (forward-mode gradients);
-3. NUTS posterior of Y, φ_L, n_L and σ (Lockhart law), same settings;
+2. NUTS posterior of Y, ext, n and σ (reference law), 4 chains × 500 + 500, through the emulator of the model
+   (ext and n are flat: directly through the model every draw would hit the tree-depth cap);
+3. NUTS posterior of Y, φ_L, n_L and σ (Lockhart law), same settings, through its emulator (directly through
+   the model it would take ~30–50 h here: ``benchmarks/nuts_direct.py``);
 4. PSIS-LOO comparison of the two laws (ArviZ), the Laplace-against-NUTS check, figures and ``report.json``.
 
 ``--quick`` (a smoke run): 0–2 s, 2 chains × 150 + 150.
@@ -94,7 +96,7 @@ def main():
         law_inputs = ex.to_inputs(exp, "forward", law_base, cfg.t0, cfg.t1)
         res = gpost.sample(exp.time, exp["robot_length_m"], law_inputs, law_base, cfg, priors=priors,
                            chains=chains, warmup=warmup, samples=samples, progress=False, target_accept=accept,
-                           emulate=law == "reference")  # ext and n are flat: direct NUTS would hit max tree depth
+                           emulate=True)  # direct NUTS: max tree depth (reference), ~30–50 h (Lockhart)
         res.idata.to_netcdf(str(out / f"posterior_{law}.nc"))
         summary = dict(res.summary)
         summary["posterior_sd_over_prior_sd"] = _identification(res.idata, priors)
