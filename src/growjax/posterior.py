@@ -325,7 +325,7 @@ def predict(idata, priors, base, inputs, config, times, seed: int = 0, max_draws
 
 def sbc(emulator: em.Emulator, priors: Sequence[Prior], replicates: int = 100, warmup: int = 200,
         samples: int = 200, seed: int = 0, noise_scale: float = 1e-3, level: float = 0.9,
-        truth_model=None) -> dict:
+        truth_model=None, model_error: float = 0.0) -> dict:
     """Simulation-based calibration (Talts et al. 2018) of NUTS on :func:`growth_model`, all replicates at once.
 
     Each replicate draws θ and σ from the prior and a data set from the model (here its
@@ -336,7 +336,9 @@ def sbc(emulator: em.Emulator, priors: Sequence[Prior], replicates: int = 100, w
 
     ``truth_model({qualified name: (replicates,) values}) → (replicates, m)`` clean lengths (m) at the emulator's
     times: data from another configuration (the reference), plus σ-noise, so the check also sees the
-    emulated configuration's error against it; the likelihood then carries the emulator's RMS error.
+    emulated configuration's error against it; the likelihood then carries the emulator's RMS error and
+    ``model_error`` (m, e.g. :data:`growjax.fit.FAST_MODEL_ERROR`, the fast configuration's against the
+    reference), both as independent noise.
 
     Returns ``ranks`` {site: (replicates,) ints in [0, samples]}, ``coverage`` {site: share},
     ``divergences`` (total) and ``draws`` (samples per replicate).
@@ -345,7 +347,11 @@ def sbc(emulator: em.Emulator, priors: Sequence[Prior], replicates: int = 100, w
     from numpyro.infer.hmc import hmc
     from numpyro.infer.util import initialize_model
 
-    model_error = 0.0 if truth_model is None else float(emulator.error_rms)
+    if truth_model is not None:
+        model_error = float(np.hypot(float(emulator.error_rms), model_error))
+    if not np.isfinite(model_error):
+        raise ValueError("sbc with a truth_model needs a validated emulator (growjax.emulator.validate): its error "
+                         "joins the noise")
     model = functools.partial(growth_model, mean_length=emulated_mean(emulator), priors=priors,
                               noise_scale=noise_scale, model_error=model_error)
     k_prior, k_init, k_run, k_noise = jax.random.split(jax.random.PRNGKey(seed), 4)
