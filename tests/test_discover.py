@@ -46,6 +46,7 @@ def test_a_correlated_effect_is_determined_only_when_its_interval_pins_its_size(
     assert not gd._pinned(0.0097, (0.0038, 0.0156))
     assert not gd._pinned(1.0, (0.0, 1.5))
     assert not gd._pinned(-8.7e-5, (-1.7e-4, 3e-6))
+    assert not gd._pinned(2.6e-21, (2.6e-21, 2.6e-21))  # zero width: a vanished Jacobian column, not a pinned size
 
 
 def test_candidate_parameters_are_named_with_units_and_ranges():

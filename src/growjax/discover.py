@@ -4,7 +4,9 @@ The workflow (:func:`discover`), on a measured length L(t):
 
 1. **Base fit.** The base model's free parameters (default the yield pressure Y) are fitted by
    least squares, in the *superset* model that carries every candidate effect at zero (which is
-   the base model exactly), so every later fit runs through the same compiled program.
+   the base model exactly), so every later fit runs through the same compiled program. It starts from the
+   given values and from 0.7 and 1.4 times them (real data can leave more than one minimum in Y), keeping
+   the best, so that no candidate scores against a base stuck in a side minimum.
 2. **Locate.** The residuals r = L_model − L_meas are summarised over time and by phase (growing,
    holding, retracting; pressure rising or falling) (:func:`locate`). The noise σ is estimated from
    successive differences of r (a smooth misfit barely enters them), and the misfit test asks whether
@@ -62,6 +64,7 @@ from growjax.simulate import input_breaks, simulate
 
 Z90 = float(stats.norm.ppf(0.95))
 START_FRACTIONS = (0.02, 0.06, 0.2)  # starts of a new effect parameter, as fractions of its range's top
+BASE_START_FACTORS = (1.0, 0.7, 1.4)  # starts of the base fit: the given base parameters times these
 PINNED_FACTOR = 2.0  # a correlated effect whose 90 % interval lies within [η/2, 2η] is determined, not confounded
 PHASES = ("growing", "holding", "retracting", "pressure_rising", "pressure_falling")
 
@@ -382,8 +385,15 @@ def discover(
         for i, (effects_on, fit_base, z_now) in enumerate(_bar(progress, specs, desc)):
             new = [k for k in effects_on if k not in added_index]
             fits = []
-            for start in ([None] if i in warm else range(u_starts.shape[1] if new else 1)):
-                m = model(effects_on, fit_base, z_now, start)
+            base_only = fit_base and not effects_on and not added_index  # the base model: its own starts
+            for start in ([None] if i in warm else range(len(BASE_START_FACTORS) if base_only
+                                                          else u_starts.shape[1] if new else 1)):
+                if base_only:
+                    z_start = np.array(z_now, float)
+                    z_start[:p] += math.log(BASE_START_FACTORS[start])
+                    m = model(effects_on, fit_base, z_start, None)
+                else:
+                    m = model(effects_on, fit_base, z_now, start)
                 z, r, jac, ok, pressure = _fit_model(problem, *(jnp.asarray(a) for a in m), max_steps)
                 fits.append((np.asarray(z), np.asarray(r), np.asarray(jac), bool(ok), m, pressure))
             out.append(min(fits, key=lambda f: float(f[1] @ f[1])))
@@ -500,10 +510,13 @@ def discover(
 
 
 def _pinned(estimate: float, interval) -> bool:
-    """Whether a 90 % interval excludes zero and lies within a factor :data:`PINNED_FACTOR` of the estimate."""
+    """Whether a 90 % interval excludes zero and lies within a factor :data:`PINNED_FACTOR` of the estimate. An
+    interval of (near) zero width is not pinned: the effect's Jacobian column vanished (η deep in softplus's flat
+    end) and the pseudo-inverse dropped its variance instead of making it infinite."""
     lo, hi = interval
     size = abs(estimate)
-    return lo * hi > 0 and min(abs(lo), abs(hi)) >= size / PINNED_FACTOR and max(abs(lo), abs(hi)) <= PINNED_FACTOR * size
+    return (lo * hi > 0 and hi - lo > 1e-6 * size and min(abs(lo), abs(hi)) >= size / PINNED_FACTOR
+            and max(abs(lo), abs(hi)) <= PINNED_FACTOR * size)
 
 
 def _bar(enabled: bool, items, desc: str):
