@@ -1,0 +1,77 @@
+"""One linearisation of discover's superset model (residuals, Jacobian and pressure in one forward-mode solve).
+
+Run: ``python benchmarks/discover_linearise.py [--candidates all|no-velocity] [--batch 6]``.
+
+On ``data/discovery/active_channel_force.csv`` (10 s) with the 8-effect superset (or the 5 effects whose rod
+force does not depend on the velocity), for a model with Y and the pull fitted: the first call (compile
+included) and the median of 5 later calls. ``--batch B`` also times B such models linearised under one ``vmap``
+(members stepped together) against the same B one after another: why ``discover`` fits its candidates in
+sequence on a CPU.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+from pathlib import Path
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import growjax as gj
+from growjax import discover as gd
+from growjax import experiment as ex
+
+REPO = Path(__file__).resolve().parents[1]
+NO_VELOCITY = ("active_channel_force", "fluid_leak", "actuation_lag", "trapped_air", "retraction_folding")
+
+
+def timed(fn, repeat: int = 5):
+    """(first call s, median of ``repeat`` later calls s)."""
+    start = time.perf_counter()
+    jax.block_until_ready(fn())
+    first = time.perf_counter() - start
+    walls = []
+    for _ in range(repeat):
+        start = time.perf_counter()
+        jax.block_until_ready(fn())
+        walls.append(time.perf_counter() - start)
+    return first, statistics.median(walls)
+
+
+def main():
+    jax.config.update("jax_enable_x64", True)
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--candidates", choices=("all", "no-velocity"), default="all")
+    ap.add_argument("--batch", type=int, default=0)
+    args = ap.parse_args()
+    exp = ex.read(REPO / "data" / "discovery" / "active_channel_force.csv")
+    cfg = gj.Config(t1=10.0)
+    inputs = ex.to_inputs(exp, "forward", gj.reference(), cfg.t0, cfg.t1)
+    keep = exp.time >= cfg.t0
+    names = tuple(gd.fx.CATALOGUE) if args.candidates == "all" else NO_VELOCITY
+    problem = gd.make_candidates(exp.time[keep], exp["robot_length_m"][keep], inputs, names, gj.reference(),
+                                 ("Y",), cfg)
+    k, p, q = len(names), 1, 3
+    mask = np.zeros(k)
+    mask[names.index("active_channel_force")] = 1.0
+    select = np.zeros((p + k, q))
+    select[0, 0] = select[p + names.index("active_channel_force"), 1] = 1.0
+    model = (jnp.asarray(mask), jnp.asarray(select), jnp.zeros(p + k))
+    w = jnp.asarray([0.0, 0.3, 0.0])
+    first, wall = timed(lambda: gd._linearised(w, problem, *model))
+    print(f"{len(names)} candidates: first call {first:.1f} s, then {1e3 * wall:.0f} ms per linearisation")
+    if args.batch:
+        ws = jnp.stack([w.at[1].set(-1.0 + 0.3 * b) for b in range(args.batch)])
+        batched = eqx.filter_jit(jax.vmap(lambda x, m, s, z: gd._linearised(x, problem, m, s, z),
+                                          in_axes=(0, None, None, None)))
+        _, loop = timed(lambda: [gd._linearised(x, problem, *model) for x in ws])
+        _, vmapped = timed(lambda: batched(ws, *model))
+        print(f"{args.batch} linearisations: {loop:.2f} s one after another, {vmapped:.2f} s under one vmap")
+
+
+if __name__ == "__main__":
+    main()
