@@ -134,3 +134,22 @@ def test_control_notebook_executes():
                             resources={"metadata": {"path": str(path.parent)}}).execute()
     text = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", []))
     assert "closed-loop RMSE" in text
+
+
+def test_posterior_draws_are_joint_seeded_and_only_model_parameters(tmp_path):
+    import arviz as az
+
+    rng = np.random.default_rng(0)
+    y = 8000.0 + 50.0 * rng.standard_normal((2, 40))
+    post = {"Y": y, "ext": 10.0 * y, "sigma": np.full((2, 40), 1e-3), "length_model": rng.random((2, 40, 3))}
+    path = tmp_path / "posterior.nc"
+    az.from_dict(posterior=post).to_netcdf(str(path))
+    draws = gc.parameter_draws(16, 3, str(path))
+    assert set(draws) == {"Y", "ext"}  # σ and derived sites are not model parameters
+    np.testing.assert_array_equal(draws["ext"], 10.0 * draws["Y"])  # one draw index for every variable
+    assert set(draws["Y"]) <= set(y.ravel())
+    np.testing.assert_array_equal(gc.parameter_draws(16, 3, str(path))["Y"], draws["Y"])
+    assert not np.array_equal(gc.parameter_draws(16, 4, str(path))["Y"], draws["Y"])
+    assert set(gc.parameter_draws(4, 0, str(path), names=["Y"])) == {"Y"}
+    with pytest.raises(ValueError, match="model parameters"):
+        gc.parameter_draws(4, 0, str(path), names=["tip_speed"])

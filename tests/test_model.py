@@ -183,3 +183,20 @@ def test_bad_input_is_named():
         gj.simulate(gj.reference(), inputs, SHORT, ts=np.array([0.1, np.nan]))
     with pytest.raises(ValueError, match=r"within \[t0, t1\]"):
         gj.simulate(gj.reference(), inputs, SHORT, ts=np.array([0.1, 5.0]))
+
+
+def test_input_breaks_are_remembered_only_while_valid():
+    from growjax.simulate import input_breaks
+
+    cfg = gj.Config()
+    inputs = gj.Inputs(catheter_length=gj.Constant(0.0), pressure_demand=gj.PulseTrain(150e3, 1.3, 0.9, 0.26))
+    first = input_breaks(inputs, cfg)
+    assert input_breaks(inputs, cfg)[0] is first[0]  # same object, same window: remembered
+    short = input_breaks(inputs, cfg.replace(t1=2.0))  # another window: found again
+    assert np.sum(np.asarray(short[0]) < 2.0) == 3 and np.sum(np.asarray(first[0]) < 10.0) == 15  # 0.26, 1.43, 1.56 s
+    edges = np.array([0.5, 1.5])  # a writable NumPy leaf could change in place: never remembered
+    stepped = gj.Inputs(catheter_length=gj.Constant(0.0), steps=gj.StepSchedule(edges, np.array([1.0, 2.0])))
+    before = np.asarray(input_breaks(stepped, cfg.replace(drive="inverse"))[0])
+    edges[1] = 2.5
+    after = np.asarray(input_breaks(stepped, cfg.replace(drive="inverse"))[0])
+    assert 1.5 in before and 2.5 in after and 1.5 not in after

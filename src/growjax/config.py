@@ -25,8 +25,8 @@ class Config:
         drive: ``"forward"`` (pressure demand, PID, ideal torque) or ``"inverse"`` (desired length, stepper).
         t0, t1: integration window, s (the shipped model starts at 0.001 s).
         save_dt: spacing of the default save grid, s.
-        rtol, atol: step-size control on the scaled states (None: 3e-5 fast, 1e-6 reference).
-        max_steps: solver step budget (None: 20 000 fast, 200 000 reference).
+        rtol, atol: step-size control on the scaled states (None: 1e-4 fast, 1e-6 reference).
+        max_steps: solver step budget (None: 8 000 fast, 200 000 reference).
         stop_at_pressure_limit: stop the run (status 1) when the sensed pressure crosses the membrane
             limit; otherwise the crossing is only flagged (``limit_time``) and the run goes on.
         velocity_eps: regularisation of |v|^n at v = 0, m/s.

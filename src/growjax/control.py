@@ -682,22 +682,36 @@ def _reset_estimate(model: Plant, y_hat, t, measured):
 
 
 def parameter_draws(n: int, seed: int = 0, posterior: str | None = None, base=None, rel_sd: float = 0.05,
-                    names=("Y",)):
-    """Parameter sets as {name: (n,) array}: from an ArviZ posterior file (its variables matching ``names``,
-    draws picked at random, seeded), or, with no file, Gaussian around the point estimate of ``base`` with
-    relative s.d. ``rel_sd`` (seeded; a stand-in when no posterior is at hand)."""
+                    names=None):
+    """Parameter sets as {name: (n,) array}.
+
+    From an ArviZ posterior file: joint draws (picked at random, seeded) of its variables that name a model
+    parameter (``names`` restricts them; noise scales such as σ and derived sites are skipped), so the
+    draws keep the posterior's correlations. With no file: Gaussian around the point estimate of ``base``
+    with relative s.d. ``rel_sd`` (seeded; a stand-in when no posterior is at hand), ``names`` default ("Y",).
+    """
     rng = np.random.default_rng(seed)
     base = base if base is not None else gj.reference("forward")
     if posterior:
         import arviz as az
 
         post = az.from_netcdf(posterior).posterior
-        flat = {k: np.asarray(post[k]).ravel() for k in names if k in post}
+        wanted = list(names) if names is not None else [k for k in post.data_vars if _is_parameter(base, k)]
+        flat = {k: np.asarray(post[k]).ravel() for k in wanted if k in post}
         if not flat:
-            raise ValueError(f"{posterior} has none of the variables {names}")
-        idx = rng.choice(next(iter(flat.values())).size, size=n, replace=n > next(iter(flat.values())).size)
+            raise ValueError(f"{posterior} has none of the model parameters {wanted or list(post.data_vars)}")
+        size = next(iter(flat.values())).size
+        idx = rng.choice(size, size=n, replace=n > size)
         return {k: v[idx] for k, v in flat.items()}
-    return {k: float(gj.get(base, k)) * (1.0 + rel_sd * rng.standard_normal(n)) for k in names}
+    return {k: float(gj.get(base, k)) * (1.0 + rel_sd * rng.standard_normal(n)) for k in (names or ("Y",))}
+
+
+def _is_parameter(base, name: str) -> bool:
+    try:
+        gj.get(base, name)
+    except ValueError:
+        return False
+    return True
 
 
 def _batched_params(base, draws: dict):
