@@ -61,6 +61,9 @@ def test_fit_names_ext_and_n_as_undetermined():
     assert len(res.undetermined) == 2
     assert res.interval_90["robot.extensibility"] is None and res.interval_90["robot.growth_exponent"] is None
     assert res.interval_90["robot.yield_pressure"] is not None
+    ranges = gf.gp.physical_ranges(gj.reference())
+    for name in ("robot.extensibility", "robot.growth_exponent"):  # undetermined, yet inside its physical range
+        assert ranges[name][0] <= res.estimate[name] <= ranges[name][1]
 
 
 @pytest.mark.xfail(strict=True, reason=(
@@ -139,6 +142,26 @@ def test_levenberg_marquardt_solves_rosenbrock_and_stops_on_a_parameter_running_
     drift = _numeric(lambda z: np.array([np.logaddexp(0.0, z[0]), z[1] - 2.0, 0.1]))
     z, _, ok, _, _ = gf.levenberg_marquardt(drift, np.array([1.0, 0.0]), max_steps=40)
     assert ok and z[0] < -3.0 and z[1] == pytest.approx(2.0, abs=1e-6)
+
+
+def test_levenberg_marquardt_keeps_a_flat_direction_inside_its_bounds():
+    # z1 is pulled weakly towards 10 but bounded above by 2; z0 is determined.
+    pulled = _numeric(lambda z: np.array([z[0] - 1.0, 1e-3 * (z[1] - 10.0)]))
+    bounds = (np.array([-np.inf, -5.0]), np.array([np.inf, 2.0]))
+    z, _, ok, _, _ = gf.levenberg_marquardt(pulled, np.array([0.0, 0.0]), max_steps=60, bounds=bounds)
+    assert ok and z[0] == pytest.approx(1.0, abs=1e-6) and z[1] == pytest.approx(2.0, abs=1e-12)
+    z, _, _, _, _ = gf.levenberg_marquardt(pulled, np.array([0.0, 0.0]), max_steps=60)
+    assert z[1] > 2.5  # without bounds it runs past them
+
+
+def test_physical_bounds_are_the_ranges_in_log_coordinates():
+    base = gj.reference()
+    names = ("robot.yield_pressure", "robot.growth_exponent", "robot.extensibility")
+    refs = np.array([8000.0, 1.0, 5000.0])
+    lo, hi = gf.physical_bounds(base, names, refs)
+    assert lo[0] == -np.inf and hi[0] == pytest.approx(np.log(1e6 / 8000.0))  # Y in [0, 1 MPa]
+    assert (lo[1], hi[1]) == pytest.approx((np.log(0.05), np.log(5.0)))  # n in [0.05, 5]
+    assert hi[2] == np.inf
 
 
 def test_levenberg_marquardt_rejects_points_where_the_model_fails():

@@ -898,7 +898,7 @@ def design(target: Target, drive: str, method: str, t1: float, robust: str | Non
 
 
 def tune_stepper(params, target: Target, t1: float, microsteps: int = 1, rates=(20.0, 50.0, 100.0),
-                 leads=(0.0, 0.05, 0.1, 0.2)):
+                 leads=(0.0, 0.1, 0.2, 0.3, 0.4)):
     """The step controller's rate and lead by search on the fast model (its cost is piecewise constant in them).
     → (best :class:`StepController`, its RMSE m)."""
     plant = Plant.make(params, gj.Config(drive="inverse", t1=t1), microstep=microsteps > 1)

@@ -64,6 +64,7 @@ class FitResult:
     starts: list  # [{"start", "estimate", "cost", "converged"}]
     wall_s: float
     status: str
+    at_bound: tuple = ()  # parameters whose estimate ended on an edge of its physical range
 
     def summary(self) -> dict:
         return {
@@ -75,6 +76,7 @@ class FitResult:
                 for n in self.names
             },
             "undetermined_directions": self.undetermined,
+            "at_physical_bound": list(self.at_bound),
             "starts": self.starts,
             "wall_s": self.wall_s,
         }
@@ -146,7 +148,7 @@ def _linearised(z, problem: Problem):
 
 
 def levenberg_marquardt(linearised, z0, max_steps: int = 100, tol: float = 1e-6, gain_tol: float = 1e-5,
-                        max_move: float = 3.0):
+                        max_move: float = 3.0, bounds=None):
     """Minimise ½‖r(z)‖² from z0 by Levenberg–Marquardt (Marquardt's scaling diag(JᵀJ), Nielsen's damping
     update), driven from Python.
 
@@ -154,7 +156,9 @@ def levenberg_marquardt(linearised, z0, max_steps: int = 100, tol: float = 1e-6,
     cost by < tol of itself, or when a full Gauss–Newton step, ½gᵀ(JᵀJ)⁺g, would gain < ``gain_tol`` of the
     cost (at the solver's noise floor, or a parameter drifting to the edge of its range). A step moves each
     coordinate by at most ``max_move`` (clipped one by one); a point whose residuals or Jacobian are not
-    finite is rejected (at z0 it ends the fit, not converged). Returns (z, cost, converged, r, J at z).
+    finite is rejected (at z0 it ends the fit, not converged). ``bounds`` = (lower (p,), upper (p,)) on z:
+    each trial point is projected into the box (a direction the data do not determine then stops at the
+    parameter's physical range instead of drifting). Returns (z, cost, converged, r, J at z).
     (optimistix's LM compiles the model's primal and tangent solves several times into one program and
     needs tens of iterations on residuals that carry the solver's tolerance-level noise; this loop
     compiles one program.)
@@ -172,6 +176,8 @@ def levenberg_marquardt(linearised, z0, max_steps: int = 100, tol: float = 1e-6,
         scale = np.maximum(np.diag(jtj), 1e-12 * max(float(np.max(np.diag(jtj))), 1e-300))
         step = np.linalg.solve(jtj + damping * np.diag(scale), -g)
         step = np.clip(step, -max_move, max_move)  # a coordinate running to its range's edge moves no others less
+        if bounds is not None:
+            step = np.clip(z + step, *bounds) - z
         predicted = 0.5 * float(step @ (damping * scale * step - g))  # decrease the linear model promises
         r_new, jac_new = (np.asarray(a) for a in linearised(jnp.asarray(z + step)))
         ok = np.all(np.isfinite(r_new)) and np.all(np.isfinite(jac_new))
@@ -250,7 +256,9 @@ def fit(
     # slowest one's iterations and for both branches of each accept/reject decision.
     # Stop when a step moves ln θ by < 1e-6 and the cost by < 1e-6 of itself (far inside any interval), or at
     # the solver's noise floor in the residuals (see levenberg_marquardt: tighter only burns iterations).
-    solved = [levenberg_marquardt(lambda z: _linearised(z, problem), z0, max_steps, LM_TOLERANCE) for z0 in z0s]
+    bounds = physical_bounds(base, names, refs)
+    solved = [levenberg_marquardt(lambda z: _linearised(z, problem), z0, max_steps, LM_TOLERANCE, bounds=bounds)
+              for z0 in z0s]
     zs, costs, oks = (np.asarray([s[k] for s in solved]) for k in range(3))
     starts = [{"start": dict(zip(names, map(float, start_values[i]))),
                "estimate": dict(zip(names, map(float, refs * np.exp(zs[k])))),
@@ -297,4 +305,18 @@ def fit(
         rmse_length_m=rmse, cost=float(best["cost"]), covariance_log=cov, eigenvalues=evals, eigenvectors=evecs,
         undetermined=undetermined, starts=starts, wall_s=time.perf_counter() - start_clock,
         status="converged" if best["converged"] else "max_steps",
+        at_bound=tuple(n for n, zi, lo, hi in zip(names, np.asarray(z), *bounds) if min(zi - lo, hi - zi) < 1e-9),
     )
+
+
+def physical_bounds(base: gp.Parameters, names, refs) -> tuple[np.ndarray, np.ndarray]:
+    """(lower, upper) of z = ln(θ/θ_ref) from each parameter's physical range (±inf where it has none)."""
+    ranges = gp.physical_ranges(base)
+    lo = np.full(len(names), -np.inf)
+    hi = np.full(len(names), np.inf)
+    for i, n in enumerate(names):
+        if n in ranges:
+            a, b = ranges[n][:2]
+            lo[i] = np.log(a / refs[i]) if a > 0 else -np.inf
+            hi[i] = np.log(b / refs[i]) if np.isfinite(b) else np.inf
+    return lo, hi

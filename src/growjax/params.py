@@ -189,6 +189,11 @@ _RANGES = {
 }
 
 
+def physical_ranges(params: Parameters) -> dict:
+    """{qualified name: (low, high, unit)}: the physical range of each parameter that has one (effects included)."""
+    return _ranges(params)
+
+
 def _ranges(params: Parameters) -> dict:
     ranges = dict(_RANGES)
     for e in params.effects:
