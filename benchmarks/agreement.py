@@ -13,7 +13,8 @@ rigid hoses) as a share of the delivered volume (target 0.1 %). ``--quick`` take
 and 2 LHS points per law and 3 inputs. The reference is slow (~10–20 s per 10 s run after a
 ~70 s compile per law and input type): the full table takes hours on 2 cores. Rows are written to
 ``--out`` as they finish; ``--resume`` keeps the rows already there and runs only the missing cases,
-so the table can be built in pieces (``--laws``, ``--inputs`` restrict a piece).
+so the table can be built in pieces (``--laws``, ``--inputs`` restrict a piece; ``--merge`` joins pieces written
+to other files, e.g. ``--laws lockhart --out agreement_lockhart.json`` in a second process).
 """
 
 from __future__ import annotations
@@ -70,6 +71,9 @@ def main(argv=None) -> dict:
     ap.add_argument("--resume", action="store_true", help="keep the rows already in --out; run the missing cases")
     ap.add_argument("--laws", nargs="+", choices=list(BOXES), default=list(BOXES))
     ap.add_argument("--inputs", nargs="+", choices=list(mk.DEMANDS), default=None)
+    ap.add_argument("--merge", nargs="+", default=(), metavar="JSON",
+                    help="add the rows of other runs' files (e.g. one law per process) before resuming")
+    ap.add_argument("--summary-only", action="store_true", help="run nothing: summarise the rows already there")
     args = ap.parse_args(argv)
     demands = args.inputs or (["published", "sampled", "step"] if args.quick else list(mk.DEMANDS))
     out = Path(args.out)
@@ -79,6 +83,13 @@ def main(argv=None) -> dict:
     ts = fast_cfg.save_grid()
     rows = json.loads(out.read_text())["rows"] if args.resume and out.exists() else []
     done_keys = {_key(r["law"], r["point"], r["input"]) for r in rows}
+    for other in args.merge:
+        for r in json.loads(Path(other).read_text())["rows"]:
+            if _key(r["law"], r["point"], r["input"]) not in done_keys:
+                rows.append(r)
+                done_keys.add(_key(r["law"], r["point"], r["input"]))
+    if args.summary_only:
+        return summarise(rows, out)
     print(f"{'law':9s} {'point':42s} {'input':10s} {'RMSE mm':>8s} {'max mm':>8s} {'volume':>9s}  status")
     for law in args.laws:
         for point, demand in itertools.product(points(law, args.quick), demands):
