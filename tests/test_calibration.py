@@ -66,16 +66,25 @@ def test_fit_names_ext_and_n_as_undetermined():
         assert ranges[name][0] <= res.estimate[name] <= ranges[name][1]
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "open (issue 9): on the first 0.8 s of the reference-made experiment the fast model's 90 % interval of Y "
-    "(~9100–9300 Pa) excludes the true 9000 Pa; not yet explained (suspect: the initial drain transient)"))
 @pytest.mark.slow
 def test_nuts_on_reference_made_data_is_converged_and_covers_the_truth(synthetic_experiment):
-    """Direct NUTS through the fast model on the shipped reference-made experiment (Y = 9 kPa), first 0.8 s."""
+    """Direct NUTS through the fast model on the shipped reference-made experiment (Y = 9 kPa), first 0.8 s.
+
+    Over 0.8 s the length says little about Y (+200 Pa moves it by 0.036 mm RMS), and this seed's noise puts the
+    reference configuration's own maximum-likelihood Y ~2.8 standard errors above the truth: no model can cover
+    9000 Pa from these data. What the fast model must do is infer what the reference would: its interval must
+    cover the reference configuration's estimate (found here on a grid of Y)."""
     exp = synthetic_experiment.window(0.8)
     cfg = gj.Config(t1=0.8)
     inputs = ex.to_inputs(exp, "forward", gj.reference(), cfg.t0, cfg.t1)
     times, length = exp.time, exp["robot_length_m"]
+    ref_cfg = gj.Config(t1=0.8, fidelity="reference", rtol=1e-7)
+    grid = np.linspace(8800.0, 9800.0, 11)
+    sse = [float(np.sum((np.asarray(gj.simulate(gj.replace(gj.reference(), Y=y), inputs, ref_cfg, ts=times).length)
+                         - length) ** 2)) for y in grid]
+    a, b, _ = np.polyfit(grid, sse, 2)
+    y_reference, se_reference = -b / (2 * a), NOISE / np.sqrt(a)
+    assert (y_reference - TRUTH_Y) / se_reference > 2.0  # the noise draw, not the model, moves Y off the truth
     priors = gpost.paper_priors()[:1]
     res = gpost.sample(times, length, inputs, config=cfg, priors=priors, chains=2, warmup=80, samples=80,
                        seed=3, progress=False)
@@ -84,7 +93,9 @@ def test_nuts_on_reference_made_data_is_converged_and_covers_the_truth(synthetic
     assert s["rhat_max"] < 1.05
     assert s["ess_bulk_min"] > 40
     lo, hi = s["parameters"]["Y"]["interval_90"]
-    assert lo < TRUTH_Y < hi
+    print(f"reference estimate {y_reference:.0f} ± {se_reference:.0f} Pa; NUTS (fast) 90 % {lo:.0f}–{hi:.0f} Pa")
+    assert lo < y_reference < hi
+    assert abs(s["parameters"]["Y"]["mean"] - y_reference) < 0.5 * se_reference
     assert s["parameters"]["sigma"]["mean"] == pytest.approx(NOISE, rel=0.2)
     assert 0.8 < s["coverage_90"] < 0.98
     # A new input: a 100 kPa pulse grows the robot less than the 150 kPa one, with a band that is not degenerate.
