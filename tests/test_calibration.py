@@ -70,7 +70,7 @@ def test_fit_names_ext_and_n_as_undetermined():
 def test_nuts_on_reference_made_data_is_converged_and_covers_the_truth(synthetic_experiment):
     """Direct NUTS through the fast model on the shipped reference-made experiment (Y = 9 kPa), first 0.8 s.
 
-    Over 0.8 s the length says little about Y (+200 Pa moves it by 0.036 mm RMS), and this seed's noise puts the
+    Over 0.8 s the length says little about Y, and this seed's noise puts the
     reference configuration's own maximum-likelihood Y ~2.8 standard errors above the truth: no model can cover
     9000 Pa from these data. What the fast model must do is infer what the reference would: its interval must
     cover the reference configuration's estimate (found here on a grid of Y)."""
