@@ -759,8 +759,8 @@ def _draw_axes(base, draws):
 
 def tune_pid(cost, log_gains, iterations: int = 10, step: float = 0.3, fd: float = 0.02) -> TuneResult:
     """Gradient descent on ``cost(log_gains)`` with backtracking; the gradient by central differences in
-    log-gain space (``fd`` decades; the closed loop's adaptive solves make a reverse pass unavailable and
-    the forward pass through the raw integrator unreliable: its tangent diverges at high gains, see
+    log-gain space (``fd`` decades, a smoothed slope: at tuned high gains the closed loop's tangent grows along a
+    10 s run and the cost is rough on small scales, so exact forward-mode derivatives diverge there; see
     benchmarks/control_gradient.py), all 2d+1 evaluations of one iteration batched."""
     start = time.perf_counter()
     x = np.asarray(log_gains, float)
