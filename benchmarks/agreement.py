@@ -7,7 +7,8 @@ Points: the 8 corners and 8 Latin-hypercube points (seed 0) of the box of each g
 φ_L 3e-4–3e-3 m/s, n_L 0.25–1). Inputs: the published pulse train and demands given as
 data or of other timing (data/make_synthetic.py ``DEMANDS``). For each (law, point, input):
 length RMSE and max |difference| (mm) of the fast configuration (default tolerance) against
-the reference (rtol 1e-7), the targets 0.05 mm and 0.15 mm, and the fast configuration's
+the reference (rtol 1e-7; where that fails, its default 1e-6, recorded as ``reference_rtol``), the targets
+0.05 mm and 0.15 mm, and the fast configuration's
 volume balance (delivered − grown − stored, stored from the sensed pressure by quadrature,
 rigid hoses) as a share of the delivered volume (target 0.1 %). ``--quick`` takes 2 corners
 and 2 LHS points per law and 3 inputs. The reference is slow (~10–20 s per 10 s run after a
@@ -42,6 +43,9 @@ BOXES = {
     "reference": (sw.Dimension("n", 0.9, 1.1), sw.Dimension("Y", 5e3, 15e3), sw.Dimension("ext", 4000.0, 10000.0)),
     "lockhart": (sw.Dimension("Y", 5e3, 15e3), sw.Dimension("phi_L", 3e-4, 3e-3, log=True), sw.Dimension("n_L", 0.25, 1.0)),
 }
+
+
+FALLBACK_RTOL = 1e-6  # the reference configuration's default, tried where rtol 1e-7 fails
 
 
 def points(law: str, quick: bool) -> list[dict]:
@@ -82,6 +86,7 @@ def main(argv=None) -> dict:
     ref_cfg = gj.Config(fidelity="reference", t1=10.0, rtol=1e-7)
     ts = fast_cfg.save_grid()
     rows = json.loads(out.read_text())["rows"] if args.resume and out.exists() else []
+    rows = [r for r in rows if r["reference_status"] == "ok" or "reference_rtol" in r]  # retry with the fallback
     done_keys = {_key(r["law"], r["point"], r["input"]) for r in rows}
     for other in args.merge:
         for r in json.loads(Path(other).read_text())["rows"]:
@@ -101,10 +106,15 @@ def main(argv=None) -> dict:
             start = time.perf_counter()
             fast = gj.simulate(params, inputs, fast_cfg, ts=ts)
             ref = gj.simulate(params, inputs, ref_cfg, ts=ts)
+            ref_rtol = ref_cfg.rtol
+            if int(ref.status) != gj.OK:  # the reference's own default tolerance, where rtol 1e-7 fails
+                ref_rtol = FALLBACK_RTOL
+                ref = gj.simulate(params, inputs, ref_cfg.replace(rtol=ref_rtol), ts=ts)
             rigid = gj.replace(params, **{"tube.diameter_compliance": 0.0})
             vol = volume_balance(rigid, gj.simulate(rigid, inputs, fast_cfg, ts=ts))
             row = {"law": law, "point": point, "input": demand, "fast_status": gj.status_name(fast.status),
-                   "reference_status": gj.status_name(ref.status), "volume_defect_share": vol,
+                   "reference_status": gj.status_name(ref.status), "reference_rtol": ref_rtol,
+                   "volume_defect_share": vol,
                    "wall_s": time.perf_counter() - start}
             if int(fast.status) == gj.OK and int(ref.status) == gj.OK:
                 d = np.asarray(fast.length - ref.length)
