@@ -71,7 +71,7 @@ def test_nuts_on_reference_made_data_is_converged_and_covers_the_truth(synthetic
     """Direct NUTS through the fast model on the shipped reference-made experiment (Y = 9 kPa), first 0.8 s.
 
     Over 0.8 s the length says little about Y, and this seed's noise puts the
-    reference configuration's own maximum-likelihood Y ~2.8 standard errors above the truth: no model can cover
+    reference configuration's own maximum-likelihood Y more than 2 standard errors above the truth: no model can cover
     9000 Pa from these data. What the fast model must do is infer what the reference would: its interval must
     cover the reference configuration's estimate (found here on a grid of Y)."""
     exp = synthetic_experiment.window(0.8)
