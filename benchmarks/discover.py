@@ -1,6 +1,7 @@
 """The discovery matrix: every catalogue effect × two magnitudes × seeds, plus clean seeds.
 
-Run: ``python benchmarks/discover.py [--seeds 10] [--clean 20] [--t-end 10] [--effects NAME ...] [--factors 1 2]``
+Run: ``python benchmarks/discover.py [--seeds 10] [--clean 20] [--t-end 10] [--effects NAME ...] [--factors 1 2]
+[--first-seed 1000] [--first-clean-seed 2000]``
 → ``benchmarks/results/discover.json``. Data come from :func:`growjax.synthetic.make_experiment`
 (the reference configuration; one noise-free trace per effect and magnitude, seeds add noise), and
 every run is :func:`growjax.discover.discover` over the whole catalogue on the fast configuration.
@@ -58,6 +59,8 @@ def main() -> None:
     parser.add_argument("--effects", nargs="+", default=list(fx.CATALOGUE))
     parser.add_argument("--factors", nargs="+", type=float, default=[1.0, 2.0],
                         help="magnitudes as multiples of each effect's moderate magnitude (default 1 2)")
+    parser.add_argument("--first-seed", type=int, default=1000, help="seed of the first hidden-effect run")
+    parser.add_argument("--first-clean-seed", type=int, default=2000, help="seed of the first clean run")
     parser.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "discover.json"))
     args = parser.parse_args()
     runs = []
@@ -65,10 +68,10 @@ def main() -> None:
         for factor in args.factors:
             magnitude = factor * sy.moderate_magnitude(effect)
             for seed in range(args.seeds):
-                runs.append(one_run(effect, magnitude, 1000 + seed, args.t_end))
+                runs.append(one_run(effect, magnitude, args.first_seed + seed, args.t_end))
                 print(json.dumps(runs[-1]), flush=True)
     for seed in range(args.clean):
-        runs.append(one_run(None, None, 2000 + seed, args.t_end))
+        runs.append(one_run(None, None, args.first_clean_seed + seed, args.t_end))
         print(json.dumps(runs[-1]), flush=True)
     hidden = [r for r in runs if r["effect"] is not None]
     clean = [r for r in runs if r["effect"] is None]
