@@ -386,8 +386,13 @@ def discover(
             new = [k for k in effects_on if k not in added_index]
             fits = []
             base_only = fit_base and not effects_on and not added_index  # the base model: its own starts
-            for start in ([None] if i in warm else range(len(BASE_START_FACTORS) if base_only
-                                                          else u_starts.shape[1] if new else 1)):
+            if i in warm:
+                starts = [None]
+            elif base_only:
+                starts = range(len(BASE_START_FACTORS))
+            else:
+                starts = range(u_starts.shape[1]) if new else [0]
+            for start in starts:
                 if base_only:
                     z_start = np.array(z_now, float)
                     z_start[:p] += math.log(BASE_START_FACTORS[start])

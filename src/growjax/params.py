@@ -191,10 +191,6 @@ _RANGES = {
 
 def physical_ranges(params: Parameters) -> dict:
     """{qualified name: (low, high, unit)}: the physical range of each parameter that has one (effects included)."""
-    return _ranges(params)
-
-
-def _ranges(params: Parameters) -> dict:
     ranges = dict(_RANGES)
     for e in params.effects:
         for field, (lo, hi) in e.ranges.items():
@@ -210,7 +206,7 @@ def admissible_rows(base: Parameters, names, values) -> np.ndarray:
     """
     values = np.atleast_2d(np.asarray(values, float))
     names = [resolve_name(base, n) for n in names]
-    ranges = _ranges(base)
+    ranges = physical_ranges(base)
     ok = np.all(np.isfinite(values), axis=1)
     for j, q in enumerate(names):
         if q in ranges:
@@ -231,7 +227,7 @@ def validate(params: Parameters) -> None:
 
     Works on concrete (possibly batched) values, never inside ``jit``.
     """
-    ranges = _ranges(params)
+    ranges = physical_ranges(params)
     for q in parameter_names(params):
         v = get(params, q)
         if v is None or isinstance(v, jax.core.Tracer):

@@ -349,9 +349,9 @@ def sbc(emulator: em.Emulator, priors: Sequence[Prior], replicates: int = 100, w
 
     if truth_model is not None:
         model_error = float(np.hypot(float(emulator.error_rms), model_error))
-    if not np.isfinite(model_error):
-        raise ValueError("sbc with a truth_model needs a validated emulator (growjax.emulator.validate): its error "
-                         "joins the noise")
+        if not np.isfinite(model_error):
+            raise ValueError("sbc with a truth_model needs a validated emulator (growjax.emulator.validate): its "
+                             "error joins the noise")
     model = functools.partial(growth_model, mean_length=emulated_mean(emulator), priors=priors,
                               noise_scale=noise_scale, model_error=model_error)
     k_prior, k_init, k_run, k_noise = jax.random.split(jax.random.PRNGKey(seed), 4)

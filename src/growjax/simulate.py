@@ -65,8 +65,8 @@ def input_breaks(inputs, config: Config) -> tuple[jax.Array, jax.Array]:
     breaks = _padded(jumps, config.t1), _padded(np.setdiff1d(kinks, jumps), config.t1)
     if all(map(_immutable, jax.tree_util.tree_leaves(inputs))):
         key = id(inputs)
-        try:
-            ref = weakref.ref(inputs, lambda r, k=key: _BREAKS.pop(k, None) if _BREAKS.get(k, (None,))[0] is r else None)
+        try:  # forgotten when the inputs are freed (before their id can be reused)
+            ref = weakref.ref(inputs, lambda _, k=key: _BREAKS.pop(k, None))
         except TypeError:
             return breaks
         _BREAKS[key] = (ref, window, breaks)
