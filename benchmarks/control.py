@@ -108,8 +108,8 @@ def other_methods(res, record, target, T, ev, p, cfg_ev, lim):
 
 
 def stepper_methods(record, target, T, ev):
-    """The open-loop step schedule, the closed-loop full-step controller (both evaluated on ``ev``) and the
-    1/16-microstep controller (fast configuration: microstepping is modelled there only)."""
+    """The open-loop step schedule, the closed-loop full-step controller and the 1/16-microstep controller,
+    designed on the fast configuration and evaluated on ``ev``."""
     pi = gc.plant_params("inverse", target)
     lim_i = gc.limits(pi)
     lead, _, ticks, counts = gc.optimize_steps(pi, target, T)
@@ -117,12 +117,14 @@ def stepper_methods(record, target, T, ev):
     tr = gc.simulate_steps(pi, target, ticks, counts, gj.Config(fidelity=ev, drive="inverse", t1=T), ts)
     r = gc._score(ts, np.asarray(tr.length), np.asarray(tr.pressure), counts, ticks, target, lim_i, int(tr.status))
     record("inverse open-loop steps", r, lead_s=lead)
-    ctrl, _ = gc.tune_stepper(pi, target, T)
-    r = gc.run_closed_loop(gc.Plant.make(pi, gj.Config(fidelity=ev, drive="inverse", t1=T)), ctrl, target, T, lim_i)
-    record("inverse feedback (step controller)", r, rate_Hz=ctrl.rate, lead_s=ctrl.lead)
-    ctrl16, _ = gc.tune_stepper(pi, target, T, microsteps=16)
-    r = gc.run_closed_loop(gc.Plant.make(pi, gj.Config(drive="inverse", t1=T), microstep=True), ctrl16, target, T, lim_i)
-    record("inverse feedback, 1/16 microstep (fast)", r, rate_Hz=ctrl16.rate, lead_s=ctrl16.lead)
+    cfg = gj.Config(fidelity=ev, drive="inverse", t1=T)
+    for microsteps, name in ((1, "inverse feedback (step controller)"), (16, "inverse feedback, 1/16 microstep")):
+        start = time.perf_counter()
+        ctrl, _ = gc.tune_stepper(pi, target, T, microsteps=microsteps)
+        tuning_s = time.perf_counter() - start
+        r = gc.run_closed_loop(gc.Plant.make(pi, cfg, microstep=microsteps > 1), ctrl, target, T, lim_i)
+        gate = ctrl.pressure_gate if np.isfinite(ctrl.pressure_gate) else None
+        record(name, r, rate_Hz=ctrl.rate, lead_s=ctrl.lead, pressure_gate_Pa=gate, tuning_s=tuning_s)
 
 
 def robust_study(args, res, target, T, p, lim, prof, pid0, tuned):

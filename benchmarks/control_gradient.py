@@ -23,7 +23,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-import growjax as gj
 from growjax import control as gc
 from growjax import experiment as ex
 

@@ -25,6 +25,7 @@ not designed on. All quantities SI: lengths m, pressures Pa, times s.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import time
 from pathlib import Path
@@ -134,20 +135,10 @@ def rmse(t, length, target: Target, t_start: float = 0.0) -> float:
 # -- microstepping driver (stepper) ------------------------------------------------------------------------
 
 
-def microstep_voltages(motor, command):
-    """Phase voltages (V) of a sine–cosine microstepping driver at a continuous step command k.
-
-    (v_A, v_B) = √2 V (cos φ, sin φ), φ = −π/4 + kπ/2: equal to the full-step driver
-    (:func:`growjax.motor.winding_voltages`) at every integer k, and smooth in between.
-    """
-    phi = -0.25 * jnp.pi + 0.5 * jnp.pi * command
-    amp = jnp.sqrt(2.0) * motor.supply_voltage
-    return amp * jnp.cos(phi), amp * jnp.sin(phi)
-
-
-def _microstep_rates(t, y, params, inputs, config, prep):
-    """The fast configuration's stepper drive with a microstepping driver (``inputs.steps`` continuous)."""
-    return fm._inverse_rates(t, y, params, inputs, config, prep, driver=microstep_voltages)
+def with_microstepping(params, on: bool = True):
+    """``params`` with the stepper's driver swapped for the sine–cosine microstepping one (both configurations;
+    :func:`growjax.motor.winding_voltages`): the step command may then be any real number."""
+    return eqx.tree_at(lambda p: p.motor, params, dataclasses.replace(params.motor, microstepping=on))
 
 
 # -- the plant, integrated from any state -------------------------------------------------------------------
@@ -156,21 +147,25 @@ def _microstep_rates(t, y, params, inputs, config, prep):
 class Plant(eqx.Module):
     """A configuration of the model as a plant: (params with effects applied, config, prepared constants).
 
-    ``microstep`` swaps the stepper's full-step driver for :func:`microstep_voltages` (fast only).
+    ``microstep`` swaps the stepper's full-step driver for the microstepping one (:func:`with_microstepping`).
     """
 
     params: object
     config: gj.Config = eqx.field(static=True)
     prep: object
-    microstep: bool = eqx.field(static=True, default=False)
 
     @classmethod
     def make(cls, params, config: gj.Config, microstep: bool = False) -> Plant:
-        if microstep and (config.fidelity != "fast" or config.drive != "inverse"):
-            raise ValueError("microstepping is modelled for the fast configuration of the inverse drive only")
-        params = fx.apply_all(params)
+        if microstep and config.drive != "inverse":
+            raise ValueError("microstepping is a driver of the stepper (inverse) drive")
+        params = fx.apply_all(with_microstepping(params) if microstep else params)
         prep = (fm.prepare if config.fidelity == "fast" else rm.prepare)(params, config)
-        return cls(params, config, prep, microstep)
+        return cls(params, config, prep)
+
+    @property
+    def microstep(self) -> bool:
+        """Does the stepper's driver microstep?"""
+        return bool(self.params.motor.microstepping)
 
     def initial_state(self):
         return (fm.initial_state if self.config.fidelity == "fast" else rm.initial_state)(self.params, self.config)
@@ -181,17 +176,13 @@ class Plant(eqx.Module):
 
     def field(self, t, y, inputs):
         """Scaled state rates (the solver's field)."""
-        if self.microstep:
-            s = self.scales()
-            return _microstep_rates(t, y * s, self.params, inputs, self.config, self.prep)[0] / s
         mod = fm if self.config.fidelity == "fast" else rm
         return mod.vector_field(t, y, (self.params, inputs, self.config, self.prep))
 
     def outputs(self, t, y, inputs):
         """(length m, sensed pressure Pa, syringe displacement m) of a scaled state."""
         if self.config.fidelity == "fast":
-            rates = _microstep_rates if self.microstep else fm._rates
-            length, pressure, _, x_p, _ = rates(t, y * self.scales(), self.params, inputs, self.config, self.prep)[1]
+            length, pressure, _, x_p, _ = fm._rates(t, y * self.scales(), self.params, inputs, self.config, self.prep)[1]
         else:
             length, pressure, _, x_p, _ = rm._outputs(t, y, self.params, inputs, self.config, self.prep)
         return length, pressure, x_p
@@ -263,7 +254,7 @@ def linearize(params=None, drive: str = "forward", pressure: float = 150e3, leng
 
     Forward drive: input the pressure demand (Pa), output the robot length (m); operating point after
     ``settle`` s at demand ``pressure`` (growing above the yield pressure, holding below). Inverse drive:
-    input the step command (steps, continuous: a microstepping driver, :func:`microstep_voltages`),
+    input the step command (steps, continuous: a microstepping driver, :func:`with_microstepping`),
     output the length, held at ``steps``. States are the fast configuration's scaled states.
     A, B, C from exact Jacobians (``jax.jacfwd``) of the vector field; D = 0. The operating point
     (state, rates, whether it grows) is attached as ``sys.operating_point``.
@@ -518,12 +509,14 @@ def _score(ts, length, pressure, command, ticks, target, lim, status, step_s=Non
 class StepController(eqx.Module):
     """Closed-loop step controller of the stepper drive: every 1/``rate`` s, step by round(e·microsteps)/microsteps
     (at most one full step per tick, back steps included) when the length error e (in steps, the target
-    taken ``lead`` s ahead) exceeds ``deadband`` steps."""
+    taken ``lead`` s ahead) exceeds ``deadband`` steps; no forward step while the sensed pressure is at or
+    above ``pressure_gate`` (Pa): there the load torque would make the motor slip, and the step is lost."""
 
     rate: float = 20.0
     lead: float = 0.1
     deadband: float = 0.5
     microsteps: int = eqx.field(static=True, default=1)
+    pressure_gate: float = float("inf")
 
     def run(self, plant: Plant, target: Target, t1: float, lim: Limits, cath) -> ClosedLoopResult:
         if self.microsteps > 1 and not plant.microstep:
@@ -543,21 +536,21 @@ class StepController(eqx.Module):
             return plant.advance(y, _segment_inputs(cath, ta, tb, 0.0, 0.0, k), ta, tb, ts)
 
         y = plant.initial_state()
-        length = float(plant.outputs(0.0, y, _segment_inputs(cath, 0.0, dt, 0.0, 0.0, 0.0))[0])
-        l0, k = float(target.length[0]), 0.0
+        length, pressure, _ = (float(v) for v in plant.outputs(0.0, y, _segment_inputs(cath, 0.0, dt, 0.0, 0.0, 0.0)))
+        k = 0.0
         out_t, out_l, out_p, ks, status = [], [], [], [], 0
         for ta in ticks:
             e = (target.at(ta + self.lead) - length) / s_len
             if abs(e) > self.deadband / self.microsteps:
-                k += float(np.clip(np.round(e * self.microsteps) / self.microsteps, -per_tick, per_tick))
+                step = float(np.clip(np.round(e * self.microsteps) / self.microsteps, -per_tick, per_tick))
+                k += 0.0 if (step > 0 and pressure >= self.pressure_gate) else step
             y, (l, p, _), st = seg(y, jnp.asarray(ta), jnp.asarray(k))
-            length = float(l[-1])
+            length, pressure = float(l[-1]), float(p[-1])
             status = max(status, int(st))
             out_t.append(ta + dt * np.arange(1, sub + 1) / sub)
             out_l.append(np.asarray(l))
             out_p.append(np.asarray(p))
             ks.append(k)
-        del l0
         ts = np.concatenate(out_t)
         return _score(ts, np.concatenate(out_l), np.concatenate(out_p), np.asarray(ks), ticks, target, lim, status)
 
@@ -806,7 +799,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--draws", type=int, default=8, help="posterior draws to tune on (--robust; default 8)")
     parser.add_argument("--t-end", type=float, default=10.0, help="end time, s (default 10)")
     parser.add_argument("--iterations", type=int, default=10, help="optimiser / tuning iterations (default 10)")
-    parser.add_argument("--microsteps", type=int, default=1, help="stepper driver microsteps (fast evaluation only)")
+    parser.add_argument("--microsteps", type=int, default=1, help="stepper driver microsteps (1: the shipped full-step driver)")
     parser.add_argument("--evaluate", choices=["fast", "reference"], default="reference",
                         help="configuration the tracking RMSE is evaluated on (default reference)")
     parser.add_argument("--seed", type=int, default=0)
@@ -851,13 +844,11 @@ def design(target: Target, drive: str, method: str, t1: float, robust: str | Non
                          int(tr.status))
             summary["profile"] = {"lead_s": lead, "tick_s": ticks.tolist(), "steps": counts.tolist()}
         else:
-            ctrl, e = tune_stepper(params, target, t1, microsteps)
+            ctrl, _ = tune_stepper(params, target, t1, microsteps)
             summary["design_s"] = time.perf_counter() - start
-            plant_cfg = evaluate_cfg if microsteps == 1 else evaluate_cfg.replace(fidelity="fast")
-            summary["evaluated_on"] = plant_cfg.fidelity
-            res = run_closed_loop(Plant.make(params, plant_cfg, microstep=microsteps > 1), ctrl, target, t1, lim)
+            res = run_closed_loop(Plant.make(params, evaluate_cfg, microstep=microsteps > 1), ctrl, target, t1, lim)
             summary["gains"] = {"rate_Hz": ctrl.rate, "lead_s": ctrl.lead, "deadband_steps": ctrl.deadband,
-                                "microsteps": ctrl.microsteps}
+                                "microsteps": ctrl.microsteps, "pressure_gate_Pa": ctrl.pressure_gate if math.isfinite(ctrl.pressure_gate) else None}
     else:
         prof = optimize_profile(params, target, t1, knot_dt=knot_dt, iterations=iterations, lim=lim)
         summary["profile_optimisation_s"] = prof.wall_s
@@ -898,19 +889,20 @@ def design(target: Target, drive: str, method: str, t1: float, robust: str | Non
     return summary
 
 
-def tune_stepper(params, target: Target, t1: float, microsteps: int = 1, rates=(20.0, 50.0, 100.0),
-                 leads=(0.0, 0.1, 0.2, 0.3, 0.4)):
-    """The step controller's rate and lead by search on the fast model (its cost is piecewise constant in them).
-    → (best :class:`StepController`, its RMSE m)."""
+def tune_stepper(params, target: Target, t1: float, microsteps: int = 1, rates=(20.0, 25.0, 50.0),
+                 leads=(0.1, 0.2, 0.3, 0.4), gates=(160e3, 200e3, 240e3, float("inf"))):
+    """The step controller's rate (Hz), lead (s) and pressure gate (Pa) by search on the fast model (its cost is
+    piecewise constant in them). → (best :class:`StepController`, its RMSE m)."""
     plant = Plant.make(params, gj.Config(drive="inverse", t1=t1), microstep=microsteps > 1)
     lim = limits(params)
     best = None
     for rate in rates:
         for lead in leads:
-            ctrl = StepController(rate=rate, lead=lead, microsteps=microsteps)
-            res = run_closed_loop(plant, ctrl, target, t1, lim)
-            if np.isfinite(res.rmse_m) and not res.pressure_limit_crossed and (best is None or res.rmse_m < best[1]):
-                best = (ctrl, res.rmse_m)
+            for gate in gates:
+                ctrl = StepController(rate=rate, lead=lead, microsteps=microsteps, pressure_gate=gate)
+                res = run_closed_loop(plant, ctrl, target, t1, lim)
+                if np.isfinite(res.rmse_m) and not res.pressure_limit_crossed and (best is None or res.rmse_m < best[1]):
+                    best = (ctrl, res.rmse_m)
     return best
 
 
@@ -947,8 +939,8 @@ def control_figure(res: ClosedLoopResult, target: Target, path, lim: Limits, tit
 
 __all__ = [
     "MPC", "ClosedLoopResult", "LengthPID", "Limits", "Plant", "ProfileResult", "StepController", "Target",
-    "TuneResult", "add_arguments", "command", "design", "limits", "linearize", "microstep_voltages",
-    "operating_point", "optimize_profile", "optimize_steps", "parameter_draws", "pid_cost_fn", "plant_params",
-    "ramp_with_pauses", "rmse", "run_closed_loop", "simulate_profile", "simulate_steps", "step_commands",
-    "step_length", "step_sequence", "target_from_experiment", "tune_pid", "tune_stepper",
+    "TuneResult", "add_arguments", "command", "design", "limits", "linearize", "operating_point",
+    "optimize_profile", "optimize_steps", "parameter_draws", "pid_cost_fn", "plant_params", "ramp_with_pauses",
+    "rmse", "run_closed_loop", "simulate_profile", "simulate_steps", "step_commands", "step_length",
+    "step_sequence", "target_from_experiment", "tune_pid", "tune_stepper", "with_microstepping",
 ]

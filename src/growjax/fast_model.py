@@ -201,19 +201,15 @@ def _forward_rates(t, y, params, inputs, config, prep):
     return rates, (length, pressure, q_r, x_p, p_r)
 
 
-def _inverse_rates(t, y, params, inputs, config, prep, driver=winding_voltages):
-    """Unscaled rates and the instant's outputs of the inverse (stepper) drive.
-
-    ``driver(motor, steps) → (v_a, v_b)``: the stepper driver's winding voltages (V) for the step count
-    ``inputs.steps(t)``; default the full-step driver (a microstepping one: :func:`growjax.control.microstep_voltages`).
-    """
+def _inverse_rates(t, y, params, inputs, config, prep):
+    """Unscaled rates and the instant's outputs of the inverse (stepper) drive (its driver: ``params.motor``)."""
     stored, angle, omega, i_a, i_b, xi, wall = y[:7]
     e = y[7:]
     pump, motor = params.pump, params.motor
     ratio = pump.screw_ratio
     x_p, v_p = angle / ratio, omega / ratio
     pressure = line_pressure(params, stored, wall, prep.storage)
-    v_a, v_b = driver(motor, inputs.steps(t))
+    v_a, v_b = winding_voltages(motor, inputs.steps(t))
     torque, di_a, di_b = motor_derivatives(motor, angle + motor_equilibrium_offset(motor), omega, i_a, i_b, v_a, v_b)
     applied = fx.applied_drive(params.effects, e, torque)
     # Each motor drives one screw and one syringe; the platform mass is shared between the screws.
