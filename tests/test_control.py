@@ -139,16 +139,20 @@ def test_step_controller_holds_forward_steps_above_its_pressure_gate():
     assert held.any()  # the gate did bind: it held steps the error asked for
 
 
-@pytest.mark.parametrize("fidelity", ["fast", "reference"])
-def test_microstepping_driver_matches_full_steps_at_integers_and_resolves_between(fidelity):
+def _step_runner(fidelity):
     tg = _sine_target()
     p = gc.plant_params("inverse", tg)
     cfg = gj.Config(fidelity=fidelity, drive="inverse", t1=1.2)
-    ts = np.arange(0.05, 1.2, 0.05)
-    ticks = np.array([0.0, 0.2, 0.4, 0.6])
+    ts, ticks = np.arange(0.05, 1.2, 0.05), np.array([0.0, 0.2, 0.4, 0.6])
 
     def run(params, counts):
         return np.asarray(gc.simulate_steps(params, tg, ticks, np.asarray(counts, float), cfg, ts).length)
+
+    return p, run
+
+
+def test_microstepping_driver_matches_full_steps_at_integers_and_resolves_between():
+    p, run = _step_runner("fast")
 
     full = run(p, [1, 2, 3, 2])
     micro = run(gc.with_microstepping(p), [1, 2, 3, 2])
@@ -158,6 +162,17 @@ def test_microstepping_driver_matches_full_steps_at_integers_and_resolves_betwee
     # a fraction of a step moves the robot by less than the step, and more for a larger fraction
     assert quarter[-1] > quarter[0] + 3e-5
     assert quarter[-1] + 2e-4 < half[-1] and half[-1] + 5e-4 < full[-1]
+
+
+@pytest.mark.slow
+def test_microstepping_driver_is_the_same_in_both_configurations():
+    """The reference configuration runs the same driver (slow: compiles the reference stepper, ~1 min)."""
+    p, fast = _step_runner("fast")
+    _, reference = _step_runner("reference")
+    micro = gc.with_microstepping(p)
+    a, b = fast(micro, [0.5, 1.0, 1.5, 1.0]), reference(micro, [0.5, 1.0, 1.5, 1.0])
+    assert np.all(np.isfinite(b)) and np.max(np.abs(a - b)) < 5e-5  # the fast/reference agreement of full steps
+    assert np.max(np.abs(b - reference(p, [0, 1, 1, 1]))) > 1e-4  # the reference did microstep (not round)
 
 
 @pytest.mark.slow
