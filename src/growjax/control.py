@@ -182,7 +182,8 @@ class Plant(eqx.Module):
     def outputs(self, t, y, inputs):
         """(length m, sensed pressure Pa, syringe displacement m) of a scaled state."""
         if self.config.fidelity == "fast":
-            length, pressure, _, x_p, _ = fm._rates(t, y * self.scales(), self.params, inputs, self.config, self.prep)[1]
+            rates = fm._rates(t, y * self.scales(), self.params, inputs, self.config, self.prep)
+            length, pressure, _, x_p, _ = rates[1]
         else:
             length, pressure, _, x_p, _ = rm._outputs(t, y, self.params, inputs, self.config, self.prep)
         return length, pressure, x_p
@@ -799,7 +800,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--draws", type=int, default=8, help="posterior draws to tune on (--robust; default 8)")
     parser.add_argument("--t-end", type=float, default=10.0, help="end time, s (default 10)")
     parser.add_argument("--iterations", type=int, default=10, help="optimiser / tuning iterations (default 10)")
-    parser.add_argument("--microsteps", type=int, default=1, help="stepper driver microsteps (1: the shipped full-step driver)")
+    parser.add_argument("--microsteps", type=int, default=1,
+                        help="stepper driver microsteps (1: the shipped full-step driver)")
     parser.add_argument("--evaluate", choices=["fast", "reference"], default="reference",
                         help="configuration the tracking RMSE is evaluated on (default reference)")
     parser.add_argument("--seed", type=int, default=0)
@@ -847,8 +849,9 @@ def design(target: Target, drive: str, method: str, t1: float, robust: str | Non
             ctrl, _ = tune_stepper(params, target, t1, microsteps)
             summary["design_s"] = time.perf_counter() - start
             res = run_closed_loop(Plant.make(params, evaluate_cfg, microstep=microsteps > 1), ctrl, target, t1, lim)
+            gate = ctrl.pressure_gate if math.isfinite(ctrl.pressure_gate) else None  # JSON has no infinity
             summary["gains"] = {"rate_Hz": ctrl.rate, "lead_s": ctrl.lead, "deadband_steps": ctrl.deadband,
-                                "microsteps": ctrl.microsteps, "pressure_gate_Pa": ctrl.pressure_gate if math.isfinite(ctrl.pressure_gate) else None}
+                                "microsteps": ctrl.microsteps, "pressure_gate_Pa": gate}
     else:
         prof = optimize_profile(params, target, t1, knot_dt=knot_dt, iterations=iterations, lim=lim)
         summary["profile_optimisation_s"] = prof.wall_s
@@ -901,7 +904,8 @@ def tune_stepper(params, target: Target, t1: float, microsteps: int = 1, rates=(
             for gate in gates:
                 ctrl = StepController(rate=rate, lead=lead, microsteps=microsteps, pressure_gate=gate)
                 res = run_closed_loop(plant, ctrl, target, t1, lim)
-                if np.isfinite(res.rmse_m) and not res.pressure_limit_crossed and (best is None or res.rmse_m < best[1]):
+                admissible = np.isfinite(res.rmse_m) and not res.pressure_limit_crossed
+                if admissible and (best is None or res.rmse_m < best[1]):
                     best = (ctrl, res.rmse_m)
     return best
 
