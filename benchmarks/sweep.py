@@ -1,7 +1,8 @@
 """Benchmark of the 500-set Latin-hypercube sweep of the 10 s forward model against a SciPy baseline.
 
-Run: ``python benchmarks/sweep.py [--out benchmarks/results/sweep.json] [--quick]``
-(``--quick``: 100-set sweeps and a 2-set baseline subset, for a smoke run).
+Run: ``python benchmarks/sweep.py [--out benchmarks/results/sweep.json] [--quick] [--profile N]``
+(``--quick``: 100-set sweeps and a 2-set baseline subset, for a smoke run; ``--profile N``: only where one
+compiled sweep of N sets spends its time, by XLA operation, printed).
 
 Measured, on the public experiment (``../shared/data/mammobot``) or, when it is absent, on
 ``data/synthetic_forward.csv``, with the paper's box (n 0.9–1.1, Y 5–15 kPa, ext 4000–10000):
@@ -433,6 +434,37 @@ def time_sweep(n: int, base, inputs, config, measured, repeats: int = 3) -> dict
             "n_failed": int(first.failed.sum()), "best": first.best()}
 
 
+def profile_sweep(n: int, base, inputs, config, measured, top: int = 12) -> dict:
+    """Where the compiled sweep of ``n`` sets spends its time: one call under ``jax.profiler`` (a Perfetto
+    trace), its XLA operations summed by name. → {"ops": [(name, ms, calls)…], "op_calls", "op_ms", "wall_s"}.
+
+    ``op_ms`` sums every operation on every thread (the threads of a device run in parallel, so it exceeds
+    ``wall_s``); ``op_calls`` counts kernel launches. The solver's loop runs the same launches per attempt,
+    so their count and mean cost tell whether launches or arithmetic bound the sweep.
+    """
+    import collections
+    import gzip
+
+    dims = sw.paper_box()
+    values = sw.latin_hypercube(dims, n, seed=0)
+    names = [d.name for d in dims]
+    sw.evaluate(values, names, base, inputs, config, measured=measured)  # compile outside the trace
+    with tempfile.TemporaryDirectory() as tmp:
+        with jax.profiler.trace(tmp, create_perfetto_trace=True):
+            wall = sw.evaluate(values, names, base, inputs, config, measured=measured).wall_s
+        trace = next(Path(tmp).rglob("perfetto_trace.json.gz"))
+        events = json.load(gzip.open(trace))
+    events = events["traceEvents"] if isinstance(events, dict) else events
+    total, calls = collections.Counter(), collections.Counter()
+    for e in events:
+        name = e.get("name", "")
+        if e.get("ph") == "X" and not name.startswith("$") and "Execute" not in name and "asarray" not in name:
+            total[name] += e.get("dur", 0) * 1e-3
+            calls[name] += 1
+    return {"n": n, "wall_s": wall, "op_ms": sum(total.values()), "op_calls": sum(calls.values()),
+            "ops": [(k, v, calls[k]) for k, v in total.most_common(top)]}
+
+
 def time_cli(n: int, data: Path) -> dict:
     """Wall time (s) of a whole ``growjax sweep`` process in a temporary folder, with an empty compilation cache."""
     exe = Path(sys.executable).with_name("growjax")
@@ -519,6 +551,8 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "sweep.json"))
     parser.add_argument("--quick", action="store_true", help="100-set sweeps and 2 baseline sets (smoke run)")
+    parser.add_argument("--profile", type=int, metavar="N", default=0,
+                        help="only profile one compiled sweep of N sets (XLA operations by time) and print it")
     args = parser.parse_args()
     n = 100 if args.quick else 500
     data = experiment_path()
@@ -530,6 +564,13 @@ def main():
     dims = sw.paper_box()
     names = [d.name for d in dims]
     out = {"data": str(data), "n_devices": len(jax.devices()), "config": dataclasses.asdict(config)}
+    if args.profile:
+        prof = profile_sweep(args.profile, base, inputs, config, measured)
+        print(f"sweep of {prof['n']} sets: {prof['wall_s']:.3f} s wall; {prof['op_calls']} XLA operation launches, "
+              f"{prof['op_ms']:.0f} ms summed over threads ({1e3 * prof['op_ms'] / prof['op_calls']:.2f} µs each)")
+        for name, ms, calls in prof["ops"]:
+            print(f"  {ms:9.1f} ms  {calls:8d} calls  {name}")
+        return
 
     out["sweep"] = time_sweep(n, base, inputs, config, measured)
     out["cli_process"] = time_cli(n, data)
