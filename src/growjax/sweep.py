@@ -263,8 +263,12 @@ def evaluate(
             return make_member(p, names, i, config, m, window, breaks=b)(theta)
 
         replicated = NamedSharding(mesh, PartitionSpec())
-        batched = jax.jit(jax.vmap(member, in_axes=(0, None)), in_shardings=(sharding, replicated),
-                          out_shardings=sharding)
+        # Each device steps its own members in its own loop (shard_map): a vmapped loop over the whole
+        # sharded batch would wait, at every attempt, for a cross-device "is any member still running?".
+        local = jax.shard_map(jax.vmap(member, in_axes=(0, None)), mesh=mesh,
+                              in_specs=(PartitionSpec("batch"), PartitionSpec()), out_specs=PartitionSpec("batch"),
+                              check_vma=False)
+        batched = jax.jit(local, in_shardings=(sharding, replicated), out_shardings=sharding)
         compiled = batched.lower(jax.ShapeDtypeStruct((chunk, len(names)), jnp.float64, sharding=sharding),
                                  dynamic).compile()
         if len(_COMPILED) >= 8:
