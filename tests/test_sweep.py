@@ -69,6 +69,28 @@ def test_sweep_equals_one_at_a_time_and_chunking_changes_nothing(setup):
     assert np.all(np.diff(whole.final_length[order]) < 0)
 
 
+def test_large_batches_compute_the_fields_shared_values_once_with_the_same_result(setup):
+    """From ``SHARED_BATCH_MIN`` members per device the field passes its shared values through a dot
+    (:func:`growjax.fast_model._computed_once`); the results equal those of small batches, which do not.
+
+    The shared values differ from the recomputed ones by rounding (XLA's kernels differ), which can move an
+    adaptive step: the runs then differ at the solver's tolerance (0.7 µm of length at the default rtol 1e-4,
+    5e-9 m at 1e-6, measured). At rtol 1e-6 a real difference would show far above that.
+    """
+    from growjax import fast_model as fm
+
+    base, inputs, measured = setup
+    cfg = CFG.replace(rtol=1e-6)
+    n = fm.SHARED_BATCH_MIN * len(jax.devices())
+    values = sw.latin_hypercube(sw.paper_box(), n, seed=2)
+    names = [d.name for d in sw.paper_box()]
+    large = sw.evaluate(values, names, base, inputs, cfg, measured=measured, chunk_size=n)
+    small = sw.evaluate(values, names, base, inputs, cfg, measured=measured, chunk_size=2)
+    assert np.all(large.status == gj.OK) and np.all(small.status == gj.OK)
+    np.testing.assert_allclose(large.rmse, small.rmse, rtol=0, atol=1e-7)
+    np.testing.assert_allclose(large.final_length, small.final_length, rtol=0, atol=1e-7)
+
+
 def test_failed_members_are_flagged_and_do_not_touch_the_others(setup):
     base, inputs, measured = setup
     names = ["Y", "t"]
