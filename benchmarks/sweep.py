@@ -453,7 +453,8 @@ def profile_sweep(n: int, base, inputs, config, measured, top: int = 12) -> dict
         with jax.profiler.trace(tmp, create_perfetto_trace=True):
             wall = sw.evaluate(values, names, base, inputs, config, measured=measured).wall_s
         trace = next(Path(tmp).rglob("perfetto_trace.json.gz"))
-        events = json.load(gzip.open(trace))
+        with gzip.open(trace) as f:
+            events = json.load(f)
     events = events["traceEvents"] if isinstance(events, dict) else events
     total, calls = collections.Counter(), collections.Counter()
     for e in events:
