@@ -83,7 +83,7 @@ class Prepared(eqx.Module):
     line_resistance: jax.Array  # Pa·s/m³
     newton: jax.Array | None  # bool: a velocity-dependent force is present (None: decided statically)
     inflow_iterations: int = eqx.field(static=True)
-    share_values: bool = eqx.field(static=True, default=False)  # see :func:`_computed_once`
+    share_values: bool = eqx.field(static=True, default=False)  # set for large batches: :func:`_computed_once`
 
 
 def prepare(params: Parameters, config: Config) -> Prepared:
@@ -184,7 +184,7 @@ SHARED_BATCH_MIN = 16  # members of a batched solve from which the field compute
 
 
 def _computed_once(*values):
-    """``values`` unchanged (exactly: a product with the identity in float64), through one array XLA must materialise.
+    """``values`` unchanged (exactly: a product with the identity, float64), through an array XLA must materialise.
 
     XLA:CPU fuses a batched field into one loop kernel that evaluates each state rate on its own, recomputing
     what the rates share (the robot's inflow, the platform speed) once per rate: 936 operations for 338

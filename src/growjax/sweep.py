@@ -265,6 +265,7 @@ def evaluate(
         replicated = NamedSharding(mesh, PartitionSpec())
         # Each device steps its own members in its own loop (shard_map): a vmapped loop over the whole
         # sharded batch would wait, at every attempt, for a cross-device "is any member still running?".
+        # check_vma=False: the solver's loop carries replicated constants beside per-device members.
         local = jax.shard_map(jax.vmap(member, in_axes=(0, None)), mesh=mesh,
                               in_specs=(PartitionSpec("batch"), PartitionSpec()), out_specs=PartitionSpec("batch"),
                               check_vma=False)
