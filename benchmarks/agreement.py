@@ -86,13 +86,11 @@ def main(argv=None) -> dict:
     ref_cfg = gj.Config(fidelity="reference", t1=10.0, rtol=1e-7)
     ts = fast_cfg.save_grid()
     rows = json.loads(out.read_text())["rows"] if args.resume and out.exists() else []
-    rows = [r for r in rows if r["reference_status"] == "ok" or "reference_rtol" in r]  # retry with the fallback
-    done_keys = {_key(r["law"], r["point"], r["input"]) for r in rows}
     for other in args.merge:
-        for r in json.loads(Path(other).read_text())["rows"]:
-            if _key(r["law"], r["point"], r["input"]) not in done_keys:
-                rows.append(r)
-                done_keys.add(_key(r["law"], r["point"], r["input"]))
+        rows += json.loads(Path(other).read_text())["rows"]
+    rows = [r for r in rows if r["reference_status"] == "ok" or "reference_rtol" in r]  # retry with the fallback
+    rows = list({_key(r["law"], r["point"], r["input"]): r for r in reversed(rows)}.values())[::-1]  # first wins
+    done_keys = {_key(r["law"], r["point"], r["input"]) for r in rows}
     if args.summary_only:
         return summarise(rows, out)
     print(f"{'law':9s} {'point':42s} {'input':10s} {'RMSE mm':>8s} {'max mm':>8s} {'volume':>9s}  status")

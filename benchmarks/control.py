@@ -57,7 +57,7 @@ def main():
               f"limit crossed {r.pressure_limit_crossed}  {extra}", flush=True)
 
     if args.stepper_only:
-        stepper_methods(record, target, T, ev)
+        stepper_methods(res, target, T, ev)
         write(res, "control_stepper.json")
         return
 
@@ -104,27 +104,21 @@ def other_methods(res, record, target, T, ev, p, cfg_ev, lim):
     res["mpc_step_s_median"] = float(np.median(r.step_s[1:]))
     res["mpc_step_s_p95"] = float(np.percentile(r.step_s[1:], 95))
     record("forward MPC", r, step_ms_median=round(1e3 * res["mpc_step_s_median"], 1))
-    stepper_methods(record, target, T, ev)
+    stepper_methods(res, target, T, ev)
 
 
-def stepper_methods(record, target, T, ev):
+def stepper_methods(res, target, T, ev):
     """The open-loop step schedule, the closed-loop full-step controller and the 1/16-microstep controller,
-    designed on the fast configuration and evaluated on ``ev``."""
-    pi = gc.plant_params("inverse", target)
-    lim_i = gc.limits(pi)
-    lead, _, ticks, counts = gc.optimize_steps(pi, target, T)
-    ts = target.time[(target.time >= 0.001) & (target.time <= T)]
-    tr = gc.simulate_steps(pi, target, ticks, counts, gj.Config(fidelity=ev, drive="inverse", t1=T), ts)
-    r = gc._score(ts, np.asarray(tr.length), np.asarray(tr.pressure), counts, ticks, target, lim_i, int(tr.status))
-    record("inverse open-loop steps", r, lead_s=lead)
-    cfg = gj.Config(fidelity=ev, drive="inverse", t1=T)
-    for microsteps, name in ((1, "inverse feedback (step controller)"), (16, "inverse feedback, 1/16 microstep")):
-        start = time.perf_counter()
-        ctrl, _ = gc.tune_stepper(pi, target, T, microsteps=microsteps)
-        tuning_s = time.perf_counter() - start
-        r = gc.run_closed_loop(gc.Plant.make(pi, cfg, microstep=microsteps > 1), ctrl, target, T, lim_i)
-        gate = ctrl.pressure_gate if np.isfinite(ctrl.pressure_gate) else None
-        record(name, r, rate_Hz=ctrl.rate, lead_s=ctrl.lead, pressure_gate_Pa=gate, tuning_s=tuning_s)
+    designed on the fast configuration and evaluated on ``ev``: :func:`growjax.control.design`, as the CLI runs them."""
+    for name, method, microsteps in (("inverse open-loop steps", "open-loop", 1),
+                                     ("inverse feedback (step controller)", "feedback", 1),
+                                     ("inverse feedback, 1/16 microstep", "feedback", 16)):
+        s = gc.design(target, "inverse", method, T, microsteps=microsteps, evaluate_on=ev)
+        setting = s.get("gains") or {"lead_s": s["profile"]["lead_s"]}
+        res["methods"][name] = {k: s[k] for k in ("tracking_rmse_m", "pressure_limit_crossed", "peak_pressure_Pa",
+                                                  "design_s")} | setting
+        print(f"{name:38s} RMSE {1e3 * s['tracking_rmse_m']:6.3f} mm  peak {s['peak_pressure_Pa'] / 1e3:6.1f} kPa  "
+              f"limit crossed {s['pressure_limit_crossed']}  {setting}  design {s['design_s']:.0f} s", flush=True)
 
 
 def robust_study(args, res, target, T, p, lim, prof, pid0, tuned):

@@ -67,7 +67,7 @@ def test_fit_names_ext_and_n_as_undetermined():
 
 
 @pytest.mark.slow
-def test_nuts_on_reference_made_data_is_converged_and_covers_the_truth(synthetic_experiment):
+def test_nuts_on_reference_made_data_is_converged_and_covers_the_reference_estimate(synthetic_experiment):
     """Direct NUTS through the fast model on the shipped reference-made experiment (Y = 9 kPa), first 0.8 s.
 
     Over 0.8 s the length says little about Y, and this seed's noise puts the

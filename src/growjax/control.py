@@ -507,6 +507,15 @@ def _score(ts, length, pressure, command, ticks, target, lim, status, step_s=Non
                             status, step_s)
 
 
+@eqx.filter_jit
+def _step_segment(plant: Plant, cath, y, ta, k, dt: float, sub: int):
+    """One tick of ``dt`` s at step command ``k`` from state ``y`` at ``ta``, saved at ``sub`` points (one compiled
+    program per plant and tick, shared by every controller run on it: a tuning search compiles it once)."""
+    tb = ta + dt
+    ts = ta + dt * jnp.arange(1, sub + 1) / sub
+    return plant.advance(y, _segment_inputs(cath, ta, tb, 0.0, 0.0, k), ta, tb, ts)
+
+
 class StepController(eqx.Module):
     """Closed-loop step controller of the stepper drive: every 1/``rate`` s, step by round(e·microsteps)/microsteps
     (at most one full step per tick, back steps included) when the length error e (in steps, the target
@@ -530,11 +539,8 @@ class StepController(eqx.Module):
         per_tick = 1.0  # at most one full step per tick (several at one edge make the rotor skip)
         s_len = step_length(plant.params)
 
-        @jax.jit
         def seg(y, ta, k):
-            tb = ta + dt
-            ts = ta + dt * jnp.arange(1, sub + 1) / sub
-            return plant.advance(y, _segment_inputs(cath, ta, tb, 0.0, 0.0, k), ta, tb, ts)
+            return _step_segment(plant, cath, y, ta, k, dt, sub)
 
         y = plant.initial_state()
         length, pressure, _ = (float(v) for v in plant.outputs(0.0, y, _segment_inputs(cath, 0.0, dt, 0.0, 0.0, 0.0)))
