@@ -53,16 +53,20 @@ def test_sweep_equals_one_at_a_time_and_chunking_changes_nothing(setup):
     names = [d.name for d in sw.paper_box()]
     whole = sw.evaluate(values, names, base, inputs, CFG, measured=measured)
     chunked = sw.evaluate(values, names, base, inputs, CFG, measured=measured, chunk_size=2)
-    # Equal to far below the solver's tolerance: XLA vectorises a batch of 2 and of 5 differently, and
-    # rounding-level differences can move an adaptive step (measured ~1e-6 relative at most).
-    np.testing.assert_allclose(whole.rmse, chunked.rmse, rtol=1e-5)
-    np.testing.assert_allclose(whole.final_length, chunked.final_length, rtol=1e-5)
+    # Equal within the solver's own tolerance: XLA vectorises a batch of 1, 2 and 5 differently, and
+    # rounding-level differences can move an adaptive step. The shift depends on the CPU's code generation
+    # (1e-6 relative on one machine, 2.4e-5 on another for member 0 against its single run); the error
+    # control bounds it by rtol (1e-4). A member given another's parameters would differ by far more (the
+    # members' RMSEs differ by factors).
+    tol = 2 * CFG.tolerances[0]
+    np.testing.assert_allclose(whole.rmse, chunked.rmse, rtol=tol)
+    np.testing.assert_allclose(whole.final_length, chunked.final_length, rtol=tol)
     single = jax.jit(lambda p: gj.simulate(p, inputs, CFG))
     for i in (0, 3):
         traj = single(gj.replace(base, **dict(zip(names, values[i]))))
         rmse = float(length_rmse(traj, *measured, CFG.t0, CFG.t1))
-        assert whole.rmse[i] == pytest.approx(rmse, rel=1e-5)
-        assert whole.final_length[i] == pytest.approx(float(traj.length[-1]), rel=1e-5)
+        assert whole.rmse[i] == pytest.approx(rmse, rel=tol)
+        assert whole.final_length[i] == pytest.approx(float(traj.length[-1]), rel=tol)
     assert np.all(whole.status == gj.OK)
     # Lower Y grows the robot further over the same pulses.
     order = np.argsort(values[:, 1])
