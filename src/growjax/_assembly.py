@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import equinox as eqx
 import jax.numpy as jnp
 
 from growjax import effects as fx
@@ -21,8 +22,10 @@ def vector_fields(forward_rates, inverse_rates, layout_of):
     ``vector_field(t, ys, args)`` is the scaled field diffrax integrates, ``args`` = (params, inputs, config, prep).
     """
 
+    traced = {"forward": eqx.filter_jit(forward_rates), "inverse": eqx.filter_jit(inverse_rates)}
+
     def rates(t, y, params, inputs, config, prep):
-        return (forward_rates if config.drive == "forward" else inverse_rates)(t, y, params, inputs, config, prep)
+        return traced[config.drive](t, y, params, inputs, config, prep)
 
     def vector_field(t, ys, args):
         params, inputs, config, prep = args
