@@ -44,9 +44,11 @@ method) at σ, clipped to the physical range.
 
 from __future__ import annotations
 
+import concurrent.futures
 import dataclasses
 import itertools
 import math
+import os
 import time
 from collections.abc import Sequence
 
@@ -339,6 +341,7 @@ def discover(
     max_steps: int = 40,
     multistart: bool = True,
     progress: bool = False,
+    workers: int | None = None,
 ) -> DiscoveryResult:
     """Find which catalogue effect the measured ``length`` (m) at ``times`` (s) needs beyond the base model.
 
@@ -346,9 +349,11 @@ def discover(
     published set of ``config.drive``), whose values are also the reference against which a base
     parameter's shift counts as confounding; ``base_names``: base parameters refitted with every
     candidate; ``multistart``: fit each new candidate from every start in ``START_FRACTIONS`` (False:
-    from the first only, a third of the fits). See the module docstring for the procedure and its thresholds.
+    from the first only, a third of the fits); ``workers``: fits run at a time (default one per CPU core; each
+    fit is deterministic, so the result does not depend on it). See the module docstring for the procedure and its thresholds.
     """
     start = time.perf_counter()
+    workers = workers if workers is not None else (os.cpu_count() or 1)
     config = config if config is not None else Config()
     base = base if base is not None else gp.reference(config.drive)
     candidates = tuple(candidates) if candidates else tuple(fx.CATALOGUE)
@@ -377,14 +382,15 @@ def discover(
             z_fixed[p + k] = 0.0
         return w0, mask, select, z_fixed
 
+    compiled = []  # whether a fit has run (the one compiled program exists)
+
     def fit_batch(specs, desc, warm=()):
-        """Fit the models (``specs``: arguments of ``model``), one after another through the one compiled
-        program; a model with a new candidate from each of its starts, keeping the lowest misfit (a model whose
+        """Fit the models (``specs``: arguments of ``model``) through the one compiled program, ``workers`` fits
+        at a time; a model with a new candidate from each of its starts, keeping the lowest misfit (a model whose
         index is in ``warm``: from its value in the spec's ``z_now`` only)."""
-        out = []
-        for i, (effects_on, fit_base, z_now) in enumerate(_bar(progress, specs, desc)):
+        jobs = []
+        for i, (effects_on, fit_base, z_now) in enumerate(specs):
             new = [k for k in effects_on if k not in added_index]
-            fits = []
             base_only = fit_base and not effects_on and not added_index  # the base model: its own starts
             if i in warm:
                 starts = [None]
@@ -396,13 +402,20 @@ def discover(
                 if base_only:
                     z_start = np.array(z_now, float)
                     z_start[:p] += math.log(BASE_START_FACTORS[start])
-                    m = model(effects_on, fit_base, z_start, None)
+                    jobs.append((i, model(effects_on, fit_base, z_start, None)))
                 else:
-                    m = model(effects_on, fit_base, z_now, start)
-                z, r, jac, ok, pressure = _fit_model(problem, *(jnp.asarray(a) for a in m), max_steps)
-                fits.append((np.asarray(z), np.asarray(r), np.asarray(jac), bool(ok), m, pressure))
-            out.append(min(fits, key=lambda f: float(f[1] @ f[1])))
-        return out
+                    jobs.append((i, model(effects_on, fit_base, z_now, start)))
+
+        def run(job):
+            m = job[1]
+            z, r, jac, ok, pressure = _fit_model(problem, *(jnp.asarray(a) for a in m), max_steps)
+            return job[0], (np.asarray(z), np.asarray(r), np.asarray(jac), bool(ok), m, pressure)
+
+        fits = [[] for _ in specs]
+        for i, fitted in _map_jobs(run, jobs, workers, progress, desc, first_alone=not compiled):
+            fits[i].append(fitted)
+        compiled.append(True)
+        return [min(f, key=lambda f: float(f[1] @ f[1])) for f in fits]
 
     def summarise(out, sigma, effects):
         z, r, jac, ok, (_, mask, select, _), _ = out
@@ -524,13 +537,45 @@ def _pinned(estimate: float, interval) -> bool:
             and max(abs(lo), abs(hi)) <= PINNED_FACTOR * size)
 
 
-def _bar(enabled: bool, items, desc: str):
-    """``items`` with a progress bar on the terminal when ``enabled``."""
+def _map_jobs(run, jobs, workers: int, progress: bool, desc: str, first_alone: bool) -> list:
+    """[``run(job)`` for every job], ``workers`` at a time on threads (XLA runs a compiled program without the
+    GIL, so the fits of one process share the CPU's cores). ``first_alone``: the first job runs before the
+    others start, so that their program is compiled once, not once per thread."""
+    bar = _bar(progress, desc, len(jobs))
+    results = []
+    if jobs and (first_alone or workers == 1):
+        results.append(run(jobs[0]))
+        bar.update(1)
+    rest = jobs[len(results):]
+    if workers > 1 and len(rest) > 1:
+        with concurrent.futures.ThreadPoolExecutor(max_workers=workers) as pool:
+            futures = [pool.submit(run, job) for job in rest]
+            for future in concurrent.futures.as_completed(futures):
+                bar.update(1)
+            results += [f.result() for f in futures]
+    else:
+        for job in rest:
+            results.append(run(job))
+            bar.update(1)
+    bar.close()
+    return results
+
+
+class _NoBar:
+    def update(self, n=1):
+        pass
+
+    def close(self):
+        pass
+
+
+def _bar(enabled: bool, desc: str, total: int):
+    """A progress bar of ``total`` fits on the terminal when ``enabled`` (else one that shows nothing)."""
     if not enabled:
-        return items
+        return _NoBar()
     from tqdm.auto import tqdm
 
-    return tqdm(items, desc=desc, unit="fit", leave=True)
+    return tqdm(desc=desc, unit="fit", leave=True, total=total)
 
 
 def _unit(name: str) -> str:
