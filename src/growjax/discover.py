@@ -353,7 +353,7 @@ def discover(
     fit is deterministic, so the result does not depend on it). See the module docstring for the procedure and its thresholds.
     """
     start = time.perf_counter()
-    workers = workers if workers is not None else (os.cpu_count() or 1)
+    workers = workers if workers is not None else _cores()
     config = config if config is not None else Config()
     base = base if base is not None else gp.reference(config.drive)
     candidates = tuple(candidates) if candidates else tuple(fx.CATALOGUE)
@@ -559,6 +559,14 @@ def _map_jobs(run, jobs, workers: int, progress: bool, desc: str, first_alone: b
             bar.update(1)
     bar.close()
     return results
+
+
+def _cores() -> int:
+    """CPU cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0)) or 1
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
 
 
 class _NoBar:
