@@ -1,5 +1,6 @@
 """Missing physics: the misfit statistics, and the whole workflow on shipped reference-made examples."""
 
+import jax
 import numpy as np
 import pytest
 
@@ -119,7 +120,7 @@ SMALL_CANDIDATES = ("active_channel_force", "fluid_leak", "retraction_folding")
 SMALL_T_END = 3.0  # s: two retractions of the published pulse
 
 
-def _shipped(name):
+def _shipped(name, **kw):
     """A shipped example of data/discovery/ (reference-made, noise 0.2 mm) on 0–3 s, and its truth."""
     import json
     from pathlib import Path
@@ -129,7 +130,8 @@ def _shipped(name):
     exp = ex.read(folder / f"{name}.csv").window(SMALL_T_END + 1e-9)
     inputs = ex.to_inputs(exp, "forward", gj.reference(), cfg.t0, cfg.t1)
     keep = (exp.time >= cfg.t0) & (exp.time <= cfg.t1)
-    res = gd.discover(exp.time[keep], exp["robot_length_m"][keep], inputs, config=cfg, candidates=SMALL_CANDIDATES)
+    res = gd.discover(exp.time[keep], exp["robot_length_m"][keep], inputs, config=cfg, candidates=SMALL_CANDIDATES,
+                      **kw)
     return res, json.loads((folder / f"{name}.json").read_text())
 
 
@@ -150,3 +152,19 @@ def test_discover_reports_none_on_clean_data():
     assert res.effect == "none", gd.summary_text(res)
     assert not res.effects and not res.confounded_with
     assert res.rmse_after_m < 1.2 * truth["noise_sd"]["robot_length_m"]
+
+
+def test_the_answer_does_not_depend_on_how_many_fits_run_at_a_time():
+    """Fits on threads (one per core) and one after another give the same report: each fit is deterministic."""
+    threaded, _ = _shipped("retraction_folding", workers=2)
+    serial, _ = _shipped("retraction_folding", workers=1)
+    a, b = threaded.report(), serial.report()
+    a.pop("wall_s"), b.pop("wall_s")
+    assert a.keys() == b.keys() and a["effect"] == b["effect"] == "retraction_folding"
+    flat_a, flat_b = jax.tree_util.tree_leaves(a), jax.tree_util.tree_leaves(b)
+    assert len(flat_a) == len(flat_b)
+    for x, y in zip(flat_a, flat_b):
+        if isinstance(x, float):
+            assert x == pytest.approx(y, rel=1e-9, abs=1e-300)
+        else:
+            assert x == y
