@@ -39,6 +39,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from growjax import xla_flags
+
 OK, EVENT, FAILED = 0, 1, 2
 
 
@@ -175,6 +177,24 @@ def _time_step(t):
     return jnp.sqrt(jnp.finfo(jnp.result_type(t)).eps) * jnp.maximum(jnp.abs(t), 1.0)
 
 
+def _inverse(m):
+    """Inverse of a small square matrix (n, n) by Gauss–Jordan elimination with partial pivoting, unrolled over
+    its n columns in elementwise operations (no LAPACK call: XLA:CPU can then compile the solver's whole loop
+    into one kernel, :mod:`growjax.xla_flags`; without that option LAPACK is faster)."""
+    n = m.shape[-1]
+    rows = jnp.arange(n)[:, None]
+    a = jnp.concatenate([m, jnp.eye(n, dtype=m.dtype)], axis=1)
+    for k in range(n):
+        size = jnp.where(rows[:, 0] >= k, jnp.abs(a[:, k]), -1.0)
+        p = jnp.argmax(size)
+        row_p = jnp.sum(jnp.where(rows == p, a, 0.0), axis=0)
+        a = jnp.where(rows == p, a[k][None, :], a)  # swap rows k and p
+        pivot = row_p / row_p[k]
+        a = a - a[:, k : k + 1] * pivot[None, :]
+        a = jnp.where(rows == k, pivot[None, :], a)
+    return a[:, n:]
+
+
 def _spectral_radius(m, squarings: int = 3):
     """Upper estimate of the spectral radius of a square matrix: ‖m^(2^k)‖∞^(1/2^k) (k squarings, rescaled)."""
     log_scale = 0.0
@@ -244,6 +264,7 @@ def integrate(
     k_order = tableau.order
     inf = jnp.asarray(jnp.inf, dtype)
     eye = jnp.eye(n, dtype=dtype)
+    small_loops = xla_flags.applied()  # the loop may be compiled whole: no LAPACK call inside it
     t_start, t_end = jnp.asarray(t0, dtype), jnp.asarray(t1, dtype)
 
     def problem(y0, args, breaks, jumps, s0, s_atol):
@@ -309,7 +330,7 @@ def integrate(
         t_next = jnp.where(t + h >= t_end, t_end, t_next)
         h = jax.lax.stop_gradient(t_next - t)
 
-        w_inv = jnp.linalg.inv(eye - (h * g) * jac)
+        w_inv = (_inverse if small_loops else jnp.linalg.inv)(eye - (h * g) * jac)
 
         def stage(i, ks, fi):
             rhs = h * fi + (gamma_sum[i] * h * h) * f_t + h * (jnp.tensordot(gamma[i], ks, 1) @ jac.T)

@@ -1,0 +1,68 @@
+"""The opt-in small-loop option: its XLA_FLAGS handling, the elementwise inverse it needs, the same solution."""
+
+import json
+import os
+import subprocess
+import sys
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from growjax import xla_flags
+from growjax._rosenbrock import _inverse
+
+OPTION = "xla_cpu_small_while_loop_byte_threshold"
+
+
+def test_the_option_joins_existing_flags_and_never_overrides_a_users_setting():
+    assert xla_flags.with_small_loops("") == f"--xla_backend_extra_options={OPTION}=1000000000"
+    assert xla_flags.with_small_loops("--xla_dump_to=/tmp/d") == (
+        f"--xla_dump_to=/tmp/d --xla_backend_extra_options={OPTION}=1000000000")
+    joined = xla_flags.with_small_loops("--xla_backend_extra_options=a=1")
+    assert joined == f"--xla_backend_extra_options=a=1,{OPTION}=1000000000"
+    own = f"--xla_backend_extra_options={OPTION}=0"
+    assert xla_flags.with_small_loops(own) == own
+
+
+@pytest.mark.parametrize("n", [1, 6, 9])
+def test_elementwise_inverse_matches_lapack_on_stiff_solver_matrices(n):
+    """W = I − hγJ with J spanning eight decades of stiffness (the opened bypass is ~1e5 s⁻¹), and a matrix
+    whose first pivot is zero (pivoting needed)."""
+    rng = np.random.default_rng(n)
+    for _ in range(5):
+        jac = rng.normal(size=(n, n)) * 10.0 ** rng.uniform(-2, 6, size=(n, 1))
+        w = np.eye(n) - 1e-3 * 0.4358665 * jac
+        inv = np.asarray(_inverse(jnp.asarray(w)))
+        assert np.max(np.abs(inv @ w - np.eye(n))) < 1e-9
+        np.testing.assert_allclose(inv, np.linalg.inv(w), rtol=1e-9, atol=1e-12 * np.max(np.abs(inv)))
+    if n > 1:
+        perm = np.roll(np.eye(n), 1, axis=0)  # zero diagonal: fails without row exchanges
+        np.testing.assert_allclose(np.asarray(_inverse(jnp.asarray(perm))), perm.T, atol=1e-15)
+
+
+CHILD = """
+import json, sys
+import growjax.xla_flags as xf
+applied = xf.apply() if sys.argv[1] == "on" else xf.applied()
+import growjax as gj
+cfg = gj.Config(t1=2.0)
+inputs = gj.Inputs(catheter_length=gj.Constant(0.02), pressure_demand=gj.published_pulse())
+traj = gj.simulate(gj.reference(), inputs, cfg)
+print(json.dumps({"applied": applied, "length": [float(x) for x in traj.length], "status": int(traj.status)}))
+"""
+
+
+def test_a_simulation_with_small_loops_gives_the_same_solution():
+    """The same 2 s run in two processes, with the option and without: the same length to within the
+    solver's tolerance (the elementwise inverse rounds differently, which can move an adaptive step)."""
+    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    out = {}
+    for mode in ("on", "off"):
+        run = subprocess.run([sys.executable, "-c", CHILD, mode], capture_output=True, text=True, env=env, timeout=300)
+        assert run.returncode == 0, run.stderr[-2000:]
+        out[mode] = json.loads(run.stdout.strip().splitlines()[-1])
+    assert out["on"]["applied"] and not out["off"]["applied"]
+    assert out["on"]["status"] == out["off"]["status"] == 0
+    on, off = np.asarray(out["on"]["length"]), np.asarray(out["off"]["length"])
+    assert np.max(np.abs(on - off)) < 2e-6 and np.ptp(off) > 1e-3  # 2 µm against millimetres of growth
