@@ -1,7 +1,8 @@
 """NUTS directly through the model (no emulator) on the public experiment, Lockhart growth law (issue 9).
 
 Run: ``python benchmarks/nuts_direct.py [--chains 4 --warmup 500 --samples 500] [--target-accept 0.98]
-[--max-tree-depth 10] [--vectorised-gradient] [--gradients-only] [--out benchmarks/results/nuts_direct.json]``.
+[--max-tree-depth 10] [--vectorised-gradient] [--gradients-only] [--small-loops]
+[--out benchmarks/results/nuts_direct.json]`` (``--small-loops``: the opt-in option of :mod:`growjax.xla_flags`).
 
 Reads ``../shared/data/mammobot/experiment.csv`` (the shipped synthetic forward experiment when it is
 absent). Chains run one after another: the forward-mode solve vmapped over chains costs about as much
@@ -29,6 +30,7 @@ from numpyro.infer.util import initialize_model
 import growjax as gj
 from growjax import experiment as ex
 from growjax import posterior as gpost
+from growjax import xla_flags
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -44,8 +46,12 @@ def main():
     parser.add_argument("--vectorised-gradient", action="store_true",
                         help="also time the gradient vmapped over the chains (members stepped together in one solve)")
     parser.add_argument("--gradients-only", action="store_true", help="time the gradients and stop (no sampling)")
+    parser.add_argument("--small-loops", action="store_true",
+                        help="the opt-in XLA:CPU option that compiles the solver's loop whole (growjax.xla_flags)")
     parser.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "nuts_direct.json"))
     args = parser.parse_args()
+    if args.small_loops and not xla_flags.apply():
+        raise SystemExit("--small-loops: JAX started before the option could be set")
     folder = ex.shared_experiment_dir()
     exp = ex.read(folder / "experiment.csv") if folder else ex.read(REPO / "data" / "synthetic_forward.csv")
     base = gj.reference(growth_law="lockhart")
@@ -69,7 +75,7 @@ def main():
     out = {"data": exp.source, "device": str(jax.devices()[0]), "law": "lockhart", "t_end_s": args.t_end,
            "chains": args.chains, "warmup": args.warmup, "samples": args.samples,
            "target_accept": args.target_accept, "max_tree_depth": args.max_tree_depth, "wall_s": res.wall_s,
-           "chain_method": "sequential", "gradient_s_one_chain": gradient_s,
+           "chain_method": "sequential", "small_loops": xla_flags.applied(), "gradient_s_one_chain": gradient_s,
            "gradient_s_vmapped_chains": gradient_vec_s,
            "tree_size_sampling_mean": steps,
            "projected_sampling_s_4x(500+500)": None if steps is None else 4 * 1000 * steps * gradient_s,

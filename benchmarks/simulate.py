@@ -1,6 +1,7 @@
 """Benchmark one 10 s simulation and one forward-mode gradient: compile time and wall time after compilation.
 
-Run: ``python benchmarks/simulate.py [--out benchmarks/results/simulate.json] [--repeat 10]``.
+Run: ``python benchmarks/simulate.py [--out benchmarks/results/simulate.json] [--repeat 10] [--small-loops]``
+(``--small-loops``: the opt-in option of :mod:`growjax.xla_flags`; write ``--out`` elsewhere to keep both).
 
 Uses the shared experiment when it is beside the checkout, else the shipped synthetic data.
 Wall times are the median of ``--repeat`` (≥ 10 by default) calls after the first; no persistent
@@ -27,6 +28,7 @@ import numpy as np
 
 import growjax as gj
 from growjax import experiment as ex
+from growjax import xla_flags
 from growjax.metrics import length_rmse
 
 REPO = Path(__file__).resolve().parents[1]
@@ -118,7 +120,10 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "simulate.json"))
     parser.add_argument("--repeat", type=int, default=10)
+    parser.add_argument("--small-loops", action="store_true",
+                        help="the opt-in XLA:CPU option that compiles the solver's loop whole (growjax.xla_flags)")
     args = parser.parse_args()
+    small_loops = xla_flags.apply() if args.small_loops else xla_flags.applied()
     folder = ex.shared_experiment_dir()
     exp = ex.read(folder / "experiment.csv") if folder else ex.read(REPO / "data" / "synthetic_forward.csv")
     fast = bench_simulation("forward", exp, args.repeat)
@@ -126,6 +131,7 @@ def main():
     results = {
         "data": exp.source,
         "device": str(jax.devices()[0]),
+        "small_loops": small_loops,
         "simulation": fast,
         "gradient": gradient,
         "other_runs": [bench_simulation("forward", exp, args.repeat, 1e-6), bench_simulation("inverse", exp, args.repeat)],
