@@ -25,6 +25,17 @@ def test_the_option_joins_existing_flags_and_never_overrides_a_users_setting():
     assert xla_flags.with_small_loops(own) == own
 
 
+def test_the_solver_takes_the_option_only_at_a_limit_its_loop_fits_under(monkeypatch):
+    monkeypatch.setenv("XLA_FLAGS", f"--xla_backend_extra_options={OPTION}=0")
+    assert not xla_flags.applied() and not xla_flags.apply()  # a user's own low limit stays, and is not in force
+    monkeypatch.setenv("XLA_FLAGS", xla_flags.with_small_loops(""))
+    assert xla_flags.applied()
+    monkeypatch.delenv("XLA_FLAGS")
+    assert not xla_flags.applied()
+    jnp.zeros(1).block_until_ready()  # JAX's backend has started: the option can no longer take effect
+    assert not xla_flags.apply() and "XLA_FLAGS" not in os.environ
+
+
 @pytest.mark.parametrize("n", [1, 6, 9])
 def test_elementwise_inverse_matches_lapack_on_stiff_solver_matrices(n):
     """W = I − hγJ with J spanning eight decades of stiffness (the opened bypass is ~1e5 s⁻¹), and a matrix

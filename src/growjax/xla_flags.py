@@ -20,6 +20,7 @@ or ``growjax.xla_flags.apply()`` first thing in a script.
 from __future__ import annotations
 
 import os
+import re
 
 SMALL_LOOP_OPTION = "xla_cpu_small_while_loop_byte_threshold"
 SMALL_LOOP_BYTES = 1_000_000_000
@@ -43,23 +44,21 @@ def _backend_started() -> bool:
     try:
         from jax._src import xla_bridge
 
-        return bool(getattr(xla_bridge, "_backends", {}))
-    except (ImportError, AttributeError):  # a JAX without that private module: assume not started
+        return bool(xla_bridge.backends_are_initialized())
+    except (ImportError, AttributeError):  # a JAX without that private function: assume not started
         return False
 
 
 def apply() -> bool:
     """Raise the small-loop limit in ``XLA_FLAGS`` if JAX's backend has not started; whether it is in force
-    (False: JAX started before, the option cannot take effect in this process)."""
-    if SMALL_LOOP_OPTION in os.environ.get("XLA_FLAGS", ""):
-        return True
-    if _backend_started():
-        return False
-    os.environ["XLA_FLAGS"] = with_small_loops(os.environ.get("XLA_FLAGS", ""))
-    return True
+    (False: JAX started before, or ``XLA_FLAGS`` sets a low limit of its own)."""
+    if SMALL_LOOP_OPTION not in os.environ.get("XLA_FLAGS", "") and not _backend_started():
+        os.environ["XLA_FLAGS"] = with_small_loops(os.environ.get("XLA_FLAGS", ""))
+    return applied()
 
 
 def applied() -> bool:
-    """Whether the small-loop limit is in ``XLA_FLAGS``: the solver then writes its linear solve in elementwise
-    operations (read when a solve is traced)."""
-    return SMALL_LOOP_OPTION in os.environ.get("XLA_FLAGS", "")
+    """Whether ``XLA_FLAGS`` sets the small-loop limit high enough for the solver's loop (≥ 1e8 bytes): the
+    solver then writes its linear solve in elementwise operations (read when a solve is traced)."""
+    found = re.search(SMALL_LOOP_OPTION + r"=(\d+)", os.environ.get("XLA_FLAGS", ""))
+    return found is not None and int(found.group(1)) >= 10**8
