@@ -70,7 +70,8 @@ def test_a_simulation_with_small_loops_gives_the_same_solution():
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
     out = {}
     for mode in ("on", "off"):
-        run = subprocess.run([sys.executable, "-c", CHILD, mode], capture_output=True, text=True, env=env, timeout=300)
+        run = subprocess.run([sys.executable, "-c", CHILD, mode], capture_output=True, text=True, env=env, timeout=300,
+                             check=False)
         assert run.returncode == 0, run.stderr[-2000:]
         out[mode] = json.loads(run.stdout.strip().splitlines()[-1])
     assert out["on"]["applied"] and not out["off"]["applied"]
