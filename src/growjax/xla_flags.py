@@ -6,8 +6,8 @@ XLA:CPU runs a compiled program as a sequence of operations, each launched on it
 With the limit raised, the solver's loop (:mod:`growjax._rosenbrock`) qualifies when its linear solve is
 written in elementwise operations instead of a LAPACK call, which it is while this option is in
 ``XLA_FLAGS``. Measured on a 2-core CPU (``benchmarks/simulate.py``, README "Benchmarks"): a 10 s simulation
-11 ms instead of 15.5 ms, a forward-mode gradient in 3 parameters 33 ms instead of 47 ms; but a linearisation
-of ``discover``'s 8-effect superset 117 ms instead of 69 ms, compiles take longer (the default test run
+10–11 ms instead of 15.5–17 ms, a forward-mode gradient in 3 parameters 24–33 ms instead of 41–47 ms; but a
+linearisation of ``discover``'s 8-effect superset 72 ms instead of 54 ms, compiles take longer (the default test run
 6 min 28 s instead of 4 min 22 s), and batched solves (sweeps) are not compiled whole (their per-member
 step records are scatters, which the kernel emitter does not take). So it is off by default; turn it on for
 long runs of the base model (many likelihood gradients), before JAX starts its backend::
