@@ -4,9 +4,9 @@ Run: ``python benchmarks/discover_linearise.py [--candidates all|no-velocity] [-
 
 On ``data/discovery/active_channel_force.csv`` (10 s) with the 8-effect superset (or the 5 effects whose rod
 force does not depend on the velocity), for a model with Y and the pull fitted: tracing and lowering, then
-XLA's compile, timed apart; the first call and the median of 5 later calls. ``--batch B`` also times B such models linearised under one ``vmap``
-(members stepped together) against the same B one after another: why ``discover`` fits its candidates in
-sequence on a CPU.
+XLA's compile, timed apart; the first call and the median of 5 later calls. ``--batch B`` also times B such
+models linearised under one ``vmap`` (members stepped together) against the same B one after another: why
+``discover`` spreads its fits over threads (one per core) instead of batching them on a CPU.
 """
 
 from __future__ import annotations
