@@ -65,7 +65,7 @@ from scipy import stats
 from growjax import effects as fx
 from growjax import params as gp
 from growjax.config import Config
-from growjax.fit import FAST_MODEL_ERROR, LM_TOLERANCE, levenberg_marquardt
+from growjax.fit import LM_TOLERANCE, default_model_error, levenberg_marquardt
 from growjax.simulate import input_breaks, simulate
 
 Z90 = float(stats.norm.ppf(0.95))
@@ -374,8 +374,7 @@ def discover(
     u_starts = np.stack([np.where(np.asarray(problem.signed), u_signed, math.log(math.expm1(10.0 * f)))
                          for f, u_signed in zip(fractions, (0.0, -0.5, 0.5))], axis=1)
     threshold = float(stats.chi2.isf(2.0 * false_positive_rate / k_all, df=1))  # ½χ²₀ + ½χ²₁, Bonferroni
-    if model_error is None:
-        model_error = FAST_MODEL_ERROR if config.fidelity == "fast" else 0.0
+    model_error = default_model_error(config) if model_error is None else model_error
 
     def model(effects_on: Sequence[int], fit_base: bool, z_now, start: int | None = 0):
         """(w0 (q,), mask (K,), select (p + K, q), z_fixed (p + K,)) of a model with ``effects_on`` fitted, a new
@@ -392,12 +391,13 @@ def discover(
             z_fixed[p + k] = 0.0
         return w0, mask, select, z_fixed
 
-    compiled = []  # whether a fit has run (the one compiled program exists)
+    compiled = False  # whether a fit has run (the one compiled program exists)
 
     def fit_batch(specs, desc, warm=()):
         """Fit the models (``specs``: arguments of ``model``) through the one compiled program, ``workers`` fits
         at a time; a model with a new candidate from each of its starts, keeping the lowest misfit (a model whose
         index is in ``warm``: from its value in the spec's ``z_now`` only)."""
+        nonlocal compiled
         jobs = []
         for i, (effects_on, fit_base, z_now) in enumerate(specs):
             new = [k for k in effects_on if k not in added_index]
@@ -424,7 +424,7 @@ def discover(
         fits = [[] for _ in specs]
         for i, fitted in _map_jobs(run, jobs, workers, progress, desc, first_alone=not compiled):
             fits[i].append(fitted)
-        compiled.append(True)
+        compiled = True
         return [min(f, key=lambda f: float(f[1] @ f[1])) for f in fits]
 
     def summarise(out, sigma, effects):

@@ -33,6 +33,13 @@ Z90 = float(stats.norm.ppf(0.95))
 # 32 shipped reference cases (benchmarks/agreement.py); 0.03 mm leaves a margin.
 FAST_MODEL_ERROR = 3e-5
 MODEL_ERROR_TIME = 0.5
+
+
+def default_model_error(config: Config) -> float:
+    """The fitted configuration's length error against the reference, m: :data:`FAST_MODEL_ERROR` for the
+    fast configuration, 0 for the reference itself."""
+    return FAST_MODEL_ERROR if config.fidelity == "fast" else 0.0
+
 LM_TOLERANCE = 1e-6  # rtol = atol of the Levenberg–Marquardt stop, on ln θ and the cost
 
 
@@ -285,7 +292,7 @@ def fit(
         if evals[k] < tol:
             blind |= np.abs(evecs[:, k]) > 0.1
     if model_error is None:
-        model_error = FAST_MODEL_ERROR if config.fidelity == "fast" else 0.0
+        model_error = default_model_error(config)
     if model_error > 0:
         t_fit = np.asarray(problem.times)
         n_fit = t_fit.size
