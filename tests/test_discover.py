@@ -132,6 +132,10 @@ def test_a_base_shift_the_fast_models_own_error_explains_is_no_confounding():
     assert 10.0 < res.trade_allowance < 50.0
     strict = gd.discover(exp.time[keep], exp["robot_length_m"][keep], inputs, config=cfg, model_error=0.0)
     assert strict.effect == "confounded" and strict.trade_allowance == 0.0, gd.summary_text(strict)
+    for name in strict.confounded_with:  # with -s: what the base-held fits gave the confounded candidates
+        s = strict.evidence[0][name]
+        print(f"{name}: 2ΔlogL {s['lr_statistic']:.2f} jointly, {s['lr_statistic_base_held']:.2f} with Y held; "
+              f"allowance {res.trade_allowance:.1f}")
 
 
 # -- the small version CI runs: shipped reference-made examples, first 3 s, three candidates ----------------
