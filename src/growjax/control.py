@@ -899,9 +899,10 @@ def design(target: Target, drive: str, method: str, t1: float, robust: str | Non
 
 
 def tune_stepper(params, target: Target, t1: float, microsteps: int = 1, rates=(20.0, 25.0, 50.0),
-                 leads=(0.1, 0.2, 0.3, 0.4), gates=(160e3, 200e3, 240e3, float("inf"))):
+                 leads=(0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4), gates=(160e3, 200e3, 240e3, float("inf"))):
     """The step controller's rate (Hz), lead (s) and pressure gate (Pa) by search on the fast model (its cost is
-    piecewise constant in them). → (best :class:`StepController`, its RMSE m)."""
+    piecewise constant in them, so a grid, not a gradient; leads 50 ms apart).
+    → (best :class:`StepController`, its RMSE m)."""
     plant = Plant.make(params, gj.Config(drive="inverse", t1=t1), microstep=microsteps > 1)
     lim = limits(params)
     best = None

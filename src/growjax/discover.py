@@ -206,19 +206,22 @@ def _linearised(w, problem: Candidates, mask, select, z_fixed):
 
 def _fit_model(problem: Candidates, w0, mask, select, z_fixed, max_steps: int):
     """Levenberg–Marquardt for one model (:func:`growjax.fit.levenberg_marquardt` around :func:`_linearised`):
-    (z (p + K,), residuals (m,), Jacobian (m, q), converged, pressure (m,) Pa at the optimum)."""
-    pressures = {}
+    (z (p + K,), residuals (m,), Jacobian (m, q), converged, pressure (m,) Pa at the optimum, linearisations run)."""
+    pressures, runs = {}, 0
 
     def linearised(x):
+        nonlocal runs
         r, jac, pressure = _linearised(x, problem, mask, select, z_fixed)
         pressures[np.asarray(x).tobytes()] = pressure
+        runs += 1
         return r, jac
 
     w, _, ok, r, jac = levenberg_marquardt(linearised, w0, max_steps, LM_TOLERANCE)
     pressure = pressures.get(np.asarray(jnp.asarray(w)).tobytes())
     if pressure is None:  # not expected: the optimum is always an evaluated point
         pressure = _linearised(jnp.asarray(w), problem, mask, select, z_fixed)[2]
-    return np.asarray(z_fixed) + np.asarray(select) @ w, r, jac, ok, np.asarray(pressure)
+        runs += 1
+    return np.asarray(z_fixed) + np.asarray(select) @ w, r, jac, ok, np.asarray(pressure), runs
 
 
 def make_candidates(times, length, inputs, effect_names: Sequence[str], base: gp.Parameters,
@@ -310,6 +313,8 @@ class DiscoveryResult:
     separating_measurement: dict
     wall_s: float
     trade_allowance: float = 0.0  # 2ΔlogL the fitted configuration's own error can buy (confounding test)
+    fits: int = 0  # least-squares fits run (every start counted)
+    linearisations: int = 0  # model linearisations over all fits (each one forward-mode solve)
     times: np.ndarray = dataclasses.field(repr=False, default=None)
     measured: np.ndarray = dataclasses.field(repr=False, default=None)
     before: np.ndarray = dataclasses.field(repr=False, default=None)
@@ -392,12 +397,13 @@ def discover(
         return w0, mask, select, z_fixed
 
     compiled = False  # whether a fit has run (the one compiled program exists)
+    fit_count, linearisations = 0, 0  # fits run, and model runs (residuals, Jacobian) over them: a run's time
 
     def fit_batch(specs, desc, warm=()):
         """Fit the models (``specs``: arguments of ``model``) through the one compiled program, ``workers`` fits
         at a time; a model with a new candidate from each of its starts, keeping the lowest misfit (a model whose
         index is in ``warm``: from its value in the spec's ``z_now`` only)."""
-        nonlocal compiled
+        nonlocal compiled, fit_count, linearisations
         jobs = []
         for i, (effects_on, fit_base, z_now) in enumerate(specs):
             new = [k for k in effects_on if k not in added_index]
@@ -418,13 +424,14 @@ def discover(
 
         def run(job):
             m = job[1]
-            z, r, jac, ok, pressure = _fit_model(problem, *(jnp.asarray(a) for a in m), max_steps)
-            return job[0], (np.asarray(z), np.asarray(r), np.asarray(jac), bool(ok), m, pressure)
+            z, r, jac, ok, pressure, runs = _fit_model(problem, *(jnp.asarray(a) for a in m), max_steps)
+            return job[0], (np.asarray(z), np.asarray(r), np.asarray(jac), bool(ok), m, pressure), runs
 
         fits = [[] for _ in specs]
-        for i, fitted in _map_jobs(run, jobs, workers, progress, desc, first_alone=not compiled):
+        for i, fitted, runs in _map_jobs(run, jobs, workers, progress, desc, first_alone=not compiled):
             fits[i].append(fitted)
-        compiled = True
+            linearisations += runs
+        compiled, fit_count = True, fit_count + len(jobs)
         return [min(f, key=lambda f: float(f[1] @ f[1])) for f in fits]
 
     def summarise(out, sigma, effects):
@@ -534,7 +541,8 @@ def discover(
                "after": locate(times, current.residual_m, after_trace, pressure_trace)},
         misfit_before=misfit_before, misfit_after=misfit_after,
         separating_measurement={n: SEPARATING.get(n, "") for n in confounded},
-        wall_s=time.perf_counter() - start, trade_allowance=model_allowance, times=times, measured=length,
+        wall_s=time.perf_counter() - start, trade_allowance=model_allowance, fits=fit_count,
+        linearisations=linearisations, times=times, measured=length,
         before=before_trace, after=after_trace,
     )
 
@@ -621,4 +629,5 @@ def summary_text(result: DiscoveryResult) -> str:
         with_ = [f"{c['parameter']} (correlation {c['correlation']:.3f})"] if c["parameter"] else []
         with_ += [f"the effect {r}" for r in c.get("rival_effects", ())]
         lines.append(f"confounded: {name} with {' and '.join(with_)}; separate by {c['separate_by']}")
+    lines.append(f"{result.wall_s:.1f} s: {result.fits} fits, {result.linearisations} linearisations of the model")
     return "\n".join(lines)
