@@ -114,7 +114,7 @@ def stepper_methods(res, target, T, ev):
                                      ("inverse feedback (step controller)", "feedback", 1),
                                      ("inverse feedback, 1/16 microstep", "feedback", 16)):
         s = gc.design(target, "inverse", method, T, microsteps=microsteps, evaluate_on=ev)
-        setting = s.get("gains") or {"lead_s": s["profile"]["lead_s"]}
+        setting = s.get("gains") or {k: s["profile"][k] for k in ("planned_by", "model_rmse_m", "controller")}
         res["methods"][name] = {k: s[k] for k in ("tracking_rmse_m", "pressure_limit_crossed", "peak_pressure_Pa",
                                                   "design_s")} | setting
         print(f"{name:38s} RMSE {1e3 * s['tracking_rmse_m']:6.3f} mm  peak {s['peak_pressure_Pa'] / 1e3:6.1f} kPa  "

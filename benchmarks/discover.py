@@ -48,7 +48,13 @@ def one_run(effect, magnitude, seed, t_end):
     return {"effect": effect, "magnitude": magnitude, "seed": seed, "found": res.effect, "named": named,
             "confounded": confounded, "covered": covered, "rmse_before_m": res.rmse_before_m,
             "rmse_after_m": res.rmse_after_m, "noise_m": truth["noise_sd"]["robot_length_m"],
-            "wall_s": time.perf_counter() - start, "fits": res.fits, "linearisations": res.linearisations}
+            "wall_s": time.perf_counter() - start, "fits": res.fits, "linearisations": res.linearisations,
+            # why: each round's 2ΔlogL per candidate, the confounded ones (with their rivals), the misfit test
+            "lr_statistics": [{n: s["lr_statistic"] for n, s in scores.items()} for scores in res.evidence],
+            "confounded_with": {n: {"parameter": c["parameter"], "correlation": c["correlation"],
+                                    "rival_effects": c.get("rival_effects", [])}
+                                for n, c in res.confounded_with.items()},
+            "threshold": res.threshold, "misfit_before": res.misfit_before}
 
 
 def main() -> None:

@@ -119,6 +119,22 @@ def test_step_controller_steps_back_and_respects_the_step_rate():
     assert res.rmse_m < 0.6 * gc.step_length(p) and not res.pressure_limit_crossed
 
 
+def test_planned_step_schedule_replays_the_controller_on_the_model_and_respects_the_step_rate():
+    """plan_steps' schedule, run blind on the model it was planned on, reproduces the closed loop there (the same
+    steps at the same ticks), and it keeps one step per tick at most at the motor's step rate."""
+    tg = _sine_target()
+    p = gc.plant_params("inverse", tg)
+    ctrl = gc.StepController(rate=20.0, lead=0.2)
+    _, model_rmse, ticks, counts = gc.plan_steps(p, tg, 2.0, controller=ctrl)
+    steps = np.diff(np.concatenate([[0.0], counts]))
+    assert np.max(steps) >= 1 and np.min(steps) <= -1 and np.max(np.abs(steps)) <= 1
+    assert np.all(np.diff(ticks) >= 1.0 / gc.limits(p).max_step_rate - 1e-12)
+    ts = tg.time[tg.time <= 2.0]
+    replay = gc.simulate_steps(p, tg, ticks, counts, gj.Config(drive="inverse", t1=2.0), ts)
+    assert int(replay.status) == 0
+    assert gc.rmse(ts, np.asarray(replay.length), tg) == pytest.approx(model_rmse, rel=0.02)
+
+
 def _sine_target():
     t = np.arange(0.01, 2.0, 0.01)
     return gc.Target(t, 0.010 + 6e-3 * np.sin(np.pi * t / 2.0) ** 2, np.zeros(t.size))

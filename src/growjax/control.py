@@ -8,7 +8,9 @@ What is here, in the order a design uses it:
 * :func:`optimize_profile` — the pressure-demand profile (piecewise linear on fixed knots) that makes the
   robot follow a desired length, by Levenberg–Marquardt with forward-mode Jacobians through
   :func:`growjax.simulate` (all knots in one merged sensitivity solve), inside the demand box [0, p_max];
-  :func:`optimize_steps` the open-loop step schedule of the stepper drive (integer: a search over its lead).
+  For the stepper drive (integer commands) an open-loop step schedule is found on the model without gradients:
+  :func:`optimize_steps` searches the lead of a schedule read off the target, :func:`plan_steps` replays the
+  steps the tuned closed-loop step controller issues on the model.
 * :func:`run_closed_loop` — a sampled-data length controller around either configuration of the plant:
   :class:`LengthPID` (forward drive, outer loop over the pressure PID, with the optimised profile as
   feed-forward), :class:`StepController` (stepper: back-and-forth steps on the length error) and
@@ -406,6 +408,19 @@ def optimize_steps(params, target: Target, t1: float, rate: float = 50.0, leads=
         if best is None or e < best[1]:
             best = (float(lead), e, ticks, counts)
     return best
+
+
+def plan_steps(params, target: Target, t1: float, microsteps: int = 1, controller: StepController | None = None):
+    """The open-loop step schedule planned on the fast model: the tuned closed-loop :class:`StepController`
+    (``controller``, default :func:`tune_stepper`'s) runs on the model, and the step counts it issues there are
+    the schedule, replayed on the robot without measuring it. The feedback acts on the model's length, so the
+    plan inherits the controller's back steps and pressure gate but not its correction of model error.
+    → (controller, RMSE m on the model, tick times (s), step counts)."""
+    if controller is None:
+        controller, _ = tune_stepper(params, target, t1, microsteps)
+    plant = Plant.make(params, gj.Config(drive="inverse", t1=t1), microstep=microsteps > 1)
+    res = run_closed_loop(plant, controller, target, t1, limits(params))
+    return controller, res.rmse_m, np.asarray(res.tick_time, float), np.asarray(res.command, float)
 
 
 def simulate_steps(params, target: Target, ticks, counts, config: gj.Config, ts):
@@ -844,13 +859,24 @@ def design(target: Target, drive: str, method: str, t1: float, robust: str | Non
         if method == "mpc":
             raise ValueError("the MPC is designed for the forward drive; use --method feedback for the stepper")
         if method == "open-loop":
-            lead, _, ticks, counts = optimize_steps(params, target, t1)
+            # two schedules, both made on the fast model; the one tracking better there is run blind
+            lead, lead_rmse, lead_ticks, lead_counts = optimize_steps(params, target, t1)
+            ctrl, plan_rmse, ticks, counts = plan_steps(params, target, t1, microsteps)
+            planned = plan_rmse <= lead_rmse or microsteps > 1
+            if not planned:
+                ticks, counts = lead_ticks, lead_counts
             summary["design_s"] = time.perf_counter() - start
             ts = target.time[(target.time >= evaluate_cfg.t0) & (target.time <= t1)]
-            tr = simulate_steps(params, target, ticks, counts, evaluate_cfg, ts)
+            driven = with_microstepping(params) if microsteps > 1 else params
+            tr = simulate_steps(driven, target, ticks, counts, evaluate_cfg, ts)
             res = _score(ts, np.asarray(tr.length), np.asarray(tr.pressure), counts, ticks, target, lim,
                          int(tr.status))
-            summary["profile"] = {"lead_s": lead, "tick_s": ticks.tolist(), "steps": counts.tolist()}
+            summary["profile"] = {"planned_by": "step controller on the model" if planned else "lead search",
+                                  "model_rmse_m": {"step controller on the model": plan_rmse,
+                                                   "lead search": lead_rmse},
+                                  "lead_search_lead_s": lead, "controller": {"rate_Hz": ctrl.rate, "lead_s": ctrl.lead,
+                                                                              "microsteps": ctrl.microsteps},
+                                  "tick_s": ticks.tolist(), "steps": counts.tolist()}
         else:
             ctrl, _ = tune_stepper(params, target, t1, microsteps)
             summary["design_s"] = time.perf_counter() - start
@@ -951,7 +977,7 @@ def control_figure(res: ClosedLoopResult, target: Target, path, lim: Limits, tit
 __all__ = [
     "MPC", "ClosedLoopResult", "LengthPID", "Limits", "Plant", "ProfileResult", "StepController", "Target",
     "TuneResult", "add_arguments", "command", "design", "limits", "linearize", "operating_point",
-    "optimize_profile", "optimize_steps", "parameter_draws", "pid_cost_fn", "plant_params", "ramp_with_pauses",
-    "rmse", "run_closed_loop", "simulate_profile", "simulate_steps", "step_commands", "step_length",
+    "optimize_profile", "optimize_steps", "parameter_draws", "pid_cost_fn", "plan_steps", "plant_params",
+    "ramp_with_pauses", "rmse", "run_closed_loop", "simulate_profile", "simulate_steps", "step_commands", "step_length",
     "step_sequence", "target_from_experiment", "tune_pid", "tune_stepper", "with_microstepping",
 ]
