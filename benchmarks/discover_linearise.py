@@ -1,12 +1,13 @@
 """One linearisation of discover's superset model (residuals, Jacobian and pressure in one forward-mode solve).
 
-Run: ``python benchmarks/discover_linearise.py [--candidates all|no-velocity] [--batch 6]``.
+Run: ``python benchmarks/discover_linearise.py [--candidates all|no-velocity] [--batch 6] [--per-effect]``.
 
 On ``data/discovery/active_channel_force.csv`` (10 s) with the 8-effect superset (or the 5 effects whose rod
 force does not depend on the velocity), for a model with Y and the pull fitted: tracing and lowering, then
 XLA's compile, timed apart; the first call and the median of 5 later calls. ``--batch B`` also times B such
 models linearised under one ``vmap`` (members stepped together) against the same B one after another: why
-``discover`` spreads its fits over threads (one per core) instead of batching them on a CPU.
+``discover`` spreads its fits over threads (one per core) instead of batching them on a CPU. ``--per-effect``
+times a linearisation with each candidate on, at discover's three starts: what a fit's step costs.
 """
 
 from __future__ import annotations
@@ -47,6 +48,8 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--candidates", choices=("all", "no-velocity"), default="all")
     ap.add_argument("--batch", type=int, default=0)
+    ap.add_argument("--per-effect", action="store_true",
+                    help="also time one linearisation with each candidate on, at each of discover's starts")
     args = ap.parse_args()
     exp = ex.read(REPO / "data" / "discovery" / "active_channel_force.csv")
     cfg = gj.Config(t1=10.0)
@@ -72,6 +75,18 @@ def main():
           f"StableHLO), XLA compile {compile_s:.1f} s")
     first, wall = timed(lambda: gd._linearised(w, problem, *model))
     print(f"{len(names)} candidates: first call after that {first:.1f} s, then {1e3 * wall:.0f} ms per linearisation")
+    if args.per_effect:
+        for j, name in enumerate(names):
+            m, sel = np.zeros(k), np.zeros((p + k, q))
+            m[j] = sel[0, 0] = sel[p + j, 1] = 1.0
+            row = []
+            for frac in gd.START_FRACTIONS:  # the effect at 2, 6 and 20 % of its range's top (u of discover's starts)
+                u = 0.0 if bool(problem.signed[j]) else float(np.log(np.expm1(10.0 * frac)))
+                wj = jnp.asarray([0.0, u, 0.0])
+                _, wall = timed(lambda: gd._linearised(wj, problem, jnp.asarray(m), jnp.asarray(sel), jnp.zeros(p + k)),
+                                repeat=3)
+                row.append(f"{1e3 * wall:5.0f}")
+            print(f"  {name:22s} ms per linearisation at the starts {' '.join(row)}")
     if args.batch:
         ws = jnp.stack([w.at[1].set(-1.0 + 0.3 * b) for b in range(args.batch)])
         batched = eqx.filter_jit(jax.vmap(lambda x, m, s, z: gd._linearised(x, problem, m, s, z),

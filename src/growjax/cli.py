@@ -250,7 +250,7 @@ def discover_command(args) -> dict:
     inputs = ex.to_inputs(exp, args.drive, base, config.t0, config.t1)
     keep = (exp.time >= config.t0) & (exp.time <= config.t1)
     res = gd.discover(exp.time[keep], exp["robot_length_m"][keep], inputs, base=base, config=config,
-                      candidates=args.candidates or None, progress=True)
+                      candidates=args.candidates or None, progress=True, workers=args.workers)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     figure = discovery_figure(res, out / "discover.png", title=f"{data.name}: {res.effect}")
@@ -312,6 +312,7 @@ def build_parser():
     dis.add_argument("--drive", choices=["forward", "inverse"], default="forward")
     dis.add_argument("--t-end", type=float, default=10.0, help="end time, s (default 10)")
     dis.add_argument("--candidates", nargs="+", metavar="NAME", help="catalogue effects to test (default: all)")
+    dis.add_argument("--workers", type=int, help="fits run at a time (default: one per CPU core)")
     dis.add_argument("--out", default="out", help="output folder (discover.png)")
     dis.add_argument("--json", help="also write the JSON report to this file")
 

@@ -367,6 +367,8 @@ def discover(
     """
     start = time.perf_counter()
     workers = workers if workers is not None else _cores()
+    if workers < 1:
+        raise ValueError(f"workers must be at least 1, got {workers}")
     config = config if config is not None else Config()
     base = base if base is not None else gp.reference(config.drive)
     candidates = tuple(candidates) if candidates else tuple(fx.CATALOGUE)
