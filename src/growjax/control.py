@@ -7,7 +7,7 @@ What is here, in the order a design uses it:
   configuration's vector field, as a python-control ``StateSpace`` (``sys.A`` … work with ``scipy.signal``).
 * :func:`optimize_profile` — the pressure-demand profile (piecewise linear on fixed knots) that makes the
   robot follow a desired length, by Levenberg–Marquardt with forward-mode Jacobians through
-  :func:`growjax.simulate` (all knots in one merged sensitivity solve), inside the demand box [0, p_max];
+  :func:`growjax.simulate` (all knots in one merged sensitivity solve), inside the demand box [0, p_max].
   For the stepper drive (integer commands) an open-loop step schedule is found on the model without gradients:
   :func:`optimize_steps` searches the lead of a schedule read off the target, :func:`plan_steps` replays the
   steps the tuned closed-loop step controller issues on the model.
@@ -859,23 +859,24 @@ def design(target: Target, drive: str, method: str, t1: float, robust: str | Non
         if method == "mpc":
             raise ValueError("the MPC is designed for the forward drive; use --method feedback for the stepper")
         if method == "open-loop":
-            # two schedules, both made on the fast model; the one tracking better there is run blind
-            lead, lead_rmse, lead_ticks, lead_counts = optimize_steps(params, target, t1)
+            # schedules made on the fast model; the one tracking best there is run blind
             ctrl, plan_rmse, ticks, counts = plan_steps(params, target, t1, microsteps)
-            planned = plan_rmse <= lead_rmse or microsteps > 1
-            if not planned:
-                ticks, counts = lead_ticks, lead_counts
+            on_model, planned_by = {"step controller on the model": plan_rmse}, "step controller on the model"
+            if microsteps == 1:  # the lead search reads a full-step schedule off the target
+                lead, lead_rmse, lead_ticks, lead_counts = optimize_steps(params, target, t1)
+                on_model["lead search"] = lead_rmse
+                summary["lead_search_lead_s"] = lead
+                if lead_rmse < plan_rmse:
+                    planned_by, ticks, counts = "lead search", lead_ticks, lead_counts
             summary["design_s"] = time.perf_counter() - start
             ts = target.time[(target.time >= evaluate_cfg.t0) & (target.time <= t1)]
             driven = with_microstepping(params) if microsteps > 1 else params
             tr = simulate_steps(driven, target, ticks, counts, evaluate_cfg, ts)
             res = _score(ts, np.asarray(tr.length), np.asarray(tr.pressure), counts, ticks, target, lim,
                          int(tr.status))
-            summary["profile"] = {"planned_by": "step controller on the model" if planned else "lead search",
-                                  "model_rmse_m": {"step controller on the model": plan_rmse,
-                                                   "lead search": lead_rmse},
-                                  "lead_search_lead_s": lead, "controller": {"rate_Hz": ctrl.rate, "lead_s": ctrl.lead,
-                                                                              "microsteps": ctrl.microsteps},
+            summary["profile"] = {"planned_by": planned_by, "model_rmse_m": on_model,
+                                  "controller": {"rate_Hz": ctrl.rate, "lead_s": ctrl.lead,
+                                                 "microsteps": ctrl.microsteps},
                                   "tick_s": ticks.tolist(), "steps": counts.tolist()}
         else:
             ctrl, _ = tune_stepper(params, target, t1, microsteps)
