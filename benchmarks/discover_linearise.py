@@ -7,7 +7,8 @@ force does not depend on the velocity), for a model with Y and the pull fitted: 
 XLA's compile, timed apart; the first call and the median of 5 later calls. ``--batch B`` also times B such
 models linearised under one ``vmap`` (members stepped together) against the same B one after another: why
 ``discover`` spreads its fits over threads (one per core) instead of batching them on a CPU. ``--per-effect``
-times a linearisation with each candidate on, at discover's three starts: what a fit's step costs.
+times a linearisation with each candidate on, at discover's three starts (what a fit's step costs), and one
+simulation with it on (its time and the solver's accepted steps: where the cost comes from).
 """
 
 from __future__ import annotations
@@ -76,6 +77,20 @@ def main():
     first, wall = timed(lambda: gd._linearised(w, problem, *model))
     print(f"{len(names)} candidates: first call after that {first:.1f} s, then {1e3 * wall:.0f} ms per linearisation")
     if args.per_effect:
+        primal = eqx.filter_jit(lambda z, mk: gj.simulate(problem.parameters(z, mk), problem.inputs, problem.config,
+                                                          ts=problem.times, breaks=problem.breaks))
+
+        def simulation(j):
+            """(ms, accepted steps) of one simulation of the superset with effect j on (None: none) at the 6 % start."""
+            z, mk = np.zeros(p + k), np.zeros(k)
+            if j is not None:
+                mk[j] = 1.0
+                z[p + j] = 0.0 if bool(problem.signed[j]) else float(np.log(np.expm1(10.0 * gd.START_FRACTIONS[1])))
+            _, wall = timed(lambda: primal(jnp.asarray(z), jnp.asarray(mk)).length, repeat=3)
+            return 1e3 * wall, int(primal(jnp.asarray(z), jnp.asarray(mk)).n_steps)
+
+        ms, steps = simulation(None)
+        print(f"  {'(no effect on)':22s} one simulation {ms:4.0f} ms, {steps} steps")
         for j, name in enumerate(names):
             m, sel = np.zeros(k), np.zeros((p + k, q))
             m[j] = sel[0, 0] = sel[p + j, 1] = 1.0
@@ -83,10 +98,12 @@ def main():
             for frac in gd.START_FRACTIONS:  # the effect at 2, 6 and 20 % of its range's top (u of discover's starts)
                 u = 0.0 if bool(problem.signed[j]) else float(np.log(np.expm1(10.0 * frac)))
                 wj = jnp.asarray([0.0, u, 0.0])
-                _, wall = timed(lambda: gd._linearised(wj, problem, jnp.asarray(m), jnp.asarray(sel), jnp.zeros(p + k)),
-                                repeat=3)
+                model_j = (jnp.asarray(m), jnp.asarray(sel), jnp.zeros(p + k))
+                _, wall = timed(lambda wj=wj, model_j=model_j: gd._linearised(wj, problem, *model_j), repeat=3)
                 row.append(f"{1e3 * wall:5.0f}")
-            print(f"  {name:22s} ms per linearisation at the starts {' '.join(row)}")
+            ms, steps = simulation(j)
+            print(f"  {name:22s} ms per linearisation at the starts {' '.join(row)}; one simulation {ms:4.0f} ms, "
+                  f"{steps} steps")
     if args.batch:
         ws = jnp.stack([w.at[1].set(-1.0 + 0.3 * b) for b in range(args.batch)])
         batched = eqx.filter_jit(jax.vmap(lambda x, m, s, z: gd._linearised(x, problem, m, s, z),
