@@ -200,3 +200,15 @@ def test_input_breaks_are_remembered_only_while_valid():
     edges[1] = 2.5
     after = np.asarray(input_breaks(stepped, cfg.replace(drive="inverse"))[0])
     assert 1.5 in before and 2.5 in after and 1.5 not in after
+
+
+def test_input_breaks_found_under_a_trace_are_not_remembered():
+    """JAX makes even a constant array a tracer under ``jit``: breaks found there must not be reused outside."""
+    from growjax.simulate import input_breaks
+
+    cfg = gj.Config(t1=1.0)
+    inputs = gj.Inputs(catheter_length=gj.Constant(0.0), pressure_demand=gj.PulseTrain(150e3, 1.3, 0.9, 0.26))
+    jax.jit(lambda x: x + input_breaks(inputs, cfg)[0][0])(0.0)  # found first inside a trace
+    jumps, _ = input_breaks(inputs, cfg)
+    assert not isinstance(jumps, jax.core.Tracer)
+    assert np.asarray(jumps)[0] == pytest.approx(0.26)

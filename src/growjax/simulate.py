@@ -63,7 +63,8 @@ def input_breaks(inputs, config: Config) -> tuple[jax.Array, jax.Array]:
             "growjax.input_breaks(inputs, config) outside the transformation and pass it as breaks="
         ) from None
     breaks = _padded(jumps, config.t1), _padded(np.setdiff1d(kinks, jumps), config.t1)
-    if all(map(_immutable, jax.tree_util.tree_leaves(inputs))):
+    # Not under a trace: there JAX makes even a constant array a tracer, which must not outlive it.
+    if not _traced(breaks) and all(map(_immutable, jax.tree_util.tree_leaves(inputs))):
         key = id(inputs)
         try:  # forgotten when the inputs are freed (before their id can be reused)
             ref = weakref.ref(inputs, lambda _, k=key: _BREAKS.pop(k, None))
