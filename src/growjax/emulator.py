@@ -26,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from growjax import params as gp
-from growjax.simulate import simulate
+from growjax.simulate import sample_times, simulate
 from growjax.trajectory import OK
 
 
@@ -121,8 +121,8 @@ def _pad_linear(values: np.ndarray, n_axes: int) -> np.ndarray:
 def predicted_length(theta: dict, base, inputs, config, times):
     """Model length (m) at ``times`` for parameter values ``theta`` {qualified name: value}; NaN if the run failed."""
     p = gp.replace(base, **theta)
-    traj = simulate(p, inputs, config)
-    return jnp.where(traj.status == OK, jnp.interp(times, traj.time, traj.length), jnp.nan)
+    traj = simulate(p, inputs, config, ts=sample_times(times, config))
+    return jnp.where(traj.status == OK, traj.length, jnp.nan)
 
 
 def model_lengths(thetas, names: Sequence[str], base, inputs, config, times, chunk: int = 512):

@@ -22,7 +22,7 @@ from scipy import stats
 from growjax import params as gp
 from growjax import sweep as sw
 from growjax.config import Config
-from growjax.simulate import input_breaks, simulate
+from growjax.simulate import input_breaks, sample_times, simulate
 from growjax.trajectory import OK
 
 # Multi-start boxes: the paper's investigation where it has one, else [θ/2, 2θ] around the reference.
@@ -114,10 +114,10 @@ class Problem(eqx.Module):
     def _residuals(self, z):
         theta = self.refs * jnp.exp(z)
         p = gp.replace(self.base, **{n: theta[i] for i, n in enumerate(self.names)})
-        traj = simulate(p, self.inputs, self.config, breaks=self.breaks)
-        r = (jnp.interp(self.times, traj.time, traj.length) - self.length) / self.sigma_length
+        traj = simulate(p, self.inputs, self.config, ts=sample_times(self.times, self.config), breaks=self.breaks)
+        r = (traj.length - self.length) / self.sigma_length
         if self.pressure is not None:
-            r = jnp.concatenate([r, (jnp.interp(self.times, traj.time, traj.pressure) - self.pressure) / self.sigma_pressure])
+            r = jnp.concatenate([r, (traj.pressure - self.pressure) / self.sigma_pressure])
         return jnp.where(jnp.isfinite(r), r, 1e3)  # a failed run is a very bad fit, not a crash
 
 

@@ -83,6 +83,16 @@ def _immutable(leaf) -> bool:
     return isinstance(leaf, (jax.Array, float, int, np.generic))
 
 
+def sample_times(times, config: Config):
+    """``times`` (s, sorted) clipped into the simulated window [t0, t1]: a save grid at the samples themselves.
+
+    Fits and scores save the solution where the data were taken instead of interpolating the default
+    10 ms grid linearly (it starts at t0, so it falls between the samples: up to 0.16 mm of length
+    error across a pulse, far above the solver's). Samples outside the window land on its ends.
+    """
+    return jnp.clip(jnp.asarray(times, float), config.t0, config.t1)
+
+
 def simulate(params, inputs, config: Config = Config(), ts=None, breaks=None) -> Trajectory:
     """Simulate the robot: (parameters, inputs, configuration) → :class:`growjax.Trajectory`.
 

@@ -26,8 +26,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from growjax import params as gp
 from growjax.config import Config
-from growjax.metrics import length_rmse
-from growjax.simulate import as_arrays, input_breaks, simulate
+from growjax.simulate import as_arrays, input_breaks, sample_times, simulate
 from growjax.trajectory import OK, PRESSURE_LIMIT, SOLVER_FAILED
 
 INVALID_PARAMETER = 3
@@ -159,13 +158,20 @@ def make_member(base: gp.Parameters, names: Sequence[str], inputs, config, measu
 
     def member(theta):
         p = gp.replace(base, **{n: theta[i] for i, n in enumerate(names)})
-        traj = simulate(p, inputs, config, breaks=breaks)
+        if measured is None:
+            traj = simulate(p, inputs, config, breaks=breaks)
+        else:  # saved at the samples (and at t1, for the final length), not interpolated between them
+            times = jnp.asarray(measured[0], float)
+            ts = jnp.concatenate([sample_times(times, config), jnp.full((1,), config.t1, times.dtype)])
+            traj = simulate(p, inputs, config, ts=ts, breaks=breaks)
         finite = jnp.isfinite(traj.length)
         final = traj.length[jnp.maximum(jnp.sum(finite) - 1, 0)]
         if measured is None:
             rmse = jnp.nan
         else:
-            rmse = length_rmse(traj, measured[0], measured[1], t_start, t_end)
+            inside = (times >= t_start - 1e-12) & (times <= t_end + 1e-12)
+            err = jnp.where(inside, traj.length[:-1] - jnp.asarray(measured[1]), 0.0)
+            rmse = jnp.sqrt(jnp.sum(err**2) / jnp.sum(inside))
         return rmse, final, traj.status
 
     return member
