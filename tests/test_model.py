@@ -212,3 +212,28 @@ def test_input_breaks_found_under_a_trace_are_not_remembered():
     jumps, _ = input_breaks(inputs, cfg)
     assert not isinstance(jumps, jax.core.Tracer)
     assert np.asarray(jumps)[0] == pytest.approx(0.26)
+
+
+def test_fits_and_the_emulator_score_the_model_at_the_samples():
+    """Samples at whole hundredths fall between the default save grid's points (every 10 ms from t0 = 1 ms):
+    fit residuals, the emulator's prediction and a sweep's RMSE use the solution at the samples themselves."""
+    from growjax import emulator as em
+    from growjax import fit as gf
+    from growjax import sweep as sw
+
+    cfg = gj.Config(t1=1.0)
+    inputs = gj.Inputs(catheter_length=gj.Constant(0.0), pressure_demand=gj.PulseTrain(150e3, 1.3, 0.9, 0.26))
+    times = np.arange(0.01, 1.0 + 1e-9, 0.01)
+    base = gj.reference()
+    exact = np.asarray(gj.simulate(base, inputs, cfg, ts=times).length)
+    grid = gj.simulate(base, inputs, cfg)
+    interpolated = np.interp(times, np.asarray(grid.time), np.asarray(grid.length))
+    assert np.max(np.abs(interpolated - exact)) > 1e-6  # the grid would be off by more than a micrometre
+    data = exact + 1e-4
+    problem = gf.make_problem(base, ["Y"], inputs, cfg, times, data, sigma_length=1e-4)
+    np.testing.assert_allclose(np.asarray(problem.residuals(jnp.zeros(1))), -1.0, atol=1e-4)  # 1e-8 m
+    predicted = em.predicted_length({"robot.yield_pressure": base.robot.yield_pressure}, base, inputs, cfg,
+                                    jnp.asarray(times))
+    np.testing.assert_allclose(np.asarray(predicted), exact, atol=1e-9)
+    scored = sw.evaluate(np.array([[base.robot.yield_pressure]]), ["Y"], base, inputs, cfg, measured=(times, data))
+    assert scored.rmse[0] == pytest.approx(1e-4, rel=1e-4)
