@@ -87,8 +87,9 @@ def sample_times(times, config: Config):
     """``times`` (s, sorted) clipped into the simulated window [t0, t1]: a save grid at the samples themselves.
 
     Fits and scores save the solution where the data were taken instead of interpolating the default
-    10 ms grid linearly (it starts at t0, so it falls between the samples: up to 0.16 mm of length
-    error across a pulse, far above the solver's). Samples outside the window land on its ends.
+    10 ms grid linearly: that grid starts at t0, so it falls between samples taken at whole hundredths,
+    and a straight line between its points misses the length where a pulse edge bends it. Samples
+    outside the window land on its ends.
     """
     return jnp.clip(jnp.asarray(times, float), config.t0, config.t1)
 
