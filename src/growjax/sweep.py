@@ -26,6 +26,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from growjax import params as gp
 from growjax.config import Config
+from growjax.metrics import rmse_at_samples
 from growjax.simulate import as_arrays, input_breaks, sample_times, simulate
 from growjax.trajectory import OK, PRESSURE_LIMIT, SOLVER_FAILED
 
@@ -169,9 +170,7 @@ def make_member(base: gp.Parameters, names: Sequence[str], inputs, config, measu
         if measured is None:
             rmse = jnp.nan
         else:
-            inside = (times >= t_start - 1e-12) & (times <= t_end + 1e-12)
-            err = jnp.where(inside, traj.length[:-1] - jnp.asarray(measured[1]), 0.0)
-            rmse = jnp.sqrt(jnp.sum(err**2) / jnp.sum(inside))
+            rmse = rmse_at_samples(traj.length[:-1], times, measured[1], t_start, t_end)
         return rmse, final, traj.status
 
     return member
