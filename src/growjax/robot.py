@@ -207,8 +207,8 @@ def inflow(rod: RodBalance, valves, pressure, length, catheter_length, effect_fo
     Newton step moves z < 1e-7 (quadratic convergence leaves ~1e-14 after it) or the bracket has
     shrunk to roundoff (or after ``iterations``): the root for every growth law and effect force,
     converged to roundoff (the sensitivities' difference quotients amplify any residual of it).
-    (A stop at steps < 1e-12 took ~10 evaluations on average against ~6: near roundoff the
-    residual's noise throws Newton out of the bracket, and bisection then crawls to 1e-12.)
+    (A stop at steps < 1e-12 cost extra evaluations: near roundoff the residual's noise throws
+    Newton out of the bracket, and bisection then crawls to 1e-12.)
     Derivatives are implicit. ``iterations = 0`` takes one fixed-point pass instead, exact when
     the motion's pressure is negligible against the valve's (the published law: x ~ 1e-5 Pa).
     ``effect_force(v)`` (N) is the effects' force opposing growth at velocity v (non-decreasing).
