@@ -1,6 +1,10 @@
 """Missing physics: the misfit statistics, and the whole workflow on shipped reference-made examples."""
 
+import math
+from pathlib import Path
+
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -193,3 +197,30 @@ def test_the_answer_does_not_depend_on_how_many_fits_run_at_a_time():
             assert x == pytest.approx(y, rel=1e-9, abs=1e-300)
         else:
             assert x == y
+
+
+def test_candidate_fits_stay_in_their_physical_ranges():
+    """The fitted coordinates are bounded at each effect's range (and the base parameters' ranges): a leak three
+    times the range's top, hidden by the fast configuration itself, is fitted at the top, not beyond it."""
+    from growjax import effects as fx
+
+    cfg = gj.Config(t1=SMALL_T_END)
+    exp = ex.read(Path(__file__).resolve().parents[1] / "data" / "discovery" / "clean.csv").window(SMALL_T_END + 1e-9)
+    inputs = ex.to_inputs(exp, "forward", gj.reference(), cfg.t0, cfg.t1)
+    times = exp.time[(exp.time >= cfg.t0) & (exp.time <= cfg.t1)]
+    top = gd.candidate_parameter("fluid_leak")[2][1]
+    truth = gj.params.with_effects(gj.reference(), fx.FluidLeak(conductance=3.0 * top))
+    length = np.asarray(gj.simulate(truth, inputs, cfg, ts=times).length)
+    problem = gd.make_candidates(times, length, inputs, SMALL_CANDIDATES, gj.reference(), ("Y",), cfg)
+    lo, hi = problem.bounds()
+    for k, name in enumerate(SMALL_CANDIDATES):  # the upper bound of u is the range's top in SI
+        assert float(problem.effect_values(jnp.full(3, hi[1 + k]), jnp.eye(3)[k])[k]) == pytest.approx(
+            gd.candidate_parameter(name)[2][1], rel=1e-9)
+    assert lo[0] == -np.inf and hi[0] == pytest.approx(np.log(1e6 / float(problem.refs[0])))
+    k = SMALL_CANDIDATES.index("fluid_leak")
+    mask, select = np.eye(3)[k], np.zeros((4, 3))
+    select[0, 0] = select[1 + k, 1] = 1.0
+    w0 = np.array([0.0, math.log(math.expm1(2.0)), 0.0])  # the leak starts at a fifth of its range
+    z, _, _, _, _, _ = gd._fit_model(problem, *(jnp.asarray(a) for a in (w0, mask, select, np.zeros(4))), 40)
+    leak = float(problem.effect_values(jnp.asarray(z[1:]), jnp.asarray(mask))[k])
+    assert leak == pytest.approx(top, rel=1e-6)  # pressed against the bound: the data ask for more

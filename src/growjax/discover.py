@@ -65,7 +65,7 @@ from scipy import stats
 from growjax import effects as fx
 from growjax import params as gp
 from growjax.config import Config
-from growjax.fit import LM_TOLERANCE, default_model_error, levenberg_marquardt
+from growjax.fit import LM_TOLERANCE, default_model_error, levenberg_marquardt, physical_bounds
 from growjax.simulate import input_breaks, simulate
 
 Z90 = float(stats.norm.ppf(0.95))
@@ -164,6 +164,22 @@ class Candidates(eqx.Module):
     effect_names: tuple = eqx.field(static=True)
     config: Config = eqx.field(static=True)
 
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lower, upper) (p + K,) of z: the base parameters' physical ranges in ln(θ/θ_ref) and each effect's
+        range in u, so no fit leaves the range a candidate is defined on (a wrong candidate drifting beyond its
+        range is both unphysical and where the model turns stiff and its runs slow)."""
+        lo_base, hi_base = physical_bounds(self.base, self.base_names, np.asarray(self.refs))
+        lo_eff, hi_eff = [], []
+        for name, s, signed in zip(self.effect_names, np.asarray(self.scales), np.asarray(self.signed)):
+            lo, hi = candidate_parameter(name.split(".")[0])[2]
+            if signed:  # η = s·u
+                lo_eff.append(lo / s)
+                hi_eff.append(hi / s)
+            else:  # η = s·softplus(u): the lower edge 0 is u → -∞
+                lo_eff.append(-np.inf)
+                hi_eff.append(math.log(math.expm1(hi / s)))
+        return np.concatenate([lo_base, lo_eff]), np.concatenate([hi_base, hi_eff])
+
     def effect_values(self, u, mask):
         """η (K,) in SI from u (K,) under the candidate ``mask`` (K,)."""
         eta = self.scales * jnp.where(self.signed, u, jax.nn.softplus(u))
@@ -205,9 +221,15 @@ def _linearised(w, problem: Candidates, mask, select, z_fixed):
 
 
 def _fit_model(problem: Candidates, w0, mask, select, z_fixed, max_steps: int):
-    """Levenberg–Marquardt for one model (:func:`growjax.fit.levenberg_marquardt` around :func:`_linearised`):
-    (z (p + K,), residuals (m,), Jacobian (m, q), converged, pressure (m,) Pa at the optimum, linearisations run)."""
+    """Levenberg–Marquardt for one model (:func:`growjax.fit.levenberg_marquardt` around :func:`_linearised`),
+    each fitted coordinate kept in its physical range (:meth:`Candidates.bounds`): (z (p + K,),
+    residuals (m,), Jacobian (m, q), converged, pressure (m,) Pa at the optimum, linearisations run)."""
     pressures, runs = {}, 0
+    lo, hi = problem.bounds()
+    sel = np.asarray(select)
+    used = sel.sum(axis=0) > 0  # a coordinate of w no effect uses has no bound (its Jacobian column is zero)
+    row = sel.argmax(axis=0)  # the coordinate of z each coordinate of w moves (select is a 0/1 selection)
+    w_bounds = (np.where(used, lo[row], -np.inf), np.where(used, hi[row], np.inf))
 
     def linearised(x):
         nonlocal runs
@@ -216,7 +238,7 @@ def _fit_model(problem: Candidates, w0, mask, select, z_fixed, max_steps: int):
         runs += 1
         return r, jac
 
-    w, _, ok, r, jac = levenberg_marquardt(linearised, w0, max_steps, LM_TOLERANCE)
+    w, _, ok, r, jac = levenberg_marquardt(linearised, w0, max_steps, LM_TOLERANCE, bounds=w_bounds)
     pressure = pressures.get(np.asarray(jnp.asarray(w)).tobytes())
     if pressure is None:  # not expected: the optimum is always an evaluated point
         pressure = _linearised(jnp.asarray(w), problem, mask, select, z_fixed)[2]
