@@ -172,6 +172,11 @@ def test_discover_names_a_hidden_folding_and_recovers_its_size():
     assert lo <= truth["magnitude"] <= hi, gd.summary_text(res)
     assert res.misfit_before["structured"] and not res.misfit_after["structured"]
     assert res.rmse_after_m < 1.2 * truth["noise_sd"]["robot_length_m"] < res.rmse_before_m
+    for scores in res.evidence:  # every candidate's fit stays in its physical range
+        for name, s in scores.items():
+            lo, hi = gd.candidate_parameter(name)[2]
+            assert lo <= s["estimate"] <= hi * (1 + 1e-9), (name, s["estimate"])
+    assert not res.evidence[0]["retraction_folding"]["at_range_edge"]
 
 
 def test_discover_reports_none_on_clean_data():

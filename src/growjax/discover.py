@@ -42,8 +42,10 @@ The workflow (:func:`discover`), on a measured length L(t):
    candidate over the threshold, ``none``.
 
 Effect parameters are moved in u with η = s·softplus(u) (η ≥ 0) or η = s·u for effects whose range
-allows both signs; s is a tenth of the range's upper end. Intervals on η are Gauss–Newton (delta
-method) at σ, clipped to the physical range.
+allows both signs; s is a tenth of the range's upper end. Every fit is bounded to the physical ranges
+(η to its effect's, the base parameters to theirs): a wrong candidate that would climb past its range to
+absorb a misfit stops at the edge (``at_range_edge`` in the evidence), where its runs are also the slowest.
+Intervals on η are Gauss–Newton (delta method) at σ, clipped to the physical range.
 """
 
 from __future__ import annotations
@@ -65,7 +67,12 @@ from scipy import stats
 from growjax import effects as fx
 from growjax import params as gp
 from growjax.config import Config
-from growjax.fit import LM_TOLERANCE, default_model_error, levenberg_marquardt, physical_bounds
+from growjax.fit import (
+    LM_TOLERANCE,
+    default_model_error,
+    levenberg_marquardt,
+    physical_bounds,
+)
 from growjax.simulate import input_breaks, simulate
 
 Z90 = float(stats.norm.ppf(0.95))
@@ -518,6 +525,9 @@ def discover(
                 "rmse_m": float(np.sqrt(np.mean(fitted.residual_m**2))),
                 "lr_statistic_base_held": h, "correlation_with_base": corr,
                 "clears_threshold": bool(lr > threshold), "pinned": bool(pinned),
+                # the fit pressed against its range's top (or a signed effect's bottom): the data ask for more
+                "at_range_edge": bool(fitted.estimate[qname] >= rng[1] * (1 - 1e-6)
+                                      or (rng[0] < 0 and fitted.estimate[qname] <= rng[0] * (1 - 1e-6))),
                 "confounded": bool(abs(c) > confounding_correlation and (lr > threshold or trades) and not pinned),
             }
             if scores[name]["confounded"]:
