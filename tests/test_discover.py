@@ -223,7 +223,8 @@ def test_candidate_fits_stay_in_their_physical_ranges():
     for k, name in enumerate(SMALL_CANDIDATES):  # the upper bound of u is the range's top in SI
         assert float(problem.effect_values(jnp.full(3, hi[1 + k]), jnp.eye(3)[k])[k]) == pytest.approx(
             gd.candidate_parameter(name)[2][1], rel=1e-9)
-    assert lo[0] == -np.inf and hi[0] == pytest.approx(np.log(1e6 / float(problem.refs[0])))
+    y_lo, y_hi, _ = gj.params.physical_ranges(problem.base)[problem.base_names[0]]  # Y: (0, y_hi) Pa
+    assert y_lo == 0 and lo[0] == -np.inf and hi[0] == pytest.approx(np.log(y_hi / float(problem.refs[0])))
     k = SMALL_CANDIDATES.index("fluid_leak")
     mask, select = np.eye(3)[k], np.zeros((4, 3))
     select[0, 0] = select[1 + k, 1] = 1.0

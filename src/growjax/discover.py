@@ -234,7 +234,7 @@ def _fit_model(problem: Candidates, w0, mask, select, z_fixed, max_steps: int):
     pressures, runs = {}, 0
     lo, hi = problem.bounds()
     sel = np.asarray(select)
-    used = sel.sum(axis=0) > 0  # a coordinate of w no effect uses has no bound (its Jacobian column is zero)
+    used = sel.sum(axis=0) > 0  # a coordinate of w that moves no coordinate of z has no bound (zero Jacobian column)
     row = sel.argmax(axis=0)  # the coordinate of z each coordinate of w moves (select is a 0/1 selection)
     w_bounds = (np.where(used, lo[row], -np.inf), np.where(used, hi[row], np.inf))
 
