@@ -165,6 +165,70 @@ def test_levenberg_marquardt_keeps_a_flat_direction_inside_its_bounds():
     assert z[1] > 2.5  # without bounds it runs past them
 
 
+def test_levenberg_marquardt_holds_a_coordinate_on_its_bound_and_solves_for_the_others():
+    # r = (z0 − 5, z1 − z0) with z0 ≤ 2: the constrained optimum is z = (2, 2). The free step aims at (5, 5);
+    # clipped, z1 would chase z0's unreachable target. Held on its bound, z0 stays and z1 follows it.
+    calls = []
+
+    def linearised(z):
+        calls.append(1)
+        return np.array([z[0] - 5.0, z[1] - z[0]]), np.array([[1.0, 0.0], [-1.0, 1.0]])
+
+    bounds = (np.array([-np.inf, -np.inf]), np.array([2.0, np.inf]))
+    z, cost, ok, _, _ = gf.levenberg_marquardt(linearised, np.zeros(2), max_steps=60, bounds=bounds)
+    assert ok and z == pytest.approx([2.0, 2.0], abs=1e-3) and cost == pytest.approx(4.5, rel=1e-6)
+    assert len(calls) <= 5
+
+
+def _noisy_line(calls, noise):
+    """A line fit whose residuals and Jacobian carry a deterministic noise, irregular in z and across samples, as
+    an adaptive solver's do (its steps move with the parameters); an irreducible misfit of 1 per sample."""
+    m = 400
+    t = np.linspace(0.0, 1.0, m)
+    a = np.stack([np.ones_like(t), t], axis=1)
+    floor = np.where(np.arange(m) % 2, 1.0, -1.0)
+
+    def linearised(z):
+        calls.append(np.array(z))
+        phase = np.sin(1e6 * (z @ np.array([1.0, np.sqrt(2.0)])) + 1e3 * np.arange(m) ** 1.5)
+        return a @ z - 1.0 - 2.0 * t + floor + noise * phase, a * (1.0 + 30.0 * noise * phase[:, None])
+
+    return linearised
+
+
+@pytest.mark.parametrize("noise", [0.01, 0.03])
+def test_levenberg_marquardt_stops_at_the_costs_resolution_instead_of_wandering_in_its_noise(noise):
+    # the cost's noise is ~√m·noise ≈ 1e-3 of it (0.2–0.6 in 200): a resolution of that size ends the wander
+    plain, resolved = [], []
+    _, cost_plain, _, _, _ = gf.levenberg_marquardt(_noisy_line(plain, noise), np.zeros(2), max_steps=60)
+    z, cost, ok, _, _ = gf.levenberg_marquardt(_noisy_line(resolved, noise), np.zeros(2), max_steps=60,
+                                               relative_resolution=1e-3)
+    assert ok and len(resolved) <= len(plain) / 2
+    assert abs(cost - cost_plain) < 10 * 1e-3 * cost_plain  # the same minimum, within ten resolutions
+    assert z == pytest.approx([1.0, 2.0], abs=0.1)
+    # without noise the resolution changes nothing: a clean fit ends as before
+    clean, clean_resolved = [], []
+    out = gf.levenberg_marquardt(_noisy_line(clean, 0.0), np.zeros(2), max_steps=60)
+    out_resolved = gf.levenberg_marquardt(_noisy_line(clean_resolved, 0.0), np.zeros(2), max_steps=60,
+                                          relative_resolution=1e-3)
+    assert np.array_equal(out[0], out_resolved[0]) and len(clean) == len(clean_resolved)
+
+
+def test_levenberg_marquardt_never_evaluates_a_rejected_point_twice():
+    # r = e^{3z} − 1.5 from z = −1: the Gauss–Newton step (~10) is clipped to max_move = 3 and lands on z = 2,
+    # far worse; while the damping grows the clipped step lands there again. It is evaluated once.
+    steep = _numeric(lambda z: np.array([np.exp(3.0 * z[0]) - 1.5]))
+    points = []
+
+    def linearised(z):
+        points.append(np.asarray(z, float).tobytes())
+        return steep(z)
+
+    z, _, ok, _, _ = gf.levenberg_marquardt(linearised, np.array([-1.0]), max_steps=40, max_move=3.0)
+    assert ok and z[0] == pytest.approx(np.log(1.5) / 3.0, abs=1e-6)
+    assert len(points) == len(set(points))
+
+
 def test_physical_bounds_are_the_ranges_in_log_coordinates():
     base = gj.reference()
     names = ("robot.yield_pressure", "robot.growth_exponent", "robot.extensibility")

@@ -11,9 +11,10 @@ The workflow (:func:`discover`), on a measured length L(t):
    holding, retracting; pressure rising or falling) (:func:`locate`). The noise σ is estimated from
    successive differences of r (a smooth misfit barely enters them), and the misfit test asks whether
    the residuals carry more than that noise: a lag-1 autocorrelation z-score and the ratio RMSE/σ.
-3. **Test each candidate.** Each effect parameter η is fitted jointly with the base parameters, from
-   several starts (2, 6 and 20 % of its range's top; the misfit can have more than one minimum along an
-   effect, e.g. one per alignment of a lag with the pulse period), keeping the best fit.
+3. **Test each candidate.** Each effect parameter η is fitted jointly with the base parameters, starting from
+   the base fit's values and from several starts of η (2, 6 and 20 % of its range's top; the misfit can have
+   more than one minimum along an effect, e.g. one per alignment of a lag with the pulse period), keeping the
+   best fit.
    Its score is the likelihood ratio 2ΔlogL = (RSS_base − RSS_k)/σ² of the nested models; under
    the null (effect absent, η on the boundary 0) it is distributed as ½χ²₀ + ½χ²₁, and the
    threshold is set so that the *family* of K candidates gives a false positive with probability
@@ -28,8 +29,9 @@ The workflow (:func:`discover`), on a measured length L(t):
    the reference (``model_error``): absorbed by a base shift it alone lowers the sum of squares by up to m·e²,
    so the effect must improve on the given values by more than the threshold plus m·e²/σ² (m samples; on
    clean reference-made data, 10 s at σ = 0.2 mm, the given Y fits worse by 2ΔlogL ≈ 9 through that error
-   alone). These base-held fits run from every start; for an uncorrelated candidate, whose
-   base-held fit is only reported, from one). A correlated candidate that clears the threshold with its magnitude *pinned*
+   alone). Each base-held fit starts where its joint fit's linearisation puts the effect once the base
+   parameters return to their given values (the effect taking over the base shift along their shared valley:
+   :func:`_held_start`). A correlated candidate that clears the threshold with its magnitude *pinned*
    (its 90 % interval, the correlation's inflation included, within a factor ``PINNED_FACTOR`` of the
    estimate) is not confounded: refitting the base did not absorb it, and the data fix its size. Its
    correlation is still reported.
@@ -43,9 +45,12 @@ The workflow (:func:`discover`), on a measured length L(t):
 
 Effect parameters are moved in u with η = s·softplus(u) (η ≥ 0) or η = s·u for effects whose range
 allows both signs; s is a tenth of the range's upper end. Every fit is bounded to the physical ranges
-(η to its effect's, the base parameters to theirs): a wrong candidate that would climb past its range to
+(η to its effect's, above a thousandth of its top, ``ETA_FLOOR``; the base parameters to theirs): a wrong candidate that would climb past its range to
 absorb a misfit stops at the edge (``at_range_edge`` in the evidence), where its runs are also the slowest.
-Intervals on η are Gauss–Newton (delta method) at σ, clipped to the physical range.
+Intervals on η are Gauss–Newton (delta method) at σ, clipped to the physical range. A fit stops once its
+steps no longer move 2ΔlogL by ``LR_RESOLUTION`` (σ estimated from the data's second differences) nor its
+cost by ``COST_NOISE`` of itself, the fast configuration's own noise: below that its trial points only wander
+(:func:`growjax.fit.levenberg_marquardt`).
 """
 
 from __future__ import annotations
@@ -80,6 +85,9 @@ START_FRACTIONS = (0.02, 0.06, 0.2)  # starts of a new effect parameter, as frac
 BASE_START_FACTORS = (1.0, 0.7, 1.4)  # starts of the base fit: the given base parameters times these
 PINNED_FACTOR = 2.0  # a correlated effect whose 90 % interval lies within [η/2, 2η] is determined, not confounded
 PHASES = ("growing", "holding", "retracting", "pressure_rising", "pressure_falling")
+ETA_FLOOR = 1e-3  # an unsigned effect's fits keep η ≥ this fraction of its range's top (below it, absent)
+LR_RESOLUTION = 0.1  # 2ΔlogL below which a fit's progress no longer counts (the threshold is ~6)
+COST_NOISE = 1e-4  # relative noise of a fit's cost through the adaptive solver's steps (measured: 1–2e-4)
 
 
 def candidate_parameter(name: str) -> tuple[str, str, tuple[float, float]]:
@@ -174,7 +182,10 @@ class Candidates(eqx.Module):
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """(lower, upper) (p + K,) of z: the base parameters' physical ranges in ln(θ/θ_ref) and each effect's
         range in u, so no fit leaves the range a candidate is defined on (a wrong candidate drifting beyond its
-        range is both unphysical and where the model turns stiff and its runs slow)."""
+        range is both unphysical and where the model turns stiff and its runs slow). An unsigned effect's η stays
+        above :data:`ETA_FLOOR` of its top, a size no measurement here tells from 0 (a thousandth of the range; the
+        moderate sizes of the tests are 2–30 % of it): nearer 0 a fit only drifts along softplus's flat end, and a
+        lag of microseconds makes the model stiff, its linearisations several times slower and its Jacobian poor."""
         lo_base, hi_base = physical_bounds(self.base, self.base_names, np.asarray(self.refs))
         lo_eff, hi_eff = [], []
         for name, s, signed in zip(self.effect_names, np.asarray(self.scales), np.asarray(self.signed)):
@@ -182,8 +193,8 @@ class Candidates(eqx.Module):
             if signed:  # η = s·u
                 lo_eff.append(lo / s)
                 hi_eff.append(hi / s)
-            else:  # η = s·softplus(u): the lower edge 0 is u → -∞
-                lo_eff.append(-np.inf)
+            else:  # η = s·softplus(u), kept above ETA_FLOOR of the range's top (u → -∞ would be η = 0)
+                lo_eff.append(math.log(math.expm1(ETA_FLOOR * hi / s)))
                 hi_eff.append(math.log(math.expm1(hi / s)))
         return np.concatenate([lo_base, lo_eff]), np.concatenate([hi_base, hi_eff])
 
@@ -227,9 +238,10 @@ def _linearised(w, problem: Candidates, mask, select, z_fixed):
     return r, jac_t.T, pressure
 
 
-def _fit_model(problem: Candidates, w0, mask, select, z_fixed, max_steps: int):
+def _fit_model(problem: Candidates, w0, mask, select, z_fixed, max_steps: int, resolution: float = 0.0):
     """Levenberg–Marquardt for one model (:func:`growjax.fit.levenberg_marquardt` around :func:`_linearised`),
-    each fitted coordinate kept in its physical range (:meth:`Candidates.bounds`): (z (p + K,),
+    each fitted coordinate kept in its physical range (:meth:`Candidates.bounds`), stopping at the cost's
+    ``resolution`` (mm², absolute) or :data:`COST_NOISE` of itself: (z (p + K,),
     residuals (m,), Jacobian (m, q), converged, pressure (m,) Pa at the optimum, linearisations run)."""
     pressures, runs = {}, 0
     lo, hi = problem.bounds()
@@ -245,7 +257,9 @@ def _fit_model(problem: Candidates, w0, mask, select, z_fixed, max_steps: int):
         runs += 1
         return r, jac
 
-    w, _, ok, r, jac = levenberg_marquardt(linearised, w0, max_steps, LM_TOLERANCE, bounds=w_bounds)
+    w, _, ok, r, jac = levenberg_marquardt(linearised, w0, max_steps, LM_TOLERANCE, bounds=w_bounds,
+                                           cost_resolution=resolution,
+                                           relative_resolution=COST_NOISE if resolution > 0.0 else 0.0)
     pressure = pressures.get(np.asarray(jnp.asarray(w)).tobytes())
     if pressure is None:  # not expected: the optimum is always an evaluated point
         pressure = _linearised(jnp.asarray(w), problem, mask, select, z_fixed)[2]
@@ -455,7 +469,7 @@ def discover(
 
         def run(job):
             m = job[1]
-            z, r, jac, ok, pressure, runs = _fit_model(problem, *(jnp.asarray(a) for a in m), max_steps)
+            z, r, jac, ok, pressure, runs = _fit_model(problem, *(jnp.asarray(a) for a in m), max_steps, resolution)
             return job[0], (np.asarray(z), np.asarray(r), np.asarray(jac), bool(ok), m, pressure), runs
 
         fits = [[] for _ in specs]
@@ -470,23 +484,25 @@ def discover(
         return _summarise(problem, z, r, jac, mask, select, sigma, ok, effects)
 
     z0 = np.concatenate([np.zeros(p), np.zeros(k_all)])
+    # a fit's cost (½RSS, mm²) worth LR_RESOLUTION of 2ΔlogL, σ from the data's second differences (var 6σ²)
+    sigma_data = noise_from_differences(np.diff(length)) / math.sqrt(3.0)
+    resolution = 0.5 * LR_RESOLUTION * (sigma_data / 1e-3) ** 2
     added, added_index = [], []
-    # Round 1: the base model and every candidate on it, with the base parameters refitted jointly.
-    outs = fit_batch([((), True, z0)] + [((k,), True, z0) for k in range(k_all)], "round 1")
+    # Round 1: the base model, then every candidate on it with the base parameters refitted jointly, each starting
+    # from the base fit (the extended model then starts within its new term of the base optimum, not in a side
+    # minimum of the base parameters that the given values may lie nearer to).
+    base_out = fit_batch([((), True, z0)], "base")[0]
+    z_base = np.concatenate([base_out[0][:p], np.zeros(k_all)])
+    outs = [base_out] + fit_batch([((k,), True, z_base) for k in range(k_all)], "round 1")
     sigma = noise_from_differences(outs[0][1] * 1e-3)
     base_fit = summarise(outs[0], sigma, ())
     fits = {candidates[k]: summarise(outs[k + 1], sigma, (candidates[k],)) for k in range(k_all)}
-    # The same candidates with the base parameters held at their given values. The fit decides confounding only
-    # for a candidate correlated with a base parameter beyond the limit: from every start. Any other is fitted once
-    # (its value reported), from its joint fit's value or the first start where that is smaller (near η = 0
-    # softplus has no slope to climb).
-    u_joint = np.array([outs[k + 1][0][p + k] for k in range(k_all)])
-    u_held = np.where(np.asarray(problem.signed), u_joint, np.maximum(u_joint, u_starts[:, 0]))
-    correlated = [max(map(abs, fits[candidates[k]].correlation.get(candidate_parameter(candidates[k])[0], {}).values()),
-                      default=0.0) > confounding_correlation for k in range(k_all)]
+    # The same candidates with the base parameters held at their given values (deciding confounding for a candidate
+    # correlated with a base parameter, reported for the others), each from one start: where its joint fit's
+    # linearisation puts it with the base at the given values.
+    u_held = [_held_start(problem, outs[k + 1], k, u_starts[k, 0]) for k in range(k_all)]
     held = fit_batch([((), False, z0)] + [((k,), False, np.where(np.arange(p + k_all) == p + k, u_held[k], z0))
-                                          for k in range(k_all)], "base held",
-                     warm={k + 1 for k in range(k_all) if not correlated[k]})
+                                          for k in range(k_all)], "base held", warm=set(range(1, k_all + 1)))
     rss_given = float(np.sum(held[0][1] ** 2))
     held_lr = {candidates[k]: max(rss_given - float(np.sum(held[k + 1][1] ** 2)), 0.0) / (sigma / 1e-3) ** 2
                for k in range(k_all)}
@@ -579,6 +595,28 @@ def discover(
         linearisations=linearisations, times=times, measured=length,
         before=before_trace, after=after_trace,
     )
+
+
+def _held_start(problem: Candidates, joint, k: int, u_floor: float) -> float:
+    """u of candidate ``k`` with the base parameters back at their given values (z_base = 0), from its joint fit
+    ``joint`` (as ``fit_batch`` returns it): the Gauss–Newton step in η alone that takes over the base shift,
+    η_held = η + (J_ηᵀJ_B z_B)/(J_ηᵀJ_η), clipped to the effect's range (and for an unsigned effect to at least
+    its first start ``u_floor``: near η = 0 softplus has no slope to climb)."""
+    z, _, jac, _, _, _ = joint
+    p = len(problem.base_names)
+    u, s, signed = float(z[p + k]), float(problem.scales[k]), bool(problem.signed[k])
+    deta_du = s if signed else s * float(jax.nn.sigmoid(u))
+    eta = s * (u if signed else float(jax.nn.softplus(u)))
+    j_eta = np.asarray(jac)[:, p] / max(deta_du, 1e-300)  # the candidate is the first effect column of w
+    curvature = float(j_eta @ j_eta)
+    if curvature > 0.0 and np.isfinite(curvature):
+        eta += float(j_eta @ (np.asarray(jac)[:, :p] @ np.asarray(z[:p]))) / curvature
+    lo, hi = candidate_parameter(problem.effect_names[k].split(".")[0])[2]
+    eta = float(np.clip(eta, lo, hi))
+    if signed:
+        return eta / s
+    x = max(eta / s, 1e-12)
+    return max(math.log(math.expm1(x)), u_floor)
 
 
 def _pinned(estimate: float, interval) -> bool:
