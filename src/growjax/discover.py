@@ -228,9 +228,11 @@ class Candidates(eqx.Module):
 @eqx.filter_jit
 def _linearised(w, problem: Candidates, mask, select, z_fixed):
     """Residuals r (m,), Jacobian J (m, q) and the model's pressure (m,) Pa of one model at its fitted
-    coordinates w (q,), in one forward-mode pass (as :func:`growjax.fit.linearise`). Every candidate has the
-    same shapes, so this one compiled program serves every fit of :func:`discover` (the candidate is data:
-    ``mask``, ``select``, ``z_fixed``), and the traces reported come from it too."""
+    coordinates w (q,), in one forward-mode pass (as :func:`growjax.fit.linearise`). The candidate is data
+    (``mask``, ``select``, ``z_fixed``), so one compiled program serves every fit with the same q: q = p + 1 for the
+    base fit, the first round and the base-held fits, p + 2 for the second round (each tangent direction costs a
+    share of a linearisation, 10–30 % on this CPU, so a fit carries only as many as it can move). The traces
+    reported come from it too."""
     units = jnp.eye(w.shape[0], dtype=w.dtype)
     (r, pressure), (jac_t, _) = jax.vmap(lambda v: jax.jvp(lambda x: problem.residuals(x, (mask, select, z_fixed)),
                                                            (w,), (v,)),
@@ -418,7 +420,6 @@ def discover(
     times, length = np.asarray(times, float), np.asarray(length, float)
     problem = make_candidates(times, length, inputs, candidates, base, base_names, config)
     p, k_all = len(problem.base_names), len(candidates)
-    q = p + max_effects  # fitted coordinates: the base parameters, the new candidate, the effects already added
     # u of each start (K, starts): η = s·softplus(u) with s a tenth of the top; signed effects start at 0, ±5 %.
     fractions = START_FRACTIONS if multistart else START_FRACTIONS[:1]
     u_starts = np.stack([np.where(np.asarray(problem.signed), u_signed, math.log(math.expm1(10.0 * f)))
@@ -428,7 +429,9 @@ def discover(
 
     def model(effects_on: Sequence[int], fit_base: bool, z_now, start: int | None = 0):
         """(w0 (q,), mask (K,), select (p + K, q), z_fixed (p + K,)) of a model with ``effects_on`` fitted, a new
-        candidate starting from its ``start``-th start (None: from its value in ``z_now``)."""
+        candidate starting from its ``start``-th start (None: from its value in ``z_now``). q = p + the effects
+        on, at least one (the base model shares the first round's program)."""
+        q = p + max(len(effects_on), 1)
         mask, select = np.zeros(k_all), np.zeros((p + k_all, q))
         z_fixed, w0 = np.array(z_now, float), np.zeros(q)
         if fit_base:
