@@ -226,9 +226,9 @@ def test_candidate_fits_stay_in_their_physical_ranges():
     y_lo, y_hi, _ = gj.params.physical_ranges(problem.base)[problem.base_names[0]]  # Y: (0, y_hi) Pa
     assert y_lo == 0 and lo[0] == -np.inf and hi[0] == pytest.approx(np.log(y_hi / float(problem.refs[0])))
     k = SMALL_CANDIDATES.index("fluid_leak")
-    mask, select = np.eye(3)[k], np.zeros((4, 3))
+    mask, select = np.eye(3)[k], np.zeros((4, 2))  # Y and the leak fitted: discover's first-round shape
     select[0, 0] = select[1 + k, 1] = 1.0
-    w0 = np.array([0.0, math.log(math.expm1(2.0)), 0.0])  # the leak starts at a fifth of its range
+    w0 = np.array([0.0, math.log(math.expm1(2.0))])  # the leak starts at a fifth of its range
     z, _, _, _, _, _ = gd._fit_model(problem, *(jnp.asarray(a) for a in (w0, mask, select, np.zeros(4))), 40)
     leak = float(problem.effect_values(jnp.asarray(z[1:]), jnp.asarray(mask))[k])
     assert leak == pytest.approx(top, rel=1e-6)  # pressed against the bound: the data ask for more
