@@ -231,7 +231,7 @@ def _linearised(w, problem: Candidates, mask, select, z_fixed):
     coordinates w (q,), in one forward-mode pass (as :func:`growjax.fit.linearise`). The candidate is data
     (``mask``, ``select``, ``z_fixed``), so one compiled program serves every fit with the same q: q = p + 1 for the
     base fit, the first round and the base-held fits, p + 2 for the second round (each tangent direction costs a
-    share of a linearisation, 10–30 % on this CPU, so a fit carries only as many as it can move). The traces
+    share of a linearisation, so a fit carries only as many as it can move). The traces
     reported come from it too."""
     units = jnp.eye(w.shape[0], dtype=w.dtype)
     (r, pressure), (jac_t, _) = jax.vmap(lambda v: jax.jvp(lambda x: problem.residuals(x, (mask, select, z_fixed)),
