@@ -198,6 +198,13 @@ class Candidates(eqx.Module):
                 hi_eff.append(math.log(math.expm1(hi / s)))
         return np.concatenate([lo_base, lo_eff]), np.concatenate([hi_base, hi_eff])
 
+    def effect_value_and_slope(self, k: int, u: float) -> tuple[float, float]:
+        """(η (SI), dη/du) of effect ``k`` at its coordinate u (host floats)."""
+        s, signed = float(self.scales[k]), bool(self.signed[k])
+        if signed:
+            return s * u, s
+        return s * float(jax.nn.softplus(u)), s * float(jax.nn.sigmoid(u))
+
     def effect_values(self, u, mask):
         """η (K,) in SI from u (K,) under the candidate ``mask`` (K,)."""
         eta = self.scales * jnp.where(self.signed, u, jax.nn.softplus(u))
@@ -309,7 +316,7 @@ def _summarise(problem: Candidates, z, r, jac, mask, select, sigma_m, converged,
     j = jac @ np.linalg.pinv(select[moved])  # d r / d z_moved (select is a 0/1 selection)
     sigma = sigma_m / 1e-3
     cov_free = sigma**2 * np.linalg.pinv(j.T @ j, rcond=1e-12, hermitian=True)
-    refs, scales, signed = (np.asarray(a) for a in (problem.refs, problem.scales, problem.signed))
+    refs = np.asarray(problem.refs)
     names, values, derivs, ranges = [], [], [], []
     for i in moved:
         if i < p:
@@ -320,8 +327,9 @@ def _summarise(problem: Candidates, z, r, jac, mask, select, sigma_m, converged,
         else:
             k, u = i - p, z[i]
             names.append(problem.effect_names[k])
-            values.append(scales[k] * (u if signed[k] else float(jax.nn.softplus(u))))
-            derivs.append(scales[k] * (1.0 if signed[k] else float(jax.nn.sigmoid(u))))
+            value, slope = problem.effect_value_and_slope(k, u)
+            values.append(value)
+            derivs.append(slope)
             ranges.append(candidate_parameter(problem.effect_names[k].split(".")[0])[2])
     d = np.asarray(derivs)
     cov = cov_free * np.outer(d, d)
@@ -608,8 +616,7 @@ def _held_start(problem: Candidates, joint, k: int, u_floor: float) -> float:
     z, _, jac, _, _, _ = joint
     p = len(problem.base_names)
     u, s, signed = float(z[p + k]), float(problem.scales[k]), bool(problem.signed[k])
-    deta_du = s if signed else s * float(jax.nn.sigmoid(u))
-    eta = s * (u if signed else float(jax.nn.softplus(u)))
+    eta, deta_du = problem.effect_value_and_slope(k, u)
     j_eta = np.asarray(jac)[:, p] / max(deta_du, 1e-300)  # the candidate is the first effect column of w
     curvature = float(j_eta @ j_eta)
     if curvature > 0.0 and np.isfinite(curvature):
