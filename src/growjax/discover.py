@@ -4,7 +4,8 @@ The workflow (:func:`discover`), on a measured length L(t):
 
 1. **Base fit.** The base model's free parameters (default the yield pressure Y) are fitted by
    least squares, in the *superset* model that carries every candidate effect at zero (which is
-   the base model exactly), so every later fit runs through the same compiled program. It starts from the
+   the base model exactly), so every later fit runs through the same compiled program (one per number of fitted
+   coordinates). It starts from the
    given values and from 0.7 and 1.4 times them (real data can leave more than one minimum in Y), keeping
    the best, so that no candidate scores against a base stuck in a side minimum.
 2. **Locate.** The residuals r = L_model − L_meas are summarised over time and by phase (growing,
@@ -452,11 +453,11 @@ def discover(
             z_fixed[p + k] = 0.0
         return w0, mask, select, z_fixed
 
-    compiled = False  # whether a fit has run (the one compiled program exists)
+    compiled = set()  # the numbers of fitted coordinates q whose program exists (one compiled program per q)
     fit_count, linearisations = 0, 0  # fits run, and model runs (residuals, Jacobian) over them: a run's time
 
     def fit_batch(specs, desc, warm=()):
-        """Fit the models (``specs``: arguments of ``model``) through the one compiled program, ``workers`` fits
+        """Fit the models (``specs``: arguments of ``model``, all with the same q) through one compiled program, ``workers`` fits
         at a time; a model with a new candidate from each of its starts, keeping the lowest misfit (a model whose
         index is in ``warm``: from its value in the spec's ``z_now`` only)."""
         nonlocal compiled, fit_count, linearisations
@@ -484,10 +485,12 @@ def discover(
             return job[0], (np.asarray(z), np.asarray(r), np.asarray(jac), bool(ok), m, pressure), runs
 
         fits = [[] for _ in specs]
-        for i, fitted, runs in _map_jobs(run, jobs, workers, progress, desc, first_alone=not compiled):
+        q = jobs[0][1][0].size if jobs else None  # the program these fits run: new, it is compiled by the first alone
+        for i, fitted, runs in _map_jobs(run, jobs, workers, progress, desc, first_alone=q not in compiled):
             fits[i].append(fitted)
             linearisations += runs
-        compiled, fit_count = True, fit_count + len(jobs)
+        compiled.add(q)
+        fit_count += len(jobs)
         return [min(f, key=lambda f: float(f[1] @ f[1])) for f in fits]
 
     def summarise(out, sigma, effects):
