@@ -118,12 +118,13 @@ def simulate_command(args) -> dict:
     return summary
 
 
-def _use_all_cpu_cores():
-    """Expose every CPU core as a JAX device so sweeps shard across them (GROWJAX_CPU_DEVICES overrides)."""
+def _use_all_cpu_cores(at_least: int = 1):
+    """Expose every CPU core (and at least ``at_least``) as a JAX device, so that sweeps shard across them and
+    NUTS chains run one per device (GROWJAX_CPU_DEVICES overrides)."""
     import jax
 
     wanted = os.environ.get("GROWJAX_CPU_DEVICES")
-    n = int(wanted) if wanted else (os.cpu_count() or 1)
+    n = int(wanted) if wanted else max(os.cpu_count() or 1, at_least)
     if "xla_force_host_platform_device_count" in os.environ.get("XLA_FLAGS", ""):
         return
     try:
@@ -340,6 +341,7 @@ def main(argv=None) -> int:
         elif args.command == "fit":
             summary = fit_command(args)
         elif args.command == "posterior":
+            _use_all_cpu_cores(at_least=args.chains)  # chains in parallel, one per device
             summary = posterior_command(args)
         elif args.command == "discover":
             summary = discover_command(args)

@@ -157,15 +157,18 @@ def sample(
     the prior box (its validated RMS error joins the noise); an ``Emulator`` is used as given; False
     (default) runs the model in every gradient (forward mode). ``max_tree_depth``: NUTS's cap on the
     tree (at most 2^depth − 1 leapfrog steps per draw). ``chain_method``: NumPyro's; None runs the chains
-    ``"vectorized"`` through an emulator and ``"sequential"`` through the model: there the vmapped
-    forward-mode solve (members stepped together) costs what the chains cost one after another, and the
-    chains' trees, built in lockstep, would wait for the deepest (`benchmarks/nuts_direct.py` measures both).
+    ``"vectorized"`` through an emulator, and through the model ``"parallel"`` (one chain per JAX device,
+    each on its own thread: expose CPU cores as devices before JAX starts, as ``growjax posterior`` does)
+    when there are as many devices as chains, else ``"sequential"``: the vmapped forward-mode solve
+    (members stepped together) costs what the chains cost one after another, and the chains' trees, built
+    in lockstep, would wait for the deepest (`benchmarks/nuts_direct.py` measures both).
 
     Returns InferenceData with posterior, pointwise log-likelihood (for LOO), posterior
     predictive of the length, observed data and sample stats, and a summary: per-parameter
     mean and 90 % interval, ``rhat_max``, ``ess_bulk_min``, ``ess_tail_min``,
     ``divergences``, ``bfmi_min``, ``coverage_90`` (share of measured points inside the 90 %
-    predictive band), ``emulator`` (its error and build time) and ``wall_s`` (everything).
+    predictive band), ``emulator`` (its error and build time), ``chain_method``, ``laplace_s`` (the start and
+    mass matrix through the model, :func:`laplace_unconstrained`, compilation included) and ``wall_s`` (everything).
     """
     import arviz as az
     from numpyro.infer import MCMC, NUTS, Predictive
@@ -178,6 +181,7 @@ def sample(
     emu_info = None
     if emulate is False:
         mean, model_error = direct_mean(base, inputs, config, t), 0.0
+        mean = with_model_tangents(mean, [p.name for p in priors])
     else:
         emu = emulate if isinstance(emulate, em.Emulator) else build_emulator(priors, base, inputs, config, t, seed)
         if emu.times.shape != t.shape or not np.allclose(np.asarray(emu.times), t):
@@ -185,16 +189,21 @@ def sample(
         mean, model_error = emulated_mean(emu), float(emu.error_rms)
         emu_info = {"error_rms_m": float(emu.error_rms), "error_max_m": float(emu.error_max),
                     "nodes": dict(zip(emu.names, emu.nodes)), "build_s": time.perf_counter() - start}
-    model = functools.partial(growth_model, mean_length=mean, priors=priors, model_error=model_error)
+    def make_model(mean_length):
+        return functools.partial(growth_model, mean_length=mean_length, priors=priors, model_error=model_error)
 
-    init_values, inverse_mass = precondition(model, priors, mean, y, seed, optimise=emulate is not False)
+    model = make_model(mean)
+    start_precondition = time.perf_counter()
+    init_values, inverse_mass = precondition(model, priors, mean, y, seed, optimise=emulate is not False,
+                                             make_model=make_model if emulate is False else None)
+    precondition_s = time.perf_counter() - start_precondition
     kernel = NUTS(model, dense_mass=dense_mass, target_accept_prob=target_accept, max_tree_depth=max_tree_depth,
                   inverse_mass_matrix=inverse_mass if dense_mass else jnp.diag(inverse_mass),
                   init_strategy=numpyro.infer.init_to_value(values=init_values),
                   # through the ODE, forward mode is 5× cheaper than reverse mode through the scan
                   forward_mode_differentiation=emulate is False)
     mcmc = MCMC(kernel, num_warmup=warmup, num_samples=samples, num_chains=chains,
-                chain_method=chain_method or ("sequential" if emulate is False else "vectorized"),
+                chain_method=chain_method or _chain_method(chains, emulate is not False),
                 progress_bar=progress)
     mcmc.run(jax.random.PRNGKey(seed), jnp.asarray(y), extra_fields=("diverging", "energy", "num_steps"))
     post = mcmc.get_samples(group_by_chain=False)
@@ -204,20 +213,32 @@ def sample(
     summary = diagnostics(idata, priors, y, mcmc)
     summary["wall_s"] = wall
     summary["emulator"] = emu_info
+    summary["laplace_s"] = precondition_s if emulate is False else None
+    summary["chain_method"] = mcmc.chain_method
     summary["chains"], summary["warmup"], summary["samples"] = chains, warmup, samples
     return PosteriorResult(idata, summary, wall)
 
 
-def precondition(model, priors, mean_length, length, seed=0, n_scout: int = 64, optimise: bool = True):
+def _chain_method(chains: int, emulated: bool) -> str:
+    if emulated:
+        return "vectorized"
+    return "parallel" if chains > 1 and jax.local_device_count() >= chains else "sequential"
+
+
+def precondition(model, priors, mean_length, length, seed=0, n_scout: int = 64, optimise: bool = True,
+                 make_model=None):
     """Start point and inverse mass matrix for NUTS.
 
     The data fix Y to ~0.2 % of its prior width while ext and n stay at their priors, a
     scale ratio of ~200 in the unconstrained space: without preconditioning NUTS builds
     trees of hundreds of leapfrog steps. The start is the best of a seeded Latin hypercube
-    over the priors (σ at its RMS residual), then, if ``optimise``, the posterior mode by
-    BFGS (cheap on an emulator). The inverse mass matrix is the inverse Hessian of the
-    potential there, eigenvalues floored at the logistic prior's curvature so that flat
-    directions get the prior's scale.
+    over the priors (σ at its RMS residual). Then, if ``make_model`` is given (``mean → model``,
+    the same statistical model around another ``mean_length``), the posterior mode and the Hessian
+    of the potential there in NumPyro's unconstrained coordinates (:func:`laplace_unconstrained`:
+    Gauss–Newton in θ, the transforms and priors exact; one forward-mode Jacobian of the model per
+    step); else, if ``optimise``, the mode by BFGS (cheap on an emulator) and a central-difference
+    Hessian. The inverse mass matrix is the inverse Hessian, eigenvalues floored at the logistic
+    prior's curvature so that flat directions get the prior's scale.
     """
     from jax.flatten_util import ravel_pytree
     from numpyro.infer.util import initialize_model
@@ -236,6 +257,9 @@ def precondition(model, priors, mean_length, length, seed=0, n_scout: int = 64, 
         raise RuntimeError("no point of the preconditioning scout simulated successfully")
     init = {p.site: float(cols[p.name][best]) for p in priors}
     init["sigma"] = max(float(rmse[best]), 1e-6)
+    if make_model is not None:
+        init, hess = laplace_unconstrained(make_model, priors, mean_length, length, init)
+        return init, jnp.asarray(_inverse_floored(hess))
     info = initialize_model(jax.random.PRNGKey(seed), model, model_args=(jnp.asarray(length),),
                             init_strategy=numpyro.infer.init_to_value(values=init),
                             forward_mode_differentiation=not optimise, validate_grad=False)
@@ -246,11 +270,139 @@ def precondition(model, priors, mean_length, length, seed=0, n_scout: int = 64, 
         if np.isfinite(float(potential(sol.value))) and float(potential(sol.value)) < float(potential(z0)):
             z0 = sol.value
             init = {k: float(v) for k, v in info.postprocess_fn(unravel(z0)).items() if k in init}
-    hess = _fd_hessian(jax.jit(jax.vmap(potential)), np.asarray(z0))
+    return init, jnp.asarray(_inverse_floored(_fd_hessian(jax.jit(jax.vmap(potential)), np.asarray(z0))))
+
+
+PRIOR_CURVATURE_FLOOR = 0.3  # logistic prior's curvature ≈ 0.5 at its centre
+
+
+def _inverse_floored(hess):
+    """Inverse of a symmetric Hessian (d, d) with its eigenvalues floored at :data:`PRIOR_CURVATURE_FLOOR`."""
     evals, evecs = np.linalg.eigh(np.asarray(hess))
-    evals = np.maximum(evals, 0.3)  # logistic prior curvature ≈ 0.5 at its centre
-    inverse_mass = (evecs / evals) @ evecs.T
-    return init, jnp.asarray(inverse_mass)
+    return (evecs / np.maximum(evals, PRIOR_CURVATURE_FLOOR)) @ evecs.T
+
+
+def value_and_jacobian(mean_length, names):
+    """``v (d,) → (μ (m,), ∂μ/∂v (m, d))`` for ``mean_length`` over θ = ``dict(zip(names, v))``: one forward-mode
+    solve carrying d tangent directions."""
+    names = tuple(names)
+
+    def mean_of(v):
+        return mean_length(dict(zip(names, v)))
+
+    def run(v):
+        mu, tangents = jax.vmap(lambda e: jax.jvp(mean_of, (v,), (e,)), out_axes=(None, 1))(jnp.eye(v.size, dtype=v.dtype))
+        return mu, tangents
+
+    return run
+
+
+def with_model_tangents(mean_length, names):
+    """``mean_length`` whose forward-mode derivative runs one tangent solve in θ's own d directions.
+
+    ``jacfwd`` of NumPyro's potential pushes one tangent per unconstrained site through the model,
+    the noise scale's (zero) included; here the model's Jacobian ∂μ/∂θ (d directions) is computed once
+    and every tangent of θ is mapped through it.
+    """
+    names = tuple(names)
+    jacobian = value_and_jacobian(mean_length, names)
+
+    @jax.custom_jvp
+    def mean_vector(v):
+        return mean_length(dict(zip(names, v)))
+
+    @mean_vector.defjvp
+    def _tangent(primals, tangents):
+        (v,), (dv,) = primals, tangents
+        mu, jac = jacobian(v)
+        return mu, jac @ dv
+
+    return lambda theta: mean_vector(jnp.stack([jnp.asarray(theta[n], float) for n in names]))
+
+
+LAPLACE_MAX_STEPS = 40
+LAPLACE_DECREMENT = 1e-2  # nats: stop once Newton predicts less (~0.1 posterior sd from the mode)
+LAPLACE_STALL = 3  # or once this many steps in a row fail to lower it: the model's own noise (~0.1 nats) is reached
+
+
+def laplace_unconstrained(make_model, priors, mean_length, length, init: dict):
+    """Posterior mode and Hessian of the potential in NumPyro's unconstrained coordinates.
+
+    NUTS samples z = T⁻¹(θ) (logit of each bounded prior, log σ). Near a prior's bound (the public
+    experiment's Y and n_L under the Lockhart law lie at theirs) the posterior in z is not the
+    Gaussian of a fit in θ: the transform's Jacobian shapes it. Each step linearises the model in θ
+    around the current point, μ(θ) ≈ μ₀ + J(θ − θ₀) (one forward-mode Jacobian), and takes a
+    Levenberg–Marquardt step on the resulting potential, exact in everything else (priors, transforms,
+    σ); a step the true potential does not confirm raises the damping. At the fixed point the gradient
+    is the true one and the Hessian is Gauss–Newton in θ, exact in the transforms. ``make_model(mean_length)``: the NumPyro
+    model around a given mean. ``init``: {site: constrained value}.
+
+    Returns the mode as {site: constrained value} and the Hessian (d, d) over the flattened sites.
+    """
+    from jax.flatten_util import ravel_pytree
+    from numpyro.infer.util import constrain_fn, potential_energy, unconstrain_fn
+
+    names = tuple(p.name for p in priors)
+    sites = tuple(p.site for p in priors)
+    y = jnp.asarray(length)
+
+    def linear_model(data, mu0, jac, v0):
+        make_model(lambda th: mu0 + jac @ (jnp.stack([jnp.asarray(th[n], float) for n in names]) - v0))(data)
+
+    d = len(names)
+    placeholder = (y, jnp.zeros_like(y), jnp.zeros((y.size, d)), jnp.zeros(d))  # the transforms alone
+    zf, unravel = ravel_pytree(unconstrain_fn(linear_model, placeholder, {}, init))
+
+    def potential(z, mu0, jac, v0):
+        return potential_energy(linear_model, (y, mu0, jac, v0), {}, unravel(z))
+
+    def constrained(z):
+        return constrain_fn(linear_model, placeholder, {}, unravel(z))
+
+    def theta_of(z):
+        values = constrained(z)
+        return jnp.stack([values[s] for s in sites])
+
+    value = jax.jit(potential)
+    grad_hess = jax.jit(lambda *a: (jax.grad(potential)(*a), jax.hessian(potential)(*a)))
+    jacobian = jax.jit(value_and_jacobian(mean_length, names))
+    theta = jax.jit(theta_of)
+
+    def linearised_at(z):
+        v = theta(jnp.asarray(z))
+        mu0, jac = jacobian(v)
+        return mu0, jac, v
+
+    z = np.asarray(zf)
+    args = linearised_at(z)
+    f = float(value(jnp.asarray(z), *args))
+    if not np.isfinite(f):
+        raise RuntimeError("the model failed at the start of the Laplace approximation")
+    damping, rejected = 1e-3, 0
+    for _ in range(LAPLACE_MAX_STEPS):
+        g, h = (np.asarray(a) for a in grad_hess(jnp.asarray(z), *args))
+        evals, evecs = np.linalg.eigh(h)
+        h_pos = (evecs * np.maximum(evals, 1e-8 * max(evals[-1], 1e-300))) @ evecs.T
+        if 0.5 * g @ np.linalg.solve(h_pos, g) < LAPLACE_DECREMENT:  # Newton decrement: at the mode
+            break
+        step = -np.linalg.solve(h_pos + damping * np.diag(np.diag(h_pos)), g)
+        predicted = f - float(value(jnp.asarray(z + step), *args))
+        if not predicted > 0.0:  # too far even for the linearised model: shorten without running the model
+            damping = 4.0 * max(damping, 1e-3)
+            continue
+        args_new = linearised_at(z + step)
+        f_new = float(value(jnp.asarray(z + step), *args_new))
+        ratio = (f - f_new) / predicted
+        if np.isfinite(f_new) and ratio > 0.1:
+            z, args, f, rejected = z + step, args_new, f_new, 0
+            damping *= max(1.0 / 3.0, 1.0 - (2.0 * ratio - 1.0) ** 3)
+        else:
+            damping, rejected = 4.0 * max(damping, 1e-3), rejected + 1
+            if rejected == LAPLACE_STALL:
+                break
+    hess = np.asarray(grad_hess(jnp.asarray(z), *args)[1])
+    mode = {k: float(x) for k, x in jax.jit(constrained)(jnp.asarray(z)).items() if k in init}
+    return mode, hess
 
 
 def _fd_hessian(batched_potential, z0, step: float = 1e-3):
