@@ -7,9 +7,10 @@ The statistical model reads like its maths::
     L_obs(t_i) ~ Normal(L_model(t_i; Y, ext, n), σ)
 
 NumPyro samples the bounded priors in unconstrained (logit) coordinates, which are O(1).
-The model runs in the quasi-static configuration by default (fixed grid, no data-dependent
-loops, exact reverse-mode gradients). A failed solve gives zero likelihood (−∞ log
-density, rejected by NUTS), never an exception.
+The model runs in the fast configuration by default, with forward-mode gradients (or through an
+emulator, opt-in); through the model, NUTS starts at the mode found in those coordinates, with the
+Hessian there as its mass matrix (:func:`laplace_unconstrained`). A failed solve gives zero likelihood
+(−∞ log density, rejected by NUTS), never an exception.
 """
 
 from __future__ import annotations
@@ -322,7 +323,7 @@ def with_model_tangents(mean_length, names):
 
 LAPLACE_MAX_STEPS = 40
 LAPLACE_DECREMENT = 1e-2  # nats: stop once Newton predicts less (~0.1 posterior sd from the mode)
-LAPLACE_STALL = 3  # or once this many steps in a row fail to lower it: the model's own noise (~0.1 nats) is reached
+LAPLACE_STALL = 3  # or once this many steps in a row fail to lower it: the model's own noise is reached
 
 
 def laplace_unconstrained(make_model, priors, mean_length, length, init: dict):
