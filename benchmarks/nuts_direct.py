@@ -141,8 +141,8 @@ def geometry(exp, inputs, base, cfg, chains, warmup, samples, target_accepts, ma
     ``softplus``: sites sampled instead in a coordinate u with the prior's fraction f = 1 − exp(−s·softplus(u))
     (f = (θ − low)/(high − low), or its log for a log-uniform prior; s = f at the mode): the same posterior,
     but a coordinate pressed against its lower bound then has exponential tails on both sides instead of the
-    logit's double-exponential wall. Started near the mode (u = 0: f ≈ 0.7 s) with an identity mass matrix,
-    adapted in warm-up."""
+    logit's double-exponential wall. Started at that model's mode with its inverse Hessian as mass matrix
+    (both by autodiff: the surrogate is explicit)."""
     import arviz as az
     import numpyro
     from numpyro.infer import MCMC, NUTS
@@ -167,8 +167,9 @@ def geometry(exp, inputs, base, cfg, chains, warmup, samples, target_accepts, ma
 
     model, start, mass = make_model(linear), init, inverse_mass
     if softplus:
-        model, mass = _softplus_model(priors, linear, init, softplus), None
+        model = _softplus_model(priors, linear, init, softplus)
         start = {("u_" + k if k in softplus else k): (0.0 if k in softplus else v) for k, v in init.items()}
+        start, mass = _surrogate_laplace(model, y, start)
     rows = []
     for accept in target_accepts:
         kernel = NUTS(model, dense_mass=True, target_accept_prob=accept, max_tree_depth=max_tree_depth,
@@ -194,6 +195,22 @@ def geometry(exp, inputs, base, cfg, chains, warmup, samples, target_accepts, ma
     return {"data": exp.source, "law": "lockhart", "surrogate": "model linearised in θ at the posterior mode",
             "mode": init, "laplace_s": laplace_s, "chains": chains, "warmup": warmup, "samples": samples,
             "max_tree_depth": max_tree_depth, "softplus_sites": list(softplus), "rows": rows}
+
+
+def _surrogate_laplace(model, y, start):
+    """Mode (BFGS from ``start``) and floored inverse Hessian of an explicit model's potential, in NumPyro's coordinates."""
+    import numpyro
+    import optimistix as optx
+    from jax.flatten_util import ravel_pytree
+    from numpyro.infer.util import initialize_model
+
+    info = initialize_model(jax.random.PRNGKey(0), model, model_args=(y,),
+                            init_strategy=numpyro.infer.init_to_value(values=start))
+    z0, unravel = ravel_pytree(info.param_info.z)
+    potential = jax.jit(lambda z: info.potential_fn(unravel(z)))
+    z = optx.minimise(lambda z, _: potential(z), optx.BFGS(rtol=1e-9, atol=1e-9), z0, max_steps=2000, throw=False).value
+    constrained = info.postprocess_fn(unravel(z))
+    return {k: float(constrained[k]) for k in start}, jnp.asarray(gpost._inverse_floored(np.asarray(jax.hessian(potential)(z))))
 
 
 def _softplus_model(priors, mean_length, mode, sites):
