@@ -285,17 +285,11 @@ def _inverse_floored(hess):
 
 def value_and_jacobian(mean_length, names):
     """``v (d,) → (μ (m,), ∂μ/∂v (m, d))`` for ``mean_length`` over θ = ``dict(zip(names, v))``: one forward-mode
-    solve carrying d tangent directions."""
+    solve carrying d tangent directions (:func:`growjax.fit.linearise`)."""
+    from growjax.fit import linearise
+
     names = tuple(names)
-
-    def mean_of(v):
-        return mean_length(dict(zip(names, v)))
-
-    def run(v):
-        mu, tangents = jax.vmap(lambda e: jax.jvp(mean_of, (v,), (e,)), out_axes=(None, 1))(jnp.eye(v.size, dtype=v.dtype))
-        return mu, tangents
-
-    return run
+    return lambda v: linearise(lambda w: mean_length(dict(zip(names, w))), v)
 
 
 def with_model_tangents(mean_length, names):
