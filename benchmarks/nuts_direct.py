@@ -142,7 +142,7 @@ def geometry(exp, inputs, base, cfg, chains, warmup, samples, target_accepts, ma
     (f = (θ − low)/(high − low), or its log for a log-uniform prior; s = f at the mode): the same posterior,
     but a coordinate pressed against its lower bound then has exponential tails on both sides instead of the
     logit's double-exponential wall. Started at that model's mode with its inverse Hessian as mass matrix
-    (both by autodiff: the surrogate is explicit)."""
+    (:func:`growjax.posterior.laplace_unconstrained`, exact on this linear surrogate)."""
     import arviz as az
     import numpyro
     from numpyro.infer import MCMC, NUTS
@@ -166,10 +166,13 @@ def geometry(exp, inputs, base, cfg, chains, warmup, samples, target_accepts, ma
         return mu0 + jac @ (jnp.stack([theta[n] for n in names]) - v0)
 
     model, start, mass = make_model(linear), init, inverse_mass
-    if softplus:
-        model = _softplus_model(priors, linear, init, softplus)
+    if softplus:  # the same statistical model, pressed sites in softplus coordinates; start and mass there
+        sp_priors = _softplus_priors(priors, init, softplus)
+        model = functools.partial(gpost.growth_model, mean_length=linear, priors=sp_priors)
         start = {("u_" + k if k in softplus else k): (0.0 if k in softplus else v) for k, v in init.items()}
-        start, mass = _surrogate_laplace(model, y, start)
+        start, hess = gpost.laplace_unconstrained(
+            lambda m: functools.partial(gpost.growth_model, mean_length=m, priors=sp_priors), sp_priors, linear, y, start)
+        mass = jnp.asarray(gpost._inverse_floored(hess))
     rows = []
     for accept in target_accepts:
         kernel = NUTS(model, dense_mass=True, target_accept_prob=accept, max_tree_depth=max_tree_depth,
@@ -197,48 +200,32 @@ def geometry(exp, inputs, base, cfg, chains, warmup, samples, target_accepts, ma
             "max_tree_depth": max_tree_depth, "softplus_sites": list(softplus), "rows": rows}
 
 
-def _surrogate_laplace(model, y, start):
-    """Mode (BFGS from ``start``) and floored inverse Hessian of an explicit model's potential, in NumPyro's coordinates."""
-    import numpyro
-    import optimistix as optx
-    from jax.flatten_util import ravel_pytree
-    from numpyro.infer.util import initialize_model
+class _SoftplusPrior(gpost.Prior):
+    """A prior sampled in u, f = 1 − exp(−s·softplus(u)) (f its fraction, on log scale when ``log``), θ recorded
+    as a deterministic site: the same prior, another coordinate (see :func:`geometry`)."""
 
-    info = initialize_model(jax.random.PRNGKey(0), model, model_args=(y,),
-                            init_strategy=numpyro.infer.init_to_value(values=start))
-    z0, unravel = ravel_pytree(info.param_info.z)
-    potential = jax.jit(lambda z: info.potential_fn(unravel(z)))
-    z = optx.minimise(lambda z, _: potential(z), optx.BFGS(rtol=1e-9, atol=1e-9), z0, max_steps=2000, throw=False).value
-    constrained = info.postprocess_fn(unravel(z))
-    return {k: float(constrained[k]) for k in start}, jnp.asarray(gpost._inverse_floored(np.asarray(jax.hessian(potential)(z))))
+    def __init__(self, prior: gpost.Prior, scale: float):
+        super().__init__(prior.site, prior.name, prior.low, prior.high, prior.log, prior.nodes)
+        object.__setattr__(self, "scale", scale)
+
+    def sample(self):
+        import numpyro
+        import numpyro.distributions as dist
+
+        u = numpyro.sample("u_" + self.site, dist.ImproperUniform(dist.constraints.real, (), ()))
+        s = self.scale
+        f = -jnp.expm1(-s * jax.nn.softplus(u))
+        numpyro.factor("du_" + self.site, jnp.log(s) + jax.nn.log_sigmoid(u) - s * jax.nn.softplus(u))  # log |df/du|
+        value = self.low * (self.high / self.low) ** f if self.log else self.low + (self.high - self.low) * f
+        return numpyro.deterministic(self.site, value)
 
 
-def _softplus_model(priors, mean_length, mode, sites):
-    """The growth model with ``sites`` sampled in softplus coordinates (see :func:`geometry`), the rest as NumPyro does."""
-    import numpyro
-    import numpyro.distributions as dist
-
-    def fraction_of(p, value):
+def _softplus_priors(priors, mode, sites):
+    """``priors`` with ``sites`` in softplus coordinates, each scaled by its fraction at ``mode``."""
+    def fraction(p, value):
         return np.log(value / p.low) / np.log(p.high / p.low) if p.log else (value - p.low) / (p.high - p.low)
 
-    scales = {p.site: float(fraction_of(p, mode[p.site])) for p in priors if p.site in sites}
-
-    def model(length=None):
-        theta = {}
-        for p in priors:
-            if p.site not in scales:
-                theta[p.name] = numpyro.sample(p.site, p.distribution())
-                continue
-            u = numpyro.sample("u_" + p.site, dist.ImproperUniform(dist.constraints.real, (), ()))
-            s = scales[p.site]
-            f = -jnp.expm1(-s * jax.nn.softplus(u))
-            numpyro.factor("du_" + p.site, jnp.log(s) + jax.nn.log_sigmoid(u) - s * jax.nn.softplus(u))  # |df/du|
-            value = p.low * (p.high / p.low) ** f if p.log else p.low + (p.high - p.low) * f
-            theta[p.name] = numpyro.deterministic(p.site, value)
-        sigma = numpyro.sample("sigma", dist.HalfNormal(1e-3))
-        numpyro.sample("length", dist.Normal(mean_length(theta), sigma), obs=length)
-
-    return model
+    return tuple(_SoftplusPrior(p, float(fraction(p, mode[p.site]))) if p.site in sites else p for p in priors)
 
 
 if __name__ == "__main__":

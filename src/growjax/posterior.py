@@ -51,6 +51,10 @@ class Prior:
     def distribution(self):
         return dist.LogUniform(self.low, self.high) if self.log else dist.Uniform(self.low, self.high)
 
+    def sample(self):
+        """θ from this prior inside a NumPyro model (NumPyro's own unconstrained coordinate for it)."""
+        return numpyro.sample(self.site, self.distribution())
+
     def axis(self) -> em.Axis:
         return em.Axis(self.name, self.low, self.high, self.nodes, self.log)
 
@@ -91,7 +95,7 @@ def growth_model(length=None, *, mean_length, priors: Sequence[Prior], noise_sca
     ``mean_length(theta)`` is the model (or its emulator) at the measured times; ``e`` (m) is the
     emulator's RMS error (0 for the model itself). A failed solve has zero likelihood.
     """
-    theta = {p.name: numpyro.sample(p.site, p.distribution()) for p in priors}
+    theta = {p.name: p.sample() for p in priors}
     sigma = numpyro.sample("sigma", dist.HalfNormal(noise_scale))
     mu = mean_length(theta)
     ok = jnp.all(jnp.isfinite(mu))
@@ -351,8 +355,8 @@ def laplace_unconstrained(make_model, priors, mean_length, length, init: dict):
     def potential(z, mu0, jac, v0):
         return potential_energy(linear_model, (y, mu0, jac, v0), {}, unravel(z))
 
-    def constrained(z):
-        return constrain_fn(linear_model, placeholder, {}, unravel(z))
+    def constrained(z):  # deterministic sites included: a prior may record θ as one (Prior.sample)
+        return constrain_fn(linear_model, placeholder, {}, unravel(z), return_deterministic=True)
 
     def theta_of(z):
         values = constrained(z)
