@@ -1,7 +1,8 @@
 """Benchmark one 10 s simulation and one forward-mode gradient: compile time and wall time after compilation.
 
-Run: ``python benchmarks/simulate.py [--out benchmarks/results/simulate.json] [--repeat 10] [--small-loops]``
-(``--small-loops``: the opt-in option of :mod:`growjax.xla_flags`; write ``--out`` elsewhere to keep both).
+Run: ``python benchmarks/simulate.py [--out benchmarks/results/simulate.json] [--repeat 10] [--small-loops]
+[--tangents]`` (``--small-loops``: the opt-in option of :mod:`growjax.xla_flags`; write ``--out`` elsewhere to
+keep both).
 
 Uses the shared experiment when it is beside the checkout, else the shipped synthetic data.
 Wall times are the median of ``--repeat`` (≥ 10 by default) calls after the first; no persistent
@@ -12,6 +13,9 @@ compilation cache, so ``compile_s`` (first call less the median) is a cold compi
   length (σ = 0.2 mm, samples in [t0, t1]) in (Y Pa, ext, n), target ≤ 60 ms;
 * for information: the forward drive at rtol 1e-6 and the inverse (stepper) drive at the default
   tolerance, with their solver steps and ``realtime_factor`` = wall / simulated time.
+* ``--tangents``: the same gradient, and the Lockhart law's in (Y, φ_L, n_L) at the public experiment's
+  posterior mode (the direct NUTS benchmark's), with the sensitivities' field in forward mode and by central
+  differences (``Config.tangents``), in this process one after the other: the ratio is the measurement.
 """
 
 from __future__ import annotations
@@ -34,6 +38,8 @@ from growjax.metrics import length_rmse
 REPO = Path(__file__).resolve().parents[1]
 SIGMA = 2e-4  # m, noise scale of the length likelihood
 GRADIENT_PARAMETERS = ("Y", "ext", "n")
+LOCKHART_PARAMETERS = ("robot.yield_pressure", "robot.lockhart_rate", "robot.lockhart_exponent")
+LOCKHART_AT = (5054.0, 2.05e-3, 0.259)  # the public experiment's posterior mode (benchmarks/nuts_direct.py --geometry)
 TARGETS = {"simulate_s": 0.020, "gradient_s": 0.060}
 
 
@@ -73,10 +79,14 @@ def bench_simulation(drive: str, exp, repeat: int, rtol: float | None = None) ->
     return out
 
 
-def log_likelihood_fn(exp, sigma: float = SIGMA):
-    """θ = (Y Pa, ext, n) → Gaussian log-likelihood of the measured length (σ m) over the 10 s window."""
-    base = gj.reference("forward")
-    config = gj.Config(adjoint="forward")
+def log_likelihood_fn(exp, sigma: float = SIGMA, law: str = "reference", tangents: str = "auto"):
+    """θ → Gaussian log-likelihood of the measured length (σ m) over the 10 s window: θ = (Y Pa, ext, n) under
+    the published law, (Y Pa, φ_L m/s, n_L) under ``law="lockhart"`` (started at :data:`LOCKHART_AT`)."""
+    base = gj.reference("forward", growth_law=law)
+    names = GRADIENT_PARAMETERS if law == "reference" else LOCKHART_PARAMETERS
+    if law != "reference":
+        base = gj.replace(base, **dict(zip(names, LOCKHART_AT)))
+    config = gj.Config(adjoint="forward", tangents=tangents)
     inputs = ex.to_inputs(exp, "forward", base, config.t0, config.t1)
     t = np.asarray(exp.time)
     keep = (t >= config.t0) & (t <= config.t1)
@@ -85,22 +95,24 @@ def log_likelihood_fn(exp, sigma: float = SIGMA):
     constant = -times.size * np.log(sigma * np.sqrt(2.0 * np.pi))
 
     def log_likelihood(theta):
-        params = gj.replace(base, **dict(zip(GRADIENT_PARAMETERS, theta)))
+        params = gj.replace(base, **dict(zip(names, theta)))
         length = gj.simulate(params, inputs, config, ts=times, breaks=breaks).length
         return constant - 0.5 * jnp.sum(((length - observed) / sigma) ** 2)
 
-    theta0 = jnp.asarray([float(gj.get(base, name)) for name in GRADIENT_PARAMETERS])
+    theta0 = jnp.asarray([float(gj.get(base, name)) for name in names])
     return log_likelihood, theta0
 
 
-def bench_gradient(exp, repeat: int) -> dict:
-    """Forward-mode gradient (``jax.jacfwd``) of the log-likelihood in (Y, ext, n) at the published values."""
-    log_likelihood, theta0 = log_likelihood_fn(exp)
+def bench_gradient(exp, repeat: int, law: str = "reference", tangents: str = "auto") -> dict:
+    """Forward-mode gradient (``jax.jacfwd``) of the log-likelihood (see :func:`log_likelihood_fn`)."""
+    log_likelihood, theta0 = log_likelihood_fn(exp, law=law, tangents=tangents)
     gradient = jax.jit(jax.jacfwd(log_likelihood))
     first, walls, grad = timed(lambda: gradient(theta0), repeat)
     wall = statistics.median(walls)
     return {
-        "parameters": list(GRADIENT_PARAMETERS),
+        "law": law,
+        "tangents": tangents,
+        "parameters": list(GRADIENT_PARAMETERS if law == "reference" else LOCKHART_PARAMETERS),
         "at": [float(v) for v in theta0],
         "sigma_m": SIGMA,
         "log_likelihood": float(jax.jit(log_likelihood)(theta0)),
@@ -122,6 +134,8 @@ def main():
     parser.add_argument("--repeat", type=int, default=10)
     parser.add_argument("--small-loops", action="store_true",
                         help="the opt-in XLA:CPU option that compiles the solver's loop whole (growjax.xla_flags)")
+    parser.add_argument("--tangents", action="store_true",
+                        help="also time both laws' gradients with forward-mode and difference tangents (Config.tangents)")
     args = parser.parse_args()
     small_loops = xla_flags.apply() if args.small_loops else xla_flags.applied()
     folder = ex.shared_experiment_dir()
@@ -137,6 +151,9 @@ def main():
         "other_runs": [bench_simulation("forward", exp, args.repeat, 1e-6), bench_simulation("inverse", exp, args.repeat)],
         "targets": TARGETS,
     }
+    if args.tangents:
+        results["tangents"] = [bench_gradient(exp, args.repeat, law, mode)
+                               for law in ("reference", "lockhart") for mode in ("forward", "differences")]
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(results, indent=2) + "\n")
     print(f"data: {exp.source}")
@@ -146,6 +163,9 @@ def main():
     print(f"jacfwd of the 10 s log-likelihood in (Y, ext, n): {1e3 * gradient['wall_s']:.1f} ms median of {args.repeat} "
           f"(target <= {1e3 * TARGETS['gradient_s']:.0f} ms) {verdict(gradient['wall_s'], TARGETS['gradient_s'])}; "
           f"compile {gradient['compile_s']:.1f} s")
+    for row in results.get("tangents", []):
+        print(f"  gradient, {row['law']} law, {row['tangents']} tangents: {1e3 * row['wall_s']:.1f} ms "
+              f"(compile {row['compile_s']:.1f} s)")
     for run in results["other_runs"]:
         print(f"  {run['drive']} rtol {run['rtol']:g}: {1e3 * run['wall_s']:.1f} ms, {run['solver_steps']} steps, "
               f"{run['status']} (information)")

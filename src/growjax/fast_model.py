@@ -35,6 +35,7 @@ import numpy as np
 from growjax import _assembly as assembly
 from growjax import effects as fx
 from growjax import hydraulics as hy
+from growjax import xla_flags
 from growjax._rosenbrock import evaluate, integrate
 from growjax.config import Config
 from growjax.effects import Instant, Rod
@@ -355,10 +356,35 @@ def _primal(run, ts, y0, theta, outputs):
     return Run({k: v + nan for k, v in values.items()}, run.y_final[0], run.t_final), block, saved
 
 
+def _forward_mode_tangents(params: Parameters, config: Config) -> bool:
+    """Whether the sensitivities' field is taken in forward mode, else by central differences (``config.tangents``;
+    decided when a solve is traced). ``jax.jvp`` evaluates the primal field, and its inner Newton solve, once for
+    all p directions where differences evaluate it 1 + 2p times; but its many small operations are launched one
+    by one unless the solver's loop is compiled whole (:mod:`growjax.xla_flags`). ``"auto"`` takes forward mode
+    where the loop is compiled whole or the Lockhart law solves the rod balance by Newton in every evaluation
+    (``python benchmarks/simulate.py --tangents``, 3 parameters: Lockhart 31 ms against 60 ms by differences with
+    small loops, 88 against 115 ms without; published law 17 against 24 ms with, but 62 against 41 ms without)."""
+    if config.tangents == "auto":
+        return xla_flags.applied() or params.robot.growth_law == "lockhart"
+    return config.tangents == "forward"
+
+
 def _sensitivities(params, inputs, config: Config, jump_ts, step_ts, directions):
+    """One member's sensitivity problem along ``directions`` (see :func:`_integrate`): (θ_s, sizes |d|/|θ| (p,),
+    S0 (p, n)), θ_s for the callbacks of :func:`_sensitivity_callbacks`."""
+    build = _forward_sensitivities if _forward_mode_tangents(params, config) else _difference_sensitivities
+    return build(params, inputs, config, jump_ts, step_ts, directions)
+
+
+def _sensitivity_callbacks(params: Parameters, config: Config):
+    """(tangent field ``(t, y, S, θ_s) → (f, S')``, output tangents ``(t, y, S, θ_s) → {output: (p,)}``)."""
+    return (_forward_callbacks if _forward_mode_tangents(params, config) else _difference_callbacks)(config)
+
+
+def _difference_sensitivities(params, inputs, config: Config, jump_ts, step_ts, directions):
     """One member's sensitivity problem along ``directions`` = (parameter tangents, input tangents), each leaf
     with a leading axis p: (θ_s = (θ, θ moved by ±εd (2p, …), ±ε (2p,), 1/2ε (p,)), sizes |d|/|θ| (p,),
-    S0 (p, n)). See :func:`_integrate`."""
+    S0 (p, n)), for :func:`_difference_callbacks`."""
     d_params, d_inputs = directions
     theta = _member(params, inputs, config, jump_ts, step_ts)[0]
     typical = (_typical(params), inputs)
@@ -392,9 +418,9 @@ def _central(quotient, values):
     return (values[:n_dir] - values[n_dir:]) * quotient.reshape((-1,) + (1,) * (values.ndim - 1))
 
 
-def _sensitivity_callbacks(config: Config):
-    """(tangent field, output tangents) over θ_s from :func:`_sensitivities`: central difference quotients of
-    the primal field and outputs along every direction, in one batched evaluation."""
+def _difference_callbacks(config: Config):
+    """(tangent field, output tangents) over θ_s from :func:`_difference_sensitivities`: central difference
+    quotients of the primal field and outputs along every direction, in one batched evaluation."""
     field, outputs, _ = _callbacks(config)
 
     def tangent_field(t, y, sens, th):
@@ -408,6 +434,53 @@ def _sensitivity_callbacks(config: Config):
         shifted = jax.vmap(lambda s, e, m: outputs(t, y + e * s, m), in_axes=(0, 0, _moved_axes(moved)))(
             jnp.concatenate([sens, sens]), signed, moved)
         return {k: _central(quotient, shifted[k]) for k in OUTPUTS}
+
+    return tangent_field, output_tangents
+
+
+def _forward_sensitivities(params, inputs, config: Config, jump_ts, step_ts, directions):
+    """One member's sensitivity problem along ``directions`` = (parameter tangents, input tangents), each leaf
+    with a leading axis p: (θ_s = (θ, dθ: the tangents of θ's floating-point leaves (p, …)), sizes |d|/|θ| (p,),
+    S0 (p, n)), for :func:`_forward_callbacks`."""
+    d_params, d_inputs = directions
+    theta = _member(params, inputs, config, jump_ts, step_ts)[0]
+    typical = (_typical(params), inputs)
+    size = jax.vmap(lambda dp, di: _relative_size((params, inputs), (dp, di), typical))(d_params, d_inputs)  # (p,)
+    if theta[2].newton is not None:  # Newton also where a small move along a direction needs it (an effect at 0)
+        step = jnp.where(size > 0, 1e-6 / jnp.where(size > 0, size, 1.0), 0.0)
+        moved = jax.vmap(lambda dp, di, e: _member(*_shifted((params, inputs), (dp, di), e), config, jump_ts,
+                                                   step_ts)[0][2].newton)(d_params, d_inputs, step)
+        theta = eqx.tree_at(lambda th: th[2].newton, theta, theta[2].newton | jnp.any(moved))
+    point, fixed = eqx.partition((params, inputs), eqx.is_inexact_array)
+    d_point = eqx.filter((d_params, d_inputs), jax.tree_util.tree_map(eqx.is_inexact_array, (params, inputs)))
+
+    def floating(x):  # θ's and the initial state's floating-point leaves at the floating-point leaves x
+        p, i = eqx.combine(x, fixed)
+        return eqx.filter(_member(p, i, config, jump_ts, step_ts)[0], eqx.is_inexact_array), initial_state(p, config)
+
+    d_theta, s0 = jax.vmap(lambda d: jax.jvp(floating, (point,), (d,))[1])(d_point)
+    return (theta, d_theta), size, s0
+
+
+def _forward_callbacks(config: Config):
+    """(tangent field, output tangents) over θ_s from :func:`_forward_sensitivities`: forward-mode derivatives of the
+    primal field and outputs along every direction, the primal (and its inner Newton solve) evaluated once."""
+    field, outputs, _ = _callbacks(config)
+
+    def along(fn, t, y, sens, th):
+        theta, d_theta = th
+        x, fixed = eqx.partition(theta, eqx.is_inexact_array)
+
+        def one(s, d):
+            return jax.jvp(lambda y_, x_: fn(t, y_, eqx.combine(x_, fixed)), (y, x), (s, d))
+
+        return jax.vmap(one, out_axes=(None, 0))(sens, d_theta)
+
+    def tangent_field(t, y, sens, th):
+        return along(field, t, y, sens, th)
+
+    def output_tangents(t, y, sens, th):
+        return along(outputs, t, y, sens, th)[1]
 
     return tangent_field, output_tangents
 
@@ -449,7 +522,7 @@ def _integrate_batch(params, inputs, config: Config, ts, jump_ts, step_ts, direc
         return primal, None, run.status, run.steps.count
     theta_s, size, s0 = jax.vmap(lambda p, i, j, s, d: _sensitivities(p, i, config, j, s, d))(
         params, inputs, jump_ts, step_ts, directions)
-    tangent_field, output_tangents = _sensitivity_callbacks(config)
+    tangent_field, output_tangents = _sensitivity_callbacks(params, config)
     run = _sensitivity_run(config, y0, theta_s, size, s0, tangent_field, breaks=breaks, jumps=jumps, batched=True)
 
     def member(r, t, y, th):
@@ -465,11 +538,13 @@ def _integrate(params, inputs, config: Config, ts, jump_ts, step_ts, directions=
 
     ``directions`` = (parameter tangents, input tangents), each leaf with a leading axis p: the
     sensitivities along them are integrated with the state, under its error control. Their field
-    is the central difference quotient of the vector field along each direction (as CVODES does by
+    (``config.tangents``, :func:`_forward_mode_tangents`) is either the vector field's ``jax.jvp`` along
+    each direction, the primal evaluated once, or its central difference quotient (as CVODES does by
     default), (f(y + εS, θ + εd) − f(y − εS, θ − εd))/2ε, with ε fixed per direction so that the
-    parameters move by (machine ε)^⅓ of themselves: one batched evaluation of the primal field
-    serves all directions. (Forward-mode ``jvp`` batched over directions is exact but XLA:CPU
-    miscompiled it inside this field when this solver was written.)
+    parameters move by (machine ε)^⅓ of themselves, one batched evaluation of the primal field for
+    all directions. (The two agree to the quotients' error, ~1e-5 relative; the ``jvp`` batched over
+    directions that XLA:CPU miscompiled when this solver was written is computed correctly now, which
+    ``tests/test_model.py`` checks against differences of whole solves.)
     """
     rtol, atol = config.tolerances
     field, outputs, event = _callbacks(config)
@@ -480,7 +555,7 @@ def _integrate(params, inputs, config: Config, ts, jump_ts, step_ts, directions=
         primal = _primal(run, ts, y0, theta, outputs)[0]
         return primal, None, run.status, run.steps.count
     theta_s, size, s0 = _sensitivities(params, inputs, config, jump_ts, step_ts, directions)
-    tangent_field, output_tangents = _sensitivity_callbacks(config)
+    tangent_field, output_tangents = _sensitivity_callbacks(params, config)
     run = _sensitivity_run(config, y0, theta_s, size, s0, tangent_field, breaks=breaks, jumps=jumps)
     primal, block, saved = _primal(run, ts, y0, theta, outputs)
     return primal, _tangent_run(run, ts, saved, block, theta_s, output_tangents), run.status, run.steps.count
