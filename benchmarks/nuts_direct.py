@@ -2,7 +2,7 @@
 
 Run: ``python benchmarks/nuts_direct.py [--chains 4 --warmup 500 --samples 500] [--target-accept 0.98]
 [--max-tree-depth 10] [--vectorised-gradient] [--gradients-only] [--small-loops] [--sequential]
-[--geometry [TARGET_ACCEPT ...]] [--out benchmarks/results/nuts_direct.json]`` (``--small-loops``: the opt-in option of :mod:`growjax.xla_flags`).
+[--geometry [TARGET_ACCEPT ...] [--logit]] [--out benchmarks/results/nuts_direct.json]`` (``--small-loops``: the opt-in option of :mod:`growjax.xla_flags`).
 
 Reads ``../shared/data/mammobot/experiment.csv`` (the shipped synthetic forward experiment when it is
 absent). Chains run in parallel, one per CPU device (the script exposes ``--chains`` devices;
@@ -54,9 +54,9 @@ def main():
     parser.add_argument("--geometry", type=float, nargs="*", metavar="TARGET_ACCEPT",
                         help="instead of sampling through the model: NUTS on the model linearised at the posterior mode "
                              "(seconds), at these target acceptance rates (default 0.8 0.9 0.95 0.98)")
-    parser.add_argument("--softplus", nargs="+", metavar="SITE",
-                        help="with --geometry: sample these bounded sites (pressed against their lower bound) in a "
-                             "softplus coordinate instead of NumPyro's logit (a parametrisation not in growjax yet)")
+    parser.add_argument("--logit", action="store_true",
+                        help="with --geometry: every prior in NumPyro's logit coordinate (no softplus coordinate for "
+                             "priors pressed against a bound, posterior.bound_start)")
     parser.add_argument("--sequential", action="store_true", help="chains one after another on one device")
     parser.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "nuts_direct.json"))
     args = parser.parse_args()
@@ -71,7 +71,7 @@ def main():
     inputs = ex.to_inputs(exp, "forward", base, cfg.t0, cfg.t1)
     if args.geometry is not None:
         out = geometry(exp, inputs, base, cfg, args.chains, args.warmup, args.samples,
-                       args.geometry or [0.8, 0.9, 0.95, 0.98], args.max_tree_depth, args.softplus or ())
+                       args.geometry or [0.8, 0.9, 0.95, 0.98], args.max_tree_depth, args.logit)
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
         Path(args.out).write_text(json.dumps(out, indent=2) + "\n")
         print(json.dumps(out, indent=2))
@@ -132,17 +132,15 @@ def gradient_time(exp, inputs, base, cfg, chains: int, model_tangents: bool = Tr
     return (time.perf_counter() - start) / 3
 
 
-def geometry(exp, inputs, base, cfg, chains, warmup, samples, target_accepts, max_tree_depth, softplus=()) -> dict:
+def geometry(exp, inputs, base, cfg, chains, warmup, samples, target_accepts, max_tree_depth, logit=False) -> dict:
     """Tree sizes, divergences and R-hat of NUTS (as ``posterior.sample`` sets it up) on the model linearised in
     θ at the posterior mode, μ ≈ μ₀ + J(θ − θ₀), priors, transforms and σ exact: what the posterior's shape in
     NUTS's coordinates alone asks for, in seconds instead of hours. Leapfrog steps per chain × the gradient's
     time bounds a run through the model (its curvature away from the mode is not in this surrogate).
 
-    ``softplus``: sites sampled instead in a coordinate u with the prior's fraction f = 1 − exp(−s·softplus(u))
-    (f = (θ − low)/(high − low), or its log for a log-uniform prior; s = f at the mode): the same posterior,
-    but a coordinate pressed against its lower bound then has exponential tails on both sides instead of the
-    logit's double-exponential wall. Started at that model's mode with its inverse Hessian as mass matrix
-    (:func:`growjax.posterior.laplace_unconstrained`, exact on this linear surrogate)."""
+    The coordinates are ``posterior.sample``'s (:func:`growjax.posterior.bound_start`: a prior pressed against a
+    bound in a softplus coordinate, start and mass matrix found again there); ``logit``: every prior in NumPyro's
+    own coordinate, as before that."""
     import arviz as az
     import numpyro
     from numpyro.infer import MCMC, NUTS
@@ -153,7 +151,7 @@ def geometry(exp, inputs, base, cfg, chains, warmup, samples, target_accepts, ma
     names = [p.name for p in priors]
     mean = gpost.direct_mean(base, inputs, cfg.replace(adjoint="forward"), exp.time[keep])
 
-    def make_model(m):
+    def make_model(m, priors=priors):
         return functools.partial(gpost.growth_model, mean_length=m, priors=priors)
 
     start = time.perf_counter()
@@ -165,14 +163,10 @@ def geometry(exp, inputs, base, cfg, chains, warmup, samples, target_accepts, ma
     def linear(theta):
         return mu0 + jac @ (jnp.stack([theta[n] for n in names]) - v0)
 
-    model, start, mass = make_model(linear), init, inverse_mass
-    if softplus:  # the same statistical model, pressed sites in softplus coordinates; start and mass there
-        sp_priors = _softplus_priors(priors, init, softplus)
-        model = functools.partial(gpost.growth_model, mean_length=linear, priors=sp_priors)
-        start = {("u_" + k if k in softplus else k): (0.0 if k in softplus else v) for k, v in init.items()}
-        start, hess = gpost.laplace_unconstrained(
-            lambda m: functools.partial(gpost.growth_model, mean_length=m, priors=sp_priors), sp_priors, linear, y, start)
-        mass = jnp.asarray(gpost._inverse_floored(hess))
+    sampled, start, mass = priors, init, inverse_mass
+    if not logit:
+        sampled, start, mass = gpost.bound_start(make_model, priors, linear, y, init, inverse_mass)
+    model = make_model(linear, sampled)
     rows = []
     for accept in target_accepts:
         kernel = NUTS(model, dense_mass=True, target_accept_prob=accept, max_tree_depth=max_tree_depth,
@@ -195,37 +189,10 @@ def geometry(exp, inputs, base, cfg, chains, warmup, samples, target_accepts, ma
                      "rhat_max": float(max(float(rhat[k]) for k in post)),
                      "posterior_90": {k: np.quantile(v, [0.05, 0.95]).tolist() for k, v in post.items()}})
         print(rows[-1], flush=True)
+    coordinates = {p.site: "softplus" if isinstance(p, gpost.SoftplusPrior) else "numpyro" for p in sampled}
     return {"data": exp.source, "law": "lockhart", "surrogate": "model linearised in θ at the posterior mode",
             "mode": init, "laplace_s": laplace_s, "chains": chains, "warmup": warmup, "samples": samples,
-            "max_tree_depth": max_tree_depth, "softplus_sites": list(softplus), "rows": rows}
-
-
-class _SoftplusPrior(gpost.Prior):
-    """A prior sampled in u, f = 1 − exp(−s·softplus(u)) (f its fraction, on log scale when ``log``), θ recorded
-    as a deterministic site: the same prior, another coordinate (see :func:`geometry`)."""
-
-    def __init__(self, prior: gpost.Prior, scale: float):
-        super().__init__(prior.site, prior.name, prior.low, prior.high, prior.log, prior.nodes)
-        object.__setattr__(self, "scale", scale)
-
-    def sample(self):
-        import numpyro
-        import numpyro.distributions as dist
-
-        u = numpyro.sample("u_" + self.site, dist.ImproperUniform(dist.constraints.real, (), ()))
-        s = self.scale
-        f = -jnp.expm1(-s * jax.nn.softplus(u))
-        numpyro.factor("du_" + self.site, jnp.log(s) + jax.nn.log_sigmoid(u) - s * jax.nn.softplus(u))  # log |df/du|
-        value = self.low * (self.high / self.low) ** f if self.log else self.low + (self.high - self.low) * f
-        return numpyro.deterministic(self.site, value)
-
-
-def _softplus_priors(priors, mode, sites):
-    """``priors`` with ``sites`` in softplus coordinates, each scaled by its fraction at ``mode``."""
-    def fraction(p, value):
-        return np.log(value / p.low) / np.log(p.high / p.low) if p.log else (value - p.low) / (p.high - p.low)
-
-    return tuple(_SoftplusPrior(p, float(fraction(p, mode[p.site]))) if p.site in sites else p for p in priors)
+            "max_tree_depth": max_tree_depth, "coordinates": coordinates, "rows": rows}
 
 
 if __name__ == "__main__":

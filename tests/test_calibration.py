@@ -275,7 +275,7 @@ def _saturating_problem(seed=0):
     def mean(theta):
         return theta["a"] * (1.0 - jnp.exp(-theta["b"] * jnp.asarray(t)))
 
-    def make_model(m):
+    def make_model(m, priors=priors):
         return functools.partial(gpost.growth_model, mean_length=m, priors=priors)
 
     return y, priors, mean, make_model
@@ -305,6 +305,46 @@ def test_laplace_in_unconstrained_coordinates_finds_the_mode_against_a_prior_bou
     rms = np.sqrt(np.mean((np.asarray(mean({"a": mode["a"], "b": mode["b"]})) - y) ** 2))
     assert rms > 1.5 * 2e-4  # the bound leaves a misfit on top of the noise, and σ takes it
     assert mode["sigma"] == pytest.approx(rms, rel=0.02)
+
+
+def test_softplus_coordinate_keeps_the_prior_and_the_posterior():
+    """A prior pressed against its bound is sampled in a softplus coordinate (``bound_start``): the same prior
+    (the density it implies on θ integrates to 1 over the range, uniform in θ) and the same posterior as NumPyro's
+    logit coordinate (NUTS in both on the cheap saturating model: the same quantiles of a), without divergences."""
+    import jax
+    import jax.numpy as jnp
+    import numpyro
+    from numpyro.infer import MCMC, NUTS
+
+    prior = gpost.SoftplusPrior("a", "a", 0.02, 0.05, scale=0.01)
+    u = np.linspace(-60.0, 3000.0, 400_001)
+    s = prior.scale
+    f = -np.expm1(-s * np.logaddexp(0.0, u))
+    density = np.exp(np.log(s) - np.logaddexp(0.0, -u) - s * np.logaddexp(0.0, u))  # |df/du|
+    assert np.all(np.diff(f) >= 0) and f[0] < 1e-20 and f[-1] > 1.0 - 1e-9
+    assert np.trapezoid(density, u) == pytest.approx(1.0, abs=1e-6)
+    inside = (f > 0.2) & (f < 0.6)  # uniform in θ: the share of u's mass mapped into a slice is its width
+    assert np.trapezoid(np.where(inside, density, 0.0), u) == pytest.approx(0.4, abs=1e-4)
+    assert -np.expm1(-s * np.logaddexp(0.0, prior.start())) == pytest.approx(s, rel=1e-12)
+
+    y, priors, mean, make_model = _saturating_problem()
+    mode, inverse_mass = gpost.precondition(make_model(mean), priors, mean, y, make_model=make_model)
+    sampled, start, mass = gpost.bound_start(make_model, priors, mean, y, mode, inverse_mass)
+    assert [type(p).__name__ for p in sampled] == ["SoftplusPrior", "Prior"]  # a at its bound, b inside
+    quantiles, divergences = [], []
+    for ps, init, m in ((priors, mode, inverse_mass), (sampled, start, mass)):
+        kernel = NUTS(make_model(mean, ps), dense_mass=True, inverse_mass_matrix=m, target_accept_prob=0.9,
+                      init_strategy=numpyro.infer.init_to_value(values=init))
+        mcmc = MCMC(kernel, num_warmup=500, num_samples=1000, num_chains=2, chain_method="vectorized",
+                    progress_bar=False)
+        mcmc.run(jax.random.PRNGKey(1), jnp.asarray(y), extra_fields=("diverging",))
+        a = np.asarray(mcmc.get_samples()["a"])
+        quantiles.append(np.quantile(a, [0.1, 0.5, 0.9]))
+        divergences.append(int(np.asarray(mcmc.get_extra_fields()["diverging"]).sum()))
+    assert quantiles[0][0] > 0.02 and quantiles[1][0] > 0.02
+    spread = quantiles[0][2] - quantiles[0][0]
+    np.testing.assert_allclose(quantiles[1], quantiles[0], atol=0.15 * spread)
+    assert divergences[1] == 0
 
 
 def test_model_tangents_give_numpyros_forward_gradient():

@@ -342,6 +342,10 @@ def main(argv=None) -> int:
             summary = fit_command(args)
         elif args.command == "posterior":
             _use_all_cpu_cores(at_least=args.chains)  # chains in parallel, one per device
+            if not args.emulate:  # thousands of gradients through the solver: its loop compiled whole
+                from growjax import xla_flags
+
+                xla_flags.apply()
             summary = posterior_command(args)
         elif args.command == "discover":
             summary = discover_command(args)

@@ -9,7 +9,8 @@ The statistical model reads like its maths::
 NumPyro samples the bounded priors in unconstrained (logit) coordinates, which are O(1).
 The model runs in the fast configuration by default, with forward-mode gradients (or through an
 emulator, opt-in); through the model, NUTS starts at the mode found in those coordinates, with the
-Hessian there as its mass matrix (:func:`laplace_unconstrained`). A failed solve gives zero likelihood
+Hessian there as its mass matrix (:func:`laplace_unconstrained`), and a prior whose mode lies
+against a bound is sampled in a softplus coordinate instead (:class:`SoftplusPrior`, :func:`bound_start`). A failed solve gives zero likelihood
 (−∞ log density, rejected by NUTS), never an exception.
 """
 
@@ -57,6 +58,60 @@ class Prior:
 
     def axis(self) -> em.Axis:
         return em.Axis(self.name, self.low, self.high, self.nodes, self.log)
+
+
+BOUND_FRACTION = 0.05  # a mode closer to a bound than this share of the prior's range is "pressed" against it
+
+
+@dataclasses.dataclass(frozen=True)
+class SoftplusPrior(Prior):
+    """The same prior, sampled in a coordinate u that suits a posterior pressed against a bound.
+
+    NumPyro's logit coordinate puts a double-exponential wall at a bound; where the likelihood presses
+    the posterior against it, NUTS's steps there diverge or shrink. Here the prior's fraction f
+    (of [low, high], on a log scale when ``log``), measured from the pressed bound, is
+    f = 1 − exp(−s·softplus(u)), s its value at the mode: a bijection of ℝ onto (0, 1) with
+    exponential tails on both sides, f ≈ s near the mode (u ≈ 0.5), and the prior's density kept by the
+    factor |df/du|. θ is recorded as the deterministic site ``site``; u is sampled as ``u_<site>``.
+    """
+
+    scale: float = 1.0  # s, the fraction at the mode
+    upper: bool = False  # pressed against ``high`` (f measured from it) instead of ``low``
+
+    def sample(self):
+        u = numpyro.sample("u_" + self.site, dist.ImproperUniform(dist.constraints.real, (), ()))
+        s = self.scale
+        f = -jnp.expm1(-s * jax.nn.softplus(u))
+        numpyro.factor("du_" + self.site, jnp.log(s) + jax.nn.log_sigmoid(u) - s * jax.nn.softplus(u))
+        f = 1.0 - f if self.upper else f
+        value = self.low * (self.high / self.low) ** f if self.log else self.low + (self.high - self.low) * f
+        return numpyro.deterministic(self.site, value)
+
+    def start(self) -> float:
+        """u where f = s (the mode this coordinate was centred on)."""
+        s = self.scale
+        return float(np.log(np.expm1(-np.log1p(-s) / s)))
+
+
+def fraction(prior: Prior, value) -> float:
+    """Where ``value`` lies in the prior's range: 0 at ``low``, 1 at ``high`` (log scale for a log prior)."""
+    if prior.log:
+        return float(np.log(value / prior.low) / np.log(prior.high / prior.low))
+    return float((value - prior.low) / (prior.high - prior.low))
+
+
+def bound_coordinates(priors: Sequence[Prior], mode: dict, within: float = BOUND_FRACTION) -> tuple[Prior, ...]:
+    """``priors`` with each one whose ``mode`` {site: value} lies within ``within`` of a bound (share of its range)
+    as a :class:`SoftplusPrior` centred there; the others unchanged."""
+    out = []
+    for p in priors:
+        f = fraction(p, mode[p.site]) if p.site in mode and not isinstance(p, SoftplusPrior) else 0.5
+        if min(f, 1.0 - f) < within:
+            upper = f > 0.5
+            scale = min(max(1.0 - f if upper else f, 1e-6), within)
+            p = SoftplusPrior(p.site, p.name, p.low, p.high, p.log, p.nodes, scale=scale, upper=upper)
+        out.append(p)
+    return tuple(out)
 
 
 def paper_priors() -> tuple[Prior, ...]:
@@ -172,7 +227,8 @@ def sample(
     predictive of the length, observed data and sample stats, and a summary: per-parameter
     mean and 90 % interval, ``rhat_max``, ``ess_bulk_min``, ``ess_tail_min``,
     ``divergences``, ``bfmi_min``, ``coverage_90`` (share of measured points inside the 90 %
-    predictive band), ``emulator`` (its error and build time), ``chain_method``, ``laplace_s`` (the start and
+    predictive band), ``emulator`` (its error and build time), ``chain_method``, ``coordinates`` (each prior's:
+    ``"numpyro"`` or ``"softplus"``, :func:`bound_start`), ``laplace_s`` (the start and
     mass matrix through the model, :func:`laplace_unconstrained`, compilation included) and ``wall_s`` (everything).
     """
     import arviz as az
@@ -194,14 +250,17 @@ def sample(
         mean, model_error = emulated_mean(emu), float(emu.error_rms)
         emu_info = {"error_rms_m": float(emu.error_rms), "error_max_m": float(emu.error_max),
                     "nodes": dict(zip(emu.names, emu.nodes)), "build_s": time.perf_counter() - start}
-    def make_model(mean_length):
+    def make_model(mean_length, priors=priors):
         return functools.partial(growth_model, mean_length=mean_length, priors=priors, model_error=model_error)
 
-    model = make_model(mean)
     start_precondition = time.perf_counter()
-    init_values, inverse_mass = precondition(model, priors, mean, y, seed, optimise=emulate is not False,
+    init_values, inverse_mass = precondition(make_model(mean), priors, mean, y, seed, optimise=emulate is not False,
                                              make_model=make_model if emulate is False else None)
+    sampled = priors
+    if emulate is False:
+        sampled, init_values, inverse_mass = bound_start(make_model, priors, mean, y, init_values, inverse_mass)
     precondition_s = time.perf_counter() - start_precondition
+    model = make_model(mean, sampled)
     kernel = NUTS(model, dense_mass=dense_mass, target_accept_prob=target_accept, max_tree_depth=max_tree_depth,
                   inverse_mass_matrix=inverse_mass if dense_mass else jnp.diag(inverse_mass),
                   init_strategy=numpyro.infer.init_to_value(values=init_values),
@@ -220,8 +279,29 @@ def sample(
     summary["emulator"] = emu_info
     summary["laplace_s"] = precondition_s if emulate is False else None
     summary["chain_method"] = mcmc.chain_method
+    summary["coordinates"] = {p.site: "softplus" if isinstance(p, SoftplusPrior) else "numpyro" for p in sampled}
     summary["chains"], summary["warmup"], summary["samples"] = chains, warmup, samples
     return PosteriorResult(idata, summary, wall)
+
+
+def bound_start(make_model, priors, mean_length, length, mode: dict, inverse_mass):
+    """(priors as sampled, start, inverse mass matrix) for NUTS through the model.
+
+    ``mode`` is the posterior mode in NumPyro's coordinates ({site: value}, σ included). Priors whose mode
+    lies against a bound are sampled in softplus coordinates instead (:func:`bound_coordinates`), and
+    the start and mass matrix are found again in them (:func:`laplace_unconstrained`); where none is
+    pressed, ``priors``, ``mode`` and ``inverse_mass`` come back unchanged. ``make_model(mean, priors)``:
+    the NumPyro model. On the public experiment under the Lockhart law (Y and n_L at their bounds),
+    ``python benchmarks/nuts_direct.py --geometry`` measures what this changes (README, "Benchmarks").
+    """
+    sampled = bound_coordinates(priors, mode)
+    if sampled == tuple(priors):
+        return tuple(priors), mode, inverse_mass
+    start = {("u_" + p.site if isinstance(p, SoftplusPrior) else p.site):
+             (p.start() if isinstance(p, SoftplusPrior) else mode[p.site]) for p in sampled}
+    start["sigma"] = mode["sigma"]
+    start, hess = laplace_unconstrained(lambda m: make_model(m, sampled), sampled, mean_length, length, start)
+    return sampled, start, jnp.asarray(_inverse_floored(hess))
 
 
 def _chain_method(chains: int, emulated: bool) -> str:
@@ -296,6 +376,13 @@ def value_and_jacobian(mean_length, names):
     return lambda v: linearise(lambda w: mean_length(dict(zip(names, w))), v)
 
 
+@functools.lru_cache(maxsize=8)
+def _jitted_jacobian(mean_length, names):
+    """``jax.jit`` of :func:`value_and_jacobian`, one per model: a second Laplace start (:func:`bound_start`)
+    reuses the compiled Jacobian."""
+    return jax.jit(value_and_jacobian(mean_length, names))
+
+
 def with_model_tangents(mean_length, names):
     """``mean_length`` whose forward-mode derivative runs one tangent solve in θ's own d directions.
 
@@ -364,7 +451,7 @@ def laplace_unconstrained(make_model, priors, mean_length, length, init: dict):
 
     value = jax.jit(potential)
     grad_hess = jax.jit(lambda *a: (jax.grad(potential)(*a), jax.hessian(potential)(*a)))
-    jacobian = jax.jit(value_and_jacobian(mean_length, names))
+    jacobian = _jitted_jacobian(mean_length, names)
     theta = jax.jit(theta_of)
 
     def linearised_at(z):
