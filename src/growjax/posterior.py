@@ -31,7 +31,8 @@ import optimistix as optx
 from growjax import emulator as em
 from growjax import params as gp
 from growjax.config import Config
-from growjax.emulator import predicted_length
+from growjax.emulator import predicted_length, sample_times
+from growjax.trajectory import OK
 
 
 @dataclasses.dataclass(frozen=True)
@@ -160,10 +161,39 @@ def growth_model(length=None, *, mean_length, priors: Sequence[Prior], noise_sca
     numpyro.sample("length", dist.Normal(jnp.where(jnp.isfinite(mu), mu, 0.0), scale), obs=length)
 
 
-def direct_mean(base, inputs, config, times):
-    """``mean_length`` that runs the model: θ {name: value} → length (m) at ``times``."""
-    times = jnp.asarray(times)
-    return lambda theta: predicted_length(theta, base, inputs, config, times)
+class DirectMean:
+    """``mean_length`` that runs the model: θ {name: value} → length (m) at ``times`` (NaN where the run failed),
+    with :meth:`value_and_jacobian` from one solve that carries the sensitivities."""
+
+    def __init__(self, base, inputs, config, times):
+        self.base, self.inputs, self.config, self.times = base, inputs, config, jnp.asarray(times)
+
+    def __call__(self, theta):
+        return predicted_length(theta, self.base, self.inputs, self.config, self.times)
+
+    def value_and_jacobian(self, names):
+        """``v (d,) → (μ (m,), ∂μ/∂v (m, d))`` over θ = ``dict(zip(names, v))`` (:func:`growjax.simulate.length_jacobian`:
+        a solve fewer than a forward-mode derivative of :meth:`__call__`; NaN where the run failed)."""
+        from growjax.simulate import input_breaks, length_jacobian
+
+        names, base = tuple(names), self.base
+        breaks = input_breaks(self.inputs, self.config)
+        ts = sample_times(self.times, self.config)
+
+        def params_of(v):
+            return gp.replace(base, **dict(zip(names, v)))
+
+        def value_and_jacobian(v):
+            traj, jac = length_jacobian(params_of, v, self.inputs, self.config, ts, breaks)
+            ok = traj.status == OK
+            return jnp.where(ok, traj.length, jnp.nan), jnp.where(ok, jac, jnp.nan)
+
+        return value_and_jacobian
+
+
+def direct_mean(base, inputs, config, times) -> DirectMean:
+    """``mean_length`` that runs the model: θ {name: value} → length (m) at ``times`` (:class:`DirectMean`)."""
+    return DirectMean(base, inputs, config, times)
 
 
 def emulated_mean(emulator: em.Emulator):
@@ -368,11 +398,14 @@ def _inverse_floored(hess):
 
 
 def value_and_jacobian(mean_length, names):
-    """``v (d,) → (μ (m,), ∂μ/∂v (m, d))`` for ``mean_length`` over θ = ``dict(zip(names, v))``: one forward-mode
-    solve carrying d tangent directions (:func:`growjax.fit.linearise`)."""
+    """``v (d,) → (μ (m,), ∂μ/∂v (m, d))`` for ``mean_length`` over θ = ``dict(zip(names, v))``: the model's own
+    (:meth:`DirectMean.value_and_jacobian`, one solve) where it has one, else one forward-mode pass carrying d
+    tangent directions (:func:`growjax.fit.linearise`)."""
     from growjax.fit import linearise
 
     names = tuple(names)
+    if hasattr(mean_length, "value_and_jacobian"):
+        return mean_length.value_and_jacobian(names)
     return lambda v: linearise(lambda w: mean_length(dict(zip(names, w))), v)
 
 

@@ -125,3 +125,38 @@ def _solve(params, inputs, config: Config, ts, jump_ts, step_ts) -> Trajectory:
     params = fx.apply_all(params)
     solve = fast_model.solve if config.fidelity == "fast" else reference_model.solve
     return solve(params, inputs, config, ts, jump_ts, step_ts)
+
+
+def length_jacobian(params_of, w, inputs, config: Config, ts, breaks=None) -> tuple[Trajectory, jax.Array]:
+    """(trajectory, ∂length/∂w (T, p)) of the fast configuration at ``params_of(w)``, w (p,), on the save grid
+    ``ts`` (s): one solve carries the p sensitivities and gives both (:func:`growjax.fast_model.solve_with_sensitivities`),
+    where ``jax.jacfwd`` of :func:`simulate` adds a plain solve for the primal. ``params_of``: w → Parameters
+    (traceable; hashable, the compiled program is kept per function). ``breaks`` as in :func:`simulate`.
+    """
+    if config.fidelity != "fast":
+        raise ValueError("length_jacobian runs the fast configuration; use jax.jacfwd of simulate for the reference")
+    if breaks is None:
+        breaks = input_breaks(inputs, config)
+    jump_ts, step_ts = breaks
+    return _length_jacobian(params_of, jnp.asarray(w, float), as_arrays(inputs), config, jnp.asarray(ts, float),
+                            jump_ts, step_ts)
+
+
+@eqx.filter_jit
+def _length_jacobian(params_of, w, inputs, config: Config, ts, jump_ts, step_ts):
+    def applied(v):
+        return fx.apply_all(as_arrays(params_of(v)))
+
+    params = applied(w)
+    mask = jax.tree_util.tree_map(eqx.is_inexact_array, params)
+    p = w.shape[0]
+
+    def zeros(x):
+        return jnp.zeros((p,) + jnp.shape(x))
+
+    d_float = jax.vmap(lambda e: jax.jvp(lambda v: eqx.filter(applied(v), mask), (w,), (e,))[1])(jnp.eye(p))
+    d_params = eqx.combine(d_float, jax.tree_util.tree_map(zeros, eqx.filter(params, mask, inverse=True)))
+    d_inputs = jax.tree_util.tree_map(zeros, inputs)
+    traj, tangents = fast_model.solve_with_sensitivities(params, inputs, config, ts, jump_ts, step_ts,
+                                                         (d_params, d_inputs))
+    return traj, tangents["length"].T
