@@ -542,9 +542,9 @@ def _integrate(params, inputs, config: Config, ts, jump_ts, step_ts, directions=
     each direction, the primal evaluated once, or its central difference quotient (as CVODES does by
     default), (f(y + εS, θ + εd) − f(y − εS, θ − εd))/2ε, with ε fixed per direction so that the
     parameters move by (machine ε)^⅓ of themselves, one batched evaluation of the primal field for
-    all directions. (The two agree to the quotients' error, ~1e-5 relative; the ``jvp`` batched over
-    directions that XLA:CPU miscompiled when this solver was written is computed correctly now, which
-    ``tests/test_model.py`` checks against differences of whole solves.)
+    all directions. (The two agree to the quotients' error, ~1e-5 relative, ``tests/test_growth_law.py``;
+    the ``jvp`` batched over directions that XLA:CPU miscompiled when this solver was written is computed
+    correctly now.)
     """
     rtol, atol = config.tolerances
     field, outputs, event = _callbacks(config)

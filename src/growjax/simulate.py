@@ -106,18 +106,24 @@ def simulate(params, inputs, config: Config = Config(), ts=None, breaks=None) ->
     """
     if ts is None:
         ts = config.save_grid()
-    if not _traced(ts):
-        t = np.asarray(ts, float)
-        if t.ndim != 1 or t.size < 1 or not np.all(np.isfinite(t)):
-            raise ValueError("ts must be a 1-D array of finite times (s)")
-        if np.any(np.diff(t) < 0):
-            raise ValueError("ts must be sorted")
-        if t[0] < config.t0 - 1e-12 or t[-1] > config.t1 + 1e-12:
-            raise ValueError(f"ts must lie within [t0, t1] = [{config.t0}, {config.t1}] s")
+    _check_times(ts, config)
     if breaks is None:
         breaks = input_breaks(inputs, config)
     jump_ts, step_ts = breaks
     return _solve(as_arrays(params), as_arrays(inputs), config, jnp.asarray(ts, float), jump_ts, step_ts)
+
+
+def _check_times(ts, config: Config):
+    """Refuse a save grid that is not 1-D, finite, sorted and inside [t0, t1] (unless traced)."""
+    if _traced(ts):
+        return
+    t = np.asarray(ts, float)
+    if t.ndim != 1 or t.size < 1 or not np.all(np.isfinite(t)):
+        raise ValueError("ts must be a 1-D array of finite times (s)")
+    if np.any(np.diff(t) < 0):
+        raise ValueError("ts must be sorted")
+    if t[0] < config.t0 - 1e-12 or t[-1] > config.t1 + 1e-12:
+        raise ValueError(f"ts must lie within [t0, t1] = [{config.t0}, {config.t1}] s")
 
 
 @eqx.filter_jit
@@ -135,6 +141,7 @@ def length_jacobian(params_of, w, inputs, config: Config, ts, breaks=None) -> tu
     """
     if config.fidelity != "fast":
         raise ValueError("length_jacobian runs the fast configuration; use jax.jacfwd of simulate for the reference")
+    _check_times(ts, config)
     if breaks is None:
         breaks = input_breaks(inputs, config)
     jump_ts, step_ts = breaks
