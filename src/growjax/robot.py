@@ -257,12 +257,13 @@ def inflow(rod: RodBalance, valves, pressure, length, catheter_length, effect_fo
             step = z - jnp.clip(fz / jnp.where(dfz < 0.0, dfz, -1.0), -8.0, 8.0)
             inside = (step > lo) & (step < hi) & jnp.isfinite(step)
             # A step past an end of the bracket that no evaluation has moved goes to that end: where the
-            # root lies beyond it (a motion's pressure below 4e-18 of the span) that end is the answer.
+            # root lies beyond it (f keeps its sign there; a motion's pressure below 4e-18 of the span) that
+            # end is the answer.
             low_edge, high_edge = (step <= lo) & (lo <= -BRACKET_LOGIT), (step >= hi) & (hi >= BRACKET_LOGIT)
             z_new = jnp.where(inside, step, jnp.where(low_edge, -BRACKET_LOGIT,
                                                       jnp.where(high_edge, BRACKET_LOGIT, 0.5 * (lo + hi))))
             exact = fz == 0.0  # the root itself (its bracket end would otherwise be bisected away)
-            beyond = ((z <= -BRACKET_LOGIT) & (fz > 0.0)) | ((z >= BRACKET_LOGIT) & (fz < 0.0))
+            beyond = ((z <= -BRACKET_LOGIT) & (fz < 0.0)) | ((z >= BRACKET_LOGIT) & (fz > 0.0))
             z_new = jnp.where(exact | beyond, z, z_new)
             converged = (inside & (jnp.abs(z_new - z) <= INFLOW_NEWTON_TOL)) | exact | beyond
             collapsed = hi - lo <= INFLOW_BRACKET_TOL * jnp.maximum(1.0, jnp.abs(z_new))
