@@ -79,10 +79,8 @@ def test_growth_law_is_validated():
 def test_forward_mode_and_difference_tangents_give_the_same_jacobian():
     """The fast configuration's sensitivities with their field in forward mode (``jax.jvp``: the Lockhart law's
     default, the rod balance's Newton solve evaluated once) and by central differences of the field (whose match
-    with differences of whole solves tests/test_model.py checks) agree, for d(length)/d(Y, φ_L, n_L) over 1.5 s.
-    The forward-mode side comes from ``length_jacobian``, whose one solve also gives the length (NUTS's path):
-    within the solver's tolerance of the plain solve's."""
-    from growjax.fit import linearise
+    with differences of whole solves tests/test_model.py checks) agree, for d(length)/d(Y, φ_L, n_L) over 1.5 s,
+    both through ``length_jacobian`` (NUTS's path: one solve gives the length and its Jacobian)."""
     from growjax.simulate import length_jacobian
 
     t = np.array([0.0, 100.0])
@@ -95,12 +93,10 @@ def test_forward_mode_and_difference_tangents_give_the_same_jacobian():
         return _lockhart(**dict(zip(names, theta)))
 
     forward = gj.Config(t1=1.5, adjoint="forward", tangents="forward")
-    traj, jac_forward = length_jacobian(params_of, theta0, inputs, forward, ts)
-    differences = forward.replace(tangents="differences")
-    length, jac_differences = jax.jit(lambda w: linearise(
-        lambda v: gj.simulate(params_of(v), inputs, differences, ts=ts).length, w))(theta0)
-    assert np.all(np.abs(np.asarray(jac_differences[-1]) * np.asarray(theta0)) > 1e-4)  # each matters (> 0.1 mm)
-    jf, jd = np.asarray(jac_forward), np.asarray(jac_differences)
+    runs = {mode: length_jacobian(params_of, theta0, inputs, forward.replace(tangents=mode), ts)
+            for mode in ("forward", "differences")}
+    (traj_f, jf), (traj_d, jd) = ((r[0], np.asarray(r[1])) for r in runs.values())
+    assert int(traj_f.status) == int(traj_d.status) == gj.OK
+    assert np.all(np.abs(jd[-1] * np.asarray(theta0)) > 1e-4)  # each matters (> 0.1 mm over its whole value)
     assert np.all(np.abs(jf - jd) <= 1e-3 * np.abs(jd).max(axis=0)), (jf, jd)
-    assert int(traj.status) == gj.OK
-    np.testing.assert_allclose(np.asarray(traj.length), np.asarray(length), rtol=0, atol=2e-6)  # 2 µm
+    np.testing.assert_allclose(np.asarray(traj_f.length), np.asarray(traj_d.length), rtol=0, atol=2e-6)  # 2 µm
