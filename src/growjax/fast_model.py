@@ -97,12 +97,21 @@ def prepare(params: Parameters, config: Config) -> Prepared:
     # every velocity-dependent effect is at zero (decided at run time: a superset model's candidates switched off,
     # where the Newton solve would triple the cost of every field evaluation).
     velocity_effects = [e for e in params.effects if e.velocity_dependent]
-    quasi_static = robot.growth_law == "reference" and not velocity_effects
-    iterations = 0 if quasi_static else INFLOW_MAX_ITERATIONS
+    iterations = 0 if _rod_solve(params) == "one pass" else INFLOW_MAX_ITERATIONS
     newton = None
-    if robot.growth_law == "reference" and velocity_effects:
+    if _rod_solve(params) == "newton where present":
         newton = jnp.any(jnp.stack([e.present() for e in velocity_effects]))
     return Prepared(storage_law(params.fluid), valves, rod, line_resistance(params), newton, iterations)
+
+
+def _rod_solve(params: Parameters) -> str:
+    """How the rod balance is solved in every field evaluation, decided statically: ``"one pass"`` (the published
+    law, no velocity-dependent effect), ``"newton"`` (the Lockhart law) or ``"newton where present"`` (the
+    published law with velocity-dependent effects: Newton at run time only where one of them is nonzero)."""
+    velocity_effects = any(e.velocity_dependent for e in params.effects)
+    if params.robot.growth_law != "reference":
+        return "newton"
+    return "newton where present" if velocity_effects else "one pass"
 
 
 # -- the lumped chamber ----------------------------------------------------------------------------------
@@ -361,11 +370,11 @@ def _forward_mode_tangents(params: Parameters, config: Config) -> bool:
     decided when a solve is traced). ``jax.jvp`` evaluates the primal field, and its inner Newton solve, once for
     all p directions where differences evaluate it 1 + 2p times; but its many small operations are launched one
     by one unless the solver's loop is compiled whole (:mod:`growjax.xla_flags`). ``"auto"`` takes forward mode
-    where the loop is compiled whole or the Lockhart law solves the rod balance by Newton in every evaluation
+    where the loop is compiled whole or the rod balance is solved by Newton in every evaluation (the Lockhart law)
     (``python benchmarks/simulate.py --tangents``, 3 parameters: Lockhart 31 ms against 60 ms by differences with
     small loops, 88 against 115 ms without; published law 17 against 24 ms with, but 62 against 41 ms without)."""
     if config.tangents == "auto":
-        return xla_flags.applied() or params.robot.growth_law == "lockhart"
+        return xla_flags.applied() or _rod_solve(params) == "newton"
     return config.tangents == "forward"
 
 
@@ -381,6 +390,11 @@ def _sensitivity_callbacks(params: Parameters, config: Config):
     return (_forward_callbacks if _forward_mode_tangents(params, config) else _difference_callbacks)(config)
 
 
+def _difference_step(size):
+    """Step ε along each direction (p,) that moves the parameters by (machine ε)^⅓ of themselves (0 where |d| = 0)."""
+    return jnp.where(size > 0, jnp.finfo(jnp.result_type(float)).eps ** (1 / 3) / jnp.where(size > 0, size, 1.0), 0.0)
+
+
 def _difference_sensitivities(params, inputs, config: Config, jump_ts, step_ts, directions):
     """One member's sensitivity problem along ``directions`` = (parameter tangents, input tangents), each leaf
     with a leading axis p: (θ_s = (θ, θ moved by ±εd (2p, …), ±ε (2p,), 1/2ε (p,)), sizes |d|/|θ| (p,),
@@ -389,7 +403,7 @@ def _difference_sensitivities(params, inputs, config: Config, jump_ts, step_ts, 
     theta = _member(params, inputs, config, jump_ts, step_ts)[0]
     typical = (_typical(params), inputs)
     size = jax.vmap(lambda dp, di: _relative_size((params, inputs), (dp, di), typical))(d_params, d_inputs)  # (p,)
-    step = jnp.where(size > 0, jnp.finfo(jnp.result_type(float)).eps ** (1 / 3) / jnp.where(size > 0, size, 1.0), 0.0)
+    step = _difference_step(size)
     signed = jnp.concatenate([step, -step])  # (2p,): central differences
     both = jax.tree_util.tree_map(lambda d: jnp.concatenate([d, d]), (d_params, d_inputs))
     moved = jax.vmap(lambda dp, di, e: _member(*_shifted((params, inputs), (dp, di), e), config, jump_ts,
@@ -447,9 +461,8 @@ def _forward_sensitivities(params, inputs, config: Config, jump_ts, step_ts, dir
     typical = (_typical(params), inputs)
     size = jax.vmap(lambda dp, di: _relative_size((params, inputs), (dp, di), typical))(d_params, d_inputs)  # (p,)
     if theta[2].newton is not None:  # Newton also where a small move along a direction needs it (an effect at 0)
-        step = jnp.where(size > 0, 1e-6 / jnp.where(size > 0, size, 1.0), 0.0)
         moved = jax.vmap(lambda dp, di, e: _member(*_shifted((params, inputs), (dp, di), e), config, jump_ts,
-                                                   step_ts)[0][2].newton)(d_params, d_inputs, step)
+                                                   step_ts)[0][2].newton)(d_params, d_inputs, _difference_step(size))
         theta = eqx.tree_at(lambda th: th[2].newton, theta, theta[2].newton | jnp.any(moved))
     point, fixed = eqx.partition((params, inputs), eqx.is_inexact_array)
     d_point = eqx.filter((d_params, d_inputs), jax.tree_util.tree_map(eqx.is_inexact_array, (params, inputs)))
@@ -655,6 +668,11 @@ def solve(params: Parameters, inputs, config: Config, ts, jump_ts, step_ts):
     (``jax.grad``) is not supported by this configuration.
     """
     run, status, n_steps = _run(params, inputs, config, ts, jump_ts, step_ts)
+    return _trajectory(params, inputs, config, ts, run, status, n_steps)
+
+
+def _trajectory(params, inputs, config: Config, ts, run: Run, status, n_steps):
+    """The :class:`growjax.trajectory.Trajectory` of a primal :class:`Run` on ``ts``."""
     demand = jax.vmap(inputs.pressure_demand)(ts)
     return finish(ts, run.outputs, pressure_limit(params.robot), demand, config.stop_at_pressure_limit,
                   t_final=run.t_final, status=status, n_steps=n_steps, final_state=run.final_state)
@@ -671,8 +689,6 @@ def solve_with_sensitivities(params: Parameters, inputs, config: Config, ts, jum
     fixed directions (a Jacobian), where that dependence is harmless. Tangents past a stop are NaN.
     """
     primal, tangent, status, n_steps = _integrate(params, inputs, config, ts, jump_ts, step_ts, directions)
-    demand = jax.vmap(inputs.pressure_demand)(ts)
-    traj = finish(ts, primal.outputs, pressure_limit(params.robot), demand, config.stop_at_pressure_limit,
-                  t_final=primal.t_final, status=status, n_steps=n_steps, final_state=primal.final_state)
+    traj = _trajectory(params, inputs, config, ts, primal, status, n_steps)
     after = ts > primal.t_final + 1e-12
     return traj, {k: jnp.where(after, jnp.nan, v) for k, v in tangent.outputs.items()}

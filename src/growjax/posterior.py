@@ -32,6 +32,7 @@ from growjax import emulator as em
 from growjax import params as gp
 from growjax.config import Config
 from growjax.emulator import predicted_length, sample_times
+from growjax.simulate import input_breaks, length_jacobian
 from growjax.trajectory import OK
 
 
@@ -174,8 +175,6 @@ class DirectMean:
     def value_and_jacobian(self, names):
         """``v (d,) → (μ (m,), ∂μ/∂v (m, d))`` over θ = ``dict(zip(names, v))`` (:func:`growjax.simulate.length_jacobian`:
         a solve fewer than a forward-mode derivative of :meth:`__call__`; NaN where the run failed)."""
-        from growjax.simulate import input_breaks, length_jacobian
-
         names, base = tuple(names), self.base
         breaks = input_breaks(self.inputs, self.config)
         ts = sample_times(self.times, self.config)
