@@ -366,3 +366,31 @@ def test_model_tangents_give_numpyros_forward_gradient():
         gradients.append(np.asarray(jax.jacfwd(potential)(z)))
     assert np.abs(gradients[0]).max() > 1.0
     np.testing.assert_allclose(gradients[1], gradients[0], rtol=1e-10)
+
+
+def test_observation_draws_equal_numpyros_log_likelihood_and_predictive():
+    """posterior.sample takes the pointwise log-likelihood and the predictive from each draw's recorded model
+    length instead of running the model twice more per draw: the log-likelihood must be NumPyro's own (which runs
+    the model again), the predictive its noise around that length, and a failed draw must have −∞."""
+    import functools
+
+    from numpyro.infer.util import log_likelihood
+
+    t = np.linspace(0.0, 1.0, 30)
+    priors = (gpost.Prior("a", "a", 0.5, 2.0),)
+    model_error = 3e-4
+    model = functools.partial(gpost.growth_model, mean_length=lambda th: th["a"] * 1e-2 * t, priors=priors,
+                              model_error=model_error)
+    rng = np.random.default_rng(0)
+    draws = {"a": rng.uniform(0.5, 2.0, (2, 40)), "sigma": rng.uniform(1e-3, 2e-3, (2, 40))}
+    draws["length_model"] = draws["a"][..., None] * 1e-2 * t
+    observed = 1.2e-2 * t + rng.normal(0.0, 1.5e-3, t.size)
+    loglik, predicted = gpost.observation_draws(draws["length_model"], draws["sigma"], model_error, observed, seed=1)
+    flat = {k: v.reshape(80, *v.shape[2:]) for k, v in draws.items()}
+    expected = np.asarray(log_likelihood(model, flat, observed)["length"]).reshape(2, 40, -1)
+    np.testing.assert_allclose(loglik, expected, rtol=1e-12)
+    z = (predicted - draws["length_model"]) / np.sqrt(draws["sigma"] ** 2 + model_error**2)[..., None]
+    assert abs(z.mean()) < 0.15 and abs(z.std() - 1.0) < 0.1  # 2400 standard normal draws
+    failed = draws["length_model"].copy()
+    failed[1, 3] = np.nan
+    assert np.all(gpost.observation_draws(failed, draws["sigma"], model_error, observed, seed=1)[0][1, 3] == -np.inf)

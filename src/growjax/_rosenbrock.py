@@ -156,13 +156,20 @@ class _Carry(NamedTuple):
     rejected: jax.Array
 
 
-def _jacobian(field, t, y, f0):
-    """J = ∂f/∂y at (t, y) by forward differences from f0 = f(t, y), held constant under differentiation.
+def _jacobian(field, t, y, f0, forward: bool = False):
+    """J = ∂f/∂y at (t, y), held constant under differentiation: by forward differences from f0 = f(t, y),
+    or in forward mode (``forward``: one ``jax.jvp`` per column, the primal evaluated once).
 
-    A W-method needs no exact Jacobian, only one that holds the stiff modes; differences of the
-    primal field (one batched evaluation) cost a third of a forward-mode Jacobian here.
+    A W-method needs no exact Jacobian, only one that holds the stiff modes. Differences of the primal
+    field (one batched evaluation) cost a third of a forward-mode Jacobian for the published growth law
+    without small loops; where the field solves the rod balance by Newton (the Lockhart law), each
+    difference column repeats that solve, and forward mode, whose tangents are implicit, is cheaper.
     """
     t, y, f0 = jax.lax.stop_gradient((t, y, f0))
+    n = y.shape[0]
+    if forward:
+        cols = jax.vmap(lambda e: jax.jvp(lambda x: field(t, x), (y,), (e,))[1], out_axes=1)(jnp.eye(n, dtype=y.dtype))
+        return jax.lax.stop_gradient(cols)
     dy = _jacobian_steps(y)
     cols = jax.vmap(lambda d: field(t, y + d), out_axes=1)(jnp.diag(dy))
     return jax.lax.stop_gradient((cols - f0[:, None]) / dy[None, :])
@@ -223,6 +230,7 @@ def integrate(
     s0: jax.Array | None = None,
     s_atol: jax.Array | None = None,
     s_rtol: float | None = None,
+    forward_jacobian: bool = False,
     dt0: float = 1e-5,
     dtmax: float = 0.1,
     event: Callable | None = None,
@@ -242,6 +250,8 @@ def integrate(
         tangent_field: ``(t, y, S, args) → (f(t, y), S')`` with S of shape (p, n); None: no sensitivities.
         s0: (p, n) sensitivities at t0.  s_atol: (p,) absolute tolerance of each sensitivity row;
             s_rtol: their relative tolerance (default ``rtol``).
+        forward_jacobian: with ``tangent_field``, the state's Jacobian in forward mode instead of by forward
+            differences (:func:`_jacobian`).
         event: ``g(t, y, args)``, decreasing through zero where the run must stop (e.g. 1 − p/p_limit).
         batched: ``y0``, ``args``, ``breaks``, ``jumps`` (and ``s0``, ``s_atol``) carry a leading batch axis B
             of independent problems, stepped together: one loop while any member runs, each member's
@@ -290,23 +300,33 @@ def integrate(
 
     def block_slopes(t, z, args, t_left=None):
         """(F, ∂F/∂t, J, F_left) at (t, z): the block field, its time derivative (forward difference), the
-        state's Jacobian and the block field at ``t_left`` (default t). The three block evaluations are one
-        vmapped call: each copy of the field in the program costs compile time."""
+        state's Jacobian and the block field at ``t_left`` (default t). The block's evaluations are one
+        vmapped call (each copy of the field in the program costs compile time), F_left apart in one run."""
         dt = _time_step(t)
-        times = jnp.stack([t, t + dt, t if t_left is None else t_left])
+        # The left limit differs from F only across a jump. One run evaluates it there alone (a branch);
+        # a batch, whose members' branches would all be taken, in the same call.
+        left_in_call = batched and t_left is not None
+        times = jnp.stack([t, t + dt, t_left] if left_in_call else [t, t + dt])
+        m = times.shape[0]
         if tangent_field is None:  # the Jacobian's columns join the same call
             y = z[0]
             dy = _jacobian_steps(y)
-            points = jnp.concatenate([jnp.broadcast_to(y, (3, n)), jax.lax.stop_gradient(y) + jnp.diag(dy)])
+            points = jnp.concatenate([jnp.broadcast_to(y, (m, n)), jax.lax.stop_gradient(y) + jnp.diag(dy)])
             values = jax.vmap(field, in_axes=(0, 0, None))(jnp.concatenate([times, jnp.full((n,), t)]), points, args)
-            fs = values[:3, None]
-            jac = jax.lax.stop_gradient((values[3:].T - jax.lax.stop_gradient(values[0])[:, None]) / dy[None, :])
+            fs = values[:m, None]
+            jac = jax.lax.stop_gradient((values[m:].T - jax.lax.stop_gradient(values[0])[:, None]) / dy[None, :])
         else:
             fs = jax.vmap(block, in_axes=(0, None, None))(times, z, args)
-            jac = _jacobian(lambda t, y: field(t, y, args), t, z[0], fs[0, 0])
+            jac = _jacobian(lambda t, y: field(t, y, args), t, z[0], fs[0, 0], forward_jacobian)
         f = fs[0]
         f_t = jax.lax.stop_gradient((fs[1] - jax.lax.stop_gradient(f)) / dt)
-        return f, f_t, jac, fs[2]
+        if left_in_call:
+            f_left = fs[2]
+        elif t_left is None:
+            f_left = f
+        else:
+            f_left = jax.lax.cond(t_left == t, lambda: f, lambda: block(t_left, z, args))
+        return f, f_t, jac, f_left
 
     def init(z0, args, breaks):
         f_first, f_t0, jac0, _ = block_slopes(t_start, z0, args)
