@@ -189,7 +189,7 @@ def geometry(exp, inputs, base, cfg, chains, warmup, samples, target_accepts, ma
                      "rhat_max": float(max(float(rhat[k]) for k in post)),
                      "posterior_90": {k: np.quantile(v, [0.05, 0.95]).tolist() for k, v in post.items()}})
         print(rows[-1], flush=True)
-    coordinates = {p.site: "softplus" if isinstance(p, gpost.SoftplusPrior) else "numpyro" for p in sampled}
+    coordinates = {p.site: gpost.coordinate(p) for p in sampled}
     return {"data": exp.source, "law": "lockhart", "surrogate": "model linearised in θ at the posterior mode",
             "mode": init, "laplace_s": laplace_s, "chains": chains, "warmup": warmup, "samples": samples,
             "max_tree_depth": max_tree_depth, "coordinates": coordinates, "rows": rows}

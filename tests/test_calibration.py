@@ -330,7 +330,7 @@ def test_softplus_coordinate_keeps_the_prior_and_the_posterior():
     y, priors, mean, make_model = _saturating_problem()
     mode, inverse_mass = gpost.precondition(make_model(mean), priors, mean, y, make_model=make_model)
     sampled, start, mass = gpost.bound_start(make_model, priors, mean, y, mode, inverse_mass)
-    assert [type(p).__name__ for p in sampled] == ["SoftplusPrior", "Prior"]  # a at its bound, b inside
+    assert [type(p).__name__ for p in sampled] == ["SoftplusPrior", "RidgePrior"]  # a at its bound, b across it
     quantiles, divergences = [], []
     for ps, init, m in ((priors, mode, inverse_mass), (sampled, start, mass)):
         kernel = NUTS(make_model(mean, ps), dense_mass=True, inverse_mass_matrix=m, target_accept_prob=0.9,
@@ -338,13 +338,37 @@ def test_softplus_coordinate_keeps_the_prior_and_the_posterior():
         mcmc = MCMC(kernel, num_warmup=500, num_samples=1000, num_chains=2, chain_method="vectorized",
                     progress_bar=False)
         mcmc.run(jax.random.PRNGKey(1), jnp.asarray(y), extra_fields=("diverging",))
-        a = np.asarray(mcmc.get_samples()["a"])
-        quantiles.append(np.quantile(a, [0.1, 0.5, 0.9]))
+        draws = mcmc.get_samples()
+        quantiles.append({k: np.quantile(np.asarray(draws[k]), [0.1, 0.5, 0.9]) for k in ("a", "b")})
         divergences.append(int(np.asarray(mcmc.get_extra_fields()["diverging"]).sum()))
-    assert quantiles[0][0] > 0.02 and quantiles[1][0] > 0.02
-    spread = quantiles[0][2] - quantiles[0][0]
-    np.testing.assert_allclose(quantiles[1], quantiles[0], atol=0.15 * spread)
+    assert quantiles[0]["a"][0] > 0.02 and quantiles[1]["a"][0] > 0.02
+    for k in ("a", "b"):
+        spread = quantiles[0][k][2] - quantiles[0][k][0]
+        np.testing.assert_allclose(quantiles[1][k], quantiles[0][k], atol=0.15 * spread)
     assert divergences[1] == 0
+
+
+def test_ridge_coordinate_keeps_the_prior():
+    """A free prior sampled across its ridge with a pressed one (``RidgePrior``: z = v + offset + b·f_a) implies
+    the same prior on θ whatever the pressed value: its density in v integrates to 1 and is log-uniform in θ."""
+    import jax
+    import jax.numpy as jnp
+    from numpyro.infer.util import constrain_fn, log_density
+
+    pressed = gpost.SoftplusPrior("a", "a", 0.02, 0.05, scale=0.01)
+    ridge = gpost.RidgePrior("b", "b", 0.1, 10.0, log=True, along=((pressed, 3.0),), offset=0.4)
+    v = jnp.linspace(-40.0, 40.0, 200_001)
+    for a in (0.0201, 0.03, 0.049):
+        def model(a=a):
+            ridge.sample({"a": a})
+
+        density = np.exp(np.asarray(jax.vmap(lambda x: log_density(model, (), {}, {"v_b": x})[0])(v)))
+        theta = np.asarray(jax.vmap(lambda x: constrain_fn(model, (), {}, {"v_b": x}, return_deterministic=True)["b"])(v))
+        assert np.all(np.diff(theta) >= 0) and theta[0] < 0.1 + 1e-9 and theta[-1] > 10.0 - 1e-9
+        assert np.trapezoid(density, np.asarray(v)) == pytest.approx(1.0, abs=1e-6)
+        f = np.log(theta / 0.1) / np.log(100.0)
+        inside = (f > 0.2) & (f < 0.6)  # log-uniform: a slice of the log range holds its share of the mass
+        assert np.trapezoid(np.where(inside, density, 0.0), np.asarray(v)) == pytest.approx(0.4, abs=1e-3)
 
 
 def test_model_tangents_give_numpyros_forward_gradient():

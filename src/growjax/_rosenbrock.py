@@ -161,8 +161,8 @@ def _jacobian(field, t, y, f0, forward: bool = False):
     or in forward mode (``forward``: one ``jax.jvp`` per column, the primal evaluated once).
 
     A W-method needs no exact Jacobian, only one that holds the stiff modes. Differences of the primal
-    field (one batched evaluation) cost a third of a forward-mode Jacobian for the published growth law
-    without small loops; where the field solves the rod balance by Newton (the Lockhart law), each
+    field (one batched evaluation) cost a third of a forward-mode Jacobian when this solver was written
+    (published growth law); where the field solves the rod balance by Newton (the Lockhart law), each
     difference column repeats that solve, and forward mode, whose tangents are implicit, is cheaper.
     """
     t, y, f0 = jax.lax.stop_gradient((t, y, f0))

@@ -10,7 +10,8 @@ NumPyro samples the bounded priors in unconstrained (logit) coordinates, which a
 The model runs in the fast configuration by default, with forward-mode gradients (or through an
 emulator, opt-in); through the model, NUTS starts at the mode found in those coordinates, with the
 Hessian there as its mass matrix (:func:`laplace_unconstrained`), and a prior whose mode lies
-against a bound is sampled in a softplus coordinate instead (:class:`SoftplusPrior`, :func:`bound_start`). A failed solve gives zero likelihood
+against a bound is sampled in a softplus coordinate instead (:class:`SoftplusPrior`, :func:`bound_start`), the
+others across the ridge they form with it (:class:`RidgePrior`). A failed solve gives zero likelihood
 (−∞ log density, rejected by NUTS), never an exception.
 """
 
@@ -54,9 +55,14 @@ class Prior:
     def distribution(self):
         return dist.LogUniform(self.low, self.high) if self.log else dist.Uniform(self.low, self.high)
 
-    def sample(self):
-        """θ from this prior inside a NumPyro model (NumPyro's own unconstrained coordinate for it)."""
+    def sample(self, given: dict | None = None):
+        """θ from this prior inside a NumPyro model (NumPyro's own unconstrained coordinate for it). ``given``:
+        the parameters sampled before it, {name: value} (used by :class:`RidgePrior`)."""
         return numpyro.sample(self.site, self.distribution())
+
+    def value_at(self, f):
+        """θ at fraction ``f`` of the range (log scale for a log prior); :func:`fraction` inverted."""
+        return self.low * (self.high / self.low) ** f if self.log else self.low + (self.high - self.low) * f
 
     def axis(self) -> em.Axis:
         return em.Axis(self.name, self.low, self.high, self.nodes, self.log)
@@ -80,14 +86,16 @@ class SoftplusPrior(Prior):
     scale: float = 1.0  # s, the fraction at the mode
     upper: bool = False  # pressed against ``high`` (f measured from it) instead of ``low``
 
-    def sample(self):
+    def sample(self, given: dict | None = None):
         u = numpyro.sample("u_" + self.site, dist.ImproperUniform(dist.constraints.real, (), ()))
         s = self.scale
-        f = -jnp.expm1(-s * jax.nn.softplus(u))
         numpyro.factor("du_" + self.site, jnp.log(s) + jax.nn.log_sigmoid(u) - s * jax.nn.softplus(u))
-        f = 1.0 - f if self.upper else f
-        value = self.low * (self.high / self.low) ** f if self.log else self.low + (self.high - self.low) * f
-        return numpyro.deterministic(self.site, value)
+        return numpyro.deterministic(self.site, self.value_at(self.fraction_at(u)))
+
+    def fraction_at(self, u):
+        """The prior's fraction from ``low`` (:func:`fraction`) at coordinate u."""
+        f = -jnp.expm1(-self.scale * jax.nn.softplus(u))
+        return 1.0 - f if self.upper else f
 
     def start(self) -> float:
         """u where f = s (the mode this coordinate was centred on)."""
@@ -95,11 +103,46 @@ class SoftplusPrior(Prior):
         return float(np.log(np.expm1(-np.log1p(-s) / s)))
 
 
+@dataclasses.dataclass(frozen=True)
+class RidgePrior(Prior):
+    """The same prior, sampled across the ridge it forms with priors pressed against a bound.
+
+    Where the likelihood ties this parameter to pressed ones (φ_L ≈ a + b·n_L under the Lockhart law on the
+    public experiment), the tie is linear in their values but curved in their softplus coordinates, and no
+    mass matrix follows a curved ridge: NUTS's trees stay long and its draws correlated. Here NumPyro's
+    own coordinate z of this prior is z = v + ``offset`` + Σ_k b_k·f_k(θ_k), f_k the pressed prior's
+    :func:`fraction` and ``along`` = ((pressed prior, b_k), ...); v, sampled as ``v_<site>``, measures the
+    distance from the ridge. The map (v, u) → (z, u) has unit Jacobian, so the prior's density in z is kept
+    as NumPyro keeps it. The pressed priors must be sampled first (``given``). θ is the deterministic ``site``.
+    """
+
+    along: tuple = ()  # ((pressed Prior, slope b_k), ...)
+    offset: float = 0.0
+
+    def sample(self, given: dict | None = None):
+        v = numpyro.sample("v_" + self.site, dist.ImproperUniform(dist.constraints.real, (), ()))
+        z = v + self.offset + sum(b * _fraction(p, given[p.name]) for p, b in self.along)
+        prior = self.distribution()
+        to_theta = dist.transforms.biject_to(prior.support)
+        theta = to_theta(z)
+        numpyro.factor("dv_" + self.site, prior.log_prob(theta) + to_theta.log_abs_det_jacobian(z, theta))
+        return numpyro.deterministic(self.site, theta)
+
+
+def coordinate(prior: Prior) -> str:
+    """The coordinate NUTS samples a prior in: ``"softplus"``, ``"ridge"`` or ``"numpyro"`` (NumPyro's own)."""
+    return "softplus" if isinstance(prior, SoftplusPrior) else "ridge" if isinstance(prior, RidgePrior) else "numpyro"
+
+
+def _fraction(prior: Prior, value):
+    if prior.log:
+        return jnp.log(value / prior.low) / np.log(prior.high / prior.low)
+    return (value - prior.low) / (prior.high - prior.low)
+
+
 def fraction(prior: Prior, value) -> float:
     """Where ``value`` lies in the prior's range: 0 at ``low``, 1 at ``high`` (log scale for a log prior)."""
-    if prior.log:
-        return float(np.log(value / prior.low) / np.log(prior.high / prior.low))
-    return float((value - prior.low) / (prior.high - prior.low))
+    return float(_fraction(prior, value))
 
 
 def bound_coordinates(priors: Sequence[Prior], mode: dict, within: float = BOUND_FRACTION) -> tuple[Prior, ...]:
@@ -152,7 +195,9 @@ def growth_model(length=None, *, mean_length, priors: Sequence[Prior], noise_sca
     ``mean_length(theta)`` is the model (or its emulator) at the measured times; ``e`` (m) is the
     emulator's RMS error (0 for the model itself). A failed solve has zero likelihood.
     """
-    theta = {p.name: p.sample() for p in priors}
+    theta = {}
+    for p in priors:
+        theta[p.name] = p.sample(theta)
     sigma = numpyro.sample("sigma", dist.HalfNormal(noise_scale))
     mu = mean_length(theta)
     ok = jnp.all(jnp.isfinite(mu))
@@ -257,7 +302,7 @@ def sample(
     mean and 90 % interval, ``rhat_max``, ``ess_bulk_min``, ``ess_tail_min``,
     ``divergences``, ``bfmi_min``, ``coverage_90`` (share of measured points inside the 90 %
     predictive band), ``emulator`` (its error and build time), ``chain_method``, ``coordinates`` (each prior's:
-    ``"numpyro"`` or ``"softplus"``, :func:`bound_start`), ``laplace_s`` (the start and
+    ``"numpyro"``, ``"softplus"`` or ``"ridge"``, :func:`bound_start`), ``laplace_s`` (the start and
     mass matrix through the model, :func:`laplace_unconstrained`, compilation included) and ``wall_s`` (everything).
     """
     import arviz as az
@@ -309,7 +354,7 @@ def sample(
     summary["emulator"] = emu_info
     summary["laplace_s"] = precondition_s if emulate is False else None
     summary["chain_method"] = mcmc.chain_method
-    summary["coordinates"] = {p.site: "softplus" if isinstance(p, SoftplusPrior) else "numpyro" for p in sampled}
+    summary["coordinates"] = {p.site: coordinate(p) for p in sampled}
     summary["chains"], summary["warmup"], summary["samples"] = chains, warmup, samples
     return PosteriorResult(idata, summary, wall)
 
@@ -337,8 +382,10 @@ def bound_start(make_model, priors, mean_length, length, mode: dict, inverse_mas
 
     ``mode`` is the posterior mode in NumPyro's coordinates ({site: value}, σ included). Priors whose mode
     lies against a bound are sampled in softplus coordinates instead (:func:`bound_coordinates`), and
-    the start and mass matrix are found again in them (:func:`laplace_unconstrained`); where none is
-    pressed, ``priors``, ``mode`` and ``inverse_mass`` come back unchanged. ``make_model(mean, priors)``:
+    the start and mass matrix are found again in them (:func:`laplace_unconstrained`); then the other
+    priors are sampled across the ridge they form with the pressed ones (:func:`ridge_coordinates`), and the
+    start and mass matrix found once more. Where none is pressed, ``priors``, ``mode`` and ``inverse_mass``
+    come back unchanged. ``make_model(mean, priors)``:
     the NumPyro model. On the public experiment under the Lockhart law (Y and n_L at their bounds),
     ``python benchmarks/nuts_direct.py --geometry`` measures what this changes (README, "Benchmarks").
     """
@@ -349,7 +396,42 @@ def bound_start(make_model, priors, mean_length, length, mode: dict, inverse_mas
              (p.start() if isinstance(p, SoftplusPrior) else mode[p.site]) for p in sampled}
     start["sigma"] = mode["sigma"]
     start, hess = laplace_unconstrained(lambda m: make_model(m, sampled), sampled, mean_length, length, start)
-    return sampled, start, jnp.asarray(_inverse_floored(hess))
+    ridged = ridge_coordinates(sampled, start, hess)
+    if ridged == sampled:
+        return sampled, start, jnp.asarray(_inverse_floored(hess))
+    start = {**{"u_" + p.site: start["u_" + p.site] for p in ridged if isinstance(p, SoftplusPrior)},
+             **{"v_" + p.site: 0.0 for p in ridged if isinstance(p, RidgePrior)}, "sigma": start["sigma"]}
+    start, hess = laplace_unconstrained(lambda m: make_model(m, ridged), ridged, mean_length, length, start)
+    return ridged, start, jnp.asarray(_inverse_floored(hess))
+
+
+def ridge_coordinates(sampled: Sequence[Prior], start: dict, hess) -> tuple[Prior, ...]:
+    """``sampled`` with every prior that is not pressed as a :class:`RidgePrior` across its ridge with the pressed
+    (:class:`SoftplusPrior`) ones, the pressed ones first; unchanged where none is pressed or none is free.
+
+    ``start`` {site: value} and ``hess`` (the potential's Hessian over the flattened sites, keys sorted as
+    ``jax.flatten_util.ravel_pytree`` sorts them) come from :func:`laplace_unconstrained` in ``sampled``'s
+    coordinates. The ridge is the Gaussian's conditional mean there, E[z_free | u] = z₀ − H_ff⁻¹ H_fu (u − u₀),
+    each u-slope divided by ∂f_k/∂u_k at the mode to become a slope in the pressed prior's fraction f_k."""
+    pressed = [p for p in sampled if isinstance(p, SoftplusPrior)]
+    free = [p for p in sampled if not isinstance(p, (SoftplusPrior, RidgePrior))]
+    if not pressed or not free:
+        return tuple(sampled)
+    index = {k: i for i, k in enumerate(sorted(start))}
+    u_idx = [index["u_" + p.site] for p in pressed]
+    f_idx = [index[p.site] for p in free]
+    hess = np.asarray(hess)
+    slopes_u = -np.linalg.solve(hess[np.ix_(f_idx, f_idx)], hess[np.ix_(f_idx, u_idx)])  # (free, pressed)
+    u0 = [float(start["u_" + p.site]) for p in pressed]
+    df_du = [float(jax.grad(p.fraction_at)(u)) for p, u in zip(pressed, u0)]
+    f0 = [float(p.fraction_at(u)) for p, u in zip(pressed, u0)]
+    out = list(pressed)
+    for i, p in enumerate(free):
+        z0 = float(dist.transforms.biject_to(p.distribution().support).inv(start[p.site]))
+        along = tuple((q, float(slopes_u[i, k] / df_du[k])) for k, q in enumerate(pressed))
+        offset = z0 - sum(b * f for (_, b), f in zip(along, f0))
+        out.append(RidgePrior(p.site, p.name, p.low, p.high, p.log, p.nodes, along=along, offset=offset))
+    return tuple(out)
 
 
 def _chain_method(chains: int, emulated: bool) -> str:
