@@ -166,9 +166,9 @@ def _jacobian(field, t, y, f0, forward: bool = False):
     difference column repeats that solve, and forward mode, whose tangents are implicit, is cheaper.
     """
     t, y, f0 = jax.lax.stop_gradient((t, y, f0))
-    n = y.shape[0]
     if forward:
-        cols = jax.vmap(lambda e: jax.jvp(lambda x: field(t, x), (y,), (e,))[1], out_axes=1)(jnp.eye(n, dtype=y.dtype))
+        units = jnp.eye(y.shape[0], dtype=y.dtype)
+        cols = jax.vmap(lambda e: jax.jvp(lambda x: field(t, x), (y,), (e,))[1], out_axes=1)(units)
         return jax.lax.stop_gradient(cols)
     dy = _jacobian_steps(y)
     cols = jax.vmap(lambda d: field(t, y + d), out_axes=1)(jnp.diag(dy))

@@ -368,11 +368,13 @@ def observation_draws(mean_length, sigma, model_error: float, observed, seed: in
     the model once more per draw (through the model, ~70 s each for 4 × 500 draws on two cores). The
     predictive noise is drawn from NumPy's generator seeded with ``seed``.
     """
+    from scipy.stats import norm
+
     mean_length = np.asarray(mean_length, float)
     scale = np.sqrt(np.asarray(sigma, float) ** 2 + model_error**2)[..., None]
     finite = np.isfinite(mean_length)
-    z = (np.asarray(observed, float) - np.where(finite, mean_length, 0.0)) / scale
-    loglik = np.where(finite, -0.5 * z**2 - np.log(scale) - 0.5 * np.log(2.0 * np.pi), -np.inf)
+    loglik = np.where(finite, norm.logpdf(np.asarray(observed, float), np.where(finite, mean_length, 0.0), scale),
+                      -np.inf)
     noise = np.random.default_rng(seed).standard_normal(mean_length.shape)
     return loglik, mean_length + scale * noise
 
