@@ -1,10 +1,12 @@
-"""The opt-in small-loop option: its XLA_FLAGS handling, the elementwise inverse it needs, the same solution."""
+"""XLA:CPU options: the opt-in small loops (XLA_FLAGS handling, the elementwise inverse they need) and the quick
+compile (its fallback); each gives the same solution as XLA's default."""
 
 import json
 import os
 import subprocess
 import sys
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -52,9 +54,23 @@ def test_elementwise_inverse_matches_lapack_on_stiff_solver_matrices(n):
         np.testing.assert_allclose(np.asarray(_inverse(jnp.asarray(perm))), perm.T, atol=1e-15)
 
 
+def test_quick_compile_joins_flags_and_falls_back_where_jaxlib_lacks_it(monkeypatch):
+    assert xla_flags.quick_compile_flags("--xla_dump_to=/tmp/d") == "--xla_dump_to=/tmp/d --xla_cpu_use_fusion_emitters=false"
+    own = "--xla_cpu_use_fusion_emitters=true"
+    assert xla_flags.quick_compile_flags(own) == own
+    lowered = jax.jit(lambda x: 2.0 * x).lower(1.5)
+    monkeypatch.setattr(xla_flags, "QUICK_COMPILE", {"xla_cpu_no_such_option": False})
+    assert float(xla_flags.compile_quickly(lowered)(1.5)) == 3.0  # an unknown option: XLA's default compile
+    monkeypatch.setattr(lowered, "compile", lambda **kw: (_ for _ in ()).throw(RuntimeError("out of memory")))
+    with pytest.raises(RuntimeError, match="out of memory"):  # any other failure is not hidden
+        xla_flags.compile_quickly(lowered)
+
+
 CHILD = """
-import json, sys
+import json, os, sys
 import growjax.xla_flags as xf
+if sys.argv[1] == "quick":
+    os.environ["XLA_FLAGS"] = xf.quick_compile_flags("")
 applied = xf.apply() if sys.argv[1] == "on" else xf.applied()
 import growjax as gj
 cfg = gj.Config(t1=2.0)
@@ -64,17 +80,19 @@ print(json.dumps({"applied": applied, "length": [float(x) for x in traj.length],
 """
 
 
-def test_a_simulation_with_small_loops_gives_the_same_solution():
-    """The same 2 s run in two processes, with the option and without: the same length to within the
-    solver's tolerance (the elementwise inverse rounds differently, which can move an adaptive step)."""
+def test_a_simulation_under_each_option_gives_the_same_solution():
+    """The same 2 s run in three processes: small loops, XLA's default (which the test run itself does not use,
+    conftest.py), the quick compile: the same length to within the solver's tolerance (the elementwise inverse
+    and other emitters round differently, which can move an adaptive step)."""
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
     out = {}
-    for mode in ("on", "off"):
+    for mode in ("on", "off", "quick"):
         run = subprocess.run([sys.executable, "-c", CHILD, mode], capture_output=True, text=True, env=env, timeout=300,
                              check=False)
         assert run.returncode == 0, run.stderr[-2000:]
         out[mode] = json.loads(run.stdout.strip().splitlines()[-1])
     assert out["on"]["applied"] and not out["off"]["applied"]
-    assert out["on"]["status"] == out["off"]["status"] == 0
-    on, off = np.asarray(out["on"]["length"]), np.asarray(out["off"]["length"])
-    assert np.max(np.abs(on - off)) < 2e-6 and np.ptp(off) > 1e-3  # 2 µm against millimetres of growth
+    assert out["on"]["status"] == out["off"]["status"] == out["quick"]["status"] == 0
+    on, off, quick = (np.asarray(out[m]["length"]) for m in ("on", "off", "quick"))
+    assert np.ptp(off) > 1e-3  # millimetres of growth
+    assert np.max(np.abs(on - off)) < 2e-6 and np.max(np.abs(quick - off)) < 2e-6  # 2 µm

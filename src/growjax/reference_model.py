@@ -7,14 +7,14 @@ robot. The hoses and the tank are chambers with their own pressures; the platfor
 :func:`network` by two scalar root solves (hose–orifice–tank series flow, and the massless
 rod coupled to the valve network through the nozzle). Solved by Kvaerno5 with tight
 tolerances; slow but as close to the published model as growjax gets, it is what the fast
-configuration (:mod:`growjax.fast_model`) is measured against.
+configuration (:mod:`growjax.fast_model`) is measured against. diffrax is imported where a solve is traced:
+the fast configuration's users do not pay its import.
 """
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
-import diffrax
 import jax
 import jax.numpy as jnp
 
@@ -34,7 +34,10 @@ from growjax.motor import (
 from growjax.params import Parameters
 from growjax.pump import platform_force, syringe_load_force
 from growjax.robot import RodBalance, pressure_limit, rod_balance, rod_pressure
-from growjax.trajectory import finish, pressure_limit_event, save_at, solver_status
+from growjax.trajectory import finish
+
+if TYPE_CHECKING:
+    import diffrax
 
 FORWARD_STATES = ("x_platform", "v_platform", "p_tube", "wall_strain", "p_tank", "robot_displacement", "z_integral", "z_filter")
 FORWARD_SCALES = (1e-3, 1e-3, 1e5, 1e-7, 1e5, 1e-3, 1e4, 1e5)
@@ -196,8 +199,42 @@ def _outputs(t, ys, params, inputs, config, prep):
     return net.length, net.sensor_pressure, net.robot_flow, x_p, net.robot_pressure
 
 
+def pressure_limit_event(pressure, limit) -> diffrax.Event:
+    """The event that stops a run where the sensed pressure crosses ``limit`` (Pa).
+
+    ``pressure(t, y)`` is the configuration's sensed pressure (Pa) of its state. The crossing is
+    located by bisection inside the step that crossed (to 1 ns and 1e-9 of the limit): bisection
+    needs only the sign change the step guarantees, where Newton on the dense output can leave
+    the step across a pulse edge and fail. The condition 1 − p/limit decreases through its root,
+    as does the stand-in diffrax gives batch members without an event (the time left in the
+    step), so one fixed bracket orientation serves a whole ``vmap`` batch, with no sign checks.
+    """
+    import diffrax
+    import optimistix as optx
+
+    return diffrax.Event(lambda t, y, args, **kw: 1.0 - pressure(t, y) / limit,
+                         root_finder=optx.Bisection(rtol=1e-12, atol=1e-9, flip=True))
+
+
+def save_at(ts) -> diffrax.SaveAt:
+    """What the reference saves: the state at ``ts`` and the final time and state."""
+    import diffrax
+
+    return diffrax.SaveAt(subs=[diffrax.SubSaveAt(ts=ts), diffrax.SubSaveAt(t1=True)])
+
+
+def solver_status(sol):
+    """A diffrax solution's result as an integrator status: 0 reached t1, 1 stopped by the event, 2 failed."""
+    import diffrax
+
+    return jnp.where(sol.result == diffrax.RESULTS.successful, 0,
+                     jnp.where(sol.result == diffrax.RESULTS.event_occurred, 1, 2))
+
+
 def solve(params: Parameters, inputs, config: Config, ts, jump_ts, step_ts):
     """Integrate the reference configuration and return a :class:`growjax.trajectory.Trajectory` on ``ts``."""
+    import diffrax
+
     rtol, atol = config.tolerances
     prep = prepare(params, config)
     args = (params, inputs, config, prep)

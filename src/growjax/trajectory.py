@@ -1,12 +1,13 @@
-"""What a simulation returns, and how a solver's raw output becomes it (written once for both configurations)."""
+"""What a simulation returns, and how a solver's raw output becomes it (written once for both configurations).
+
+No diffrax here: the fast configuration runs without importing it (the reference's diffrax glue is in
+:mod:`growjax.reference_model`)."""
 
 from __future__ import annotations
 
-import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import optimistix as optx
 
 # Status codes of a trajectory.
 OK, PRESSURE_LIMIT, SOLVER_FAILED = 0, 1, 2
@@ -44,31 +45,6 @@ class Trajectory(eqx.Module):
     t_final: jax.Array
     n_steps: jax.Array
     final_state: jax.Array
-
-
-def pressure_limit_event(pressure, limit) -> diffrax.Event:
-    """The event that stops a run where the sensed pressure crosses ``limit`` (Pa).
-
-    ``pressure(t, y)`` is the configuration's sensed pressure (Pa) of its state. The crossing is
-    located by bisection inside the step that crossed (to 1 ns and 1e-9 of the limit): bisection
-    needs only the sign change the step guarantees, where Newton on the dense output can leave
-    the step across a pulse edge and fail. The condition 1 − p/limit decreases through its root,
-    as does the stand-in diffrax gives batch members without an event (the time left in the
-    step), so one fixed bracket orientation serves a whole ``vmap`` batch, with no sign checks.
-    """
-    return diffrax.Event(lambda t, y, args, **kw: 1.0 - pressure(t, y) / limit,
-                         root_finder=optx.Bisection(rtol=1e-12, atol=1e-9, flip=True))
-
-
-def save_at(ts) -> diffrax.SaveAt:
-    """What both configurations save: the state at ``ts`` and the final time and state."""
-    return diffrax.SaveAt(subs=[diffrax.SubSaveAt(ts=ts), diffrax.SubSaveAt(t1=True)])
-
-
-def solver_status(sol: diffrax.Solution):
-    """A diffrax solution's result as an integrator status: 0 reached t1, 1 stopped by the event, 2 failed."""
-    return jnp.where(sol.result == diffrax.RESULTS.successful, 0,
-                     jnp.where(sol.result == diffrax.RESULTS.event_occurred, 1, 2))
 
 
 def finish(ts, outputs: dict, limit, demand, stop_at_limit: bool, *, t_final, status, n_steps, final_state) -> Trajectory:

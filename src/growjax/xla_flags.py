@@ -1,6 +1,7 @@
-"""An opt-in XLA:CPU option: compile the solver's loop into one kernel ("small loops").
+"""XLA:CPU options: an opt-in one that compiles the solver's loop into one kernel ("small loops"), and the
+quick compile the sweep's program takes.
 
-XLA:CPU runs a compiled program as a sequence of operations, each launched on its own (a few µs), except a
+**Small loops.** XLA:CPU runs a compiled program as a sequence of operations, each launched on its own (a few µs), except a
 ``while`` loop whose operations it can all emit as one kernel and whose data fit under a size limit
 (``xla_cpu_small_while_loop_byte_threshold``, 1 kB by default): that loop runs as one compiled function.
 With the limit raised, the solver's loop (:mod:`growjax._rosenbrock`) qualifies when its linear solve is
@@ -15,6 +16,13 @@ long runs of the base model (many likelihood gradients), before JAX starts its b
     XLA_FLAGS="--xla_backend_extra_options=xla_cpu_small_while_loop_byte_threshold=1000000000" growjax ...
 
 or ``growjax.xla_flags.apply()`` first thing in a script.
+
+**Quick compile** (:data:`QUICK_COMPILE`): XLA:CPU's older fusion emitters (``xla_cpu_use_fusion_emitters``
+off) compile a program 20–30 % faster, and the code they emit runs slower: a single 10 s simulation 22 ms
+instead of 14 ms (``benchmarks/simulate.py``), the 500-set sweep 7 % longer. A sweep of up to
+``growjax.sweep.QUICK_COMPILE_ROWS`` sets, which compiles once and runs once, takes them
+(:func:`compile_quickly`), as does the test suite, made of compiles (``tests/conftest.py``). Everything else
+keeps XLA's default.
 """
 
 from __future__ import annotations
@@ -24,6 +32,7 @@ import re
 
 SMALL_LOOP_OPTION = "xla_cpu_small_while_loop_byte_threshold"
 SMALL_LOOP_BYTES = 1_000_000_000
+QUICK_COMPILE = {"xla_cpu_use_fusion_emitters": False}
 
 
 def with_small_loops(flags: str, limit: int = SMALL_LOOP_BYTES) -> str:
@@ -62,3 +71,36 @@ def applied() -> bool:
     solver then writes its linear solve in elementwise operations (read when a solve is traced)."""
     found = re.search(SMALL_LOOP_OPTION + r"=(\d+)", os.environ.get("XLA_FLAGS", ""))
     return found is not None and int(found.group(1)) >= 10**8
+
+
+def compile_quickly(lowered):
+    """``lowered.compile()`` under :data:`QUICK_COMPILE`; XLA's default where this jaxlib lacks the option."""
+    try:
+        return lowered.compile(compiler_options=QUICK_COMPILE)
+    except Exception as err:  # jaxlib raises its own runtime error type for an unknown option
+        if "compile option" not in str(err):
+            raise
+        return lowered.compile()
+
+
+def quick_compile_flags(flags: str) -> str:
+    """``flags`` (an ``XLA_FLAGS`` string) with :data:`QUICK_COMPILE` for every program of a process, unless it
+    already sets that option. Only for a jaxlib known to have it: XLA aborts the process on an unknown flag
+    (check with :func:`quick_compile_known` in another process)."""
+    (name, value), = QUICK_COMPILE.items()
+    if name in flags:
+        return flags
+    return " ".join([*flags.split(), f"--{name}={str(value).lower()}"])
+
+
+def quick_compile_known() -> bool:
+    """Whether this environment's jaxlib takes :data:`QUICK_COMPILE`, asked of a new interpreter (~1 s)."""
+    import subprocess
+    import sys
+
+    probe = ("import jax; jax.jit(lambda x: x + 1.0).lower(1.0).compile(compiler_options="
+             f"{QUICK_COMPILE!r})")
+    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    env["JAX_PLATFORMS"] = "cpu"
+    run = subprocess.run([sys.executable, "-c", probe], capture_output=True, env=env, timeout=120, check=False)
+    return run.returncode == 0
