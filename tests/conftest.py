@@ -6,10 +6,9 @@ from pathlib import Path
 from growjax import xla_flags
 
 # The run is mostly compiles: XLA's quicker emitters for all of it (growjax.xla_flags; 5 min 42 s → 4 min 30 s
-# measured), set before JAX starts and inherited by the xdist workers and CLI subprocesses. Asked of a new
-# interpreter first, once: XLA aborts a process on a flag its jaxlib lacks. test_xla_flags runs the default.
-if "xla_cpu_use_fusion_emitters" not in os.environ.get("XLA_FLAGS", "") and xla_flags.quick_compile_known():
-    os.environ["XLA_FLAGS"] = xla_flags.quick_compile_flags(os.environ.get("XLA_FLAGS", ""))
+# measured), set before JAX starts and inherited by the xdist workers and CLI subprocesses; only for a jaxlib
+# known to have it (XLA aborts a process on an unknown flag). test_xla_flags runs XLA's default too.
+xla_flags.apply_quick_compile()
 
 import jax
 import numpy as np

@@ -66,6 +66,14 @@ def test_quick_compile_joins_flags_and_falls_back_where_jaxlib_lacks_it(monkeypa
         xla_flags.compile_quickly(lowered)
 
 
+def test_quick_compile_for_a_process_leaves_a_users_setting_and_a_started_backend(monkeypatch):
+    monkeypatch.setenv("XLA_FLAGS", "--xla_cpu_use_fusion_emitters=true")
+    assert not xla_flags.apply_quick_compile() and os.environ["XLA_FLAGS"] == "--xla_cpu_use_fusion_emitters=true"
+    monkeypatch.delenv("XLA_FLAGS")
+    jnp.zeros(1).block_until_ready()  # JAX's backend has started: the option can no longer take effect
+    assert not xla_flags.apply_quick_compile() and "XLA_FLAGS" not in os.environ
+
+
 CHILD = """
 import json, os, sys
 import growjax.xla_flags as xf

@@ -332,6 +332,10 @@ def build_parser():
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     _enable_compile_cache()
+    if args.command in ("simulate", "fit"):  # compile-bound: XLA's quicker emitters (growjax.xla_flags)
+        from growjax import xla_flags
+
+        xla_flags.apply_quick_compile()
     from growjax.experiment import ExperimentError
 
     try:

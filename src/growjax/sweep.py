@@ -178,7 +178,7 @@ def make_member(base: gp.Parameters, names: Sequence[str], inputs, config, measu
 
 
 # Designs up to this many rows compile with XLA's quicker emitters (xla_flags.QUICK_COMPILE). Measured on the
-# 2-core CPU, 500 sets of 10 s: compile 1.2 s shorter, sweep 7 % (0.26 ms per set) longer: even at ~4500 sets.
+# 2-core CPU, 500 sets of 10 s: compile 1.2 s shorter, sweep 7 % (0.26 ms per set) longer; break-even ~4500 sets.
 QUICK_COMPILE_ROWS = 4000
 
 # Compiled sweep programs of this process, keyed by everything they close over (at most 8 kept).

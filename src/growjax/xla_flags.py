@@ -21,7 +21,8 @@ or ``growjax.xla_flags.apply()`` first thing in a script.
 off) compile a program 20–30 % faster, and the code they emit runs slower: a single 10 s simulation 22 ms
 instead of 14 ms (``benchmarks/simulate.py``), the 500-set sweep 7 % longer. A sweep of up to
 ``growjax.sweep.QUICK_COMPILE_ROWS`` sets, which compiles once and runs once, takes them
-(:func:`compile_quickly`), as does the test suite, made of compiles (``tests/conftest.py``). Everything else
+(:func:`compile_quickly`, its program only); so do the ``growjax simulate`` and ``growjax fit`` processes
+(:func:`apply_quick_compile`) and the test suite, made of compiles (``tests/conftest.py``). Everything else
 keeps XLA's default.
 """
 
@@ -33,6 +34,7 @@ import re
 SMALL_LOOP_OPTION = "xla_cpu_small_while_loop_byte_threshold"
 SMALL_LOOP_BYTES = 1_000_000_000
 QUICK_COMPILE = {"xla_cpu_use_fusion_emitters": False}
+QUICK_COMPILE_VERIFIED = ("0.10.",)  # jaxlib release series known to have the option
 
 
 def with_small_loops(flags: str, limit: int = SMALL_LOOP_BYTES) -> str:
@@ -94,9 +96,15 @@ def quick_compile_flags(flags: str) -> str:
 
 
 def quick_compile_known() -> bool:
-    """Whether this environment's jaxlib takes :data:`QUICK_COMPILE`, asked of a new interpreter (~1 s)."""
+    """Whether this environment's jaxlib takes :data:`QUICK_COMPILE`: a release series it was verified in
+    (:data:`QUICK_COMPILE_VERIFIED`), else asked of a new interpreter (~1 s)."""
     import subprocess
     import sys
+
+    import jaxlib
+
+    if jaxlib.__version__.startswith(QUICK_COMPILE_VERIFIED):
+        return True
 
     probe = ("import jax; jax.jit(lambda x: x + 1.0).lower(1.0).compile(compiler_options="
              f"{QUICK_COMPILE!r})")
@@ -104,3 +112,13 @@ def quick_compile_known() -> bool:
     env["JAX_PLATFORMS"] = "cpu"
     run = subprocess.run([sys.executable, "-c", probe], capture_output=True, env=env, timeout=120, check=False)
     return run.returncode == 0
+
+
+def apply_quick_compile() -> bool:
+    """:data:`QUICK_COMPILE` for every program of this process, if JAX's backend has not started, this jaxlib has
+    the option and ``XLA_FLAGS`` does not set it; whether it is in force."""
+    (name, _), = QUICK_COMPILE.items()
+    flags = os.environ.get("XLA_FLAGS", "")
+    if name not in flags and not _backend_started() and quick_compile_known():
+        os.environ["XLA_FLAGS"] = quick_compile_flags(flags)
+    return f"--{name}=false" in os.environ.get("XLA_FLAGS", "")
