@@ -332,7 +332,7 @@ def build_parser():
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     _enable_compile_cache()
-    if args.command in ("simulate", "fit"):  # compile-bound: XLA's quicker emitters (growjax.xla_flags)
+    if args.command in ("simulate", "fit") and args.fidelity == "fast":  # compile-bound: XLA's quicker emitters
         from growjax import xla_flags
 
         xla_flags.apply_quick_compile()

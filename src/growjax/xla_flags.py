@@ -30,6 +30,8 @@ from __future__ import annotations
 
 import os
 import re
+import subprocess
+import sys
 
 SMALL_LOOP_OPTION = "xla_cpu_small_while_loop_byte_threshold"
 SMALL_LOOP_BYTES = 1_000_000_000
@@ -98,9 +100,6 @@ def quick_compile_flags(flags: str) -> str:
 def quick_compile_known() -> bool:
     """Whether this environment's jaxlib takes :data:`QUICK_COMPILE`: a release series it was verified in
     (:data:`QUICK_COMPILE_VERIFIED`), else asked of a new interpreter (~1 s)."""
-    import subprocess
-    import sys
-
     import jaxlib
 
     if jaxlib.__version__.startswith(QUICK_COMPILE_VERIFIED):
