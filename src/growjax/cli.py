@@ -325,7 +325,7 @@ def build_parser():
         command.add_argument("--fidelity", choices=["fast", "reference"], default="fast",
                              help="fast configuration (default) or the reference network (slow; for checks)")
         command.add_argument("--rtol", type=float, default=None,
-                             help="solver tolerance on scaled states (default: 3e-5 fast, 1e-6 reference)")
+                             help="solver tolerance on scaled states (default: 1e-4 fast, 1e-6 reference)")
     return parser
 
 
