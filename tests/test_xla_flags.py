@@ -84,14 +84,19 @@ import growjax as gj
 cfg = gj.Config(t1=2.0)
 inputs = gj.Inputs(catheter_length=gj.Constant(0.02), pressure_demand=gj.published_pulse())
 traj = gj.simulate(gj.reference(), inputs, cfg)
-print(json.dumps({"applied": applied, "length": [float(x) for x in traj.length], "status": int(traj.status)}))
+# The same compiled solver under a demand beyond the membrane limit: the stop must not depend on the emitters.
+over = gj.simulate(gj.reference(), gj.Inputs(catheter_length=gj.Constant(0.02),
+                                             pressure_demand=gj.PulseTrain(amplitude=600e3)), cfg)
+print(json.dumps({"applied": applied, "length": [float(x) for x in traj.length], "status": int(traj.status),
+                  "over_status": int(over.status), "limit_time": float(over.limit_time)}))
 """
 
 
 def test_a_simulation_under_each_option_gives_the_same_solution():
     """The same 2 s run in three processes: small loops, XLA's default (which the test run itself does not use,
     conftest.py), the quick compile: the same length to within the solver's tolerance (the elementwise inverse
-    and other emitters round differently, which can move an adaptive step)."""
+    and other emitters round differently, which can move an adaptive step); and a 600 kPa pulse stops at the
+    pressure limit in each, at the same time."""
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
     out = {}
     for mode in ("on", "off", "quick"):
@@ -104,3 +109,6 @@ def test_a_simulation_under_each_option_gives_the_same_solution():
     on, off, quick = (np.asarray(out[m]["length"]) for m in ("on", "off", "quick"))
     assert np.ptp(off) > 1e-3  # millimetres of growth
     assert np.max(np.abs(on - off)) < 2e-6 and np.max(np.abs(quick - off)) < 2e-6  # 2 µm
+    stops = [out[m]["limit_time"] for m in ("on", "off", "quick")]
+    assert all(out[m]["over_status"] == 1 for m in out), out  # status 1 (pressure limit), never 2
+    assert 0.26 < min(stops) and max(stops) - min(stops) < 1e-4, stops  # after the first rise; 0.1 ms
