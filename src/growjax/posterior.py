@@ -134,6 +134,11 @@ def coordinate(prior: Prior) -> str:
     return "softplus" if isinstance(prior, SoftplusPrior) else "ridge" if isinstance(prior, RidgePrior) else "numpyro"
 
 
+def _recast(kind: type, prior: Prior, **coordinate_fields):
+    """``prior``'s range and names as a ``kind`` (a :class:`Prior` subclass) with its own coordinate's fields."""
+    return kind(**{f.name: getattr(prior, f.name) for f in dataclasses.fields(Prior)}, **coordinate_fields)
+
+
 def _fraction(prior: Prior, value):
     if prior.log:
         return jnp.log(value / prior.low) / np.log(prior.high / prior.low)
@@ -154,7 +159,7 @@ def bound_coordinates(priors: Sequence[Prior], mode: dict, within: float = BOUND
         if min(f, 1.0 - f) < within:
             upper = f > 0.5
             scale = min(max(1.0 - f if upper else f, 1e-6), within)
-            p = SoftplusPrior(p.site, p.name, p.low, p.high, p.log, p.nodes, scale=scale, upper=upper)
+            p = _recast(SoftplusPrior, p, scale=scale, upper=upper)
         out.append(p)
     return tuple(out)
 
@@ -432,7 +437,7 @@ def ridge_coordinates(sampled: Sequence[Prior], start: dict, hess) -> tuple[Prio
         z0 = float(dist.transforms.biject_to(p.distribution().support).inv(start[p.site]))
         along = tuple((q, float(slopes_u[i, k] / df_du[k])) for k, q in enumerate(pressed))
         offset = z0 - sum(b * f for (_, b), f in zip(along, f0))
-        out.append(RidgePrior(p.site, p.name, p.low, p.high, p.log, p.nodes, along=along, offset=offset))
+        out.append(_recast(RidgePrior, p, along=along, offset=offset))
     return tuple(out)
 
 
