@@ -357,7 +357,7 @@ def _callbacks(config: Config):
 def _primal(run, ts, y0, theta, outputs):
     """(primal Run on ts, state block on ts (T, 1 + p, n), primal states there). A non-finite state (a failed
     run) is evaluated at y0 instead and its outputs are NaN."""
-    block = evaluate(run.steps, ts)
+    block = evaluate(run.steps, ts) if run.saved is None else run.saved
     finite = jnp.all(jnp.isfinite(block[:, 0]), axis=1)
     saved = jnp.where(finite[:, None], block[:, 0], y0)
     nan = jnp.where(finite, 0.0, jnp.nan)
@@ -534,7 +534,7 @@ def _integrate_batch(params, inputs, config: Config, ts, jump_ts, step_ts, direc
         theta = (*theta[:-1], dataclasses.replace(theta[-1], share_values=True))
     if directions is None:
         run = integrate(field, y0, config.t0, config.t1, args=theta, breaks=breaks, jumps=jumps, rtol=rtol, atol=atol,
-                        max_steps=config.step_budget, event=event, batched=True)
+                        max_steps=config.step_budget, event=event, batched=True, save_ts=ts)
         primal = jax.vmap(lambda r, t, y, th: _primal(r, t, y, th, outputs)[0])(run, ts, y0, theta)
         return primal, None, run.status, run.steps.count
     theta_s, size, s0 = jax.vmap(lambda p, i, j, s, d: _sensitivities(p, i, config, j, s, d))(
