@@ -162,6 +162,7 @@ class _Carry(NamedTuple):
     err: jax.Array  # error norm of the last accepted step (PI control)
     h: jax.Array  # proposed step, s
     rejected_last: jax.Array  # was the last attempt rejected?
+    opened: jax.Array  # has the opening attempt (zero length) evaluated f, ∂f/∂t and J at t0?
     brk: jax.Array  # index of the next break
     steps: Steps
     status: jax.Array  # −1 running
@@ -313,6 +314,10 @@ def integrate(
     t_start, t_end = jnp.asarray(t0, dtype), jnp.asarray(t1, dtype)
 
     saving = save_ts is not None
+    # A batch takes f, ∂f/∂t and J at t0 from an opening attempt of zero length, the first of its loop: one
+    # copy of their evaluation in the compiled program instead of two (500-set sweep: 1.4 s less compile).
+    # A single run computes them before its loop: the opening's extra selects cost it 5 % (measured).
+    opening = batched
     window = jnp.arange(SAVE_WINDOW)
     max_rows = 1 if saving else max_steps  # step records kept
 
@@ -371,14 +376,18 @@ def integrate(
         return f, f_t, jac, f_left
 
     def init(z0, args, breaks, ts):
-        f_first, f_t0, jac0, _ = block_slopes(t_start, z0, args)
+        if opening:
+            f_first, f_t0, jac0 = jnp.zeros_like(z0), jnp.zeros_like(z0), jnp.zeros((n, n), dtype)
+        else:
+            f_first, f_t0, jac0, _ = block_slopes(t_start, z0, args)
         zeros_m = jnp.zeros((max_rows,) + z0.shape, dtype)
         steps0 = Steps(jnp.full((max_rows,), inf), jnp.full((max_rows,), inf), zeros_m, zeros_m, zeros_m, zeros_m,
                        jnp.asarray(0))
         first_break = jnp.searchsorted(breaks, t_start, side="right")
         saved = None if ts is None else jnp.zeros((ts.shape[0],) + z0.shape, dtype)
         return _Carry(t_start, z0, f_first, jac0, f_t0, jnp.asarray(1.0, dtype), jnp.asarray(dt0, dtype),
-                      jnp.asarray(False), first_break, steps0, jnp.asarray(-1), jnp.asarray(0), saved, jnp.asarray(0))
+                      jnp.asarray(False), jnp.asarray(not opening), first_break, steps0, jnp.asarray(-1), jnp.asarray(0), saved,
+                      jnp.asarray(0))
 
     def attempt(prob, carry: _Carry):
         _, tol_abs, tol_rel, breaks, jumps, ts, args = prob
@@ -389,6 +398,8 @@ def integrate(
             reach = ts[carry.next_save + SAVE_WINDOW - 1] - t
             capped = reach < h
             h = jnp.where(capped, reach, h)
+        if opening:
+            h = jnp.where(carry.opened, h, 0.0)
         t_break, is_jump = breaks[carry.brk], jumps[carry.brk]
         on_break = (t + h >= t_break - 1e-12 * jnp.maximum(1.0, jnp.abs(t_break))) & (t_break < t_end)
         is_jump = on_break & is_jump
@@ -440,12 +451,16 @@ def integrate(
         # After a step shortened onto a break, keep the size the controller had proposed.
         shortened = (on_break | capped) if saving else on_break
         h_new = jnp.where(accept & shortened, jnp.maximum(h_new, jnp.minimum(carry.h, dtmax)), h_new)
+        taken = accept  # a step of the solution (not the opening attempt)
+        if opening:
+            h_new = jnp.where(carry.opened, h_new, carry.h)  # the opening attempt leaves the first step's size
+            taken = accept & carry.opened
 
         # The row after the last accepted step is scratch: written by every live attempt, kept by an accepted one.
         k = carry.steps.count
         row = 0 if saving else jnp.minimum(k, max_steps - 1)
         st = carry.steps
-        written = (accept & live) if saving else live  # one row kept when saving: the last step
+        written = (taken & live) if saving else live  # one row kept when saving: the last step
 
         def put(buffer, value):  # a stopped member rewrites its row unchanged
             return buffer.at[row].set(jnp.where(written, value, buffer[row]))
@@ -454,7 +469,7 @@ def integrate(
         if saving:  # the save times this step covers, from its cubic Hermite interpolant
             index = next_save + window
             t_save = ts[index]
-            covered = accept & live & (t_save <= t_next) & (index < ts.shape[0] - SAVE_WINDOW)
+            covered = taken & live & (t_save <= t_next) & (index < ts.shape[0] - SAVE_WINDOW)
             values = jax.vmap(lambda ti: hermite(t, t_next, y, y1, f0, f1_left, ti))(t_save)
             old = jax.lax.dynamic_slice_in_dim(saved, next_save, SAVE_WINDOW)
             mask = covered.reshape((-1,) + (1,) * y.ndim)
@@ -462,18 +477,23 @@ def integrate(
             next_save = next_save + jnp.sum(covered)
 
         new_steps = Steps(put(st.t0, t), put(st.t1, t_next), put(st.y0, y), put(st.y1, y1), put(st.f0, f0),
-                          put(st.f1, f1_left), k + jnp.where(accept, 1, 0))
+                          put(st.f1, f1_left), k + jnp.where(taken, 1, 0))
         status = carry.status
         if event is not None:
-            status = jnp.where(accept & (event(t_next, y1[0], args) < 0.0), EVENT, status)
-        status = jnp.where(accept & (t_next >= t_end) & (status < 0), OK, status)
+            status = jnp.where(taken & (event(t_next, y1[0], args) < 0.0), EVENT, status)
+        status = jnp.where(taken & (t_next >= t_end) & (status < 0), OK, status)
         too_small = live & ~accept & (h_new < 1e-14 * jnp.maximum(1.0, jnp.abs(t)))
-        out_of_budget = accept & (k + 1 >= max_steps) & (status < 0)
+        out_of_budget = taken & (k + 1 >= max_steps) & (status < 0)
         status = jnp.where(too_small | out_of_budget, FAILED, status)
+        err_kept = jnp.maximum(err_norm, 1e-4)
+        if opening:
+            status = jnp.where(live & ~accept & ~carry.opened, FAILED, status)  # f or J not finite at t0
+            err_kept = jnp.where(carry.opened, err_kept, carry.err)
         keep = jax.tree_util.tree_map(lambda new, old: jnp.where(accept, new, old),
-                                      (t_after, y1, f1, jac1, f_t1, jnp.maximum(err_norm, 1e-4)),
+                                      (t_after, y1, f1, jac1, f_t1, err_kept),
                                       (t, y, f0, jac, f_t, carry.err))
         return _Carry(*keep, h=jnp.where(live, h_new, carry.h), rejected_last=jnp.where(live, ~accept, carry.rejected_last),
+                      opened=(carry.opened | live) if opening else carry.opened,
                       brk=carry.brk + jnp.where(accept & on_break, 1, 0), steps=new_steps, status=status,
                       rejected=carry.rejected + jnp.where(live & ~accept, 1, 0), saved=saved, next_save=next_save)
 
