@@ -9,7 +9,9 @@ Measured, on the public experiment (``../shared/data/mammobot``) or, when it is 
 
 1. ``growjax.sweep.lhs_sweep`` of 500 sets in the fast configuration: wall time after compilation
    (median of repeated calls of the compiled program, as ``SweepResult.wall_s``; target ≤ 1 s), compile
-   time, and the whole ``lhs_sweep`` call (design and per-set parameter validation included), s;
+   time, and the whole ``lhs_sweep`` call (design and per-set parameter validation included), s; and, for
+   information, the same sweep compiled under XLA's default emitters (the library compiles designs of up to
+   ``sweep.QUICK_COMPILE_ROWS`` sets with the quicker ones, :mod:`growjax.xla_flags`);
 2. the whole ``growjax sweep`` process (subprocess: interpreter start, imports, compile, the sweep,
    sweep.csv and sweep.png) in a temporary folder, with an empty persistent compilation cache
    (``GROWJAX_CACHE_DIR`` points at a new empty folder), so compilation is counted in full;
@@ -434,6 +436,16 @@ def time_sweep(n: int, base, inputs, config, measured, repeats: int = 3) -> dict
             "n_failed": int(first.failed.sum()), "best": first.best()}
 
 
+def time_sweep_default_emitters(n: int, base, inputs, config, measured) -> dict:
+    """:func:`time_sweep` with the design compiled under XLA's default emitters, as designs of more than
+    ``sweep.QUICK_COMPILE_ROWS`` sets are (information: what the quick compile saves and costs)."""
+    rows, sw.QUICK_COMPILE_ROWS = sw.QUICK_COMPILE_ROWS, 0
+    try:
+        return time_sweep(n, base, inputs, config, measured)
+    finally:
+        sw.QUICK_COMPILE_ROWS = rows
+
+
 def profile_sweep(n: int, base, inputs, config, measured, top: int = 12) -> dict:
     """Where the compiled sweep of ``n`` sets spends its time: one call under ``jax.profiler`` (a Perfetto
     trace), its XLA operations summed by name. → {"ops": [(name, ms, calls)…], "op_calls", "op_ms", "wall_s"}.
@@ -534,6 +546,9 @@ def report(out: dict) -> None:
         f"1. sweep of {s['n']} sets after compile: {s['wall_s']:.3f} s  (target <= {TARGETS['sweep_wall_s']} s) "
         f"{verdict(s['wall_s'], TARGETS['sweep_wall_s'], True)};  compile {s['compile_s']:.1f} s;  "
         f"whole lhs_sweep call {s['call_wall_s']:.2f} s (with design and parameter validation)",
+        f"   the same compiled under XLA's default emitters (as designs over sweep.QUICK_COMPILE_ROWS sets): "
+        f"{out['sweep_default_emitters']['wall_s']:.3f} s (information; its compile here follows the first, "
+        f"whose tracing it reuses)",
         f"2. whole `growjax sweep` process ({cli['n']} sets, empty compilation cache): {cli['process_wall_s']:.1f} s "
         f"(compile inside {cli['compile_s_inside']:.1f} s, sweep {cli['sweep_wall_s_inside']:.2f} s)",
         f"3. SciPy BDF baseline: {b['per_simulation_s']:.3f} s per 10 s simulation "
@@ -585,6 +600,7 @@ def main():
         return
 
     out["sweep"] = time_sweep(n, base, inputs, config, measured)
+    out["sweep_default_emitters"] = time_sweep_default_emitters(n, base, inputs, config, measured)
     out["cli_process"] = time_cli(n, data)
     corners = {"published": {}, "n0.9_Y5kPa_ext4000": {"n": 0.9, "Y": 5e3, "ext": 4000.0},
                "n1.1_Y15kPa_ext10000": {"n": 1.1, "Y": 15e3, "ext": 10000.0}}

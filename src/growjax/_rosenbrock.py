@@ -467,13 +467,12 @@ def integrate(
 
         saved, next_save = carry.saved, carry.next_save
         if saving:  # the save times this step covers, from its cubic Hermite interpolant
-            index = next_save + window
-            t_save = ts[index]
-            covered = taken & live & (t_save <= t_next) & (index < ts.shape[0] - SAVE_WINDOW)
+            t_save = ts[next_save + window]
+            covered = taken & live & (t_save <= t_next)
             values = jax.vmap(lambda ti: hermite(t, t_next, y, y1, f0, f1_left, ti))(t_save)
-            old = jax.lax.dynamic_slice_in_dim(saved, next_save, SAVE_WINDOW)
-            mask = covered.reshape((-1,) + (1,) * y.ndim)
-            saved = jax.lax.dynamic_update_slice_in_dim(saved, jnp.where(mask, values, old), next_save, 0)
+            # The whole window is written: the rows past those covered are rewritten by the next step taken
+            # (its window starts at or before them), or by ``finish`` after the last.
+            saved = jax.lax.dynamic_update_slice_in_dim(saved, values, next_save, 0)
             next_save = next_save + jnp.sum(covered)
 
         new_steps = Steps(put(st.t0, t), put(st.t1, t_next), put(st.y0, y), put(st.y1, y1), put(st.f0, f0),
@@ -503,6 +502,8 @@ def integrate(
             args = prob[-1]
             last = final.steps._replace(count=jnp.minimum(final.steps.count, 1)) if saving else final.steps
             t_final, y_final = _locate_event(lambda t, y: event(t, y, args), last, final.status == EVENT, y_final)
+            if saving:  # the one record kept is the last step taken: none if the run failed at once
+                t_final = jnp.where(final.status == EVENT, t_final, final.t)
         saved = None
         if saving:  # save times after the last step taken get its end state
             n_save = final.saved.shape[0] - SAVE_WINDOW

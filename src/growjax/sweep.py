@@ -178,7 +178,9 @@ def make_member(base: gp.Parameters, names: Sequence[str], inputs, config, measu
 
 
 # Designs up to this many rows compile with XLA's quicker emitters (xla_flags.QUICK_COMPILE). Measured on the
-# 2-core CPU, 500 sets of 10 s: compile 1.2 s shorter, sweep 7 % (0.26 ms per set) longer; break-even ~4500 sets.
+# 2-core CPU, 500 sets of 10 s: compile 1.2 s shorter, sweep 7 % (0.26 ms per set) longer; break-even ~4500 sets
+# (2026-11-24). After the batch's in-loop saving and forward-mode Jacobian (2026-11-25): compile 1.3 s shorter,
+# sweep ~5 % (0.1 ms per set) longer (``benchmarks/sweep.py`` prints both); the threshold was left as it was.
 QUICK_COMPILE_ROWS = 4000
 
 # Compiled sweep programs of this process, keyed by everything they close over (at most 8 kept).
@@ -264,7 +266,8 @@ def evaluate(
     breaks = input_breaks(inputs, config)
     dynamic, static = eqx.partition((as_arrays(base), as_arrays(inputs), breaks, measured), eqx.is_array)
     shapes = jax.tree_util.tree_map(lambda a: (a.shape, str(a.dtype)), dynamic)
-    key = (names, config, chunk, None if window is None else tuple(window), tuple(d.id for d in mesh.devices.flat),
+    quick = n <= QUICK_COMPILE_ROWS
+    key = (names, config, chunk, quick, None if window is None else tuple(window), tuple(d.id for d in mesh.devices.flat),
            str(jax.tree_util.tree_structure(dynamic)), str(jax.tree_util.tree_leaves(shapes)), _content_key(static))
     compiled = _COMPILED.get(key)
     if compiled is None:
@@ -282,7 +285,7 @@ def evaluate(
         batched = jax.jit(local, in_shardings=(sharding, replicated), out_shardings=sharding)
         lowered = batched.lower(jax.ShapeDtypeStruct((chunk, len(names)), jnp.float64, sharding=sharding), dynamic)
         # XLA's quicker emitters where the compile they save exceeds the slower run they give (QUICK_COMPILE_ROWS).
-        compiled = xla_flags.compile_quickly(lowered) if n <= QUICK_COMPILE_ROWS else lowered.compile()
+        compiled = xla_flags.compile_quickly(lowered) if quick else lowered.compile()
         if len(_COMPILED) >= 8:
             _COMPILED.pop(next(iter(_COMPILED)))
         _COMPILED[key] = compiled
