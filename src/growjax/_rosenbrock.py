@@ -195,8 +195,8 @@ def _forward_slopes(field, t, y, t_left=None):
     direction and along time, the primal evaluated once; F_left = F(t_left, y) (default F). ∂F/∂t is the
     derivative of the input's piece that starts at t. Shapes as the state block: (1, n), (1, n), (n, n), (1, n).
 
-    Used for batches: there it costs less than the difference columns (500-set sweep 1.34 → 1.06 s), in a
-    single run more (a 10 s simulation 16 → 28 ms), at a longer compile (+1.4 s for the sweep).
+    Used for batches: there it costs less than the difference columns (500-set sweep 1.35 → 1.06 s), in a
+    single run more (a 10 s simulation 16 → 28 ms), at a longer compile (+1.6–2.1 s for the sweep).
     """
     t, y = jax.lax.stop_gradient((t, y))
     units = jnp.eye(y.shape[0] + 1, dtype=y.dtype)
@@ -293,7 +293,7 @@ def integrate(
         save_ts: sorted times (T,) s (with ``batched``, (B, T)) at which to return the solution
             (``Result.saved``), interpolated in the loop as each step is taken, so that no step record is
             kept (only the last step, for the event). A step then covers at most ``SAVE_WINDOW`` of them
-            (binding only for save times closer than dtmax / SAVE_WINDOW); times beyond the end get its state.
+            (binding only where they lie closer than about dtmax / (SAVE_WINDOW − 1)); times beyond the end get its state.
 
     The state block is (1 + p, n): row 0 the state, rows 1… the sensitivities. Every row shares
     W = I − hγJ, J the state's Jacobian (the block-diagonal W a W-method allows). The error norm
