@@ -20,12 +20,14 @@ with J at its start and is rejected unless ``h γ ‖J₁ − J₀‖∞ ≤ 1``
 on the primal solution, and the tangents it carries are stable and consistent. The end's J is the
 next step's start's, so the check costs nothing extra.
 
-In a batch (``batched``: a sweep) two choices differ, each a gain there and a loss in a single run
-(measured): the Jacobian and ∂f/∂t are taken in forward mode (the primal once, then one tangent per
-state and for time) instead of by forward differences, and the stages are a loop (one copy of the
-field in the compiled program: a shorter compile). A batch may also interpolate its save times inside the loop
-(``save_ts``) instead of recording every step: a sweep member then carries (T, n) values, not the
-(max_steps, n) records whose per-member writes and memory cost a 500-set sweep a fifth of its time.
+In a batch (``batched``: a sweep) three choices differ, each measured a gain there and a loss in a
+single run: the Jacobian and ∂f/∂t are taken in forward mode (the primal once, then one tangent per
+state and for time) instead of by forward differences; the stages are a loop (one copy of the field
+in the compiled program: a shorter compile); and f, ∂f/∂t and J at t0 come from an opening attempt of
+zero length, the loop's first, instead of a second copy of that code before the loop. A run may also
+interpolate its save times inside the loop (``save_ts``, used by batches) instead of recording every
+step: a sweep member then carries (T, n) values, not the (max_steps, n) records whose per-member writes
+and memory cost a 500-set sweep a fifth of its time.
 
 Other choices: steps land on every declared input break (a jump is approached from the left and
 left from the right, one ulp either side; a slope break is landed on); the accepted steps are
@@ -397,7 +399,7 @@ def integrate(
         if saving:  # the step may cover SAVE_WINDOW save times at most
             reach = ts[carry.next_save + SAVE_WINDOW - 1] - t
             capped = reach < h
-            h = jnp.where(capped, reach, h)
+            h = jnp.where(capped, jnp.maximum(reach, 0.0), h)
         if opening:
             h = jnp.where(carry.opened, h, 0.0)
         t_break, is_jump = breaks[carry.brk], jumps[carry.brk]
