@@ -546,9 +546,9 @@ def report(out: dict) -> None:
         f"1. sweep of {s['n']} sets after compile: {s['wall_s']:.3f} s  (target <= {TARGETS['sweep_wall_s']} s) "
         f"{verdict(s['wall_s'], TARGETS['sweep_wall_s'], True)};  compile {s['compile_s']:.1f} s;  "
         f"whole lhs_sweep call {s['call_wall_s']:.2f} s (with design and parameter validation)",
-        f"   the same compiled under XLA's default emitters (as designs over sweep.QUICK_COMPILE_ROWS sets): "
-        f"{out['sweep_default_emitters']['wall_s']:.3f} s (information; its compile here follows the first, "
-        f"whose tracing it reuses)",
+        (f"   the same compiled under XLA's default emitters (as designs over sweep.QUICK_COMPILE_ROWS sets): "
+         f"{out['sweep_default_emitters']['wall_s']:.3f} s (information; its compile here follows the first, "
+         f"whose tracing it reuses)"),
         f"2. whole `growjax sweep` process ({cli['n']} sets, empty compilation cache): {cli['process_wall_s']:.1f} s "
         f"(compile inside {cli['compile_s_inside']:.1f} s, sweep {cli['sweep_wall_s_inside']:.2f} s)",
         f"3. SciPy BDF baseline: {b['per_simulation_s']:.3f} s per 10 s simulation "

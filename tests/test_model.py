@@ -251,7 +251,7 @@ def test_a_batch_saves_in_its_loop_what_single_runs_interpolate_afterwards():
     inputs = forward_inputs()
     dense = np.arange(1, 3001) * 1e-3
     for ts in (EDGE_TIMES, dense):
-        batch = jax.vmap(lambda p: gj.simulate(p, inputs, SHORT, ts=ts))(stacked)
+        batch = jax.vmap(lambda p, ts=ts: gj.simulate(p, inputs, SHORT, ts=ts))(stacked)
         for i, params in enumerate(members):
             single = gj.simulate(params, inputs, SHORT, ts=ts)
             assert int(batch.status[i]) == int(single.status) == expected[i]
@@ -279,13 +279,13 @@ def test_the_integrator_saves_in_its_loop_the_solution_it_would_record(batched):
 
     ts = np.arange(0, 1001) * 2e-3
     ks = np.array([1.0, 3.0])
-    kw = dict(rtol=1e-8, atol=1e-10, max_steps=4000, breaks=jnp.array([0.5]), jumps=jnp.array([True]))
+    kw = {"rtol": 1e-8, "atol": 1e-10, "max_steps": 4000, "breaks": jnp.array([0.5]), "jumps": jnp.array([True])}
     if batched:
         kw.update(breaks=jnp.full((2, 1), 0.5), jumps=jnp.ones((2, 1), bool))
         run = rb.integrate(field, jnp.ones((2, 1)), 0.0, 2.0, args=jnp.asarray(ks), batched=True,
                            save_ts=jnp.tile(ts, (2, 1)), **kw)
         kept = rb.integrate(field, jnp.ones((2, 1)), 0.0, 2.0, args=jnp.asarray(ks), batched=True, **kw)
-        recorded = np.stack([np.asarray(rb.evaluate(jax.tree_util.tree_map(lambda x: x[i], kept.steps), ts))
+        recorded = np.stack([np.asarray(rb.evaluate(jax.tree_util.tree_map(lambda x, i=i: x[i], kept.steps), ts))
                              for i in range(2)])[:, :, 0, 0]
         saved = np.asarray(run.saved)[:, :, 0, 0]
     else:
