@@ -19,7 +19,7 @@ or ``growjax.xla_flags.apply()`` first thing in a script.
 
 **Quick compile** (:data:`QUICK_COMPILE`): XLA:CPU's older fusion emitters (``xla_cpu_use_fusion_emitters``
 off) compile a program 15–30 % faster, and the code they emit runs slower: a single 10 s simulation 22 ms
-instead of 14 ms (``benchmarks/simulate.py``), the 500-set sweep 7 % longer. A sweep of up to
+instead of 14 ms (``benchmarks/simulate.py``), the 500-set sweep 5–7 % longer. A sweep of up to
 ``growjax.sweep.QUICK_COMPILE_ROWS`` sets, which compiles once and runs once, takes them
 (:func:`compile_quickly`, its program only); so do the ``growjax simulate`` and ``growjax fit`` processes
 (:func:`apply_quick_compile`) and the test suite, made of compiles (``tests/conftest.py``). Everything else
