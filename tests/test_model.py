@@ -298,3 +298,30 @@ def test_the_integrator_saves_in_its_loop_the_solution_it_would_record(batched):
     assert np.all(np.asarray(run.status) == rb.OK) and np.all(np.asarray(kept.status) == rb.OK)
     np.testing.assert_allclose(saved, recorded, rtol=1e-9, atol=0)
     np.testing.assert_allclose(saved, exact, rtol=1e-5, atol=0)
+
+
+def test_a_batch_inverts_and_measures_the_variation_as_single_members_do():
+    """The batch's elementwise W⁻¹ (Gauss–Jordan with partial pivoting, batch axis last) and variation check
+    (‖W₀⁻¹ΔW‖∞, refined by the spectral radius above 1) against the single-member LAPACK inverse and
+    ``_variation``: members that need row exchanges (zero leading entries), one ill-conditioned, and changes on both
+    sides of the bound (a non-normal one whose ∞-norm exceeds 1 while its spectral radius does not)."""
+    from growjax import _rosenbrock as rb
+
+    rng = np.random.default_rng(7)
+    n = 6
+    swap = np.eye(n)[[1, 0, 3, 2, 5, 4]]  # every diagonal entry zero: no step without a row exchange
+    mats = np.stack([np.eye(n) + 0.3 * rng.normal(size=(n, n)), swap, swap + 1e-3 * rng.normal(size=(n, n)),
+                     np.diag([1.0, 1e-7, 1.0, 1.0, 1e3, 1.0]) + 1e-4 * rng.normal(size=(n, n)),
+                     np.eye(n) - 50.0 * rng.normal(size=(n, n))])
+    inverse = np.asarray(jax.vmap(rb._batchable_inverse)(jnp.asarray(mats)))
+    expected = np.stack([np.linalg.inv(m) for m in mats])
+    np.testing.assert_allclose(inverse, expected, rtol=1e-9, atol=1e-12 * np.abs(expected).max())
+
+    nilpotent = np.diag(np.full(n - 1, 3.0), 1)  # ‖·‖∞ = 3, spectral radius 0
+    changes = np.stack([0.01 * rng.normal(size=(n, n)), nilpotent, 2.0 * np.eye(n), 0.5 * rng.normal(size=(n, n)),
+                        nilpotent + 0.9 * np.eye(n)])
+    w_inv = np.broadcast_to(np.eye(n), changes.shape)
+    batch = np.asarray(jax.vmap(rb._batchable_variation)(jnp.asarray(w_inv), jnp.asarray(changes)))
+    single = np.array([float(rb._variation(jnp.asarray(w), jnp.asarray(c))) for w, c in zip(w_inv, changes)])
+    np.testing.assert_allclose(batch, single, rtol=1e-12)
+    assert single[0] < 1.0 and single[1] < 1.0 < np.abs(changes[1]).sum(axis=1).max() and single[2] > 1.0

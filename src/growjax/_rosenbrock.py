@@ -20,11 +20,14 @@ with J at its start and is rejected unless ``h γ ‖J₁ − J₀‖∞ ≤ 1``
 on the primal solution, and the tangents it carries are stable and consistent. The end's J is the
 next step's start's, so the check costs nothing extra.
 
-In a batch (``batched``: a sweep) three choices differ, each measured a gain there and a loss in a
-single run: the Jacobian and ∂f/∂t are taken in forward mode (the primal once, then one tangent per
+In a batch (``batched``: a sweep) four choices differ, each measured a gain there (the first three a loss
+in a single run; the fourth has no single-run form): the Jacobian and ∂f/∂t are taken in forward mode (the primal once, then one tangent per
 state and for time) instead of by forward differences; the stages are a loop (one copy of the field
-in the compiled program: a shorter compile); and f, ∂f/∂t and J at t0 come from an opening attempt of
-zero length, the loop's first, instead of a second copy of that code before the loop. A run may also
+in the compiled program: a shorter compile); f, ∂f/∂t and J at t0 come from an opening attempt of
+zero length, the loop's first, instead of a second copy of that code before the loop; and W⁻¹ and the
+variation check are written with the batch axis last, in elementwise operations (``custom_vmap`` rules;
+for 250 6 × 6 matrices in a loop, measured: an inverse ~70 µs against LAPACK's ~120 µs, a product ~12 µs
+against a batched ``dot``'s ~45 µs; 500-set sweep 1.04 → 0.83 s). A run may also
 interpolate its save times inside the loop (``save_ts``, used by batches) instead of recording every
 step: a sweep member then carries (T, n) values, not the (max_steps, n) records whose per-member writes
 and memory cost a 500-set sweep a fifth of its time.
@@ -235,6 +238,86 @@ def _inverse(m):
     return a[:, n:]
 
 
+def _product_last(a, b):
+    """Products of two batches of matrices with the batch axis last: (n, m, B) @ (m, k, B) → (n, k, B)."""
+    return sum(a[:, j, None, :] * b[None, j, :, :] for j in range(b.shape[0]))
+
+
+def _row_sums_max(m):
+    """‖m‖∞ of a batch of matrices with the batch axis last (n, n, B) → (B,)."""
+    return jnp.max(jnp.sum(jnp.abs(m), axis=1), axis=0)
+
+
+def _inverse_batch(m):
+    """Inverses of a batch of small matrices (B, n, n) by Gauss–Jordan elimination with partial pivoting,
+    with the batch axis last inside: every operation is elementwise over the batch. For 250 6 × 6 matrices in
+    a loop: ~70 µs against LAPACK's ~120 µs (one call per matrix)."""
+    n = m.shape[-1]
+    a = jnp.moveaxis(m, 0, -1)  # (n, n, B)
+    unit = jnp.broadcast_to(jnp.eye(n, dtype=m.dtype)[:, :, None], a.shape)
+    rows = [jnp.concatenate([a[i], unit[i]]) for i in range(n)]  # each (2n, B)
+    for k in range(n):
+        p = k + jnp.argmax(jnp.stack([jnp.abs(rows[r][k]) for r in range(k, n)]), axis=0)  # (B,)
+        row_p = sum(jnp.where(p == r, rows[r], 0.0) for r in range(k, n))
+        pivot = row_p / row_p[k]
+        new = []
+        for r in range(n):
+            if r == k:
+                new.append(pivot)
+                continue
+            src = rows[r] if r < k else jnp.where(p == r, rows[k], rows[r])  # row p takes row k's place
+            new.append(src - src[k] * pivot)
+        rows = new
+    return jnp.moveaxis(jnp.stack([r[n:] for r in rows]), -1, 0)
+
+
+def _spectral_radius_last(m, squarings: int = 3):
+    """:func:`_spectral_radius` of a batch of matrices with the batch axis last (n, n, B) → (B,)."""
+    log_scale = 0.0
+    for _ in range(squarings):
+        norm = jnp.maximum(_row_sums_max(m), 1e-300)
+        m = m / norm
+        log_scale = 2.0 * (log_scale + jnp.log(norm))
+        m = _product_last(m, m)
+    return jnp.exp((log_scale + jnp.log(jnp.maximum(_row_sums_max(m), 1e-300))) / 2**squarings)
+
+
+def _variation(w_inv, dw):
+    """Spectral radius of W₀⁻¹ (W₀ − W₁) for W₀⁻¹ = ``w_inv`` and W₀ − W₁ = ``dw`` (n, n): its ∞-norm, refined by
+    :func:`_spectral_radius` where that bound exceeds 1 (a step is rejected above 1)."""
+    change = w_inv @ dw
+    bound = jnp.max(jnp.sum(jnp.abs(change), axis=1))
+    return jax.lax.cond(bound > 1.0, _spectral_radius, lambda m: bound, change)
+
+
+def _broadcast_unbatched(axis_size, in_batched, *args):
+    return [x if b else jnp.broadcast_to(x, (axis_size,) + jnp.shape(x)) for x, b in zip(args, in_batched)]
+
+
+@jax.custom_batching.custom_vmap
+def _batchable_inverse(m):
+    """W⁻¹ of one (n, n) matrix by LAPACK; of a batch (under ``vmap``) by :func:`_inverse_batch`."""
+    return jnp.linalg.inv(m)
+
+
+@_batchable_inverse.def_vmap
+def _inverse_rule(axis_size, in_batched, m):
+    return _inverse_batch(*_broadcast_unbatched(axis_size, in_batched, m)), True
+
+
+_batchable_variation = jax.custom_batching.custom_vmap(_variation)
+
+
+@_batchable_variation.def_vmap
+def _variation_rule(axis_size, in_batched, w_inv, dw):
+    """:func:`_variation` of a batch, its matrices with the batch axis last: elementwise operations instead of
+    batched 6 × 6 products, and the refinement computed for every member (as a vmapped ``cond`` would)."""
+    w_inv, dw = _broadcast_unbatched(axis_size, in_batched, w_inv, dw)
+    change = _product_last(jnp.moveaxis(w_inv, 0, -1), jnp.moveaxis(dw, 0, -1))
+    bound = _row_sums_max(change)
+    return jnp.where(bound > 1.0, _spectral_radius_last(change), bound), True
+
+
 def _spectral_radius(m, squarings: int = 3):
     """Upper estimate of the spectral radius of a square matrix: ‖m^(2^k)‖∞^(1/2^k) (k squarings, rescaled)."""
     log_scale = 0.0
@@ -410,7 +493,7 @@ def integrate(
         t_next = jnp.where(t + h >= t_end, t_end, t_next)
         h = jax.lax.stop_gradient(t_next - t)
 
-        w_inv = (_inverse if small_loops else jnp.linalg.inv)(eye - (h * g) * jac)
+        w_inv = (_batchable_inverse if batched else _inverse if small_loops else jnp.linalg.inv)(eye - (h * g) * jac)
 
         def stage(i, ks, fi):
             rhs = h * fi + (gamma_sum[i] * h * h) * f_t + h * (jnp.tensordot(gamma[i], ks, 1) @ jac.T)
@@ -435,9 +518,7 @@ def integrate(
         t_after = jnp.where(is_jump, jnp.nextafter(t_break, inf), t_next)
         f1, f_t1, jac1, f1_left = block_slopes(t_after, y1, args, t_next)
         # J must describe the field over the whole step (see the module docstring).
-        change = w_inv @ ((h * g) * (jac1 - jac))  # W₀⁻¹ (W₀ − W₁)
-        bound = jnp.max(jnp.sum(jnp.abs(change), axis=1))  # ≥ its spectral radius: refine only where it binds
-        variation = jax.lax.stop_gradient(jax.lax.cond(bound > 1.0, _spectral_radius, lambda m: bound, change))
+        variation = jax.lax.stop_gradient((_batchable_variation if batched else _variation)(w_inv, (h * g) * (jac1 - jac)))
         variation = jnp.where(is_jump, 0.0, variation)  # across a jump J may change: the step ends there
         finite = jnp.all(jnp.isfinite(y1)) & jnp.isfinite(err_norm) & jnp.all(jnp.isfinite(jac1))
         accept = live & finite & (err_norm <= 1.0) & (variation <= 1.0)
