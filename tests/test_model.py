@@ -325,3 +325,28 @@ def test_a_batch_inverts_and_measures_the_variation_as_single_members_do():
     single = np.array([float(rb._variation(jnp.asarray(w), jnp.asarray(c))) for w, c in zip(w_inv, changes)])
     np.testing.assert_allclose(batch, single, rtol=1e-12)
     assert single[0] < 1.0 and single[1] < 1.0 < np.abs(changes[1]).sum(axis=1).max() and single[2] > 1.0
+
+
+# The reference case compiles the reference model twice (40 s): a slow study.
+@pytest.mark.parametrize("fidelity", ["fast", pytest.param("reference", marks=pytest.mark.slow)])
+def test_simulate_members_equals_the_vmapped_simulate(fidelity):
+    """``simulate_members`` (one batched solve, the one-member program never traced) gives what
+    ``jax.vmap(simulate)`` gives, field by field, for members that finish, stop at the pressure limit (a 10 µm
+    membrane) and fail (Y NaN); it refuses to be differentiated."""
+    members = [gj.replace(gj.reference(), Y=12e3, n=1.05), gj.replace(gj.reference(), t=1e-5),
+               gj.replace(gj.reference(), Y=float("nan"))]
+    stacked = jax.tree_util.tree_map(lambda *leaves: jnp.stack([jnp.asarray(x) for x in leaves]), *members)
+    inputs = forward_inputs()
+    config = SHORT.replace(fidelity=fidelity, t1=1.0) if fidelity == "reference" else SHORT
+    ts = EDGE_TIMES[EDGE_TIMES <= config.t1]
+    together = gj.simulate_members(stacked, inputs, config, ts=ts)
+    vmapped = jax.vmap(lambda p: gj.simulate(p, inputs, config, ts=ts))(stacked)
+    assert [int(s) for s in together.status] == [gj.OK, gj.PRESSURE_LIMIT, gj.SOLVER_FAILED]
+    leaves = jax.tree_util.tree_leaves_with_path(together)
+    assert len(leaves) == len(jax.tree_util.tree_leaves(vmapped)) > 5
+    for (path, a), b in zip(leaves, jax.tree_util.tree_leaves(vmapped)):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b), err_msg=jax.tree_util.keystr(path))
+    if fidelity == "fast":
+        with pytest.raises(TypeError, match="not differentiable"):
+            jax.jvp(lambda y: gj.simulate_members(gj.replace(stacked, Y=y), inputs, config, ts=ts).length,
+                    (stacked.robot.yield_pressure,), (jnp.ones(3),))

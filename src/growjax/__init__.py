@@ -31,7 +31,7 @@ from growjax.signals import (
     StepSchedule,
     published_pulse,
 )
-from growjax.simulate import input_breaks, simulate
+from growjax.simulate import input_breaks, simulate, simulate_members
 from growjax.trajectory import (
     OK,
     PRESSURE_LIMIT,
@@ -63,6 +63,7 @@ __all__ = [
     "reference",
     "replace",
     "simulate",
+    "simulate_members",
     "status_name",
     "validate",
     "with_effects",

@@ -28,7 +28,7 @@ from growjax import params as gp
 from growjax import xla_flags
 from growjax.config import Config
 from growjax.metrics import rmse_at_samples
-from growjax.simulate import as_arrays, input_breaks, sample_times, simulate
+from growjax.simulate import as_arrays, input_breaks, sample_times, simulate_members
 from growjax.trajectory import OK, PRESSURE_LIMIT, SOLVER_FAILED
 
 INVALID_PARAMETER = 3
@@ -152,29 +152,31 @@ def _valid_rows(names, values, base: gp.Parameters) -> np.ndarray:
     return gp.admissible_rows(base, names, values)
 
 
-def make_member(base: gp.Parameters, names: Sequence[str], inputs, config, measured=None, window=None, breaks=None):
-    """Function θ (d,) → (rmse m, final length m, status) of one member; pure, ``vmap``-able."""
+def make_members(base: gp.Parameters, names: Sequence[str], inputs, config, measured=None, window=None, breaks=None):
+    """Function Θ (B, d) → (rmse (B,) m, final length (B,) m, status (B,)) of a batch of parameter sets, simulated
+    together (:func:`growjax.simulate.simulate_members`); pure."""
     names = tuple(names)
     t_start, t_end = window if window is not None else (config.t0, config.t1)
     breaks = input_breaks(inputs, config) if breaks is None else breaks
+    if measured is None:
+        ts = None
+    else:  # saved at the samples (and at t1, for the final length), not interpolated between them
+        times = jnp.asarray(measured[0], float)
+        ts = jnp.concatenate([sample_times(times, config), jnp.full((1,), config.t1, times.dtype)])
 
-    def member(theta):
-        p = gp.replace(base, **{n: theta[i] for i, n in enumerate(names)})
-        if measured is None:
-            traj = simulate(p, inputs, config, breaks=breaks)
-        else:  # saved at the samples (and at t1, for the final length), not interpolated between them
-            times = jnp.asarray(measured[0], float)
-            ts = jnp.concatenate([sample_times(times, config), jnp.full((1,), config.t1, times.dtype)])
-            traj = simulate(p, inputs, config, ts=ts, breaks=breaks)
-        finite = jnp.isfinite(traj.length)
-        final = traj.length[jnp.maximum(jnp.sum(finite) - 1, 0)]
-        if measured is None:
-            rmse = jnp.nan
-        else:
-            rmse = rmse_at_samples(traj.length[:-1], times, measured[1], t_start, t_end)
+    def score(length):
+        finite = jnp.isfinite(length)
+        final = length[jnp.maximum(jnp.sum(finite) - 1, 0)]
+        rmse = jnp.nan if measured is None else rmse_at_samples(length[:-1], times, measured[1], t_start, t_end)
+        return rmse, final
+
+    def members(thetas):
+        params = jax.vmap(lambda theta: gp.replace(base, **{n: theta[i] for i, n in enumerate(names)}))(thetas)
+        traj = simulate_members(params, inputs, config, ts=ts, breaks=breaks)
+        rmse, final = jax.vmap(score)(traj.length)
         return rmse, final, traj.status
 
-    return member
+    return members
 
 
 # Designs up to this many rows compile with XLA's quicker emitters (xla_flags.QUICK_COMPILE). Measured on the
@@ -271,15 +273,15 @@ def evaluate(
            str(jax.tree_util.tree_structure(dynamic)), str(jax.tree_util.tree_leaves(shapes)), _content_key(static))
     compiled = _COMPILED.get(key)
     if compiled is None:
-        def member(theta, dynamic):
+        def members(thetas, dynamic):
             p, i, b, m = eqx.combine(dynamic, static)
-            return make_member(p, names, i, config, m, window, breaks=b)(theta)
+            return make_members(p, names, i, config, m, window, breaks=b)(thetas)
 
         replicated = NamedSharding(mesh, PartitionSpec())
         # Each device steps its own members in its own loop (shard_map): a vmapped loop over the whole
         # sharded batch would wait, at every attempt, for a cross-device "is any member still running?".
         # check_vma=False: the solver's loop carries replicated constants beside per-device members.
-        local = jax.shard_map(jax.vmap(member, in_axes=(0, None)), mesh=mesh,
+        local = jax.shard_map(members, mesh=mesh,
                               in_specs=(PartitionSpec("batch"), PartitionSpec()), out_specs=PartitionSpec("batch"),
                               check_vma=False)
         batched = jax.jit(local, in_shardings=(sharding, replicated), out_shardings=sharding)
