@@ -21,8 +21,8 @@ on the primal solution, and the tangents it carries are stable and consistent. T
 next step's start's, so the check costs nothing extra.
 
 In a batch (``batched``: a sweep) four choices differ, each measured a gain there (the first three a loss
-in a single run; the fourth has no single-run form): the Jacobian and ∂f/∂t are taken in forward mode (the primal once, then one tangent per
-state and for time) instead of by forward differences; the stages are a loop (one copy of the field
+in a single run; the fourth has no single-run form): the Jacobian and ∂f/∂t are taken in forward mode (the
+primal once, then one tangent per state and for time) instead of by forward differences; the stages are a loop (one copy of the field
 in the compiled program: a shorter compile); f, ∂f/∂t and J at t0 come from an opening attempt of
 zero length, the loop's first, instead of a second copy of that code before the loop; and W⁻¹ and the
 variation check are written with the batch axis last, in elementwise operations (``custom_vmap`` rules;
@@ -251,7 +251,7 @@ def _row_sums_max(m):
 def _inverse_batch(m):
     """Inverses of a batch of small matrices (B, n, n) by Gauss–Jordan elimination with partial pivoting,
     with the batch axis last inside: every operation is elementwise over the batch. For 250 6 × 6 matrices in
-    a loop: ~70 µs against LAPACK's ~120 µs (one call per matrix)."""
+    a loop: ~70 µs against ~120 µs for ``jnp.linalg.inv`` (LAPACK) on the same batch."""
     n = m.shape[-1]
     a = jnp.moveaxis(m, 0, -1)  # (n, n, B)
     unit = jnp.broadcast_to(jnp.eye(n, dtype=m.dtype)[:, :, None], a.shape)

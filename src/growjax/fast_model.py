@@ -688,6 +688,7 @@ def solve_members(params: Parameters, inputs, config: Config, ts, jump_ts, step_
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(2,))
 def _members(params, inputs, config: Config, ts, jump_ts, step_ts):
+    """The batched solve of :func:`solve_members`; its derivative rule refuses (no error-controlled tangents here)."""
     size = jax.tree_util.tree_leaves(params)[0].shape[0]
     shared = (inputs, ts, jump_ts, step_ts)
     in_batched = (jax.tree_util.tree_map(lambda _: True, params), *(jax.tree_util.tree_map(lambda _: False, a) for a in shared))

@@ -104,13 +104,7 @@ def simulate(params, inputs, config: Config = Config(), ts=None, breaks=None) ->
     ``breaks`` = (jump times, slope-break times) of the inputs, found from ``inputs`` when they
     are concrete (:func:`input_breaks`). A failed solve is reported in ``status``, never raised.
     """
-    if ts is None:
-        ts = config.save_grid()
-    _check_times(ts, config)
-    if breaks is None:
-        breaks = input_breaks(inputs, config)
-    jump_ts, step_ts = breaks
-    return _solve(as_arrays(params), as_arrays(inputs), config, jnp.asarray(ts, float), jump_ts, step_ts)
+    return _solve(*_arguments(params, inputs, config, ts, breaks))
 
 
 def simulate_members(params, inputs, config: Config = Config(), ts=None, breaks=None) -> Trajectory:
@@ -121,13 +115,17 @@ def simulate_members(params, inputs, config: Config = Config(), ts=None, breaks=
     Equal to ``jax.vmap(simulate, in_axes=(0, None))``, and quicker to compile in the fast configuration (its
     one-member program is never traced). Not differentiable: differentiate ``jax.vmap(simulate)``.
     """
+    return _solve_members(*_arguments(params, inputs, config, ts, breaks))
+
+
+def _arguments(params, inputs, config: Config, ts, breaks):
+    """(params, inputs, config, ts, jump times, slope-break times) of a solve: the save grid checked (default
+    ``config.save_grid()``), the inputs' breaks found unless given, Python numbers as arrays."""
     if ts is None:
         ts = config.save_grid()
     _check_times(ts, config)
-    if breaks is None:
-        breaks = input_breaks(inputs, config)
-    jump_ts, step_ts = breaks
-    return _solve_members(as_arrays(params), as_arrays(inputs), config, jnp.asarray(ts, float), jump_ts, step_ts)
+    jump_ts, step_ts = input_breaks(inputs, config) if breaks is None else breaks
+    return as_arrays(params), as_arrays(inputs), config, jnp.asarray(ts, float), jump_ts, step_ts
 
 
 def _check_times(ts, config: Config):
