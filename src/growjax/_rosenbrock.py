@@ -271,27 +271,20 @@ def _inverse_batch(m):
     return jnp.moveaxis(jnp.stack([r[n:] for r in rows]), -1, 0)
 
 
-def _spectral_radius_last(m, squarings: int = 3):
-    """:func:`_spectral_radius` of a batch of matrices with the batch axis last (n, n, B) → (B,)."""
-    log_scale = 0.0
-    for _ in range(squarings):
-        norm = jnp.maximum(_row_sums_max(m), 1e-300)
-        m = m / norm
-        log_scale = 2.0 * (log_scale + jnp.log(norm))
-        m = _product_last(m, m)
-    return jnp.exp((log_scale + jnp.log(jnp.maximum(_row_sums_max(m), 1e-300))) / 2**squarings)
-
-
 def _variation(w_inv, dw):
     """Spectral radius of W₀⁻¹ (W₀ − W₁) for W₀⁻¹ = ``w_inv`` and W₀ − W₁ = ``dw`` (n, n): its ∞-norm, refined by
     :func:`_spectral_radius` where that bound exceeds 1 (a step is rejected above 1)."""
     change = w_inv @ dw
-    bound = jnp.max(jnp.sum(jnp.abs(change), axis=1))
+    bound = _norm_inf(change)
     return jax.lax.cond(bound > 1.0, _spectral_radius, lambda m: bound, change)
 
 
-def _broadcast_unbatched(axis_size, in_batched, *args):
-    return [x if b else jnp.broadcast_to(x, (axis_size,) + jnp.shape(x)) for x, b in zip(args, in_batched)]
+def spread(args, in_batched, axis_size: int):
+    """``custom_vmap`` arguments (a tuple of pytrees) with the unbatched leaves broadcast to the batch's leading axis."""
+    def one(x, batched):
+        return x if batched else jnp.broadcast_to(x, (axis_size,) + jnp.shape(x))
+
+    return jax.tree_util.tree_map(one, tuple(args), tuple(in_batched))
 
 
 @jax.custom_batching.custom_vmap
@@ -302,7 +295,7 @@ def _batchable_inverse(m):
 
 @_batchable_inverse.def_vmap
 def _inverse_rule(axis_size, in_batched, m):
-    return _inverse_batch(*_broadcast_unbatched(axis_size, in_batched, m)), True
+    return _inverse_batch(*spread((m,), in_batched, axis_size)), True
 
 
 _batchable_variation = jax.custom_batching.custom_vmap(_variation)
@@ -312,22 +305,28 @@ _batchable_variation = jax.custom_batching.custom_vmap(_variation)
 def _variation_rule(axis_size, in_batched, w_inv, dw):
     """:func:`_variation` of a batch, its matrices with the batch axis last: elementwise operations instead of
     batched 6 × 6 products, and the refinement computed for every member (as a vmapped ``cond`` would)."""
-    w_inv, dw = _broadcast_unbatched(axis_size, in_batched, w_inv, dw)
+    w_inv, dw = spread((w_inv, dw), in_batched, axis_size)
     change = _product_last(jnp.moveaxis(w_inv, 0, -1), jnp.moveaxis(dw, 0, -1))
     bound = _row_sums_max(change)
-    return jnp.where(bound > 1.0, _spectral_radius_last(change), bound), True
+    return jnp.where(bound > 1.0, _spectral_radius(change, norm=_row_sums_max, product=_product_last), bound), True
 
 
-def _spectral_radius(m, squarings: int = 3):
-    """Upper estimate of the spectral radius of a square matrix: ‖m^(2^k)‖∞^(1/2^k) (k squarings, rescaled)."""
+def _norm_inf(m):
+    """‖m‖∞ of a square matrix (n, n)."""
+    return jnp.max(jnp.sum(jnp.abs(m), axis=1))
+
+
+def _spectral_radius(m, squarings: int = 3, norm=_norm_inf, product=jnp.matmul):
+    """Upper estimate of the spectral radius of a square matrix: ‖m^(2^k)‖∞^(1/2^k) (k squarings, rescaled).
+    ``norm`` and ``product`` fit the layout: a batch with its axis last passes :func:`_row_sums_max` and
+    :func:`_product_last` and gets (B,)."""
     log_scale = 0.0
     for _ in range(squarings):
-        norm = jnp.maximum(jnp.max(jnp.sum(jnp.abs(m), axis=1)), 1e-300)
-        m = m / norm
-        log_scale = 2.0 * (log_scale + jnp.log(norm))
-        m = m @ m
-    norm = jnp.maximum(jnp.max(jnp.sum(jnp.abs(m), axis=1)), 1e-300)
-    return jnp.exp((log_scale + jnp.log(norm)) / 2**squarings)
+        size = jnp.maximum(norm(m), 1e-300)
+        m = m / size
+        log_scale = 2.0 * (log_scale + jnp.log(size))
+        m = product(m, m)
+    return jnp.exp((log_scale + jnp.log(jnp.maximum(norm(m), 1e-300))) / 2**squarings)
 
 
 def integrate(

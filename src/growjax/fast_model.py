@@ -36,7 +36,7 @@ from growjax import _assembly as assembly
 from growjax import effects as fx
 from growjax import hydraulics as hy
 from growjax import xla_flags
-from growjax._rosenbrock import evaluate, integrate
+from growjax._rosenbrock import evaluate, integrate, spread
 from growjax.config import Config
 from growjax.effects import Instant, Rod
 from growjax.fluid import (
@@ -578,14 +578,6 @@ def _integrate(params, inputs, config: Config, ts, jump_ts, step_ts, directions=
     return primal, _tangent_run(run, ts, saved, block, theta_s, output_tangents), run.status, run.steps.count
 
 
-def _spread(args, in_batched, axis_size: int):
-    """``custom_vmap`` arguments with the unbatched ones broadcast to the batch's leading axis."""
-    def spread(x, batched):
-        return x if batched else jnp.broadcast_to(x, (axis_size,) + jnp.shape(x))
-
-    return jax.tree_util.tree_map(spread, tuple(args), tuple(in_batched))
-
-
 @functools.cache
 def _plain_solver(config: Config):
     """``(params, inputs, ts, jump_ts, step_ts) → (Run, status, steps)``; under ``vmap`` the members are
@@ -599,7 +591,7 @@ def _plain_solver(config: Config):
 
     @solver.def_vmap
     def together(axis_size, in_batched, *args):
-        args = _spread(args, in_batched, axis_size)
+        args = spread(args, in_batched, axis_size)
         primal, _, status, n_steps = _integrate_batch(*args[:2], config, *args[2:])
         out = (primal, status, n_steps)
         return out, jax.tree_util.tree_map(lambda _: True, out)
@@ -620,7 +612,7 @@ def _tangent_solver(config: Config):
     def merge_directions(axis_size, in_batched, params, inputs, ts, jump_ts, step_ts, d_params, d_inputs):
         args = (params, inputs, ts, jump_ts, step_ts, d_params, d_inputs)
         if any(jax.tree_util.tree_leaves(in_batched[:5])):  # the point itself is batched: members stepped together
-            args = _spread(args, in_batched, axis_size)
+            args = spread(args, in_batched, axis_size)
             out = _integrate_batch(*args[:2], config, *args[2:5], directions=args[5:])
             return out, jax.tree_util.tree_map(lambda _: True, out)
 
@@ -690,10 +682,9 @@ def solve_members(params: Parameters, inputs, config: Config, ts, jump_ts, step_
 def _members(params, inputs, config: Config, ts, jump_ts, step_ts):
     """The batched solve of :func:`solve_members`; its derivative rule refuses (no error-controlled tangents here)."""
     size = jax.tree_util.tree_leaves(params)[0].shape[0]
-    shared = (inputs, ts, jump_ts, step_ts)
-    in_batched = (jax.tree_util.tree_map(lambda _: True, params), *(jax.tree_util.tree_map(lambda _: False, a) for a in shared))
-    args = _spread((params, *shared), in_batched, size)
-    run, _, status, n_steps = _integrate_batch(*args[:2], config, *args[2:])
+    inputs_b, ts_b, jump_b, step_b = jax.tree_util.tree_map(lambda x: jnp.broadcast_to(x, (size,) + jnp.shape(x)),
+                                                            (inputs, ts, jump_ts, step_ts))
+    run, _, status, n_steps = _integrate_batch(params, inputs_b, config, ts_b, jump_b, step_b)
     return jax.vmap(_trajectory, in_axes=(0, None, None, None, 0, 0, 0))(params, inputs, config, ts, run, status, n_steps)
 
 
