@@ -332,7 +332,9 @@ def test_a_batch_inverts_and_measures_the_variation_as_single_members_do():
 def test_simulate_members_equals_the_vmapped_simulate(fidelity):
     """``simulate_members`` (one batched solve, the one-member program never traced) gives what
     ``jax.vmap(simulate)`` gives, field by field, for members that finish, stop at the pressure limit (a 10 µm
-    membrane) and fail (Y NaN); it refuses to be differentiated."""
+    membrane) and fail (Y NaN); it refuses to be differentiated. Both run the same batched solve (bitwise equal
+    here); the bounds are the solver's (1e-3 relative, 1e-4 of each field's scale, 2 % of the steps), so that two
+    compiles that round differently, and so take a step differently, cannot fail it."""
     members = [gj.replace(gj.reference(), Y=12e3, n=1.05), gj.replace(gj.reference(), t=1e-5),
                gj.replace(gj.reference(), Y=float("nan"))]
     stacked = jax.tree_util.tree_map(lambda *leaves: jnp.stack([jnp.asarray(x) for x in leaves]), *members)
@@ -345,7 +347,16 @@ def test_simulate_members_equals_the_vmapped_simulate(fidelity):
     leaves = jax.tree_util.tree_leaves_with_path(together)
     assert len(leaves) == len(jax.tree_util.tree_leaves(vmapped)) > 5
     for (path, a), b in zip(leaves, jax.tree_util.tree_leaves(vmapped)):
-        np.testing.assert_array_equal(np.asarray(a), np.asarray(b), err_msg=jax.tree_util.keystr(path))
+        a, b = np.asarray(a), np.asarray(b)
+        assert a.shape == b.shape and a.dtype == b.dtype, jax.tree_util.keystr(path)
+        name = jax.tree_util.keystr(path)
+        if np.issubdtype(a.dtype, np.floating):  # NaN where the other is NaN (past a stop, the failed member)
+            scale = np.nanmax(np.abs(b)) if np.any(np.isfinite(b)) else 0.0
+            np.testing.assert_allclose(a, b, rtol=1e-3, atol=1e-4 * scale, equal_nan=True, err_msg=name)
+        elif "n_steps" in name:
+            assert np.all(np.abs(a - b) <= 0.02 * b + 2), name
+        else:
+            np.testing.assert_array_equal(a, b, err_msg=name)
     if fidelity == "fast":
         with pytest.raises(TypeError, match="not differentiable"):
             jax.jvp(lambda y: gj.simulate_members(gj.replace(stacked, Y=y), inputs, config, ts=ts).length,
