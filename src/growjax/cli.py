@@ -174,6 +174,7 @@ def sweep_command(args) -> dict:
         "failed_reasons": failed,
         "wall_s": result.wall_s,
         "compile_s": result.compile_s,
+        "trace_lower_s": result.lower_s,
         "n_devices": result.n_devices,
         "device": str(jax.devices()[0].platform),
         "table_csv": str(out / "sweep.csv"),

@@ -101,7 +101,9 @@ class SweepResult:
         names: qualified parameter names, (d,).  values: (n, d) parameter values, SI.
         rmse: (n,) length RMSE, m (NaN where no data or failed).  final_length: (n,) m.
         status: (n,) codes, see :data:`REASONS`.  wall_s: evaluation time after compilation, s.
-        compile_s: compilation time, s.  n_devices: devices the sweep was split over.
+        compile_s: compilation time, s (tracing and lowering included).  lower_s: the part of ``compile_s`` spent
+        tracing and lowering the program to StableHLO, s; the rest is XLA's (0 where this process had compiled it).
+        n_devices: devices the sweep was split over.
     """
 
     names: tuple
@@ -112,6 +114,7 @@ class SweepResult:
     wall_s: float = float("nan")
     compile_s: float = float("nan")
     n_devices: int = 1
+    lower_s: float = float("nan")
 
     @property
     def reasons(self) -> list[str]:
@@ -275,6 +278,7 @@ def evaluate(
     key = (names, config, chunk, quick, None if window is None else tuple(window), tuple(d.id for d in mesh.devices.flat),
            str(jax.tree_util.tree_structure(dynamic)), str(jax.tree_util.tree_leaves(shapes)), _content_key(static))
     compiled = _COMPILED.get(key)
+    lower_s = 0.0
     if compiled is None:
         def members(thetas, dynamic):
             p, i, b, m = eqx.combine(dynamic, static)
@@ -289,6 +293,7 @@ def evaluate(
                               check_vma=False)
         batched = jax.jit(local, in_shardings=(sharding, replicated), out_shardings=sharding)
         lowered = batched.lower(jax.ShapeDtypeStruct((chunk, len(names)), jnp.float64, sharding=sharding), dynamic)
+        lower_s = time.perf_counter() - start
         # XLA's quicker emitters where the compile they save exceeds the slower run they give (QUICK_COMPILE_ROWS).
         compiled = xla_flags.compile_quickly(lowered) if quick else lowered.compile()
         if len(_COMPILED) >= 8:
@@ -313,7 +318,8 @@ def evaluate(
     status = np.where(valid, np.asarray(status, int), INVALID_PARAMETER)
     rmse = np.where(status == OK, rmse, np.nan)
     final = np.where(valid, final, np.nan)
-    return SweepResult(names, values, np.asarray(rmse, float), np.asarray(final, float), status, wall_s, compile_s, n_dev)
+    return SweepResult(names, values, np.asarray(rmse, float), np.asarray(final, float), status, wall_s, compile_s,
+                       n_dev, lower_s)
 
 
 def lhs_sweep(
