@@ -10,6 +10,7 @@ so the reference uses 4 devices too.)
 Marked slow; run it with ``pytest tests/test_distributed.py -m slow``.
 """
 
+import contextlib
 import json
 import os
 import socket
@@ -42,24 +43,23 @@ def _worker_env() -> dict:
 
 def _run_all(jobs: dict, tmp_path: Path) -> dict:
     """Start every job (name → argv), wait for all (killing all on a timeout); name → (rc, stderr tail)."""
-    env, procs, logs = _worker_env(), {}, {}
-    for name, argv in jobs.items():
-        logs[name] = open(tmp_path / f"{name}.log", "w")
-        procs[name] = subprocess.Popen([sys.executable, str(WORKER), *argv], stdout=logs[name],
-                                       stderr=subprocess.STDOUT, env=env, cwd=WORKER.parents[1])
-    deadline = time.monotonic() + TIMEOUT_S
-    try:
-        for proc in procs.values():
-            proc.wait(timeout=max(1.0, deadline - time.monotonic()))
-    except subprocess.TimeoutExpired:
-        pass
-    finally:
-        for proc in procs.values():
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait()
-        for fh in logs.values():
-            fh.close()
+    env, procs = _worker_env(), {}
+    with contextlib.ExitStack() as logs:
+        for name, argv in jobs.items():
+            log = logs.enter_context(open(tmp_path / f"{name}.log", "w"))
+            procs[name] = subprocess.Popen([sys.executable, str(WORKER), *argv], stdout=log,
+                                           stderr=subprocess.STDOUT, env=env, cwd=WORKER.parents[1])
+        deadline = time.monotonic() + TIMEOUT_S
+        try:
+            for proc in procs.values():
+                proc.wait(timeout=max(1.0, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            pass
+        finally:
+            for proc in procs.values():
+                if proc.poll() is None:
+                    proc.kill()
+                    proc.wait()
     return {name: (procs[name].returncode, (tmp_path / f"{name}.log").read_text()[-3000:]) for name in jobs}
 
 

@@ -623,6 +623,6 @@ def _locate_event(event, steps: Steps, occurred, y_final, iterations: int = 60):
         above = g(mid) >= 0.0
         return jnp.where(above, mid, lo), jnp.where(above, hi, mid)
 
-    lo, hi = jax.lax.fori_loop(0, iterations, bisect, jax.lax.stop_gradient((t0, t1)))
+    _lo, hi = jax.lax.fori_loop(0, iterations, bisect, jax.lax.stop_gradient((t0, t1)))
     t_cross = jnp.where(occurred, hi, t1)
     return t_cross, jnp.where(occurred, hermite(t0, t1, y0, y1, f0, f1, t_cross), y_final)

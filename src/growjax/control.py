@@ -478,7 +478,7 @@ class ClosedLoopResult(NamedTuple):
 def _pid_loop(plant: Plant, pid: LengthPID, target_ts, target_len, catheter, lim: Limits, t1: float):
     """The PID closed loop as one ``lax.scan`` over ticks of ``pid.dt`` → (ts, length, pressure, demand, status)."""
     dt = pid.dt
-    n = int(round(t1 / dt))
+    n = int(round(t1 / dt))  # noqa: RUF046 (t1 may be an array scalar)
     ticks = jnp.arange(n) * dt
     y0 = plant.initial_state()
     ref = lambda t: jnp.interp(t, target_ts, target_len)
@@ -547,7 +547,7 @@ class StepController(eqx.Module):
         if self.microsteps > 1 and not plant.microstep:
             raise ValueError("microsteps > 1 needs a plant made with microstep=True")
         dt = 1.0 / self.rate
-        sub = max(1, int(round(dt / 0.01)))
+        sub = max(1, int(round(dt / 0.01)))  # noqa: RUF046 (rate may be an array scalar)
         ticks = np.arange(0.0, t1 - 1e-9, dt)
         if self.rate > lim.max_step_rate:
             raise ValueError(f"tick rate {self.rate} Hz exceeds the motor's step rate {lim.max_step_rate} steps/s")
@@ -633,7 +633,7 @@ class MPC(eqx.Module):
                 x = jnp.clip(x + step, 0.0, hi / scale)
             return x * scale
 
-        sub = max(1, int(round(self.dt / 0.01)))
+        sub = max(1, int(round(self.dt / 0.01)))  # noqa: RUF046 (dt may be an array scalar)
 
         @jax.jit
         def seg(y, ta, ua, ub):

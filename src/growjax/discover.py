@@ -699,8 +699,8 @@ def _unit(name: str) -> str:
 def summary_text(result: DiscoveryResult) -> str:
     """A readable summary of a :class:`DiscoveryResult` for the terminal."""
     lines = [f"effect: {result.effect}" + (f" (added: {', '.join(result.effects)})" if result.effects else ""),
-             f"length RMSE {1e3 * result.rmse_before_m:.3f} mm before, {1e3 * result.rmse_after_m:.3f} mm after; "
-             f"noise σ {1e3 * result.noise_sigma_m:.3f} mm; threshold 2ΔlogL > {result.threshold:.2f}"]
+             (f"length RMSE {1e3 * result.rmse_before_m:.3f} mm before, {1e3 * result.rmse_after_m:.3f} mm after; "
+              f"noise σ {1e3 * result.noise_sigma_m:.3f} mm; threshold 2ΔlogL > {result.threshold:.2f}")]
     for name, p in result.parameters.items():
         lo, hi = p["interval_90"]
         lines.append(f"  {name} = {p['estimate']:.4g} {p['unit']} (90 %: {lo:.4g} – {hi:.4g})")

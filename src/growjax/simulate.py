@@ -15,6 +15,7 @@ from growjax.config import Config
 from growjax.trajectory import Trajectory
 
 _PAD_BLOCK = 32
+_DEFAULT_CONFIG = Config()  # Config is immutable: one default instance serves every call
 
 
 def _traced(tree) -> bool:
@@ -94,7 +95,7 @@ def sample_times(times, config: Config):
     return jnp.clip(jnp.asarray(times, float), config.t0, config.t1)
 
 
-def simulate(params, inputs, config: Config = Config(), ts=None, breaks=None) -> Trajectory:
+def simulate(params, inputs, config: Config = _DEFAULT_CONFIG, ts=None, breaks=None) -> Trajectory:
     """Simulate the robot: (parameters, inputs, configuration) → :class:`growjax.Trajectory`.
 
     Pure and usable under ``jax.jit``, ``jax.vmap``, ``jax.grad`` and ``jax.jvp`` with respect to
@@ -107,7 +108,7 @@ def simulate(params, inputs, config: Config = Config(), ts=None, breaks=None) ->
     return _solve(*_arguments(params, inputs, config, ts, breaks))
 
 
-def simulate_members(params, inputs, config: Config = Config(), ts=None, breaks=None) -> Trajectory:
+def simulate_members(params, inputs, config: Config = _DEFAULT_CONFIG, ts=None, breaks=None) -> Trajectory:
     """:func:`simulate` for a batch of parameter sets: every leaf of ``params`` with a leading axis B (e.g. made by
     ``jax.vmap`` of :func:`growjax.replace`), the inputs, ``ts`` and ``breaks`` shared. → a
     :class:`growjax.Trajectory` whose fields have a leading axis B.
