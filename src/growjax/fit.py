@@ -23,6 +23,7 @@ from growjax import params as gp
 from growjax import sweep as sw
 from growjax.config import Config
 from growjax.simulate import input_breaks, sample_times, simulate
+from growjax._least_squares import levenberg_marquardt, linearise  # noqa: F401  (public through fit)
 from growjax.trajectory import OK
 
 # Multi-start boxes: the paper's investigation where it has one, else [θ/2, 2θ] around the reference.
@@ -140,101 +141,10 @@ def make_problem(base, names, inputs, config, times, length, pressure=None, wind
                    sigma_length, sigma_pressure)
 
 
-def linearise(residuals, z):
-    """(r (m,), J (m, p)) of ``residuals`` at z (p,) in one forward-mode pass: ``jax.jvp`` along the p unit
-    directions under ``vmap``, which the fast configuration merges into one solve carrying p sensitivities."""
-    p = z.shape[0]
-    r, jac_t = jax.vmap(lambda v: jax.jvp(residuals, (z,), (v,)), out_axes=(None, 0))(jnp.eye(p, dtype=z.dtype))
-    return r, jac_t.T
-
-
 @eqx.filter_jit
 def _linearised(z, problem: Problem):
     """:func:`linearise` of the problem's residuals at z: the only compiled program of a fit."""
     return linearise(problem.residuals, z)
-
-
-def levenberg_marquardt(linearised, z0, max_steps: int = 100, tol: float = 1e-6, gain_tol: float = 1e-5,
-                        max_move: float = 3.0, bounds=None, cost_resolution: float = 0.0, relative_resolution: float = 0.0,
-                        stall_steps: int = 3):
-    """Minimise ½‖r(z)‖² from z0 by Levenberg–Marquardt (Marquardt's scaling diag(JᵀJ), Nielsen's damping
-    update), driven from Python.
-
-    ``linearised(z) → (r (m,), J (m, p))``. Stops when an accepted step moves z by < tol·(1 + |z|) and the
-    cost by < tol of itself, or when a full Gauss–Newton step, ½gᵀ(JᵀJ)⁺g, would gain < ``gain_tol`` of the
-    cost (at the solver's noise floor, or a parameter drifting to the edge of its range). A step moves each
-    coordinate by at most ``max_move`` (clipped one by one); a point whose residuals or Jacobian are not
-    finite is rejected (at z0 it ends the fit, not converged). ``bounds`` = (lower (p,), upper (p,)) on z:
-    each trial point is projected into the box (a direction the data do not determine then stops at the
-    parameter's physical range instead of drifting), and a coordinate on its bound that the gradient pushes
-    outwards is held there while the others are solved for (so a fit pressed against its range converges as
-    fast as a free one). A trial point equal to the last one rejected (a step
-    clipped to ``max_move`` or to the box while the damping grows) is rejected again without evaluating it.
-    Resolution (on when ``cost_resolution`` or ``relative_resolution`` > 0): the smallest change of the cost
-    that matters, the larger of ``cost_resolution`` and ``relative_resolution`` × the cost. An adaptive
-    solver's cost carries noise (its steps move with the parameters; ~1e-4 of the cost for growjax's fast
-    configuration), and near a minimum, or along a valley the data hardly determine, trial points then
-    wander at that noise: the fit stops, converged, once ``stall_steps`` trial points in a row near the best
-    (within ten resolutions of its cost) have not lowered it by more than one resolution. A trial point far
-    above the best (a step too long, far from the minimum) neither counts nor resets the count.
-    Returns (z, cost, converged, r, J at z).
-    (optimistix's LM compiles the model's primal and tangent solves several times into one program and
-    needs tens of iterations on residuals that carry the solver's tolerance-level noise; this loop
-    compiles one program.)
-    """
-    z = np.asarray(z0, float)
-    r, jac = (np.asarray(a) for a in linearised(jnp.asarray(z)))
-    cost = 0.5 * float(r @ r)
-    if not (np.all(np.isfinite(r)) and np.all(np.isfinite(jac))):  # the model fails at the start: no descent
-        return z, np.inf, False, r, np.nan_to_num(jac, nan=0.0, posinf=0.0, neginf=0.0)
-    damping, growth = 1e-3, 2.0
-    stalled = 0  # trial points in a row near the best that did not lower it by a resolution
-    rejected = None  # the last trial point rejected
-    resolving = cost_resolution > 0.0 or relative_resolution > 0.0
-    for _ in range(max_steps):
-        jtj, g = jac.T @ jac, jac.T @ r
-        # A coordinate on its bound that the gradient pushes outwards is held there (the active set): the gain
-        # test and the step are those of the others.
-        free = np.ones(z.size, bool) if bounds is None else ~(((z <= bounds[0]) & (g > 0)) | ((z >= bounds[1]) & (g < 0)))
-        jtj_f, g_f = jtj[np.ix_(free, free)], g[free]
-        if 0.5 * float(g_f @ np.linalg.pinv(jtj_f, rcond=1e-12, hermitian=True) @ g_f) <= gain_tol * cost:
-            return z, cost, True, r, jac  # a full Gauss–Newton step would gain < gain_tol of the cost
-        scale = np.maximum(np.diag(jtj_f), 1e-12 * max(float(np.max(np.diag(jtj), initial=0.0)), 1e-300))
-        step = np.zeros_like(z)
-        step[free] = np.linalg.solve(jtj_f + damping * np.diag(scale), -g_f)
-        step = np.clip(step, -max_move, max_move)  # a coordinate running to its range's edge moves no others less
-        if bounds is not None:
-            step = np.clip(z + step, *bounds) - z
-        predicted = 0.5 * float(step[free] @ (damping * scale * step[free] - g_f))  # the linear model's promise
-        trial = z + step
-        if rejected is not None and np.array_equal(trial, rejected):
-            cost_new = np.inf  # evaluated already, and rejected: the model is deterministic
-        else:
-            r_new, jac_new = (np.asarray(a) for a in linearised(jnp.asarray(trial)))
-            ok = np.all(np.isfinite(r_new)) and np.all(np.isfinite(jac_new))
-            cost_new = 0.5 * float(r_new @ r_new) if ok else np.inf
-            resolution = max(cost_resolution, relative_resolution * cost)
-            if cost_new < cost - resolution:
-                stalled = 0
-            elif cost_new < cost + 10.0 * resolution:
-                stalled += 1
-        at_noise = resolving and stalled >= stall_steps
-        if cost_new <= cost:
-            done = np.all(np.abs(step) < tol * (1.0 + np.abs(z))) and cost - cost_new <= tol * cost
-            gain = (cost - cost_new) / max(predicted, 1e-300)
-            z, r, jac, cost = z + step, r_new, jac_new, cost_new
-            # Nielsen's update: keep the damping where the linear model predicted well, relax it slowly
-            damping = max(damping * max(1.0 / 3.0, 1.0 - (2.0 * min(gain, 1.0) - 1.0) ** 3), 1e-9)
-            growth = 2.0
-            if done or at_noise:
-                return z, cost, True, r, jac
-        else:
-            rejected = trial
-            damping *= growth
-            growth *= 2.0
-            if damping > 1e12 or at_noise:  # no descent left at the solver's resolution: a minimum
-                return z, cost, True, r, jac
-    return z, cost, False, r, jac
 
 
 def fit(
