@@ -205,6 +205,34 @@ def to_inputs(exp: Experiment, drive: str, params: Parameters, t0: float = 0.001
     )
 
 
+INTERPOLATED_SHARE = 0.9  # a record is interpolated when this share of its second differences vanish
+VERTEX_FRACTION = 1e-3  # a vertex bends the record by more than this share of its sharpest bend
+
+
+def informative_samples(values) -> np.ndarray:
+    """Which samples (T,) bool of a record ``values`` (T,) carry its information.
+
+    A record digitised at keyframes and linearly interpolated to a fixed rate is piecewise linear: its
+    second differences vanish (to rounding) between keyframes. Its interpolated samples are fixed by the
+    keyframes, so they carry nothing beyond them, and a likelihood over every sample would count each
+    keyframe many times. For such a record (at least :data:`INTERPOLATED_SHARE` of its second differences
+    below 1e-4 of the largest) the informative samples are the vertices (second difference above
+    :data:`VERTEX_FRACTION` of the largest) and the two ends; for any other record, every sample.
+    """
+    y = np.asarray(values, float)
+    keep = np.ones(y.size, bool)
+    if y.size < 5:
+        return keep
+    bend = np.abs(np.diff(y, 2))
+    top = float(np.max(bend))
+    if top == 0.0 or np.mean(bend < 1e-4 * top) < INTERPOLATED_SHARE:
+        return keep
+    keep[:] = False
+    keep[1:-1] = bend > VERTEX_FRACTION * top
+    keep[0] = keep[-1] = True
+    return keep
+
+
 def shared_experiment_dir() -> Path | None:
     """The public MAMMOBOT experiment beside the checkout (``../shared/data/mammobot``), if present."""
     here = Path(__file__).resolve()
@@ -219,6 +247,7 @@ __all__ = [
     "Experiment",
     "ExperimentError",
     "demand_steps",
+    "informative_samples",
     "read",
     "read_csv",
     "read_mat_experiment",

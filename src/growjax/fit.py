@@ -19,10 +19,13 @@ import jax.numpy as jnp
 import numpy as np
 from scipy import stats
 
+from growjax import discrepancy as dc
+from growjax import experiment
 from growjax import params as gp
 from growjax import sweep as sw
+from growjax import tolerance as tl
 from growjax.config import Config
-from growjax.simulate import input_breaks, sample_times, simulate
+from growjax.simulate import as_arrays, input_breaks, sample_times, simulate
 from growjax._least_squares import levenberg_marquardt, linearise  # noqa: F401  (public through fit)
 from growjax.trajectory import OK
 
@@ -73,6 +76,10 @@ class FitResult:
     wall_s: float
     status: str
     at_bound: tuple = ()  # parameters whose estimate ended on an edge of its physical range
+    discrepancy: dict = dataclasses.field(default_factory=dict)  # kind, amplitude_m, time_scale_s, noise_m
+    budget: dict = dataclasses.field(default_factory=dict)  # {name: {source: sd, SI}}: noise, discrepancy, tolerances
+    tolerances: dict = dataclasses.field(default_factory=dict)  # {parameter: relative sd} carried
+    samples_used: int = 0  # length samples the likelihood scored (an interpolated record: its keyframes)
 
     def summary(self) -> dict:
         return {
@@ -80,9 +87,12 @@ class FitResult:
             "rmse_length_m": self.rmse_length_m,
             "parameters": {
                 n: {"estimate": self.estimate[n], "standard_error": self.standard_error[n],
-                    "interval_90": self.interval_90[n]}
+                    "interval_90": self.interval_90[n], "budget_sd": self.budget.get(n)}
                 for n in self.names
             },
+            "discrepancy": self.discrepancy,
+            "tolerances": self.tolerances,
+            "samples_used": self.samples_used,
             "undetermined_directions": self.undetermined,
             "at_physical_bound": list(self.at_bound),
             "starts": self.starts,
@@ -137,7 +147,8 @@ def make_problem(base, names, inputs, config, times, length, pressure=None, wind
     t0, t1 = window if window is not None else (config.t0, config.t1)
     keep = (np.asarray(times) >= t0) & (np.asarray(times) <= t1)
     pick = (lambda a: None if a is None else jnp.asarray(np.asarray(a)[keep]))
-    return Problem(base, inputs, refs, pick(times), pick(length), pick(pressure), input_breaks(inputs, config), names, config,
+    # Numbers as arrays: one compiled program serves every base (a tolerance's perturbed rig included).
+    return Problem(as_arrays(base), inputs, refs, pick(times), pick(length), pick(pressure), input_breaks(inputs, config), names, config,
                    sigma_length, sigma_pressure)
 
 
@@ -163,27 +174,39 @@ def fit(
     sigma_length: float = 1e-3,
     sigma_pressure: float = 5e3,
     model_error: float | None = None,
+    discrepancy: str = "matern32",
+    tolerances: dict | None = None,
 ) -> FitResult:
     """Fit ``free`` parameters to a measured length (m) at ``times`` (s) (and ``pressure``, Pa, if given).
 
-    Starts: the ``n_starts`` best of a ``sweep_n``-point Latin hypercube over each parameter's
-    :func:`default_range` (``sweep_n=0``: one start, at the values in ``base``). Returns the best optimum
-    over the starts.
+    ``window`` = (t_start, t_end), s: only the samples inside it are scored; the model still runs from the
+    configuration's t0. Starts: the ``n_starts`` best of a ``sweep_n``-point Latin hypercube over each
+    parameter's :func:`default_range` (``sweep_n=0``: one start, at the values in ``base``).
 
-    Intervals: Gauss–Newton s²(JᵀJ)⁻¹ for the measurement noise, plus the propagated model error:
-    a smooth error δ(t) of the configuration against the reference (Gaussian process, sd
-    ``model_error`` m, squared-exponential correlation over :data:`MODEL_ERROR_TIME`) moves the
-    estimate by A δ, A = (JᵀJ)⁻¹Jᵀ, and adds A Σ_δ Aᵀ. Default: :data:`FAST_MODEL_ERROR` for the fast
-    configuration, 0 for the reference. Being correlated, this error does not shrink with more data.
+    The likelihood (:mod:`growjax.discrepancy`): ``discrepancy="matern32"`` (default) scores the length as the
+    model plus a smooth Matérn-3/2 discrepancy plus sensor noise, their amplitude, time scale and noise at
+    their posterior mode given the residuals; a record interpolated between keyframes is scored at its
+    keyframes (:func:`growjax.experiment.informative_samples`). ``"none"``: independent noise on every sample,
+    its sd from the residuals, plus the fitted configuration's own error ``model_error`` (m; default
+    :data:`FAST_MODEL_ERROR` for the fast configuration) propagated as a smooth correlated error.
+    ``tolerances`` {parameter: relative sd}: the rig's fixed parameters' uncertainty (:mod:`growjax.tolerance`;
+    None: its default budget with the discrepancy, none without). The estimate is the generalised
+    least-squares optimum under that likelihood, found by Gauss–Newton on the whitened residuals
+    (Levenberg–Marquardt) alternating with the hyperparameters' mode; the intervals are Gauss–Newton's,
+    (J̃ᵀJ̃)⁻¹ with J̃ the whitened Jacobian, and :attr:`FitResult.budget` splits each variance into noise,
+    discrepancy and each tolerance.
     """
+    if discrepancy not in dc.KINDS:
+        raise ValueError(f"discrepancy must be one of {dc.KINDS}, got {discrepancy!r}")
     base = base if base is not None else gp.reference()
     config = (config if config is not None else Config()).replace(adjoint="forward")  # Jacobians by jvp
     names = tuple(gp.resolve_name(base, n) for n in free)
     refs = np.array([float(gp.get(base, n)) for n in names])
     if np.any(refs <= 0):
         raise ValueError(f"fitted parameters must be positive, got {dict(zip(names, refs))}")
+    tol = tl.budget(base, tolerances, names, use_default=tolerances is None and discrepancy != "none")
+    window = _check_window(window, config)
     start_clock = time.perf_counter()
-
     if sweep_n < 0 or n_starts < 1:
         raise ValueError(f"sweep_n must be >= 0 and n_starts >= 1, got {sweep_n} and {n_starts}")
     if sweep_n == 0:  # no scouting sweep: start at the given values
@@ -197,63 +220,188 @@ def fit(
         if not order:
             raise RuntimeError("no start of the multi-start sweep simulated successfully")
 
-    problem = make_problem(base, names, inputs, config, times, length, pressure, window,
-                           sigma_length, sigma_pressure)
-    z0s = jnp.log(jnp.asarray(start_values[order]) / refs)
-    # One start after another through one compiled solver: under vmap every start would pay for the
-    # slowest one's iterations and for both branches of each accept/reject decision.
-    # Stop when a step moves ln θ by < 1e-6 and the cost by < 1e-6 of itself (far inside any interval), or at
-    # the solver's noise floor in the residuals (see levenberg_marquardt: tighter only burns iterations).
+    problem = make_problem(base, names, inputs, config, times, length, pressure, window, sigma_length, sigma_pressure)
+    n_len = int(problem.times.size)
+    used = (experiment.informative_samples(np.asarray(problem.length)) if discrepancy != "none"
+            else np.ones(n_len, bool))
+    likelihood = Likelihood(problem.times, jnp.asarray(used), sigma_length, n_len)
     bounds = physical_bounds(base, names, refs)
-    solved = [levenberg_marquardt(lambda z: _linearised(z, problem), z0, max_steps, LM_TOLERANCE, bounds=bounds)
-              for z0 in z0s]
+    z0s = jnp.log(jnp.asarray(start_values[order]) / refs)
+
+    def model(z):
+        return _linearised(z, problem)
+
+    # The likelihood's hyperparameters and the rig's sensitivities at the best start, then a generalised
+    # least-squares fit from every start (one after another through one compiled solver), then the
+    # hyperparameters again at the best optimum and, if they moved it, the fit once more.
+    raw = model(z0s[0])
+    if tol:
+        likelihood = likelihood.with_tolerances(_tolerance_sensitivity(problem, z0s[0], raw[0], tol), tol)
+    hyper = likelihood.estimate(raw[0], discrepancy)
+    solved = [levenberg_marquardt(lambda w: likelihood.whitened(*model(w), hyper), z0, max_steps, LM_TOLERANCE,
+                                  bounds=bounds, cost_resolution=COST_RESOLUTION) for z0 in z0s]
     zs, costs, oks = (np.asarray([s[k] for s in solved]) for k in range(3))
+    k_best = int(np.argmin(costs))
+    z, converged = np.asarray(zs[k_best]), bool(oks[k_best])
+    raw = model(jnp.asarray(z))
+    for _ in range(OUTER_STEPS):
+        hyper = likelihood.estimate(raw[0], discrepancy, hyper)
+        z_new, _, converged, _, jac_w = levenberg_marquardt(lambda w: likelihood.whitened(*model(w), hyper), z,
+                                                           max_steps, LM_TOLERANCE, bounds=bounds,
+                                                           cost_resolution=COST_RESOLUTION)
+        sd = np.sqrt(np.diag(np.linalg.pinv(jac_w.T @ jac_w, rcond=1e-10, hermitian=True)))
+        moved = np.abs(z_new - z)
+        z, raw = np.asarray(z_new), model(jnp.asarray(z_new))
+        if np.all(moved <= OUTER_TOLERANCE * sd):
+            break
+    r_w, jac_w = (np.asarray(a) for a in likelihood.whitened(*raw, hyper))
     starts = [{"start": dict(zip(names, map(float, start_values[i]))),
                "estimate": dict(zip(names, map(float, refs * np.exp(zs[k])))),
                "cost": float(costs[k]), "converged": bool(oks[k])} for k, i in enumerate(order)]
-    k_best = int(np.argmin(costs))
-    z = jnp.asarray(zs[k_best])
-    best = starts[k_best]
+    theta = refs * np.exp(z)
+    cov, parts = likelihood.covariance(np.asarray(raw[1]), jac_w, hyper)
+    if discrepancy == "none":
+        if model_error is None:
+            model_error = default_model_error(config)
+        if model_error > 0:
+            jac_m = np.asarray(raw[1])[:n_len] * sigma_length
+            parts["model_error"] = _propagated_model_error(cov, jac_m, hyper, problem.times, model_error)
+            cov = cov + parts["model_error"]
+    return _result(names, theta, z, cov, parts, jac_w, hyper, likelihood, raw, starts, converged, bounds,
+                   start_clock, int(np.sum(used)), discrepancy)
 
-    r, jac = (np.asarray(a) for a in solved[k_best][3:])
-    m, p = jac.shape
-    dof = max(m - p, 1)
-    s2 = float(np.sum(r**2) / dof)
-    jtj = jac.T @ jac
-    evals, evecs = np.linalg.eigh(jtj)
+
+# The smallest change of the whitened cost (nats) that matters: a 90 % interval spans 1.35 nats, and the
+# adaptive solver's own noise moves the cost by ~1e-3.
+COST_RESOLUTION = 1e-2
+OUTER_STEPS = 4  # alternations of the hyperparameters' mode and the GLS fit
+OUTER_TOLERANCE = 0.05  # stop once a GLS fit moves ln θ by less than this share of its sd
+
+
+class Likelihood(eqx.Module):
+    """The fit's side of :mod:`growjax.discrepancy`: residuals and Jacobians (length rows in units of
+    ``sigma_length``, pressure rows after them) weighted or whitened, and the covariance with its budget."""
+
+    times: jax.Array  # (n,) s, the scored samples
+    used: jax.Array  # (n,) bool, the samples the likelihood sees
+    sigma_length: float = eqx.field(static=True)
+    n_len: int = eqx.field(static=True)
+    sensitivity: jax.Array | None = None  # (n, q) m per unit ln ψ
+    tolerance: jax.Array | None = None  # (q,) relative sd
+    tolerance_names: tuple = eqx.field(static=True, default=())
+
+    def with_tolerances(self, sensitivity, tol: dict):
+        return Likelihood(self.times, self.used, self.sigma_length, self.n_len, jnp.asarray(sensitivity),
+                          jnp.asarray(list(tol.values())), tuple(tol))
+
+    def weighted(self, r, jac):
+        """Residuals and Jacobian with the unused length samples zeroed (independent noise of sd σ_L)."""
+        keep = jnp.concatenate([self.used, jnp.ones(r.shape[0] - self.n_len, bool)])
+        return jnp.where(keep, r, 0.0), jnp.where(keep[:, None], jac, 0.0)
+
+    def whitened(self, r, jac, hyper):
+        return _whitened(self, r, jac, hyper)
+
+    def estimate(self, r, kind, start=None):
+        return dc.estimate(np.asarray(r)[: self.n_len] * self.sigma_length, self.times, kind, self.sensitivity,
+                           self.tolerance, self.used, start)
+
+    def covariance(self, jac, jac_w, hyper):
+        """Covariance (p, p) of z = ln θ, (J̃ᵀJ̃)⁻¹, and its parts {source: (p, p)} (noise, discrepancy, each
+        tolerance, pressure noise), which add up to it."""
+        cov = np.linalg.pinv(jac_w.T @ jac_w, rcond=1e-10, hermitian=True)
+        used = np.asarray(self.used)
+        t = np.asarray(self.times)[used]
+        j_len = jac[: self.n_len][used] * self.sigma_length  # m per unit z
+        kernels = {"noise": float(hyper.noise) ** 2 * np.eye(t.size)}
+        if float(hyper.amplitude) > 0:
+            kernels["discrepancy"] = dc.kernel(t, hyper)
+        if self.sensitivity is not None:
+            g = np.asarray(self.sensitivity)[used]
+            for j, name in enumerate(self.tolerance_names):
+                kernels[name] = float(self.tolerance[j]) ** 2 * np.outer(g[:, j], g[:, j])
+        total = sum(kernels.values())
+        a = cov @ np.linalg.solve(total, j_len).T  # (p, n): ln θ per metre of residual
+        parts = {k: a @ kern @ a.T for k, kern in kernels.items()}
+        if jac.shape[0] > self.n_len:
+            j_p = jac[self.n_len:]
+            parts["pressure_noise"] = cov @ j_p.T @ j_p @ cov
+        return cov, parts
+
+
+@eqx.filter_jit
+def _whitened(likelihood: Likelihood, r, jac, hyper):
+    n, scale = likelihood.n_len, likelihood.sigma_length
+    cols = jnp.concatenate([r[:n, None], jac[:n]], axis=1) * scale
+    w = dc.whiten(cols, likelihood.times, hyper, likelihood.sensitivity, likelihood.tolerance, likelihood.used)
+    return jnp.concatenate([w[:, 0], r[n:]]), jnp.concatenate([w[:, 1:], jac[n:]], axis=0)
+
+
+def _tolerance_sensitivity(problem: Problem, z, r0, tol: dict) -> np.ndarray:
+    """g (n, q): the length's change, m, per unit ln ψ of each toleranced parameter: the secant from ψ to ψ·e^u, u
+    its tolerance (through the fit's own compiled program, the base being one of its leaves; ``r0`` (n,) the
+    residuals at z, in units of σ_L)."""
+    n = problem.times.size
+    cols = []
+    for name, u in tol.items():
+        value = gp.get(problem.base, name)
+        shifted = eqx.tree_at(lambda pr: pr.base, problem, gp.replace(problem.base, **{name: value * np.exp(u)}))
+        r1 = np.asarray(_linearised(jnp.asarray(z), shifted)[0])[:n]
+        cols.append((r1 - np.asarray(r0)[:n]) * problem.sigma_length / u)
+    return np.stack(cols, axis=1)
+
+
+def _propagated_model_error(cov, jac_m, hyper, times, model_error) -> np.ndarray:
+    """The fitted configuration's smooth error against the reference (sd ``model_error`` m, squared-exponential
+    over :data:`MODEL_ERROR_TIME`) moved through the independent-noise estimator: A Σ Aᵀ, A = C Jᵀ/σ²
+    (``jac_m`` (n, p): m per unit ln θ; σ the noise sd, m)."""
+    t = np.asarray(times)
+    sigma_delta = model_error**2 * np.exp(-0.5 * ((t[:, None] - t[None, :]) / MODEL_ERROR_TIME) ** 2)
+    a = cov @ jac_m.T / float(hyper.noise) ** 2
+    return a @ sigma_delta @ a.T
+
+
+def _check_window(window, config: Config):
+    """(t_start, t_end) s inside the configuration's span, or None; ValueError naming the problem."""
+    if window is None:
+        return None
+    t0, t1 = (float(w) for w in window)
+    if not (np.isfinite(t0) and np.isfinite(t1)) or t0 >= t1:
+        raise ValueError(f"window must be (t_start, t_end) with t_start < t_end, got {window}")
+    if t1 < config.t0 or t0 > config.t1:
+        raise ValueError(f"window {window} s lies outside the simulated span [{config.t0}, {config.t1}] s")
+    return t0, t1
+
+
+def _result(names, theta, z, cov, parts, jac_w, hyper, likelihood, raw, starts, converged, bounds, start_clock,
+            samples_used, kind) -> FitResult:
+    p = len(names)
+    evals, evecs = np.linalg.eigh(jac_w.T @ jac_w)
     tol = 1e-10 * max(float(evals[-1]), 1e-300)
-    cov = s2 * np.linalg.pinv(jtj, rcond=1e-10, hermitian=True)
-    theta = refs * np.exp(np.asarray(z))
-    undetermined = [
-        {"eigenvalue": float(evals[k]), "direction": dict(zip(names, map(float, evecs[:, k])))}
-        for k in range(p) if evals[k] < tol
-    ]
+    undetermined = [{"eigenvalue": float(evals[k]), "direction": dict(zip(names, map(float, evecs[:, k])))}
+                    for k in range(p) if evals[k] < tol]
     blind = np.zeros(p, bool)
     for k in range(p):
         if evals[k] < tol:
             blind |= np.abs(evecs[:, k]) > 0.1
-    if model_error is None:
-        model_error = default_model_error(config)
-    if model_error > 0:
-        t_fit = np.asarray(problem.times)
-        n_fit = t_fit.size
-        gap = t_fit[:, None] - t_fit[None, :]
-        sigma_delta = (model_error / sigma_length) ** 2 * np.exp(-0.5 * (gap / MODEL_ERROR_TIME) ** 2)
-        a = np.linalg.pinv(jtj, rcond=1e-10, hermitian=True) @ jac[:n_fit].T  # (p, n) on the length rows
-        cov = cov + a @ sigma_delta @ a.T
     sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     interval = {n: (None if blind[i] else (float(theta[i] * np.exp(-Z90 * sd[i])), float(theta[i] * np.exp(Z90 * sd[i]))))
                 for i, n in enumerate(names)}
     se = {n: (None if blind[i] else float(theta[i] * sd[i])) for i, n in enumerate(names)}
-    n_len = int(np.sum((np.asarray(times) >= (window or (config.t0, config.t1))[0])
-                       & (np.asarray(times) <= (window or (config.t0, config.t1))[1])))
-    rmse = float(np.sqrt(np.mean((r[:n_len] * sigma_length) ** 2)))
+    budget = {n: {k: float(theta[i] * np.sqrt(max(part[i, i], 0.0))) for k, part in parts.items()}
+              for i, n in enumerate(names)}
+    r_len = np.asarray(raw[0])[: likelihood.n_len] * likelihood.sigma_length
+    best = min(starts, key=lambda s: s["cost"])
     return FitResult(
         names=names, estimate=dict(zip(names, map(float, theta))), interval_90=interval, standard_error=se,
-        rmse_length_m=rmse, cost=float(best["cost"]), covariance_log=cov, eigenvalues=evals, eigenvectors=evecs,
-        undetermined=undetermined, starts=starts, wall_s=time.perf_counter() - start_clock,
-        status="converged" if best["converged"] else "max_steps",
-        at_bound=tuple(n for n, zi, lo, hi in zip(names, np.asarray(z), *bounds) if min(zi - lo, hi - zi) < 1e-9),
+        rmse_length_m=float(np.sqrt(np.mean(r_len**2))), cost=float(best["cost"]), covariance_log=cov,
+        eigenvalues=evals, eigenvectors=evecs, undetermined=undetermined, starts=starts,
+        wall_s=time.perf_counter() - start_clock, status="converged" if converged else "max_steps",
+        at_bound=tuple(n for n, zi, lo, hi in zip(names, z, *bounds) if min(zi - lo, hi - zi) < 1e-9),
+        discrepancy={"kind": kind, **hyper.as_dict()}, budget=budget,
+        tolerances=dict(zip(likelihood.tolerance_names, map(float, np.asarray(likelihood.tolerance))))
+        if likelihood.tolerance is not None else {},
+        samples_used=samples_used,
     )
 
 

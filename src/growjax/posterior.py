@@ -29,11 +29,14 @@ import numpyro
 import numpyro.distributions as dist
 import optimistix as optx
 
+from growjax import discrepancy as dc
 from growjax import emulator as em
+from growjax import experiment
 from growjax import params as gp
 from growjax.config import Config
 from growjax.emulator import predicted_length, sample_times
-from growjax.simulate import input_breaks, length_jacobian
+from growjax import tolerance as tl
+from growjax.simulate import as_arrays, input_breaks, length_jacobian
 from growjax.trajectory import OK
 
 
@@ -192,13 +195,19 @@ def lockhart_priors() -> tuple[Prior, ...]:
     )
 
 
-def growth_model(length=None, *, mean_length, priors: Sequence[Prior], noise_scale=1e-3, model_error=0.0):
+def growth_model(length=None, *, mean_length, priors: Sequence[Prior], noise_scale=1e-3, model_error=0.0,
+                 residuals: Residuals | None = None):
     """NumPyro model of the measured length (m)::
 
-        θ_j ~ prior_j,   σ ~ HalfNormal(noise_scale),   L_i ~ Normal(L_model(t_i; θ), √(σ² + e²))
+        θ_j ~ prior_j,   σ ~ HalfNormal(noise_scale),
+        a ~ HalfNormal(2 mm),   ℓ ~ LogNormal(ln 1 s, 1)                       (with a discrepancy)
+        L_obs = L_model(t; θ) + δ(t) + Σ_k g_k(t) b_k + ε,   δ ~ GP(0, Matérn-3/2(a, ℓ)),
+        b_k ~ N(0, u_k²),   ε_i ~ N(0, σ² + e²)
 
     ``mean_length(theta)`` is the model (or its emulator) at the measured times; ``e`` (m) is the
-    emulator's RMS error (0 for the model itself). A failed solve has zero likelihood.
+    emulator's RMS error (0 for the model itself). ``residuals`` (:class:`Residuals`) sets the discrepancy,
+    the rig's tolerances and the samples scored; None: independent noise, every sample (δ and b absent).
+    δ and b are marginalised exactly (:mod:`growjax.discrepancy`). A failed solve has zero likelihood.
     """
     theta = {}
     for p in priors:
@@ -209,7 +218,43 @@ def growth_model(length=None, *, mean_length, priors: Sequence[Prior], noise_sca
     numpyro.factor("solver_ok", jnp.where(ok, 0.0, -jnp.inf))
     numpyro.deterministic("length_model", mu)
     scale = jnp.sqrt(sigma**2 + model_error**2)
-    numpyro.sample("length", dist.Normal(jnp.where(jnp.isfinite(mu), mu, 0.0), scale), obs=length)
+    mu = jnp.where(jnp.isfinite(mu), mu, 0.0)
+    if residuals is None:
+        numpyro.sample("length", dist.Normal(mu, scale), obs=length)
+        return
+    if residuals.discrepancy == "matern32":
+        amplitude = numpyro.sample("delta_amplitude", dist.HalfNormal(dc.AMPLITUDE_SCALE))
+        time_scale = numpyro.sample("delta_time_scale",
+                                    dist.LogNormal(np.log(dc.TIME_SCALE_MEDIAN), dc.TIME_SCALE_LOG_SD))
+    else:
+        amplitude, time_scale = jnp.zeros(()), jnp.ones(())
+    hyper = dc.Hyper(amplitude, time_scale, scale)
+    numpyro.sample("length", residuals.distribution(mu, hyper), obs=length)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Residuals:
+    """What the likelihood of :func:`growth_model` holds besides the model: the discrepancy (``"matern32"`` or
+    ``"none"``), the sample times (n,) s, the samples scored (n,) bool, and the rig's tolerances: sensitivities
+    (n, q) m per unit ln ψ, relative sds (q,), names."""
+
+    discrepancy: str
+    times: np.ndarray
+    observed: np.ndarray
+    sensitivity: np.ndarray | None = None
+    tolerance: np.ndarray | None = None
+    tolerance_names: tuple = ()
+
+    def distribution(self, mu, hyper):
+        g = None if self.sensitivity is None else jnp.asarray(self.sensitivity)
+        u = None if self.tolerance is None else jnp.asarray(self.tolerance)
+        return dc.distribution(mu, jnp.asarray(self.times), hyper, g, u, jnp.asarray(self.observed))
+
+    def hyper_sites(self, hyper: dc.Hyper) -> dict:
+        """Start values {site: value} of the hyperparameters' sites."""
+        if self.discrepancy != "matern32":
+            return {}
+        return {"delta_amplitude": max(float(hyper.amplitude), 1e-7), "delta_time_scale": float(hyper.time_scale)}
 
 
 class DirectMean:
@@ -263,6 +308,8 @@ class PosteriorResult:
     idata: object
     summary: dict
     wall_s: float
+    residuals: Residuals | None = None  # the likelihood's discrepancy, samples and tolerances (None: independent)
+    data: tuple = ()  # (times (n,) s, length (n,) m) the posterior was fitted on
 
 
 def _window(times, length, config, window):
@@ -289,6 +336,8 @@ def sample(
     emulate: bool | em.Emulator = False,
     max_tree_depth: int = 10,
     chain_method: str | None = None,
+    discrepancy: str = "matern32",
+    tolerances: dict | None = None,
 ) -> PosteriorResult:
     """NUTS over the priors and σ given a measured length (m) at ``times`` (s).
 
@@ -301,6 +350,10 @@ def sample(
     when there are as many devices as chains, else ``"sequential"``: the vmapped forward-mode solve
     (members stepped together) costs what the chains cost one after another, and the chains' trees, built
     in lockstep, would wait for the deepest (`benchmarks/nuts_direct.py` measures both).
+
+    ``discrepancy`` and ``tolerances``: the likelihood, as in :func:`growjax.fit.fit` (:func:`growth_model`): the
+    discrepancy's amplitude and time scale are sampled with the parameters; the rig's tolerances enter through
+    the length's sensitivities at the start point (linearised), marginalised exactly.
 
     Returns InferenceData with posterior, pointwise log-likelihood (for LOO), posterior
     predictive of the length, observed data and sample stats, and a summary: per-parameter
@@ -332,9 +385,22 @@ def sample(
     def make_model(mean_length, priors=priors):
         return functools.partial(growth_model, mean_length=mean_length, priors=priors, model_error=model_error)
 
+    if discrepancy not in dc.KINDS:
+        raise ValueError(f"discrepancy must be one of {dc.KINDS}, got {discrepancy!r}")
+    residuals, extra_init = None, {}
+    tol = tl.budget(base, tolerances, [p.name for p in priors], use_default=tolerances is None and discrepancy != "none")
+    if discrepancy != "none" or tol:
+        residuals, hyper = build_residuals(discrepancy, t, y, mean, priors, base, inputs, config, tol, seed)
+        extra_init = {**residuals.hyper_sites(hyper), "sigma": float(hyper.noise)}
+
+    def make_model(mean_length, priors=priors):
+        return functools.partial(growth_model, mean_length=mean_length, priors=priors, model_error=model_error,
+                                 residuals=residuals)
+
     start_precondition = time.perf_counter()
     init_values, inverse_mass = precondition(make_model(mean), priors, mean, y, seed, optimise=emulate is not False,
-                                             make_model=make_model if emulate is False else None)
+                                             make_model=make_model if emulate is False else None,
+                                             extra_init=extra_init)
     sampled = priors
     if emulate is False:
         sampled, init_values, inverse_mass = bound_start(make_model, priors, mean, y, init_values, inverse_mass)
@@ -350,38 +416,110 @@ def sample(
                 progress_bar=progress)
     mcmc.run(jax.random.PRNGKey(seed), jnp.asarray(y), extra_fields=("diverging", "energy", "num_steps"))
     post = mcmc.get_samples(group_by_chain=True)
-    loglik, predicted = observation_draws(post["length_model"], post["sigma"], model_error, y, seed + 1)
+    loglik, predicted = observation_draws(post["length_model"], post["sigma"], model_error, y, seed + 1, residuals,
+                                          post.get("delta_amplitude"), post.get("delta_time_scale"))
     idata = az.from_numpyro(mcmc, log_likelihood=False, posterior_predictive={"length": predicted})
     idata.add_groups(log_likelihood={"length": loglik})
     wall = time.perf_counter() - start
-    summary = diagnostics(idata, priors, y, mcmc)
+    summary = diagnostics(idata, priors, y, mcmc, residuals)
     summary["wall_s"] = wall
     summary["emulator"] = emu_info
     summary["laplace_s"] = precondition_s if emulate is False else None
     summary["chain_method"] = mcmc.chain_method
     summary["coordinates"] = {p.site: coordinate(p) for p in sampled}
     summary["chains"], summary["warmup"], summary["samples"] = chains, warmup, samples
-    return PosteriorResult(idata, summary, wall)
+    summary["discrepancy"] = discrepancy
+    summary["tolerances"] = dict(zip(residuals.tolerance_names, map(float, residuals.tolerance))) if (
+        residuals is not None and residuals.tolerance is not None) else {}
+    summary["samples_used"] = int(np.sum(residuals.observed)) if residuals is not None else int(y.size)
+    return PosteriorResult(idata, summary, wall, residuals, (t, y))
 
 
-def observation_draws(mean_length, sigma, model_error: float, observed, seed: int):
+def _scout(priors, mean_length, length, seed: int, n_scout: int = 64):
+    """The best θ {name: value} of a seeded Latin hypercube over the priors, and its RMSE (m)."""
+    from scipy.stats import qmc
+
+    unit = qmc.LatinHypercube(d=len(priors), seed=seed).random(n_scout)
+    cols = {}
+    for k, p in enumerate(priors):
+        u = unit[:, k]
+        cols[p.name] = np.exp(np.log(p.low) + u * np.log(p.high / p.low)) if p.log else p.low + u * (p.high - p.low)
+    mu = np.asarray(jax.jit(jax.vmap(mean_length))({n: jnp.asarray(v) for n, v in cols.items()}))
+    rmse = np.sqrt(np.nanmean((mu - np.asarray(length)) ** 2, axis=1))
+    rmse = np.where(np.all(np.isfinite(mu), axis=1), rmse, np.inf)
+    best = int(np.argmin(rmse))
+    if not np.isfinite(rmse[best]):
+        raise RuntimeError("no point of the preconditioning scout simulated successfully")
+    return {p.name: float(cols[p.name][best]) for p in priors}, float(rmse[best]), best, cols
+
+
+def tolerance_sensitivity(theta: dict, base, inputs, config, times, tol: dict) -> np.ndarray:
+    """g (n, q): the model's length change (m) at ``times`` per unit ln ψ of each toleranced parameter, the secant
+    from ψ to ψ·e^u at θ (one compiled run of the model, the rig as its argument)."""
+    times = jnp.asarray(times)
+    run = jax.jit(lambda b: predicted_length(theta, b, inputs, config, times))
+    base = as_arrays(base)
+    l0 = np.asarray(run(base))
+    cols = [(np.asarray(run(gp.replace(base, **{n: gp.get(base, n) * np.exp(u)}))) - l0) / u for n, u in tol.items()]
+    g = np.stack(cols, axis=1)
+    if not np.all(np.isfinite(g)):
+        raise RuntimeError("the model failed while measuring the rig's tolerance sensitivities")
+    return g
+
+
+def build_residuals(discrepancy: str, times, length, mean_length, priors, base, inputs, config, tol: dict,
+                    seed: int = 0) -> tuple[Residuals, dc.Hyper]:
+    """The :class:`Residuals` of a posterior and its hyperparameters' start: the samples scored
+    (:func:`growjax.experiment.informative_samples` with a discrepancy), the rig's sensitivities at the scout's
+    best θ, and the hyperparameters' mode given the residuals there."""
+    theta, _, _, _ = _scout(priors, mean_length, length, seed)
+    observed = experiment.informative_samples(length) if discrepancy != "none" else np.ones(len(length), bool)
+    g = u = None
+    if tol:
+        g = tolerance_sensitivity(theta, base, inputs, config, times, tol)
+        u = np.asarray(list(tol.values()))
+    r = np.asarray(length) - np.asarray(jax.jit(mean_length)({k: jnp.asarray(v) for k, v in theta.items()}))
+    hyper = dc.estimate(r, times, discrepancy, g, u, observed)
+    return Residuals(discrepancy, np.asarray(times), observed, g, u, tuple(tol)), hyper
+
+
+def observation_draws(mean_length, sigma, model_error: float, observed, seed: int, residuals: Residuals | None = None,
+                      amplitude=None, time_scale=None):
     """Pointwise log-likelihood and posterior predictive length (m), both (C, S, T), of every draw.
 
     ``mean_length`` (C, S, T): the model's length (m) at each draw, which :func:`growth_model` records as
     ``length_model`` while NUTS samples; ``sigma`` (C, S): the noise scale (m); ``model_error`` (m) joins it as in
-    the model. Nothing is simulated again: NumPyro's ``Predictive`` and ArviZ's log-likelihood would each run
-    the model once more per draw (through the model, ~70 s each for 4 × 500 draws on two cores). The
-    predictive noise is drawn from NumPy's generator seeded with ``seed``.
+    the model; ``residuals``, ``amplitude`` and ``time_scale`` (C, S): the discrepancy and tolerances, if any. The
+    pointwise terms are then the one-step-ahead log-densities log p(yᵢ | earlier y) (0 at samples not scored),
+    and a predictive draw carries a fresh discrepancy and rig error. Nothing is simulated again: NumPyro's
+    ``Predictive`` and ArviZ's log-likelihood would each run the model once more per draw. Seeded by ``seed``.
     """
     from scipy.stats import norm
 
     mean_length = np.asarray(mean_length, float)
-    scale = np.sqrt(np.asarray(sigma, float) ** 2 + model_error**2)[..., None]
+    scale = np.sqrt(np.asarray(sigma, float) ** 2 + model_error**2)
     finite = np.isfinite(mean_length)
-    loglik = np.where(finite, norm.logpdf(np.asarray(observed, float), np.where(finite, mean_length, 0.0), scale),
-                      -np.inf)
-    noise = np.random.default_rng(seed).standard_normal(mean_length.shape)
-    return loglik, mean_length + scale * noise
+    if residuals is None:
+        loglik = np.where(finite, norm.logpdf(np.asarray(observed, float), np.where(finite, mean_length, 0.0),
+                                              scale[..., None]), -np.inf)
+        noise = np.random.default_rng(seed).standard_normal(mean_length.shape)
+        return loglik, mean_length + scale[..., None] * noise
+    shape = mean_length.shape
+    mu = np.where(finite, mean_length, 0.0).reshape(-1, shape[-1])
+    ones = np.ones(shape[:-1])
+    amp = np.zeros(shape[:-1]) if amplitude is None else np.asarray(amplitude, float)
+    ell = ones if time_scale is None else np.asarray(time_scale, float)
+    hyper = dc.Hyper(jnp.asarray(amp.ravel()), jnp.asarray(ell.ravel()), jnp.asarray(scale.ravel()))
+    y = jnp.asarray(observed, float)
+
+    def one(m, h, key):
+        d = residuals.distribution(m, h)
+        return d.pointwise(y), d.sample(key)
+
+    keys = jax.random.split(jax.random.PRNGKey(seed), mu.shape[0])
+    loglik, predicted = jax.jit(jax.vmap(one))(jnp.asarray(mu), hyper, keys)
+    loglik = np.where(np.all(finite, axis=-1, keepdims=True), np.asarray(loglik).reshape(shape), -np.inf)
+    return loglik, np.asarray(predicted).reshape(shape)
 
 
 def bound_start(make_model, priors, mean_length, length, mode: dict, inverse_mass):
@@ -401,13 +539,14 @@ def bound_start(make_model, priors, mean_length, length, mode: dict, inverse_mas
         return tuple(priors), mode, inverse_mass
     start = {("u_" + p.site if isinstance(p, SoftplusPrior) else p.site):
              (p.start() if isinstance(p, SoftplusPrior) else mode[p.site]) for p in sampled}
-    start["sigma"] = mode["sigma"]
+    start.update({k: v for k, v in mode.items() if k not in {p.site for p in priors}})  # σ and the discrepancy's
     start, hess = laplace_unconstrained(lambda m: make_model(m, sampled), sampled, mean_length, length, start)
     ridged = ridge_coordinates(sampled, start, hess)
     if ridged == sampled:
         return sampled, start, jnp.asarray(_inverse_floored(hess))
     start = {**{"u_" + p.site: start["u_" + p.site] for p in ridged if isinstance(p, SoftplusPrior)},
-             **{"v_" + p.site: 0.0 for p in ridged if isinstance(p, RidgePrior)}, "sigma": start["sigma"]}
+             **{"v_" + p.site: 0.0 for p in ridged if isinstance(p, RidgePrior)},
+             **{k: v for k, v in start.items() if not k.startswith("u_") and k not in {p.site for p in sampled}}}
     start, hess = laplace_unconstrained(lambda m: make_model(m, ridged), ridged, mean_length, length, start)
     return ridged, start, jnp.asarray(_inverse_floored(hess))
 
@@ -448,7 +587,7 @@ def _chain_method(chains: int, emulated: bool) -> str:
 
 
 def precondition(model, priors, mean_length, length, seed=0, n_scout: int = 64, optimise: bool = True,
-                 make_model=None):
+                 make_model=None, extra_init: dict | None = None):
     """Start point and inverse mass matrix for NUTS.
 
     The data fix Y to ~0.2 % of its prior width while ext and n stay at their priors, a
@@ -464,21 +603,11 @@ def precondition(model, priors, mean_length, length, seed=0, n_scout: int = 64, 
     """
     from jax.flatten_util import ravel_pytree
     from numpyro.infer.util import initialize_model
-    from scipy.stats import qmc
 
-    unit = qmc.LatinHypercube(d=len(priors), seed=seed).random(n_scout)
-    cols = {}
-    for k, p in enumerate(priors):
-        u = unit[:, k]
-        cols[p.name] = np.exp(np.log(p.low) + u * np.log(p.high / p.low)) if p.log else p.low + u * (p.high - p.low)
-    mu = np.asarray(jax.jit(jax.vmap(mean_length))({n: jnp.asarray(v) for n, v in cols.items()}))
-    rmse = np.sqrt(np.nanmean((mu - np.asarray(length)) ** 2, axis=1))
-    rmse = np.where(np.all(np.isfinite(mu), axis=1), rmse, np.inf)
-    best = int(np.argmin(rmse))
-    if not np.isfinite(rmse[best]):
-        raise RuntimeError("no point of the preconditioning scout simulated successfully")
-    init = {p.site: float(cols[p.name][best]) for p in priors}
-    init["sigma"] = max(float(rmse[best]), 1e-6)
+    best_theta, rmse, _, _ = _scout(priors, mean_length, length, seed, n_scout)
+    init = {p.site: best_theta[p.name] for p in priors}
+    init["sigma"] = max(rmse, 1e-6)
+    init.update(extra_init or {})
     if make_model is not None:
         init, hess = laplace_unconstrained(make_model, priors, mean_length, length, init)
         return init, jnp.asarray(_inverse_floored(hess))
@@ -658,11 +787,13 @@ def predictive_band(draws, level: float = 0.9):
     return np.nanquantile(draws, a, axis=0), np.nanquantile(draws, 1.0 - a, axis=0)
 
 
-def diagnostics(idata, priors, observed, mcmc=None) -> dict:
-    """Posterior means and 90 % intervals, R-hat, ESS, divergences, BFMI and predictive coverage."""
+def diagnostics(idata, priors, observed, mcmc=None, residuals: Residuals | None = None) -> dict:
+    """Posterior means and 90 % intervals, R-hat, ESS, divergences, BFMI and predictive coverage (the share of
+    the measured samples inside the pointwise 90 % band of replicated data)."""
     import arviz as az
 
     sites = [p.site for p in priors] + ["sigma"]
+    sites += [s for s in ("delta_amplitude", "delta_time_scale") if s in idata.posterior]
     rhat = az.rhat(idata, var_names=sites)
     ess_bulk = az.ess(idata, var_names=sites, method="bulk")
     ess_tail = az.ess(idata, var_names=sites, method="tail")

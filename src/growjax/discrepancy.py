@@ -1,0 +1,271 @@
+"""The residual model shared by every likelihood: a smooth model discrepancy, sensor noise and rig tolerances.
+
+The measured length is written
+
+    y(tᵢ) = L(tᵢ; θ) + δ(tᵢ) + Σⱼ gⱼ(tᵢ) bⱼ + εᵢ,
+
+with L the simulated length, δ a zero-mean Gaussian process in time (Matérn ν = 3/2, amplitude ``a`` m,
+time scale ``ℓ`` s), εᵢ independent sensor noise (sd ``σ`` m), and the last sum the linearised effect of
+the fixed rig parameters held at their nominal values: bⱼ ~ N(0, uⱼ²) is parameter j's relative error
+(its tolerance uⱼ) and gⱼ(t) = ∂L/∂ln ψⱼ the length's sensitivity to it.
+
+A Matérn-3/2 process is the output of a two-state linear SDE, so this covariance is that of a linear
+Gaussian state-space model: a Kalman filter (:func:`kalman_filter`, a ``lax.scan``) gives the exact likelihood
+in O(n) for any (also irregular) sampling, the whitened residuals for Gauss–Newton, forecasts and
+draws. The tolerance terms are static states of the same filter.
+
+Shapes: ``times`` (n,) s, sorted; residuals (n,) or (n, k) m (k columns share one filter: a residual and its
+Jacobian's columns are whitened together); ``sensitivity`` (n, q) m, or None.
+"""
+
+from __future__ import annotations
+
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import numpyro.distributions as _dist
+
+KINDS = ("matern32", "none")
+
+# Priors of the hyperparameters (fit: MAP; posterior: marginalised). See the docs' "Uncertainty" page.
+AMPLITUDE_SCALE = 2e-3  # m, half-normal scale of a: model errors up to a few mm on a robot of 10–60 mm
+TIME_SCALE_MEDIAN = 1.0  # s, log-normal median of ℓ: the drive's pulse period (1.3 s) to the whole run
+TIME_SCALE_LOG_SD = 1.0  # 90 % of the prior's mass on 0.19–5.2 s
+NOISE_SCALE = 1e-3  # m, half-normal scale of σ
+
+
+class Hyper(eqx.Module):
+    """Hyperparameters of the residual model: discrepancy amplitude ``a`` (m), time scale ``ell`` (s), noise
+    ``sigma`` (m). ``a = 0`` is independent noise alone."""
+
+    amplitude: jax.Array
+    time_scale: jax.Array
+    noise: jax.Array
+
+    @classmethod
+    def of(cls, amplitude, time_scale, noise) -> Hyper:
+        f = lambda x: jnp.asarray(x, float)  # noqa: E731
+        return cls(f(amplitude), f(time_scale), f(noise))
+
+    def as_dict(self) -> dict:
+        return {"amplitude_m": float(self.amplitude), "time_scale_s": float(self.time_scale),
+                "noise_m": float(self.noise)}
+
+
+def _transition(dt, hyper: Hyper):
+    """(A (2, 2), Q (2, 2)): the Matérn-3/2 state's transition over dt (s) and the noise it adds."""
+    lam = jnp.sqrt(3.0) / hyper.time_scale
+    a2 = hyper.amplitude**2
+    stationary = jnp.diag(jnp.stack([a2, lam**2 * a2]))
+    e = jnp.exp(-lam * dt)
+    trans = e * jnp.array([[1.0 + lam * dt, dt], [-(lam**2) * dt, 1.0 - lam * dt]])
+    return trans, stationary - trans @ stationary @ trans.T, stationary
+
+
+def kalman_filter(residuals, times, hyper: Hyper, sensitivity=None, tolerance=None, observed=None):
+    """Kalman filter of the residual model over ``residuals`` (n,) or (n, k).
+
+    ``sensitivity`` (n, q) and ``tolerance`` (q,) add the rig terms Σⱼ gⱼ(t) bⱼ, bⱼ ~ N(0, uⱼ²); ``observed``
+    (n,) bool marks the samples that update the filter (default all): at the others the filter only
+    predicts. Returns (innovations (n,) or (n, k) m, their variances (n,) m², predicted δ + rig term
+    (n,) or (n, k) m and its variance (n,) m² before each update).
+    """
+    r = jnp.asarray(residuals, float)
+    vector = r.ndim == 1
+    r = r[:, None] if vector else r
+    n, k = r.shape
+    t = jnp.asarray(times, float)
+    q = 0 if sensitivity is None else sensitivity.shape[1]
+    g = jnp.zeros((n, 0)) if q == 0 else jnp.asarray(sensitivity, float)
+    u2 = jnp.zeros((0,)) if q == 0 else jnp.asarray(tolerance, float) ** 2
+    obs = jnp.ones(n, bool) if observed is None else jnp.asarray(observed, bool)
+    _, _, stationary = _transition(0.0, hyper)
+    p0 = jax.scipy.linalg.block_diag(stationary, jnp.diag(u2)) if q else stationary
+    dts = jnp.diff(t, prepend=t[0])
+    s2 = hyper.noise**2
+
+    def step(carry, inp):
+        m, p = carry
+        dt, y, gk, ok = inp
+        a_d, q_d, _ = _transition(dt, hyper)
+        a = jax.scipy.linalg.block_diag(a_d, jnp.eye(q)) if q else a_d
+        qn = jax.scipy.linalg.block_diag(q_d, jnp.zeros((q, q))) if q else q_d
+        m = a @ m
+        p = a @ p @ a.T + qn
+        h = jnp.concatenate([jnp.array([1.0, 0.0]), gk])
+        ph = p @ h
+        pred_var = h @ ph
+        s = pred_var + s2
+        pred = h @ m
+        v = y - pred
+        gain = jnp.where(ok, ph / s, 0.0)
+        m = m + gain[:, None] * v[None, :]
+        p = p - jnp.outer(gain, ph)
+        p = 0.5 * (p + p.T)
+        return (m, p), (v, s, pred, pred_var)
+
+    init = (jnp.zeros((2 + q, k)), p0)
+    _, (v, s, pred, pred_var) = jax.lax.scan(step, init, (dts, r, g, obs))
+    if vector:
+        v, pred = v[:, 0], pred[:, 0]
+    return v, s, pred, pred_var
+
+
+def log_likelihood(residuals, times, hyper: Hyper, sensitivity=None, tolerance=None, observed=None,
+                   pointwise: bool = False):
+    """Exact log-likelihood (nats) of ``residuals`` (n,) m at the ``observed`` samples (default all) under the
+    residual model; ``pointwise``: the (n,) one-step-ahead terms log p(yᵢ | earlier observed y), whose sum is
+    the total (0 where not observed)."""
+    v, s, _, _ = kalman_filter(residuals, times, hyper, sensitivity, tolerance, observed)
+    terms = -0.5 * (jnp.log(2.0 * jnp.pi * s) + v**2 / s)
+    if observed is not None:
+        terms = jnp.where(jnp.asarray(observed, bool), terms, 0.0)
+    return terms if pointwise else jnp.sum(terms)
+
+
+def whiten(residuals, times, hyper: Hyper, sensitivity=None, tolerance=None, observed=None):
+    """Whitened residuals (n,) or (n, k): v/√S, independent N(0, 1) under the model (0 at samples not
+    ``observed``). Linear in the residuals, so Gauss–Newton on the whitened residuals and whitened Jacobian
+    is generalised least squares."""
+    v, s, _, _ = kalman_filter(residuals, times, hyper, sensitivity, tolerance, observed)
+    w = v / jnp.sqrt(s if v.ndim == 1 else s[:, None])
+    if observed is not None:
+        ok = jnp.asarray(observed, bool)
+        w = jnp.where(ok if w.ndim == 1 else ok[:, None], w, 0.0)
+    return w
+
+
+def forecast(residuals, times, observed, hyper: Hyper, sensitivity=None, tolerance=None):
+    """Predictive mean (n,) m and variance (n,) m² of δ + rig term at every sample, conditioned on the residuals
+    at the ``observed`` (n,) samples before it (the filter's prediction; beyond the last observed sample,
+    the forecast). Add σ² for a new measurement's variance."""
+    _, _, pred, pred_var = kalman_filter(residuals, times, hyper, sensitivity, tolerance, observed)
+    return pred, pred_var
+
+
+def sample(key, times, hyper: Hyper, shape=()):
+    """Draws of δ at ``times`` (n,) from the Matérn-3/2 prior: shape ``shape + (n,)`` m (no noise)."""
+    t = jnp.asarray(times, float)
+    dts = jnp.diff(t, prepend=t[0])
+    _, _, stationary = _transition(0.0, hyper)
+    k0, k1 = jax.random.split(key)
+    x0 = jax.random.normal(k0, shape + (2,)) * jnp.sqrt(jnp.diag(stationary))
+    xi = jax.random.normal(k1, (t.size,) + shape + (2,))
+
+    def step(x, inp):
+        dt, e = inp
+        a, q, _ = _transition(dt, hyper)
+        chol = jnp.linalg.cholesky(q + 1e-30 * jnp.eye(2))
+        x = x @ a.T + e @ chol.T
+        return x, x[..., 0]
+
+    _, d = jax.lax.scan(step, x0, (dts, xi))
+    return jnp.moveaxis(d, 0, -1)
+
+
+def kernel(times, hyper: Hyper) -> np.ndarray:
+    """Dense covariance (n, n) m² of δ at ``times``: a²(1 + √3|Δt|/ℓ)exp(−√3|Δt|/ℓ). For reports on small n."""
+    t = np.asarray(times, float)
+    x = math.sqrt(3.0) * np.abs(t[:, None] - t[None, :]) / float(hyper.time_scale)
+    return float(hyper.amplitude) ** 2 * (1.0 + x) * np.exp(-x)
+
+
+def log_prior(hyper: Hyper, amplitude_scale: float = AMPLITUDE_SCALE, noise_scale: float = NOISE_SCALE,
+              time_scale_median: float = TIME_SCALE_MEDIAN, time_scale_log_sd: float = TIME_SCALE_LOG_SD):
+    """Log density (up to a constant) of the hyperparameters' priors, in the log coordinates (ln a, ln ℓ, ln σ):
+    a ~ HalfNormal, ℓ ~ LogNormal, σ ~ HalfNormal (the Jacobians of the logs included)."""
+    a, ell, s = hyper.amplitude, hyper.time_scale, hyper.noise
+    return (-0.5 * (a / amplitude_scale) ** 2 + jnp.log(a)
+            - 0.5 * ((jnp.log(ell) - jnp.log(time_scale_median)) / time_scale_log_sd) ** 2
+            - 0.5 * (s / noise_scale) ** 2 + jnp.log(s))
+
+
+def _negative_log_posterior(log_hyper, residuals, times, sensitivity, tolerance, observed, kind):
+    if kind == "none":
+        hyper = Hyper(jnp.asarray(0.0), jnp.asarray(1.0), jnp.exp(log_hyper[2]))
+        return -(log_likelihood(residuals, times, hyper, sensitivity, tolerance, observed) - 0.5 * (hyper.noise / NOISE_SCALE) ** 2
+                 + jnp.log(hyper.noise))
+    hyper = Hyper(*jnp.exp(log_hyper))
+    return -(log_likelihood(residuals, times, hyper, sensitivity, tolerance, observed) + log_prior(hyper))
+
+
+_objective = jax.jit(jax.value_and_grad(_negative_log_posterior), static_argnames="kind")
+
+
+def estimate(residuals, times, kind: str = "matern32", sensitivity=None, tolerance=None, observed=None,
+             start: Hyper | None = None) -> Hyper:
+    """Hyperparameters at the mode of their posterior given ``residuals`` (n,) m (the model's θ held fixed).
+
+    ``kind="none"``: σ alone (a = 0). Quasi-Newton (L-BFGS-B) in the log coordinates, from ``start`` or from
+    a spread of starts (the likelihood can have one mode with δ absorbing the residual and one with the noise
+    doing so).
+    """
+    from scipy.optimize import minimize
+
+    if kind not in KINDS:
+        raise ValueError(f"discrepancy must be one of {KINDS}, got {kind!r}")
+    r = jnp.asarray(residuals, float)
+    t = jnp.asarray(times, float)
+    g = None if sensitivity is None else jnp.asarray(sensitivity, float)
+    u = None if tolerance is None else jnp.asarray(tolerance, float)
+    obs = jnp.ones(r.shape[0], bool) if observed is None else jnp.asarray(observed, bool)
+    rms = max(float(np.sqrt(np.mean(np.asarray(r)[np.asarray(obs)] ** 2))), 1e-7)
+    if start is not None:
+        starts = [np.log([float(start.amplitude) if kind != "none" else 1.0, float(start.time_scale),
+                          float(start.noise)])]
+    elif kind == "none":
+        starts = [np.log([1.0, 1.0, rms])]
+    else:
+        starts = [np.log([rms, TIME_SCALE_MEDIAN, 0.3 * rms]), np.log([0.3 * rms, 0.2, rms])]
+
+    def fun(x):
+        f, grad = _objective(jnp.asarray(x), r, t, g, u, obs, kind)
+        f, grad = float(f), np.asarray(grad, float)
+        return (f, grad) if np.isfinite(f) and np.all(np.isfinite(grad)) else (1e300, np.zeros(3))
+
+    bounds = [(np.log(1e-9), np.log(1.0)), (np.log(1e-3), np.log(1e3)), (np.log(1e-9), np.log(1.0))]
+    best = min((minimize(fun, x0, jac=True, method="L-BFGS-B", bounds=bounds) for x0 in starts),
+               key=lambda res: res.fun)
+    a, ell, s = np.exp(best.x)
+    return Hyper.of(0.0 if kind == "none" else a, ell, s)
+
+
+def distribution(mean, times, hyper: Hyper, sensitivity=None, tolerance=None, observed=None):
+    """The measured length as a NumPyro distribution: event shape (n,), mean ``mean`` (n,) m plus the residual
+    model (:class:`MeasuredLength`)."""
+    return MeasuredLength(mean, times, hyper, sensitivity, tolerance, observed)
+
+
+class MeasuredLength(_dist.Distribution):
+    """y = model + δ + Σ g b + ε over ``times`` (n,): log-density by :func:`log_likelihood` (at the ``observed``
+    samples), draws by :func:`sample` plus the rig terms and the noise."""
+
+    support = _dist.constraints.real_vector
+
+    def __init__(self, model, times, hyper: Hyper, sensitivity=None, tolerance=None, observed=None,
+                 validate_args=None):
+        self.model, self.times, self.hyper = jnp.asarray(model), jnp.asarray(times), hyper
+        self.sensitivity, self.tolerance, self.observed = sensitivity, tolerance, observed
+        super().__init__(batch_shape=(), event_shape=self.model.shape[-1:], validate_args=validate_args)
+
+    def log_prob(self, value):
+        return log_likelihood(value - self.model, self.times, self.hyper, self.sensitivity, self.tolerance,
+                              self.observed)
+
+    def pointwise(self, value):
+        """(n,) one-step-ahead log-densities (0 where not observed)."""
+        return log_likelihood(value - self.model, self.times, self.hyper, self.sensitivity, self.tolerance,
+                              self.observed, pointwise=True)
+
+    def sample(self, key, sample_shape=()):
+        k_delta, k_noise, k_rig = jax.random.split(key, 3)
+        shape = tuple(sample_shape)
+        y = self.model + sample(k_delta, self.times, self.hyper, shape)
+        y = y + self.hyper.noise * jax.random.normal(k_noise, shape + self.model.shape[-1:])
+        if self.sensitivity is not None:
+            b = jax.random.normal(k_rig, shape + (self.sensitivity.shape[1],)) * self.tolerance
+            y = y + b @ self.sensitivity.T
+        return y
