@@ -70,7 +70,9 @@ import jax.numpy as jnp
 import numpy as np
 from scipy import stats
 
+from growjax import discrepancy as dc
 from growjax import effects as fx
+from growjax import experiment
 from growjax import params as gp
 from growjax.config import Config
 from growjax.fit import (
@@ -390,6 +392,66 @@ SEPARATING = {
 }
 
 
+MATERIAL_MISFIT = 5e-4  # m: a smooth misfit below this amplitude is left to the discrepancy term
+
+
+class Scorer:
+    """Likelihood-ratio scores and the misfit test under the fit's likelihood (:mod:`growjax.discrepancy`).
+
+    ``discrepancy="matern32"``: a model's score is its log-likelihood with the residual model's
+    hyperparameters at their mode for that model's residuals; the misfit is structured where the discrepancy
+    is significant against white noise (2ΔlogL above the 1 % point of χ²₂) and larger than the noise, and
+    material where its amplitude also exceeds ``material`` (m): only a material misfit that no candidate
+    removes is reported ``unexplained``; a smaller one is left to the discrepancy term. ``"none"``: independent noise of sd ``sigma`` (m) and :func:`misfit_test`.
+    A record interpolated between keyframes is scored at its keyframes.
+    """
+
+    def __init__(self, times, length, sigma: float, discrepancy: str, material: float = MATERIAL_MISFIT):
+        self.times, self.sigma, self.kind, self.material = np.asarray(times, float), sigma, discrepancy, material
+        self.observed = experiment.informative_samples(length) if discrepancy != "none" else None
+        self._cache = {}
+
+    def profile(self, residual, kind: str | None = None) -> tuple[float, dc.Hyper]:
+        """(log-likelihood, nats, at the hyperparameters' mode for ``residual``; that mode)."""
+        kind = kind or self.kind
+        r = np.asarray(residual, float)
+        key = (kind, r.tobytes())
+        if key not in self._cache:
+            hyper = dc.estimate(r, self.times, kind, observed=self.observed)
+            value = dc.log_likelihood(r, self.times, hyper, observed=self.observed)
+            self._cache[key] = (float(value), hyper)
+        return self._cache[key]
+
+    def noise(self, residual) -> float:
+        return float(self.profile(residual)[1].noise)
+
+    def lr(self, worse, better, signed: bool = False) -> float:
+        """2ΔlogL of the model with residuals ``better`` (m) over the one with ``worse`` (≥ 0 unless ``signed``)."""
+        if self.kind == "none":
+            value = (float(np.sum(np.asarray(worse) ** 2)) - float(np.sum(np.asarray(better) ** 2))) / self.sigma**2
+        else:
+            value = 2.0 * (self.profile(better)[0] - self.profile(worse)[0])
+        return value if signed else max(value, 0.0)
+
+    def misfit(self, residual) -> dict:
+        """:func:`misfit_test`'s statistics, and under the discrepancy its amplitude, time scale and noise, the
+        2ΔlogL of the discrepancy against white noise, and ``structured`` by the rule above."""
+        if self.kind == "none":
+            return misfit_test(residual, self.sigma)
+        smooth, hyper = self.profile(residual)
+        white, white_hyper = self.profile(residual, "none")
+        out = misfit_test(residual, float(hyper.noise))
+        lr = 2.0 * (smooth - white)
+        out.update({"discrepancy": hyper.as_dict(), "discrepancy_lr": lr, "noise_sigma_m": float(hyper.noise),
+                    "rmse_over_noise": out["rmse_m"] / float(hyper.noise),
+                    "structured": bool(lr > STRUCTURE_THRESHOLD and float(hyper.amplitude) > float(hyper.noise)),
+                    "material": bool(float(hyper.amplitude) > self.material)})
+        return out
+
+
+STRUCTURE_THRESHOLD = float(stats.chi2.isf(0.01, df=2))
+
+
 def discover(
     times,
     length,
@@ -407,6 +469,8 @@ def discover(
     progress: bool = False,
     workers: int | None = None,
     model_error: float | None = None,
+    discrepancy: str = "matern32",
+    material_misfit: float = MATERIAL_MISFIT,
 ) -> DiscoveryResult:
     """Find which catalogue effect the measured ``length`` (m) at ``times`` (s) needs beyond the base model.
 
@@ -417,8 +481,15 @@ def discover(
     from the first only, a third of the fits); ``workers``: fits run at a time (default one per CPU core; each
     fit is deterministic, so the result does not depend on it); ``model_error``: the fitted configuration's
     length error against the reference, m (default :data:`growjax.fit.FAST_MODEL_ERROR` for the fast
-    configuration, 0 for the reference), allowed for in the confounding test. See the module docstring for the procedure and its thresholds.
+    configuration, 0 for the reference), allowed for in the confounding test under independent noise.
+    ``discrepancy``: the likelihood every test uses (:mod:`growjax.discrepancy`): ``"matern32"`` (default) scores
+    each model by its profile log-likelihood under a smooth discrepancy plus noise (hyperparameters at their mode
+    for that model's residuals), and calls the misfit structured only where the discrepancy is significant and
+    larger than ``material_misfit`` (m); ``"none"``: independent noise, σ from the residuals' differences.
+    See the module docstring for the procedure and its thresholds.
     """
+    if discrepancy not in dc.KINDS:
+        raise ValueError(f"discrepancy must be one of {dc.KINDS}, got {discrepancy!r}")
     start = time.perf_counter()
     workers = workers if workers is not None else _cores()
     if workers < 1:
@@ -511,28 +582,31 @@ def discover(
     sigma = noise_from_differences(outs[0][1] * 1e-3)
     base_fit = summarise(outs[0], sigma, ())
     fits = {candidates[k]: summarise(outs[k + 1], sigma, (candidates[k],)) for k in range(k_all)}
+    scorer = Scorer(times, length, sigma, discrepancy, material_misfit)
+    if discrepancy != "none":
+        sigma = scorer.noise(base_fit.residual_m)
     # The same candidates with the base parameters held at their given values (deciding confounding for a candidate
     # correlated with a base parameter, reported for the others), each from one start: where its joint fit's
     # linearisation puts it with the base at the given values.
     u_held = [_held_start(problem, outs[k + 1], k, u_starts[k, 0]) for k in range(k_all)]
     held = fit_batch([((), False, z0)] + [((k,), False, np.where(np.arange(p + k_all) == p + k, u_held[k], z0))
                                           for k in range(k_all)], "base held", warm=set(range(1, k_all + 1)))
-    rss_given = float(np.sum(held[0][1] ** 2))
-    held_lr = {candidates[k]: max(rss_given - float(np.sum(held[k + 1][1] ** 2)), 0.0) / (sigma / 1e-3) ** 2
-               for k in range(k_all)}
+    held_res = [h[1] * 1e-3 for h in held]
+    held_lr = {candidates[k]: scorer.lr(held_res[0], held_res[k + 1]) for k in range(k_all)}
     # With the base held, does the effect alone explain the data as well as refitting the base does?
-    held_trades = {candidates[k]: (float(np.sum(held[k + 1][1] ** 2)) - base_fit.rss_mm2) / (sigma / 1e-3) ** 2
-                   < threshold for k in range(k_all)}
-    model_allowance = times.size * model_error**2 / sigma**2  # 2ΔlogL the model's own error can buy a base shift
+    held_trades = {candidates[k]: scorer.lr(held_res[k + 1], base_fit.residual_m, signed=True) < threshold
+                   for k in range(k_all)}
+    # 2ΔlogL the model's own error can buy a base shift (under the discrepancy, δ carries that error)
+    model_allowance = times.size * model_error**2 / sigma**2 if discrepancy == "none" else 0.0
 
     # The model's traces at the data's times: the length is the data plus the residual, the pressure comes with the fit.
     before_trace, pressure_trace = length + base_fit.residual_m, outs[0][5]
-    misfit_before = misfit_test(base_fit.residual_m, sigma)
+    misfit_before = scorer.misfit(base_fit.residual_m)
     current = base_fit
     evidence, confounded = [], {}
     for round_no in range(max_effects):
         if round_no > 0:
-            if not misfit_test(current.residual_m, sigma)["structured"]:
+            if not scorer.misfit(current.residual_m)["structured"]:
                 break
             others = [k for k in range(k_all) if k not in added_index]
             outs = fit_batch([(tuple(added_index) + (k,), True, current.z) for k in others], f"round {round_no + 1}")
@@ -540,12 +614,15 @@ def discover(
         scores = {}
         for name, fitted in fits.items():
             qname, unit, rng = candidate_parameter(name)
-            lr = max(current.rss_mm2 - fitted.rss_mm2, 0.0) / (sigma / 1e-3) ** 2
+            lr = scorer.lr(current.residual_m, fitted.residual_m)
             sd = max((fitted.interval_90[qname][1] - fitted.interval_90[qname][0]) / (2 * Z90), 1e-300)
             corr = fitted.correlation.get(qname, {})
             worst, c = max(corr.items(), key=lambda kv: abs(kv[1]), default=(None, 0.0))
             h = held_lr[name] if round_no == 0 else 0.0
-            trades = round_no == 0 and h > threshold + model_allowance and held_trades[name]
+            # Unstructured residuals at the start: an effect (or a confounding) needs the threshold cleared
+            # with the base refitted, never a trade with the base held.
+            trades = (round_no == 0 and h > threshold + model_allowance and held_trades[name]
+                      and (discrepancy == "none" or misfit_before["structured"]))
             pinned = lr > threshold and _pinned(fitted.estimate[qname], fitted.interval_90[qname])
             scores[name] = {
                 "parameter": qname, "unit": unit, "estimate": fitted.estimate[qname],
@@ -584,7 +661,7 @@ def discover(
         added_index.append(candidates.index(best))
         current = fits[best]
 
-    misfit_after = misfit_test(current.residual_m, sigma)
+    misfit_after = scorer.misfit(current.residual_m)
     after_trace = length + current.residual_m
     if added and not misfit_after["structured"]:
         effect = added[0]
@@ -593,7 +670,7 @@ def discover(
     elif confounded:
         effect = "confounded"
     else:
-        effect = "unexplained" if misfit_after["structured"] else "none"
+        effect = "unexplained" if misfit_after["structured"] and misfit_after.get("material", True) else "none"
     units = {candidate_parameter(n)[0]: candidate_parameter(n)[1] for n in candidates}
     parameters = {n: {"estimate": v, "interval_90": current.interval_90[n], "unit": units.get(n, _unit(n))}
                   for n, v in current.estimate.items()}

@@ -231,19 +231,18 @@ def fit(
     def model(z):
         return _linearised(z, problem)
 
-    # The likelihood's hyperparameters and the rig's sensitivities at the best start, then a generalised
-    # least-squares fit from every start (one after another through one compiled solver), then the
-    # hyperparameters again at the best optimum and, if they moved it, the fit once more.
-    raw = model(z0s[0])
-    if tol:
-        likelihood = likelihood.with_tolerances(_tolerance_sensitivity(problem, z0s[0], raw[0], tol), tol)
-    hyper = likelihood.estimate(raw[0], discrepancy)
-    solved = [levenberg_marquardt(lambda w: likelihood.whitened(*model(w), hyper), z0, max_steps, LM_TOLERANCE,
-                                  bounds=bounds, cost_resolution=COST_RESOLUTION) for z0 in z0s]
+    # Least squares from every start (one after another through one compiled solver): consistent under any
+    # correlation of the residuals, and a start that a discrepancy absorbing the misfit cannot trap. Then the
+    # rig's sensitivities there, and generalised least squares alternating with the hyperparameters' mode.
+    solved = [levenberg_marquardt(lambda w: likelihood.weighted(*model(w)), z0, max_steps, LM_TOLERANCE,
+                                  bounds=bounds, relative_resolution=RELATIVE_RESOLUTION) for z0 in z0s]
     zs, costs, oks = (np.asarray([s[k] for s in solved]) for k in range(3))
     k_best = int(np.argmin(costs))
     z, converged = np.asarray(zs[k_best]), bool(oks[k_best])
     raw = model(jnp.asarray(z))
+    if tol:
+        likelihood = likelihood.with_tolerances(_tolerance_sensitivity(problem, z, raw[0], tol), tol)
+    hyper = None
     for _ in range(OUTER_STEPS):
         hyper = likelihood.estimate(raw[0], discrepancy, hyper)
         z_new, _, converged, _, jac_w = levenberg_marquardt(lambda w: likelihood.whitened(*model(w), hyper), z,
@@ -274,6 +273,7 @@ def fit(
 # The smallest change of the whitened cost (nats) that matters: a 90 % interval spans 1.35 nats, and the
 # adaptive solver's own noise moves the cost by ~1e-3.
 COST_RESOLUTION = 1e-2
+RELATIVE_RESOLUTION = 1e-4  # the same for the least-squares starts, as a share of their cost
 OUTER_STEPS = 4  # alternations of the hyperparameters' mode and the GLS fit
 OUTER_TOLERANCE = 0.05  # stop once a GLS fit moves ln θ by less than this share of its sd
 
