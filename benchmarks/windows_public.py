@@ -5,8 +5,9 @@ Run: ``python benchmarks/windows_public.py [--data DIR] [--out benchmarks/result
 Forward drive, fast configuration. Y is fitted on 0–10 s, its halves and its thirds, under the default
 likelihood (Matérn-3/2 discrepancy, the rig's default tolerance budget), under the discrepancy without
 tolerances, and under independent noise (``discrepancy="none"``). For every pair of disjoint windows it
-prints |ΔY| in combined standard errors, sqrt(se₁² + se₂²), and the same without the tolerance terms (the
-rig is the same in every window, so its tolerances move every window's Y together and do not widen ΔY).
+prints |ΔY| in combined standard errors, sqrt(se₁² + se₂²), and in the standard error of the difference itself
+(the rig is the same in every window: a tolerance moves both windows' Y, each by its own gain, so it adds
+Σ u²(gain₁ − gain₂)² to the difference's variance rather than the sum of both windows' shares).
 Targets: every pair within 2 combined standard errors; the 0–10 s interval at most a third of the
 paper's Y box (5–15 kPa).
 """
@@ -57,7 +58,8 @@ def main():
                 "likelihood": label, "window_s": list(w), "Y_Pa": res.estimate[Y], "se_Pa": se,
                 "se_without_tolerances_Pa": float(np.sqrt(max(se**2 - rig, 0.0))),
                 "interval_90_Pa": list(res.interval_90[Y]), "rmse_length_m": res.rmse_length_m,
-                "budget_sd_Pa": budget, "discrepancy": res.discrepancy, "samples_used": res.samples_used,
+                "budget_sd_Pa": budget, "tolerance_gain_Pa": res.tolerance_gain.get(Y, {}),
+                "tolerances": res.tolerances, "discrepancy": res.discrepancy, "samples_used": res.samples_used,
                 "wall_s": res.wall_s, "status": res.status}
             r = rows[f"{label} {w[0]:g}-{w[1]:g}"]
             lo, hi = r["interval_90_Pa"]
@@ -69,10 +71,12 @@ def main():
             ra, rb = rows[f"{label} {a[0]:g}-{a[1]:g}"], rows[f"{label} {b[0]:g}-{b[1]:g}"]
             dy = abs(ra["Y_Pa"] - rb["Y_Pa"])
             z = dy / np.hypot(ra["se_Pa"], rb["se_Pa"])
-            z_rig = dy / np.hypot(ra["se_without_tolerances_Pa"], rb["se_without_tolerances_Pa"])
-            pairs.append({"likelihood": label, "a": a, "b": b, "dY_Pa": dy, "z": z, "z_without_tolerances": z_rig})
+            shared = sum((ra["tolerance_gain_Pa"][k] - rb["tolerance_gain_Pa"][k]) ** 2 * u**2
+                         for k, u in ra["tolerances"].items())
+            z_diff = dy / np.sqrt(ra["se_without_tolerances_Pa"] ** 2 + rb["se_without_tolerances_Pa"] ** 2 + shared)
+            pairs.append({"likelihood": label, "a": a, "b": b, "dY_Pa": dy, "z": z, "z_difference": z_diff})
             print(f"{label:24s} {a} vs {b}: |ΔY| {dy:6.0f} Pa = {z:.2f} combined se "
-                  f"({z_rig:.2f} without the shared tolerances)")
+                  f"({z_diff:.2f} se of the difference, the shared rig counted once)")
     full = rows["discrepancy+tolerances 0-10"]
     width_share = (full["interval_90_Pa"][1] - full["interval_90_Pa"][0]) / 10e3
     print(f"0-10 s interval: {width_share:.2f} of the 5-15 kPa box (target <= 0.33)")

@@ -80,6 +80,7 @@ class FitResult:
     budget: dict = dataclasses.field(default_factory=dict)  # {name: {source: sd, SI}}: noise, discrepancy, tolerances
     tolerances: dict = dataclasses.field(default_factory=dict)  # {parameter: relative sd} carried
     samples_used: int = 0  # length samples the likelihood scored (an interpolated record: its keyframes)
+    tolerance_gain: dict = dataclasses.field(default_factory=dict)  # {name: {tolerance: dθ/d ln ψ, SI}}, signed
 
     def summary(self) -> dict:
         return {
@@ -191,10 +192,11 @@ def fit(
     :data:`FAST_MODEL_ERROR` for the fast configuration) propagated as a smooth correlated error.
     ``tolerances`` {parameter: relative sd}: the rig's fixed parameters' uncertainty (:mod:`growjax.tolerance`;
     None: its default budget with the discrepancy, none without). The estimate is the generalised
-    least-squares optimum under that likelihood, found by Gauss–Newton on the whitened residuals
-    (Levenberg–Marquardt) alternating with the hyperparameters' mode; the intervals are Gauss–Newton's,
-    (J̃ᵀJ̃)⁻¹ with J̃ the whitened Jacobian, and :attr:`FitResult.budget` splits each variance into noise,
-    discrepancy and each tolerance.
+    least-squares optimum under the discrepancy and noise, found by Gauss–Newton on the whitened residuals
+    (Levenberg–Marquardt) from the least-squares optimum, alternating with the hyperparameters' mode; its
+    covariance is Gauss–Newton's, (J̃ᵀJ̃)⁻¹ with J̃ the whitened Jacobian, plus each tolerance propagated
+    through the estimator's gain (the GUM's sensitivity coefficients; the posterior marginalises them
+    instead). :attr:`FitResult.budget` splits each variance into noise, discrepancy and each tolerance.
     """
     if discrepancy not in dc.KINDS:
         raise ValueError(f"discrepancy must be one of {dc.KINDS}, got {discrepancy!r}")
@@ -235,7 +237,7 @@ def fit(
     # correlation of the residuals, and a start that a discrepancy absorbing the misfit cannot trap. Then the
     # rig's sensitivities there, and generalised least squares alternating with the hyperparameters' mode.
     solved = [levenberg_marquardt(lambda w: likelihood.weighted(*model(w)), z0, max_steps, LM_TOLERANCE,
-                                  bounds=bounds, relative_resolution=RELATIVE_RESOLUTION) for z0 in z0s]
+                                  bounds=bounds) for z0 in z0s]
     zs, costs, oks = (np.asarray([s[k] for s in solved]) for k in range(3))
     k_best = int(np.argmin(costs))
     z, converged = np.asarray(zs[k_best]), bool(oks[k_best])
@@ -258,7 +260,7 @@ def fit(
                "estimate": dict(zip(names, map(float, refs * np.exp(zs[k])))),
                "cost": float(costs[k]), "converged": bool(oks[k])} for k, i in enumerate(order)]
     theta = refs * np.exp(z)
-    cov, parts = likelihood.covariance(np.asarray(raw[1]), jac_w, hyper)
+    cov, parts, gain = likelihood.covariance(np.asarray(raw[1]), jac_w, hyper)
     if discrepancy == "none":
         if model_error is None:
             model_error = default_model_error(config)
@@ -266,14 +268,16 @@ def fit(
             jac_m = np.asarray(raw[1])[:n_len] * sigma_length
             parts["model_error"] = _propagated_model_error(cov, jac_m, hyper, problem.times, model_error)
             cov = cov + parts["model_error"]
-    return _result(names, theta, z, cov, parts, jac_w, hyper, likelihood, raw, starts, converged, bounds,
-                   start_clock, int(np.sum(used)), discrepancy)
+    result = _result(names, theta, z, cov, parts, jac_w, hyper, likelihood, raw, starts, converged, bounds,
+                     start_clock, int(np.sum(used)), discrepancy)
+    result.tolerance_gain = {n: {t: float(theta[i] * gain[i, j]) for j, t in enumerate(likelihood.tolerance_names)}
+                             for i, n in enumerate(names)}
+    return result
 
 
 # The smallest change of the whitened cost (nats) that matters: a 90 % interval spans 1.35 nats, and the
 # adaptive solver's own noise moves the cost by ~1e-3.
 COST_RESOLUTION = 1e-2
-RELATIVE_RESOLUTION = 1e-4  # the same for the least-squares starts, as a share of their cost
 OUTER_STEPS = 4  # alternations of the hyperparameters' mode and the GLS fit
 OUTER_TOLERANCE = 0.05  # stop once a GLS fit moves ln θ by less than this share of its sd
 
@@ -303,12 +307,14 @@ class Likelihood(eqx.Module):
         return _whitened(self, r, jac, hyper)
 
     def estimate(self, r, kind, start=None):
-        return dc.estimate(np.asarray(r)[: self.n_len] * self.sigma_length, self.times, kind, self.sensitivity,
-                           self.tolerance, self.used, start)
+        return dc.estimate(np.asarray(r)[: self.n_len] * self.sigma_length, self.times, kind, observed=self.used,
+                           start=start)
 
     def covariance(self, jac, jac_w, hyper):
-        """Covariance (p, p) of z = ln θ, (J̃ᵀJ̃)⁻¹, and its parts {source: (p, p)} (noise, discrepancy, each
-        tolerance, pressure noise), which add up to it."""
+        """Covariance (p, p) of z = ln θ and its parts {source: (p, p)}, which add up to it: the noise and the
+        discrepancy, (J̃ᵀJ̃)⁻¹ split by their kernels; each tolerance propagated through the estimator (the GUM's
+        sensitivity coefficients), u² (A g)(A g)ᵀ with A the estimator's gain and g the length's sensitivity;
+        the pressure noise."""
         cov = np.linalg.pinv(jac_w.T @ jac_w, rcond=1e-10, hermitian=True)
         used = np.asarray(self.used)
         t = np.asarray(self.times)[used]
@@ -316,24 +322,24 @@ class Likelihood(eqx.Module):
         kernels = {"noise": float(hyper.noise) ** 2 * np.eye(t.size)}
         if float(hyper.amplitude) > 0:
             kernels["discrepancy"] = dc.kernel(t, hyper)
-        if self.sensitivity is not None:
-            g = np.asarray(self.sensitivity)[used]
-            for j, name in enumerate(self.tolerance_names):
-                kernels[name] = float(self.tolerance[j]) ** 2 * np.outer(g[:, j], g[:, j])
-        total = sum(kernels.values())
-        a = cov @ np.linalg.solve(total, j_len).T  # (p, n): ln θ per metre of residual
+        a = cov @ np.linalg.solve(sum(kernels.values()), j_len).T  # (p, n): ln θ per metre of residual
         parts = {k: a @ kern @ a.T for k, kern in kernels.items()}
         if jac.shape[0] > self.n_len:
             j_p = jac[self.n_len:]
             parts["pressure_noise"] = cov @ j_p.T @ j_p @ cov
-        return cov, parts
-
+        gain = np.zeros((len(cov), 0))
+        if self.sensitivity is not None:
+            gain = a @ np.asarray(self.sensitivity)[used]  # (p, q): ln θ per unit ln ψ
+            for j, name in enumerate(self.tolerance_names):
+                c = gain[:, j] * float(self.tolerance[j])
+                parts[name] = np.outer(c, c)
+        return sum(parts.values()), parts, gain
 
 @eqx.filter_jit
 def _whitened(likelihood: Likelihood, r, jac, hyper):
     n, scale = likelihood.n_len, likelihood.sigma_length
     cols = jnp.concatenate([r[:n, None], jac[:n]], axis=1) * scale
-    w = dc.whiten(cols, likelihood.times, hyper, likelihood.sensitivity, likelihood.tolerance, likelihood.used)
+    w = dc.whiten(cols, likelihood.times, hyper, observed=likelihood.used)
     return jnp.concatenate([w[:, 0], r[n:]]), jnp.concatenate([w[:, 1:], jac[n:]], axis=0)
 
 
