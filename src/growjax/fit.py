@@ -188,8 +188,8 @@ def fit(
     model plus a smooth Matérn-3/2 discrepancy plus sensor noise, their amplitude, time scale and noise at
     their posterior mode given the residuals; a record interpolated between keyframes is scored at its
     keyframes (:func:`growjax.experiment.informative_samples`). ``"none"``: independent noise on every sample,
-    its sd from the residuals, plus the fitted configuration's own error ``model_error`` (m; default
-    :data:`FAST_MODEL_ERROR` for the fast configuration) propagated as a smooth correlated error.
+    its sd from the residuals. Both add the fitted configuration's own error ``model_error`` (m; default
+    :data:`FAST_MODEL_ERROR` for the fast configuration), propagated as a smooth correlated error.
     ``tolerances`` {parameter: relative sd}: the rig's fixed parameters' uncertainty (:mod:`growjax.tolerance`;
     None: its default budget with the discrepancy, none without). The estimate is the generalised
     least-squares optimum under the discrepancy and noise, found by Gauss–Newton on the whitened residuals
@@ -260,14 +260,9 @@ def fit(
                "estimate": dict(zip(names, map(float, refs * np.exp(zs[k])))),
                "cost": float(costs[k]), "converged": bool(oks[k])} for k, i in enumerate(order)]
     theta = refs * np.exp(z)
-    cov, parts, gain = likelihood.covariance(np.asarray(raw[1]), jac_w, hyper)
-    if discrepancy == "none":
-        if model_error is None:
-            model_error = default_model_error(config)
-        if model_error > 0:
-            jac_m = np.asarray(raw[1])[:n_len] * sigma_length
-            parts["model_error"] = _propagated_model_error(cov, jac_m, hyper, problem.times, model_error)
-            cov = cov + parts["model_error"]
+    if model_error is None:
+        model_error = default_model_error(config)
+    cov, parts, gain = likelihood.covariance(np.asarray(raw[1]), jac_w, hyper, model_error)
     result = _result(names, theta, z, cov, parts, jac_w, hyper, likelihood, raw, starts, converged, bounds,
                      start_clock, int(np.sum(used)), discrepancy)
     result.tolerance_gain = {n: {t: float(theta[i] * gain[i, j]) for j, t in enumerate(likelihood.tolerance_names)}
@@ -310,11 +305,13 @@ class Likelihood(eqx.Module):
         return dc.estimate(np.asarray(r)[: self.n_len] * self.sigma_length, self.times, kind, observed=self.used,
                            start=start)
 
-    def covariance(self, jac, jac_w, hyper):
+    def covariance(self, jac, jac_w, hyper, model_error: float = 0.0):
         """Covariance (p, p) of z = ln θ and its parts {source: (p, p)}, which add up to it: the noise and the
         discrepancy, (J̃ᵀJ̃)⁻¹ split by their kernels; each tolerance propagated through the estimator (the GUM's
         sensitivity coefficients), u² (A g)(A g)ᵀ with A the estimator's gain and g the length's sensitivity;
-        the pressure noise."""
+        the fitted configuration's own error against the reference (sd ``model_error`` m, squared-exponential
+        over :data:`MODEL_ERROR_TIME`: too small for the data to measure, known from the agreement benchmark)
+        through the same gain; the pressure noise."""
         cov = np.linalg.pinv(jac_w.T @ jac_w, rcond=1e-10, hermitian=True)
         used = np.asarray(self.used)
         t = np.asarray(self.times)[used]
@@ -324,6 +321,9 @@ class Likelihood(eqx.Module):
             kernels["discrepancy"] = dc.kernel(t, hyper)
         a = cov @ np.linalg.solve(sum(kernels.values()), j_len).T  # (p, n): ln θ per metre of residual
         parts = {k: a @ kern @ a.T for k, kern in kernels.items()}
+        if model_error > 0:
+            solver = model_error**2 * np.exp(-0.5 * ((t[:, None] - t[None, :]) / MODEL_ERROR_TIME) ** 2)
+            parts["fast_model_error"] = a @ solver @ a.T
         if jac.shape[0] > self.n_len:
             j_p = jac[self.n_len:]
             parts["pressure_noise"] = cov @ j_p.T @ j_p @ cov
@@ -355,16 +355,6 @@ def _tolerance_sensitivity(problem: Problem, z, r0, tol: dict) -> np.ndarray:
         r1 = np.asarray(_linearised(jnp.asarray(z), shifted)[0])[:n]
         cols.append((r1 - np.asarray(r0)[:n]) * problem.sigma_length / u)
     return np.stack(cols, axis=1)
-
-
-def _propagated_model_error(cov, jac_m, hyper, times, model_error) -> np.ndarray:
-    """The fitted configuration's smooth error against the reference (sd ``model_error`` m, squared-exponential
-    over :data:`MODEL_ERROR_TIME`) moved through the independent-noise estimator: A Σ Aᵀ, A = C Jᵀ/σ²
-    (``jac_m`` (n, p): m per unit ln θ; σ the noise sd, m)."""
-    t = np.asarray(times)
-    sigma_delta = model_error**2 * np.exp(-0.5 * ((t[:, None] - t[None, :]) / MODEL_ERROR_TIME) ** 2)
-    a = cov @ jac_m.T / float(hyper.noise) ** 2
-    return a @ sigma_delta @ a.T
 
 
 def _check_window(window, config: Config):
