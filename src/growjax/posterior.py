@@ -229,14 +229,18 @@ def growth_model(length=None, *, mean_length, priors: Sequence[Prior], noise_sca
     else:
         amplitude, time_scale = jnp.zeros(()), jnp.ones(())
     hyper = dc.Hyper(amplitude, time_scale, scale)
-    numpyro.sample("length", residuals.distribution(mu, hyper), obs=length)
+    if length is None:  # replicated data at every sample
+        numpyro.sample("length", residuals.replicate(mu, hyper))
+    else:  # the scored samples
+        numpyro.sample("length", residuals.distribution(mu, hyper), obs=jnp.asarray(length)[residuals.index])
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class Residuals:
     """What the likelihood of :func:`growth_model` holds besides the model: the discrepancy (``"matern32"`` or
     ``"none"``), the sample times (n,) s, the samples scored (n,) bool, and the rig's tolerances: sensitivities
-    (n, q) m per unit ln ψ, relative sds (q,), names."""
+    (n, q) m per unit ln ψ, relative sds (q,), names. The filter runs over the scored samples alone (the
+    likelihood of an interpolated record is that of its keyframes)."""
 
     discrepancy: str
     times: np.ndarray
@@ -245,10 +249,31 @@ class Residuals:
     tolerance: np.ndarray | None = None
     tolerance_names: tuple = ()
 
-    def distribution(self, mu, hyper):
-        g = None if self.sensitivity is None else jnp.asarray(self.sensitivity)
+    @property
+    def index(self) -> np.ndarray:
+        return np.flatnonzero(self.observed)
+
+    def _terms(self, index):
+        g = None if self.sensitivity is None else jnp.asarray(np.asarray(self.sensitivity)[index])
         u = None if self.tolerance is None else jnp.asarray(self.tolerance)
-        return dc.distribution(mu, jnp.asarray(self.times), hyper, g, u, jnp.asarray(self.observed))
+        return jnp.asarray(np.asarray(self.times)[index]), g, u
+
+    def distribution(self, mu, hyper):
+        """The scored samples' distribution (event shape: the number scored) around the model ``mu`` (n,)."""
+        index = self.index
+        t, g, u = self._terms(index)
+        return dc.distribution(mu[index], t, hyper, g, u)
+
+    def replicate(self, mu, hyper):
+        """Replicated data at every sample (event shape (n,)) around ``mu`` (n,)."""
+        t, g, u = self._terms(np.arange(len(self.times)))
+        return dc.distribution(mu, t, hyper, g, u)
+
+    def pointwise(self, y, mu, hyper):
+        """(n,) one-step-ahead log-densities of ``y`` at the scored samples, 0 elsewhere."""
+        index = self.index
+        terms = self.distribution(mu, hyper).pointwise(jnp.asarray(y)[index])
+        return jnp.zeros(len(self.times)).at[index].set(terms)
 
     def hyper_sites(self, hyper: dc.Hyper) -> dict:
         """Start values {site: value} of the hyperparameters' sites."""
@@ -513,8 +538,7 @@ def observation_draws(mean_length, sigma, model_error: float, observed, seed: in
     y = jnp.asarray(observed, float)
 
     def one(m, h, key):
-        d = residuals.distribution(m, h)
-        return d.pointwise(y), d.sample(key)
+        return residuals.pointwise(y, m, h), residuals.replicate(m, h).sample(key)
 
     keys = jax.random.split(jax.random.PRNGKey(seed), mu.shape[0])
     loglik, predicted = jax.jit(jax.vmap(one))(jnp.asarray(mu), hyper, keys)
@@ -830,6 +854,44 @@ def predict(idata, priors, base, inputs, config, times, seed: int = 0, max_draws
     mu = jax.jit(jax.vmap(lambda th: predicted_length(th, base, inputs, config, jnp.asarray(times))))(thetas)
     noise = np.random.default_rng(seed + 1).normal(size=mu.shape) * sigma[take][:, None]
     return np.asarray(mu) + noise
+
+
+def forecast(result: PosteriorResult, priors, base, inputs, config, times, seed: int = 0, max_draws: int = 400):
+    """Posterior predictive length draws (S, T), m, at ``times`` (s) beyond or between the data the posterior was
+    fitted on, conditioned on them: each draw's model run over the fitted and the new times, its discrepancy
+    (and rig terms) at the new times given its residuals at the fitted samples (the Kalman forecast), and fresh
+    noise. Without a discrepancy (``result.residuals`` None) the draws are the model plus noise."""
+    post = result.idata.posterior
+    t_fit, y_fit = (np.asarray(a, float) for a in result.data)
+    t_new = np.asarray(times, float)
+    union = np.unique(np.concatenate([t_fit, t_new]))
+    sigma = np.asarray(post["sigma"]).ravel()
+    take = np.random.default_rng(seed).choice(sigma.size, size=min(max_draws, sigma.size), replace=False)
+    thetas = {p.name: jnp.asarray(np.asarray(post[p.site]).ravel()[take]) for p in priors}
+    mu = np.asarray(jax.jit(jax.vmap(lambda th: predicted_length(th, base, inputs, config, jnp.asarray(union))))(thetas))
+    at_fit, at_new = np.searchsorted(union, t_fit), np.searchsorted(union, t_new)
+    res = result.residuals
+    rng = np.random.default_rng(seed + 1)
+    if res is None:
+        return mu[:, at_new] + sigma[take][:, None] * rng.standard_normal((take.size, at_new.size))
+    observed = np.zeros(union.size, bool)
+    observed[at_fit[res.observed]] = True
+    g = u = None
+    if res.sensitivity is not None:
+        mean_theta = {n: float(np.mean(v)) for n, v in thetas.items()}
+        g = jnp.asarray(tolerance_sensitivity(mean_theta, base, inputs, config, union,
+                                              dict(zip(res.tolerance_names, map(float, res.tolerance)))))
+        u = jnp.asarray(res.tolerance)
+    flat = lambda site: jnp.asarray(np.asarray(post[site]).ravel()[take]) if site in post else None  # noqa: E731
+    amp, ell = flat("delta_amplitude"), flat("delta_time_scale")
+    hyper = dc.Hyper(jnp.zeros(take.size) if amp is None else amp, jnp.ones(take.size) if ell is None else ell,
+                     jnp.asarray(np.sqrt(sigma[take] ** 2 + result.summary.get("model_error_m", 0.0) ** 2)))
+    r = np.zeros_like(mu)
+    r[:, at_fit] = y_fit[None, :] - mu[:, at_fit]
+    mean, var = jax.jit(jax.vmap(lambda ri, h: dc.forecast(ri, jnp.asarray(union), jnp.asarray(observed), h, g, u)))(
+        jnp.asarray(r), hyper)
+    scale = np.sqrt(np.asarray(var)[:, at_new] + np.asarray(hyper.noise)[:, None] ** 2)
+    return mu[:, at_new] + np.asarray(mean)[:, at_new] + scale * rng.standard_normal(scale.shape)
 
 
 def sbc(emulator: em.Emulator, priors: Sequence[Prior], replicates: int = 100, warmup: int = 200,
