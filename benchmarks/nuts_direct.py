@@ -65,7 +65,7 @@ def main():
     if not args.sequential:
         jax.config.update("jax_num_cpu_devices", max(args.chains, 1))  # one chain per device, before JAX starts
     folder = ex.shared_experiment_dir()
-    exp = ex.read(folder / "experiment.csv") if folder else ex.read(REPO / "data" / "synthetic_forward.csv")
+    exp = ex.read(folder / "experiment.csv") if folder else ex.read(REPO / "src" / "growjax" / "datasets" / "synthetic_forward.csv")
     base = gj.reference(growth_law="lockhart")
     cfg = gj.Config(t1=args.t_end)
     inputs = ex.to_inputs(exp, "forward", base, cfg.t0, cfg.t1)

@@ -139,7 +139,7 @@ def main():
     args = parser.parse_args()
     small_loops = xla_flags.apply() if args.small_loops else xla_flags.applied()
     folder = ex.shared_experiment_dir()
-    exp = ex.read(folder / "experiment.csv") if folder else ex.read(REPO / "data" / "synthetic_forward.csv")
+    exp = ex.read(folder / "experiment.csv") if folder else ex.read(REPO / "src" / "growjax" / "datasets" / "synthetic_forward.csv")
     fast = bench_simulation("forward", exp, args.repeat)
     gradient = bench_gradient(exp, args.repeat)
     results = {

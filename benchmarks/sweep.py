@@ -5,7 +5,7 @@ Run: ``python benchmarks/sweep.py [--out benchmarks/results/sweep.json] [--quick
 compiled sweep of N sets spends its time, by XLA operation, printed).
 
 Measured, on the public experiment (``../shared/data/mammobot``) or, when it is absent, on
-``data/synthetic_forward.csv``, with the paper's box (n 0.9–1.1, Y 5–15 kPa, ext 4000–10000):
+``growjax/datasets/synthetic_forward.csv``, with the paper's box (n 0.9–1.1, Y 5–15 kPa, ext 4000–10000):
 
 1. ``growjax.sweep.lhs_sweep`` of 500 sets in the fast configuration: wall time after compilation
    (median of repeated calls of the compiled program, as ``SweepResult.wall_s``; target ≤ 1 s), compile
@@ -72,7 +72,7 @@ TARGETS = {"sweep_wall_s": 1.0, "ratio_min": 50.0, "agreement_m": 1e-4}
 def experiment_path() -> Path:
     """The public experiment's CSV if it is beside the checkout, else the shipped synthetic one."""
     folder = ex.shared_experiment_dir()
-    return folder / "experiment.csv" if folder else REPO / "data" / "synthetic_forward.csv"
+    return folder / "experiment.csv" if folder else REPO / "src" / "growjax" / "datasets" / "synthetic_forward.csv"
 
 
 def measured_series(exp, config: gj.Config):

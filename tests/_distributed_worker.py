@@ -41,7 +41,7 @@ def main() -> int:
     from growjax import experiment as ex
     from growjax import sweep as sw
 
-    exp = ex.read(REPO / "data" / "synthetic_forward.csv")
+    exp = ex.read(REPO / "src" / "growjax" / "datasets" / "synthetic_forward.csv")
     base = gj.reference()
     inputs = ex.to_inputs(exp, "forward", base)
     dims = (sw.Dimension("robot.yield_pressure", 5e3, 15e3), sw.Dimension("robot.extensibility", 4000.0, 10000.0))

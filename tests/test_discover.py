@@ -149,11 +149,11 @@ SMALL_T_END = 3.0  # s: two retractions of the published pulse
 
 
 def _shipped(name, **kw):
-    """A shipped example of data/discovery/ (reference-made, noise 0.2 mm) on 0–3 s, and its truth."""
+    """A shipped example of growjax/datasets/discovery/ (reference-made, noise 0.2 mm) on 0–3 s, and its truth."""
     import json
     from pathlib import Path
 
-    folder = Path(__file__).resolve().parents[1] / "data" / "discovery"
+    folder = Path(__file__).resolve().parents[1] / "src" / "growjax" / "datasets" / "discovery"
     cfg = gj.Config(t1=SMALL_T_END)
     exp = ex.read(folder / f"{name}.csv").window(SMALL_T_END + 1e-9)
     inputs = ex.to_inputs(exp, "forward", gj.reference(), cfg.t0, cfg.t1)
@@ -212,7 +212,7 @@ def test_candidate_fits_stay_in_their_physical_ranges():
     from growjax import effects as fx
 
     cfg = gj.Config(t1=SMALL_T_END)
-    exp = ex.read(Path(__file__).resolve().parents[1] / "data" / "discovery" / "clean.csv").window(SMALL_T_END + 1e-9)
+    exp = ex.read(Path(__file__).resolve().parents[1] / "src" / "growjax" / "datasets" / "discovery" / "clean.csv").window(SMALL_T_END + 1e-9)
     inputs = ex.to_inputs(exp, "forward", gj.reference(), cfg.t0, cfg.t1)
     times = exp.time[(exp.time >= cfg.t0) & (exp.time <= cfg.t1)]
     top = gd.candidate_parameter("fluid_leak")[2][1]

@@ -7,7 +7,7 @@ All runs are 0–3 s of the forward drive under the published pulse with the shi
 which is the same model as the effect alone and shares one compiled solver between all effects.
 
 The fast configuration is checked against noise-free traces made by the reference configuration
-(rtol 1e-7) and shipped in data/discovery/reference/ (``python data/make_discovery_examples.py reference``):
+(rtol 1e-7) and shipped in growjax/datasets/discovery/reference/ (``python data/make_discovery_examples.py reference``):
 the reference cannot be cached on disk (its solve uses host callbacks) and costs about a minute to
 compile per process, so the live comparison runs under ``-m slow``.
 """
@@ -386,8 +386,8 @@ def test_make_experiment_noise_seeds_cache_and_format(monkeypatch, tmp_path, tra
 
 
 def test_shipped_discovery_examples():
-    """data/discovery/: small CSVs with a JSON truth beside each, 0.01–10 s, length noise 0.2 mm as stated."""
-    folder = REPO / "data" / "discovery"
+    """growjax/datasets/discovery/: small CSVs with a JSON truth beside each, 0.01–10 s, length noise 0.2 mm as stated."""
+    folder = REPO / "src" / "growjax" / "datasets" / "discovery"
     paths = sorted(folder.glob("*.csv"))
     assert {p.stem for p in paths} >= {"clean", "active_channel_force", "retraction_folding"}
     assert any(sy.read_truth(p)["in_catalogue"] is False for p in paths)

@@ -127,7 +127,7 @@ def test_sobol_indices_find_that_yield_pressure_dominates(setup):
 
 def test_sweep_command_writes_table_figures_and_summary(tmp_path):
     out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "growjax.cli", "sweep", str(REPO / "data" / "synthetic_forward.csv"), "--n", "16",
+    cmd = [sys.executable, "-m", "growjax.cli", "sweep", str(REPO / "src" / "growjax" / "datasets" / "synthetic_forward.csv"), "--n", "16",
            "--t-end", "2", "--seed", "5", "--out", str(out), "--json", str(out / "s.json")]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, check=False)
     assert proc.returncode == 0, proc.stderr[-2000:]

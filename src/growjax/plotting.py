@@ -1,12 +1,12 @@
-"""Figures (matplotlib, Agg backend): the paper's Fig. 3/4 style trajectory plot."""
+"""Figures (matplotlib): the paper's Fig. 3/4 style trajectory plot and the workflows' figures.
+
+Each function writes a PNG and closes its figure; the backend is left to the caller (the command line uses Agg).
+"""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 

@@ -21,10 +21,10 @@ Inputs (``inputs=``):
   (:func:`growjax.experiment.shared_experiment_dir`, ``../shared/data/mammobot``) and, as the
   published model does, the published 0/150 kPa pulse (the demand was not recorded); the inverse
   drive takes the measured length as the desired one. **Where that folder is absent (CI)** the
-  shipped ``data/synthetic_forward.csv`` is used instead (catheter 0.004 + 0.004·t m, published
+  shipped ``growjax/datasets/synthetic_forward.csv`` is used instead (catheter 0.004 + 0.004·t m, published
   pulse, 0.01–10 s), and if that too is missing, the published pulse with the same catheter ramp.
   ``metadata["inputs"]`` says which was used.
-* ``"synthetic"``: always the shipped ``data/synthetic_forward.csv`` inputs (same fallback).
+* ``"synthetic"``: always the shipped ``growjax/datasets/synthetic_forward.csv`` inputs (same fallback).
 * a :class:`growjax.Inputs`: used as given, sampled every ``dt`` for the CSV columns.
 
 Magnitudes: :func:`moderate_magnitude` gives, per effect, a value inside its physical range that
@@ -203,13 +203,10 @@ def hidden_effect_parameters(effect: Effect | None = None, base=None, *, superse
 
 
 def shipped_inputs_path() -> Path | None:
-    """The shipped ``synthetic_forward.csv`` (package data ``growjax/datasets``, i.e. the repository's ``data/``)."""
+    """The shipped ``synthetic_forward.csv`` (package data ``growjax/datasets``)."""
     from importlib import resources
 
     cand = Path(str(resources.files("growjax") / "datasets" / SHIPPED_INPUTS))
-    if cand.exists():
-        return cand
-    cand = Path(__file__).resolve().parents[2] / "data" / SHIPPED_INPUTS
     return cand if cand.exists() else None
 
 
