@@ -1,4 +1,4 @@
-"""Benchmark of calibration on the measured data (issue 4): fit time, NUTS cost, and the fast approximation.
+"""Benchmark of calibration on the measured data: fit time, NUTS cost, and the fast approximation.
 
 Run: ``python benchmarks/calibrate.py [--out benchmarks/results/calibrate.json] [--t-end 10]
 [--chains 4 --warmup 500 --samples 500] [--direct-iterations 20]``. The JSON holds:

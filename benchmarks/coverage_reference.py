@@ -1,4 +1,4 @@
-"""Fit intervals against the truth on data made by the reference configuration (issue 9, "honest").
+"""Fit intervals against the truth on data made by the reference configuration (data the fast model did not make).
 
 Run: ``python benchmarks/coverage_reference.py [--seeds 1] [--out benchmarks/results/coverage_reference.json]``.
 

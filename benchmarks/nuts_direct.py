@@ -1,4 +1,4 @@
-"""NUTS directly through the model (no emulator) on the public experiment, Lockhart growth law (issue 9).
+"""NUTS directly through the model (no emulator) on the public experiment, Lockhart growth law.
 
 Run: ``python benchmarks/nuts_direct.py [--chains 4 --warmup 500 --samples 500] [--target-accept 0.98]
 [--max-tree-depth 10] [--vectorised-gradient] [--gradients-only] [--small-loops] [--sequential]

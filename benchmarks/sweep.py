@@ -25,7 +25,7 @@ Measured, on the public experiment (``../shared/data/mammobot``) or, when it is 
    (target ≥ 50×).
 
 Every CPU core is a JAX device (``jax_num_cpu_devices``; ``GROWJAX_CPU_DEVICES`` overrides), so the
-sweep shards across them. Times are wall-clock seconds on this machine, taken in one session.
+sweep shards across them. Times are wall-clock seconds on this machine, taken in one process.
 """
 
 from __future__ import annotations

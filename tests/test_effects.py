@@ -313,8 +313,8 @@ def test_the_effect_parameter_is_a_differentiable_leaf(inputs, name):
 @pytest.mark.parametrize("name", ["fluid_leak", "active_channel_force"])
 def test_the_derivative_at_an_absent_effect_is_finite_and_right(inputs, name):
     """At θ = 0 (the effect absent) a unit tangent in SI units has no size of its own to scale the difference
-    step: the effect's range sets it (a leak's 1e-12 m³/(s·Pa), not 1). Before, the step was ε^⅓ in SI, the
-    shifted solve failed and every derivative came back NaN. Now d(final length)/dθ matches the forward
+    step: the effect's range sets it (a leak's 1e-12 m³/(s·Pa), not 1); a step of ε^⅓ in SI would make the
+    shifted solve fail and every derivative NaN. d(final length)/dθ matches the forward
     difference to 10 % of the moderate magnitude within 5 % (both effects are nearly linear there)."""
     k = list(sy.ALL_EFFECTS).index(name)
     m = sy.moderate_magnitude(name)

@@ -37,10 +37,10 @@ def test_regular_install_runs_simulate_elsewhere(tmp_path):
 
     where = tmp_path / "elsewhere"
     where.mkdir()
-    probe = subprocess.run([str(python), "-c", "import growjax, sys; print(growjax.__file__); print(growjax.__version__)"],
+    found = subprocess.run([str(python), "-c", "import growjax, sys; print(growjax.__file__); print(growjax.__version__)"],
                            env=env, capture_output=True, text=True, cwd=where, check=True).stdout.split()
-    assert Path(probe[0]).is_relative_to(env_dir), probe  # the installed copy, not the source tree
-    installed_data = Path(probe[0]).parent / "datasets" / "synthetic_forward.csv"
+    assert Path(found[0]).is_relative_to(env_dir), found  # the installed copy, not the source tree
+    installed_data = Path(found[0]).parent / "datasets" / "synthetic_forward.csv"
     assert installed_data.is_file() and not installed_data.is_symlink()
 
     run = subprocess.run([str(env_dir / "bin" / "growjax"), "simulate", "--out", "out/simulate", "--json",

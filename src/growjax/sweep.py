@@ -182,13 +182,9 @@ def make_members(base: gp.Parameters, names: Sequence[str], inputs, config, meas
     return members
 
 
-# Designs up to this many rows compile with XLA's quicker emitters (xla_flags.QUICK_COMPILE). Measured on the
-# 2-core CPU, 500 sets of 10 s: compile 1.2 s shorter, sweep 7 % (0.26 ms per set) longer; break-even ~4500 sets
-# (2026-11-24). After the batch's in-loop saving and forward-mode Jacobian (2026-11-25): compile 1.3 s shorter,
-# sweep ~5 % (0.1 ms per set) longer (``benchmarks/sweep.py`` prints both); the threshold was left as it was.
-# After the batch's elementwise W⁻¹ and variation check (2026-11-25, two alternating pairs in separate processes):
-# compile 4.79–4.85 s against 6.34–6.41 s (1.55 s shorter), sweep 0.822–0.830 s against 0.783–0.786 s (0.07–0.09 ms
-# per set longer); break-even ~17 000–22 000 sets, so the quick compile now serves designs up to 15 000.
+# Designs up to this many rows compile with XLA's quicker emitters (xla_flags.QUICK_COMPILE). On a 2-core CPU,
+# 500 sets of 10 s compile ~1.5 s sooner and sweep ~0.08 ms per set slower with them (``benchmarks/sweep.py``
+# measures both), so they pay up to ~17 000 sets.
 QUICK_COMPILE_ROWS = 15_000
 
 # Compiled sweep programs of this process, keyed by everything they close over (at most 8 kept).
