@@ -29,6 +29,7 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 import numpy as np
+from _environment import environment  # benchmarks/ is on sys.path when run as a script
 
 import growjax as gj
 from growjax import experiment as ex
@@ -145,6 +146,7 @@ def main():
     results = {
         "data": exp.source,
         "device": str(jax.devices()[0]),
+        "environment": environment(),
         "small_loops": small_loops,
         "simulation": fast,
         "gradient": gradient,

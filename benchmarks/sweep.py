@@ -51,6 +51,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _environment import environment  # benchmarks/ is on sys.path when run as a script
 from scipy.integrate import solve_ivp
 
 import growjax as gj
@@ -626,6 +627,7 @@ def main():
         "baseline_over_warm_cli_process": baseline / out["cli_process"]["warm"]["process_wall_s"],
     }
     out["targets"] = TARGETS
+    out["environment"] = environment()
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(out, indent=2) + "\n")
     report(out)

@@ -16,7 +16,10 @@ PATTERNS = {
     "issue number": re.compile(r"\bissues?[ -]#?\d+", re.IGNORECASE),
     "date": re.compile(r"\b(?:19|20)\d\d-(?:0[1-9]|1[0-2])-(?:0[1-9]|[12]\d|3[01])\b"),
     "probe": re.compile(r"\bprob(?:e|es|ed|ing)\b", re.IGNORECASE),
+    "a file users do not have": re.compile(r"PHYSICS\.md"),
 }
+# Generated from the benchmark results, whose date says when the numbers were measured.
+DATED = {"docs/benchmarks.md"}
 # Code, not history: pytest's fixture scope is called "session".
 ALLOWED = re.compile(r"scope=[\"']session[\"']")
 
@@ -45,6 +48,6 @@ def test_no_development_history_in_tracked_files():
         for number, line in enumerate(text.splitlines(), 1):
             line = ALLOWED.sub("", line)
             for what, pattern in PATTERNS.items():
-                if pattern.search(line):
+                if pattern.search(line) and not (what == "date" and name in DATED):
                     hits.append(f"{name}:{number}: {what}: {line.strip()[:120]}")
     assert not hits, f"{len(hits)} lines of development history:\n" + "\n".join(hits)

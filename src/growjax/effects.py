@@ -20,7 +20,7 @@ iterations instead of one fixed-point pass.
 
 The catalogue (:data:`CATALOGUE`, name → class): ``active_channel_force``, ``fluid_leak``,
 ``actuation_lag``, ``trapped_air``, ``catheter_friction``, ``lumen_friction``,
-``growth_rate_limit``, ``retraction_folding``.
+``growth_rate_limit``, ``retraction_folding``. :func:`register` adds an effect of your own.
 """
 
 from __future__ import annotations
@@ -214,7 +214,7 @@ class CatheterFriction(Effect):
     F = μ·P·2π r_i·L_c·s(v), with P the sensed pressure (taken ≥ 0: the contact cannot pull),
     r_i the robot's inner radius, L_c the catheter length in contact and s the smooth sign of the
     robot velocity (:func:`friction_sign`). The shipped model's own catheter term (μ_c = 0.01)
-    *assists* growth (PHYSICS.md §8.4); this one opposes growth and retraction alike.
+    *assists* growth; this one opposes growth and retraction alike.
 
     Attributes:
         coefficient: μ (–) (0 = absent).
@@ -309,6 +309,26 @@ class RetractionFolding(Effect):
 
 CATALOGUE = {cls.name: cls for cls in (ActiveChannelForce, FluidLeak, ActuationLag, TrappedAir, CatheterFriction,
                                        LumenFriction, GrowthRateLimit, RetractionFolding)}
+
+
+def register(cls: type[Effect]) -> type[Effect]:
+    """Add an :class:`Effect` subclass to :data:`CATALOGUE`, so that :func:`growjax.discover.discover` tests it.
+
+    The class needs a ``name`` not already in the catalogue, a one-line ``description``, and exactly one
+    parameter field with its unit (``units``) and physical range (``ranges``), the range including 0 (absent).
+    Usable as a class decorator; returns the class.
+    """
+    if not (isinstance(cls, type) and issubclass(cls, Effect)):
+        raise TypeError(f"register expects an Effect subclass, got {cls!r}")
+    if not cls.name or cls.name in CATALOGUE:
+        raise ValueError(f"an effect needs a name not in the catalogue ({sorted(CATALOGUE)}), got {cls.name!r}")
+    if len(cls.ranges) != 1:
+        raise ValueError(f"{cls.name}: discover fits one parameter per effect; ranges has {len(cls.ranges)}")
+    (field, (low, high)), = cls.ranges.items()
+    if field not in cls.units or not low <= 0.0 <= high:
+        raise ValueError(f"{cls.name}.{field}: needs a unit in `units` and a range that includes 0")
+    CATALOGUE[cls.name] = cls
+    return cls
 
 
 # -- what the assemblies call: the sum over a tuple of effects -------------------------------------------

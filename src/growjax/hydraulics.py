@@ -1,4 +1,4 @@
-"""Hydraulic components between the syringes and the robot (PHYSICS.md §3.2–3.6).
+"""Hydraulic components between the syringes and the robot.
 
 Sign convention (Simscape): pressures are gauge, Pa; a flow q (m³/s) is positive
 from port A to port B. Each component is a small pytree of parameters plus pure
@@ -75,7 +75,7 @@ def circular_pipeline(diameter: float, length: float, **kw) -> Pipeline:
 
 
 def _friction_times_reynolds(pipe: Pipeline, re):
-    """f(Re)·Re: laminar s below Re_lam, Haaland above Re_turb, C¹ blend between (PHYSICS.md §3.2)."""
+    """f(Re)·Re: laminar s below Re_lam, Haaland above Re_turb, C¹ blend between."""
     re_safe = jnp.maximum(re, 1.0)
     rel = pipe.roughness / pipe.hydraulic_diameter / 3.7
     f_turb = 1.0 / (-1.8 * jnp.log10(6.9 / re_safe + rel**1.11)) ** 2
@@ -96,7 +96,7 @@ def chamber_pressure_rate(pipe: Pipeline, fluid: Fluid, p, wall_strain, net_infl
     """dp/dt (Pa/s) and dδ/dt (m/s) of a pipeline chamber at pressure ``p`` with diameter increase δ.
 
     Rigid wall: (V/E) ṗ = q. Flexible wall: τ δ̇ = k_p p − δ and
-    q = (V(δ)/E) ṗ + (π(d+δ)/2) L (1 + p/E) δ̇, V(δ) = π(d+δ)²L/4 (PHYSICS.md §3.2).
+    q = (V(δ)/E) ṗ + (π(d+δ)/2) L (1 + p/E) δ̇, V(δ) = π(d+δ)²L/4.
     """
     e = bulk_modulus(fluid, p)
     d = pipe.hydraulic_diameter
@@ -154,7 +154,7 @@ def nozzle_pressure_drop(noz: Nozzle, fluid: Fluid, q_ab, p_avg, flow_width):
 
 
 class CheckValve(eqx.Module):
-    """Check valve with linear opening between cracking and max-opening pressure (PHYSICS.md §3.5).
+    """Check valve with linear opening between cracking and max-opening pressure.
 
     ``crack_pressure`` is None in the shipped model: it is tied to the robot's yield pressure Y.
     """
@@ -174,7 +174,7 @@ def check_valve_flow(cv: CheckValve, fluid: Fluid, dp, p_avg, crack_pressure, cr
 
 
 class DirectionalValve(eqx.Module):
-    """3-way directional valve whose spool follows the robot-flow sign (PS Switch, PHYSICS.md §1.4, §3.6).
+    """3-way directional valve whose spool follows the robot-flow sign (PS Switch).
 
     Spool +1 (robot flow ≥ 0): P–A open, A–T closed; −1: A–T open (check valve bypassed).
     """
@@ -224,7 +224,7 @@ def valve_network_flow(net: ValveNetwork, dp, p_avg):
     (A–T) area is therefore opened for Δp < 0 only, ramping from leak to full over
     ``switch_width`` Pa, so no forward flow ever bypasses the check valve. The open P–A
     orifice in series with the check valve is omitted: its resistance is < 1e-5 of the
-    check valve's (PHYSICS.md §7), a relative flow error below 1e-5.
+    check valve's, a relative flow error below 1e-5.
     """
     q_check = _check_flow(net, dp, critical_pressure(p_avg, net.check_laminar_ratio))
     bypass_open = 1.0 - smooth_step(dp + net.switch_width, net.switch_width)

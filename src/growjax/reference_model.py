@@ -1,6 +1,6 @@
 """The reference configuration: the shipped network node by node, solved by a stiff ESDIRK method.
 
-Topology (PHYSICS.md §1): drive → lead screws → platform → 2 syringes → 2 hoses →
+Topology: drive → lead screws → platform → 2 syringes → 2 hoses →
 junction → orifice → tank → nozzle → node P (sensor) → check valve ∥ 3-way bypass →
 robot. The hoses and the tank are chambers with their own pressures; the platform has its
 1 g mass. Node pressures between resistances are algebraic and eliminated in

@@ -101,8 +101,9 @@ class SweepResult:
         names: qualified parameter names, (d,).  values: (n, d) parameter values, SI.
         rmse: (n,) length RMSE, m (NaN where no data or failed).  final_length: (n,) m.
         status: (n,) codes, see :data:`REASONS`.  wall_s: evaluation time after compilation, s.
-        compile_s: compilation time, s (tracing and lowering included).  lower_s: the part of ``compile_s`` spent
-        tracing and lowering the program to StableHLO, s; the rest is XLA's (0 where this process had compiled it).
+        compile_s: compilation time, s (tracing and lowering included).
+        lower_s: the part of ``compile_s`` spent tracing and lowering the program to StableHLO, s; the rest is
+            XLA's (0 where this process had compiled it).
         n_devices: devices the sweep was split over.
     """
 
