@@ -26,7 +26,7 @@ class LengthPID(eqx.Module):
     Gains as log10 of SI values: Kp Pa/m, Ki Pa/(m·s), Kd Pa·s/m. ``ff``: (knots, values) of a demand profile.
     """
 
-    log_gains: Float[Array, 3]  # log10(Kp, Ki, Kd)
+    log_gains: Float[Array, " gains"]  # (3,): log10(Kp, Ki, Kd)
     ff_knots: jax.Array
     ff_values: jax.Array
     dt: float = eqx.field(static=True, default=0.01)
