@@ -32,7 +32,7 @@ import make_discovery_examples as mde  # the shipped reference traces, made and 
 
 NAMES = list(fx.CATALOGUE)
 T1 = 3.0
-FAST = gj.Config(t1=T1)
+FAST = gj.Config(t1=T1, adjoint="forward")  # forward mode along the tangent (jvp)
 TIME = np.round(np.arange(1, 301) * 0.01, 10)  # s: the save grid of the shipped reference traces
 TS = np.concatenate([[FAST.t0], TIME])
 NOISE = 2e-4  # m: the rig's length noise
@@ -85,12 +85,14 @@ def test_an_effect_at_zero_contributes_nothing(name):
     rng = np.random.default_rng(7)
     for _ in range(20):
         t, p, v = rng.uniform(0, 10), rng.uniform(-5e3, 3e5), rng.normal(0.0, 0.02)
-        rod = fx.Rod(t, p, v, rng.uniform(0, 0.08), rng.uniform(0, 0.05), params.robot.inner_radius, params.robot.area)
+        rod = fx.Rod(t=t, pressure=p, velocity=v, length=rng.uniform(0, 0.08), catheter_length=rng.uniform(0, 0.05),
+                     inner_radius=params.robot.inner_radius, area=params.robot.area)
         assert float(effect.rod_force(rod, state)) == 0.0
         assert float(effect.chamber_outflow(t, p, state)) == 0.0
         commanded = rng.normal(0.0, 50.0)
         assert float(effect.drive(commanded, state)) == commanded
-        instant = fx.Instant(t, p, p - 100.0, v * params.robot.area, v, 0.02, commanded)
+        instant = fx.Instant(t=t, pressure=p, robot_pressure=p - 100.0, robot_flow=v * params.robot.area, velocity=v,
+                             length=0.02, drive=commanded)
         np.testing.assert_array_equal(np.asarray(effect.rates(instant, state)), 0.0)
     same = jax.tree_util.tree_map(lambda a, b: bool(np.all(np.asarray(a) == np.asarray(b))), effect.apply(params), params)
     assert all(jax.tree_util.tree_leaves(same))

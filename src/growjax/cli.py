@@ -11,6 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
+from growjax._data import default_data_path
+
 
 def _enable_compile_cache():
     import jax
@@ -29,13 +31,6 @@ def parse_param(text: str):
         return name.strip(), float(value)
     except ValueError:
         raise ValueError(f"--param {name}: {value!r} is not a number") from None
-
-
-def default_data_path() -> Path:
-    """The synthetic experiment shipped with the package."""
-    from importlib import resources
-
-    return Path(str(resources.files("growjax") / "datasets" / "synthetic_forward.csv"))
 
 
 def make_config(args, drive: str = "forward", **extra):
@@ -260,6 +255,39 @@ def discover_command(args) -> dict:
     return {"data": str(data), "drive": args.drive, "t_end_s": args.t_end, **res.report(), "figure": str(figure)}
 
 
+def _control_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``growjax control DATA``."""
+    parser.add_argument("data", nargs="?", help="experiment CSV (or folder); target: desired_length_m, else robot_length_m")
+    parser.add_argument("--drive", choices=["forward", "inverse"], default="forward")
+    parser.add_argument("--method", choices=["open-loop", "feedback", "mpc"], default="feedback")
+    parser.add_argument("--robust", metavar="POSTERIOR.nc", help="tune on the cost averaged over posterior draws")
+    parser.add_argument("--draws", type=int, default=8, help="posterior draws to tune on (--robust; default 8)")
+    parser.add_argument("--t-end", type=float, default=10.0, help="end time, s (default 10)")
+    parser.add_argument("--iterations", type=int, default=10, help="optimiser / tuning iterations (default 10)")
+    parser.add_argument("--microsteps", type=int, default=1,
+                        help="stepper driver microsteps (1: the shipped full-step driver)")
+    parser.add_argument("--evaluate", choices=["fast", "reference"], default="reference",
+                        help="configuration the tracking RMSE is evaluated on (default reference)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--out", default="out", help="output folder (control.png)")
+    parser.add_argument("--json", help="also write the JSON summary to this file")
+
+
+def control_command(args) -> dict:
+    """Run ``growjax control``: design on the fast model, evaluate on ``--evaluate``, write a figure, return JSON."""
+    from growjax import experiment as ex
+    from growjax.control import design, target_from_experiment
+
+    data = Path(args.data) if args.data else default_data_path()
+    target = target_from_experiment(ex.read(data), args.t_end)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    summary = design(target, args.drive, args.method, args.t_end, robust=args.robust, n_draws=args.draws,
+                     iterations=args.iterations, microsteps=args.microsteps, evaluate_on=args.evaluate,
+                     seed=args.seed, figure=out / "control.png")
+    return {"data": str(data), **summary}
+
+
 def build_parser():
     parser = argparse.ArgumentParser(prog="growjax", description="MAMMOBOT growing-robot simulator")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -318,10 +346,8 @@ def build_parser():
     dis.add_argument("--out", default="out", help="output folder (discover.png)")
     dis.add_argument("--json", help="also write the JSON report to this file")
 
-    from growjax import control as gcontrol
-
     ctl = sub.add_parser("control", help="length control design: open-loop profile, feedback, MPC")
-    gcontrol.add_arguments(ctl)
+    _control_arguments(ctl)
     for command in (sim, swp, fit, post, dis):
         command.add_argument("--fidelity", choices=["fast", "reference"], default="fast",
                              help="fast configuration (default) or the reference network (slow; for checks)")
@@ -331,6 +357,9 @@ def build_parser():
 
 
 def main(argv=None) -> int:
+    import matplotlib
+
+    matplotlib.use("Agg")  # the commands write figures to files
     args = build_parser().parse_args(argv)
     _enable_compile_cache()
     if args.command in ("simulate", "fit") and args.fidelity == "fast":  # compile-bound: XLA's quicker emitters
@@ -355,9 +384,7 @@ def main(argv=None) -> int:
         elif args.command == "discover":
             summary = discover_command(args)
         elif args.command == "control":
-            from growjax import control as gcontrol
-
-            summary = gcontrol.command(args)
+            summary = control_command(args)
         else:
             summary = simulate_command(args)
     except (ExperimentError, ValueError) as err:

@@ -25,26 +25,29 @@ The catalogue (:data:`CATALOGUE`, name → class): ``active_channel_force``, ``f
 
 from __future__ import annotations
 
-from typing import ClassVar, NamedTuple
+import dataclasses
+from typing import ClassVar
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 
 from growjax._smooth import smooth_ramp
+from growjax.robot import LOCKHART_PRESSURE_SCALE, lockhart_pressure
 
 FRICTION_VELOCITY = 1e-4  # m/s: velocity over which a friction force turns from one sign to the other
 RAMP_VELOCITY = 1e-6  # m/s: C¹ band of the ramps max(v, 0) of the velocity
 
 
-class Rod(NamedTuple):
-    """The growing element as an effect sees it in the rod balance (SI units).
+class Rod(eqx.Module):
+    """The growing element as an effect sees it in the rod balance (SI units); built by keyword only.
 
     t: s.  pressure: sensed pressure P before the check valve, Pa.  velocity: robot
     velocity (inflow / A_r), m/s.  length: robot length, m.  catheter_length: m.
     inner_radius: r_i of the robot, m.  area: its annular piston area A_r = π(r_o² − r_i²), m².
     """
 
+    _: dataclasses.KW_ONLY
     t: jax.Array
     pressure: jax.Array
     velocity: jax.Array
@@ -54,12 +57,15 @@ class Rod(NamedTuple):
     area: jax.Array
 
 
-class Instant(NamedTuple):
-    """The solved model at one instant, for the rates of effect states (SI units).
+class Instant(eqx.Module):
+    """The solved model at one instant, for the rates of effect states (SI units); built by keyword only.
 
-    ``drive``: the commanded drive (forward: force on the platform, N; inverse: motor torque, N·m).
+    t: s.  pressure: sensed pressure, Pa.  robot_pressure: Pa.  robot_flow: m³/s.  velocity: robot velocity, m/s.
+    length: robot length, m.  drive: the commanded drive (forward: force on the platform, N; inverse: motor
+    torque, N·m).
     """
 
+    _: dataclasses.KW_ONLY
     t: jax.Array
     pressure: jax.Array
     robot_pressure: jax.Array
@@ -197,8 +203,6 @@ class TrappedAir(Effect):
     extra_fraction: float = 0.0
 
     def apply(self, params):
-        import dataclasses
-
         fluid = dataclasses.replace(params.fluid, air_fraction=params.fluid.air_fraction + self.extra_fraction)
         return dataclasses.replace(params, fluid=fluid)
 
@@ -257,9 +261,9 @@ class LumenFriction(Effect):
 class GrowthRateLimit(Effect):
     """Membrane-limited growth speed: growing at v > 0 needs Δp = p_ref·(κ·v)^m more rod pressure.
 
-    The inverse of a Lockhart-type law v = (Δp/p_ref)^(1/m)/κ, with p_ref = 1 kPa and m = 4 fixed
-    (the calibration found Lockhart's exponent n_L ≈ 0.25, m = 1/n_L). Zero while the robot holds
-    or retracts (a C¹ ramp of v). Rod force A_r·Δp.
+    The inverse of a Lockhart-type law v = (Δp/p_ref)^(1/m)/κ (:func:`growjax.robot.lockhart_pressure`), with
+    p_ref = 1 kPa and m = 4 fixed (the calibration found Lockhart's exponent n_L ≈ 0.25, m = 1/n_L). Zero while
+    the robot holds or retracts (a C¹ ramp of v). Rod force A_r·Δp.
 
     Attributes:
         inverse_speed: κ, s/m: the inverse of the growth speed at 1 kPa of excess pressure (0 = absent).
@@ -270,13 +274,12 @@ class GrowthRateLimit(Effect):
     units: ClassVar[dict] = {"inverse_speed": "s/m"}
     ranges: ClassVar[dict] = {"inverse_speed": (0.0, 2000.0)}
     velocity_dependent: ClassVar[bool] = True
-    reference_pressure: ClassVar[float] = 1e3  # Pa: p_ref
+    reference_pressure: ClassVar[float] = LOCKHART_PRESSURE_SCALE  # Pa: p_ref
     exponent: ClassVar[float] = 4.0  # m = 1/n_L
     inverse_speed: float = 0.0
 
     def rod_force(self, rod, state):
-        growth = self.inverse_speed * smooth_ramp(rod.velocity, RAMP_VELOCITY)  # κ·v (–)
-        return rod.area * self.reference_pressure * growth**self.exponent
+        return rod.area * lockhart_pressure(rod.velocity, self.inverse_speed, self.exponent, RAMP_VELOCITY)
 
 
 class RetractionFolding(Effect):

@@ -99,13 +99,22 @@ def chamber_pressure_rate(pipe: Pipeline, fluid: Fluid, p, wall_strain, net_infl
     q = (V(δ)/E) ṗ + (π(d+δ)/2) L (1 + p/E) δ̇, V(δ) = π(d+δ)²L/4.
     """
     e = bulk_modulus(fluid, p)
-    d = pipe.hydraulic_diameter
     rigid = pipe.diameter_compliance == 0.0
-    dd = (pipe.diameter_compliance * p - wall_strain) / pipe.wall_time_constant
-    dd = jnp.where(rigid, 0.0, dd)
-    volume = jnp.where(rigid, pipe.volume, jnp.pi * (d + wall_strain) ** 2 / 4.0 * pipe.length)
-    wall_flow = jnp.pi * (d + wall_strain) / 2.0 * pipe.length * (1.0 + p / e) * dd
+    dd = wall_strain_rate(pipe, p, wall_strain)
+    volume = jnp.where(rigid, pipe.volume, strained_volume(pipe, wall_strain))
+    wall_flow = jnp.pi * (pipe.hydraulic_diameter + wall_strain) / 2.0 * pipe.length * (1.0 + p / e) * dd
     return (net_inflow - wall_flow) * e / volume, dd
+
+
+def strained_volume(pipe: Pipeline, wall_strain, count=1):
+    """Chamber volume of ``count`` pipes like ``pipe`` at diameter increase δ = ``wall_strain`` (m): n·π(d + δ)²L/4, m³."""
+    return count * jnp.pi * (pipe.hydraulic_diameter + wall_strain) ** 2 / 4.0 * pipe.length
+
+
+def wall_strain_rate(pipe: Pipeline, p, wall_strain):
+    """dδ/dt (m/s) of the viscoelastic wall at gauge pressure ``p`` (Pa): τ δ̇ = k_p p − δ (0 for a rigid wall)."""
+    rate = (pipe.diameter_compliance * p - wall_strain) / pipe.wall_time_constant
+    return jnp.where(pipe.diameter_compliance == 0.0, 0.0, rate)
 
 
 class Orifice(eqx.Module):

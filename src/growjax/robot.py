@@ -151,9 +151,16 @@ def growth_pressure(rod: RodBalance, velocity):
     """
     eps = rod.velocity_eps
     if rod.growth_law == "lockhart":
-        growth = smooth_ramp(velocity, eps) * rod.law_scale
-        return LOCKHART_PRESSURE_SCALE * smooth_abs_power(growth, rod.law_exponent, eps * rod.law_scale)
+        return lockhart_pressure(velocity, rod.law_scale, rod.law_exponent, eps)
     return smooth_abs_power(velocity * rod.law_scale, rod.law_exponent, eps * rod.law_scale)
+
+
+def lockhart_pressure(velocity, inverse_speed, exponent, eps):
+    """Excess pressure (Pa) of Lockhart's law to grow at ``velocity`` (m/s): p_ref·(κ·v)^m for v > 0, 0 otherwise
+    (p_ref = 1 kPa, κ = ``inverse_speed`` s/m, m = ``exponent``), the ramp of v and the power regularised over
+    ``eps`` m/s (C¹ at v = 0). The inverse of v = ((p − p₀)/p_ref)^(1/m)/κ."""
+    growth = smooth_ramp(velocity, eps) * inverse_speed
+    return LOCKHART_PRESSURE_SCALE * smooth_abs_power(growth, exponent, eps * inverse_speed)
 
 
 def velocity_pressure(robot: GrowingRobot, velocity, velocity_eps):

@@ -13,7 +13,6 @@ others are unaffected.
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import math
 import time
 from collections.abc import Sequence
@@ -26,6 +25,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from growjax import params as gp
 from growjax import xla_flags
+from growjax._pytree_hash import content_key
 from growjax.config import Config
 from growjax.metrics import rmse_at_samples
 from growjax.simulate import as_arrays, input_breaks, sample_times, simulate_members
@@ -192,17 +192,6 @@ QUICK_COMPILE_ROWS = 15_000
 _COMPILED: dict = {}
 
 
-def _content_key(tree) -> tuple:
-    """Hashable fingerprint of a pytree's structure and leaf values (the constants a sweep program closes over)."""
-    leaves, treedef = jax.tree_util.tree_flatten(tree)
-    digest = hashlib.sha1()
-    for leaf in leaves:
-        a = np.asarray(leaf)
-        digest.update(str((a.dtype, a.shape)).encode())
-        digest.update(repr(leaf).encode() if a.dtype == object else a.tobytes())
-    return (str(treedef), digest.hexdigest())
-
-
 def _mesh(devices=None) -> Mesh:
     return Mesh(np.asarray(devices if devices is not None else jax.devices()), ("batch",))
 
@@ -272,8 +261,8 @@ def evaluate(
     dynamic, static = eqx.partition((as_arrays(base), as_arrays(inputs), breaks, measured), eqx.is_array)
     shapes = jax.tree_util.tree_map(lambda a: (a.shape, str(a.dtype)), dynamic)
     quick = n <= QUICK_COMPILE_ROWS
-    key = (names, config, chunk, quick, None if window is None else tuple(window), tuple(d.id for d in mesh.devices.flat),
-           str(jax.tree_util.tree_structure(dynamic)), str(jax.tree_util.tree_leaves(shapes)), _content_key(static))
+    key = (names, config.resolved(), chunk, quick, None if window is None else tuple(window), tuple(d.id for d in mesh.devices.flat),
+           str(jax.tree_util.tree_structure(dynamic)), str(jax.tree_util.tree_leaves(shapes)), content_key(static))
     compiled = _COMPILED.get(key)
     lower_s = 0.0
     if compiled is None:

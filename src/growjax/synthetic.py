@@ -42,7 +42,6 @@ from __future__ import annotations
 
 import collections
 import dataclasses
-import hashlib
 import json
 import math
 from pathlib import Path
@@ -55,6 +54,7 @@ import numpy as np
 import growjax as gj
 from growjax import effects as fx
 from growjax import experiment as ex
+from growjax._pytree_hash import content_key
 from growjax.effects import Effect
 
 # -- effects outside the catalogue (for false-claim tests) ------------------------------------------------
@@ -295,14 +295,6 @@ def clear_cache() -> None:
     _CACHE.clear()
 
 
-def _leaves_key(tree) -> str:
-    leaves, treedef = jax.tree_util.tree_flatten(tree)
-    h = hashlib.sha1(str(treedef).encode())
-    for leaf in leaves:
-        h.update(np.ascontiguousarray(np.asarray(leaf, float)).tobytes())
-    return h.hexdigest()
-
-
 def _effect_spec(effect, magnitude):
     """(Effect instance or None, name, magnitude or None) from the arguments of :func:`make_experiment`."""
     if effect is None:
@@ -334,9 +326,9 @@ def noise_free(effect=None, magnitude: float | None = None, *, drive: str = "for
     """
     instance, name, magnitude = _effect_spec(effect, magnitude)
     base_params = gj.reference(drive) if base is None else base
-    inputs_key = inputs if isinstance(inputs, str) else ("inputs", _leaves_key(inputs))
-    key = (None if instance is None else (type(instance).__qualname__, _leaves_key(instance)), drive, inputs_key,
-           round(float(t_end), 9), float(dt), float(rtol), bool(superset), None if base is None else (_leaves_key(base), str(
+    inputs_key = inputs if isinstance(inputs, str) else ("inputs", content_key(inputs))
+    key = (None if instance is None else (type(instance).__qualname__, content_key(instance)), drive, inputs_key,
+           round(float(t_end), 9), float(dt), float(rtol), bool(superset), None if base is None else (content_key(base), str(
                jax.tree_util.tree_structure(base))))
     if key in _CACHE:
         _CACHE.move_to_end(key)
