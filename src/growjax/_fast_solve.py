@@ -61,7 +61,7 @@ def _sensitivity_run(params, config: Config, y0, theta_s, size, s0, tangent_fiel
     jumps, batched), θ_s from :func:`sensitivities`, with twice the step budget of a plain solve. With
     forward-mode tangents the state's Jacobian is taken in forward mode too: the field's ``jvp`` is compiled
     anyway, and under the Lockhart law each difference column would repeat the rod balance's Newton solve
-    (one Jacobian in 3 parameters on the public experiment, small loops: 18 → 16 ms, a probe)."""
+    (one Jacobian in 3 parameters on the public experiment, small loops: 16 ms against 18 ms)."""
     rtol, atol = config.tolerances
     field, _, event = fs.callbacks(config)
     # The difference quotients carry roundoff of ~1e-10 relative: tighter sensitivity control only burns steps.

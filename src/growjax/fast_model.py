@@ -1,7 +1,7 @@
 """The fast configuration: the same components with the lines lumped, solved by an L-stable Rosenbrock method.
 
 Three reductions of the reference assembly (:mod:`growjax.reference_model`), each of a mode far
-faster than anything the robot's length shows (PHYSICS.md §7):
+faster than anything the robot's length shows:
 
 * the hoses, orifice, tank and node P form one chamber: their series drops equalise in
   < 15 µs; the pump sees the series drop of the lines at its flow
