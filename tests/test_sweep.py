@@ -138,7 +138,7 @@ def test_sweep_command_writes_table_figures_and_summary(tmp_path):
     rows = (out / "sweep.csv").read_text().splitlines()
     assert len(rows) == 17 and rows[0].endswith("rmse_length_m,final_length_m,status")
     assert (out / "sweep.png").stat().st_size > 10_000  # (--sobol: test_sobol_indices_find_that_yield_pressure_dominates)
-    bad = subprocess.run([sys.executable, "-m", "growjax.cli", "sweep", "--param", "Y=9:1"], capture_output=True, text=True, check=False)
+    bad = subprocess.run([sys.executable, "-m", "growjax.cli", "sweep", "--range", "Y=9:1"], capture_output=True, text=True, check=False)
     assert bad.returncode == 2 and "LOW < HIGH" in bad.stderr
 
 
