@@ -98,9 +98,9 @@ def test_discover_on_reference_made_examples(name):
 @pytest.mark.slow
 def test_a_hidden_lag_is_fitted_in_its_own_basin_and_no_other_effect_is_claimed():
     """A 15 ms actuation lag (10 s, public inputs, reference-made, seed 1000). Its joint fit with Y has more than
-    one minimum; from the single start (η = 2 % of the range) it stopped in a side basin (Y 8 687 Pa, τ 8.6 ms)
-    and ``discover`` claimed trapped_air. Fitted from every start, the lag's misfit falls to the noise and
-    trapped air is no longer claimed: the lag is named or, trading with Y, reported confounded."""
+    one minimum: a single start (η = 2 % of the range) stops in a side basin (Y 8 687 Pa, τ 8.6 ms), where
+    ``discover`` would claim trapped_air. Fitted from every start, the lag's misfit falls to the noise and
+    trapped air is not claimed: the lag is named or, trading with Y, reported confounded."""
     from growjax import synthetic as sy
 
     exp = sy.make_experiment("actuation_lag", sy.moderate_magnitude("actuation_lag"), seed=1000, t_end=10.0)
