@@ -398,6 +398,7 @@ def params_command(args) -> dict:
         cls = type(getattr(base, block))
         about = _attribute_text(cls.__doc__ or "", field)
         lo, hi, unit = ranges.get(q, (None, None, ""))
+        unit = unit or _unit_of(about)
         rows.append({"name": q, "symbol": symbols.get(q, ""), "value": float(value), "unit": unit,
                      "range": None if lo is None else [lo, hi], "description": about})
     return {"command": "params", "drive": args.drive, "parameters": rows}
@@ -407,9 +408,24 @@ def _attribute_text(doc: str, field: str) -> str:
     """The description of ``field`` in a Google-style ``Attributes:`` section (one line), or ''."""
     import re
 
-    flat = " ".join(doc.split())
+    flat = " ".join(doc.split("Attributes:", 1)[-1].split())
     m = re.search(rf"(?:^|[\s.:]){re.escape(field)}: (.*?)(?=\s+[a-z_]+: |$)", flat)
     return m.group(1).strip() if m else ""
+
+
+def _unit_of(description: str) -> str:
+    """The SI unit a docstring states at the end of a parameter's description ("..., kg/m³.", "... (–)."), or ''."""
+    import re
+
+    text = re.sub(r"\s*\((?![^()]*/)[^()]*\)\.?$", "", description.strip()).rstrip(". ")  # drop a closing remark
+    if "(–)" in description and not re.search(r",\s*\S+$", text):
+        return "-"
+    last = text.rsplit(", ", 1)[-1] if ", " in text else text
+    last = last.split(":")[0].split(";")[0].strip()
+    if last and " " not in last and len(last) <= 16 and (not last.isalpha() or last in ("m", "s", "N", "Pa", "kg",
+                                                                                         "V", "A", "H", "rad", "Hz", "Ω")):
+        return last
+    return "-" if "(–)" in description else ""
 
 
 def effects_command(args) -> dict:

@@ -44,8 +44,9 @@ class Pipeline(eqx.Module):
         length: L, m (chamber volume A_c·L).
         length_additional: aggregate equivalent length of local resistances, m.
         roughness: internal surface roughness, m.
-        shape_factor: laminar friction constant s (64 for a circle).
-        re_laminar, re_turbulent: Reynolds bounds of the transition region.
+        shape_factor: laminar friction constant s (64 for a circle) (–).
+        re_laminar: Reynolds number where the laminar–turbulent transition region starts (–).
+        re_turbulent: Reynolds number where it ends (–).
         diameter_compliance: static pressure–diameter coefficient k_p, m/Pa (0 = rigid wall).
         wall_time_constant: viscoelastic time constant τ of the wall, s.
         initial_pressure: gauge pressure at t0, Pa.
@@ -118,7 +119,13 @@ def wall_strain_rate(pipe: Pipeline, p, wall_strain):
 
 
 class Orifice(eqx.Module):
-    """Fixed orifice. ``area`` m², ``discharge_coefficient`` C_D, ``b_lam`` laminar pressure ratio."""
+    """Fixed orifice.
+
+    Attributes:
+        area: opening area A, m².
+        discharge_coefficient: C_D (–).
+        b_lam: laminar transition pressure ratio B_lam (–).
+    """
 
     area: float = 1.2566e-5
     discharge_coefficient: float = 0.7
@@ -131,7 +138,15 @@ def orifice_conductance(area, cd, fluid: Fluid):
 
 
 class Nozzle(eqx.Module):
-    """Gradual area change (semi-empirical Gibson losses). Port A small, B large; diameters m, angle rad."""
+    """Gradual area change (semi-empirical Gibson losses). Port A small, B large.
+
+    Attributes:
+        small_diameter: diameter at port A, m.
+        large_diameter: diameter at port B, m.
+        angle: included angle of the transition, rad.
+        correction: factor on the loss coefficients (–).
+        b_lam: laminar transition pressure ratio B_lam (–).
+    """
 
     small_diameter: float = 2e-3
     large_diameter: float = 15e-3
@@ -166,6 +181,14 @@ class CheckValve(eqx.Module):
     """Check valve with linear opening between cracking and max-opening pressure.
 
     ``crack_pressure`` is None in the shipped model: it is tied to the robot's yield pressure Y.
+
+    Attributes:
+        area_max: fully open area, m².
+        max_open_pressure: pressure drop at which the valve is fully open, Pa.
+        discharge_coefficient: C_D (–).
+        leak_area: area when closed, m².
+        b_lam: laminar transition pressure ratio B_lam (–).
+        crack_pressure: cracking pressure, Pa (None: the robot's yield pressure Y).
     """
 
     area_max: float = 2.5e-4
@@ -186,6 +209,12 @@ class DirectionalValve(eqx.Module):
     """3-way directional valve whose spool follows the robot-flow sign (PS Switch).
 
     Spool +1 (robot flow ≥ 0): P–A open, A–T closed; −1: A–T open (check valve bypassed).
+
+    Attributes:
+        area_max: fully open area of a path, m².
+        discharge_coefficient: C_D (–).
+        leak_area: area of a closed path, m².
+        b_lam: laminar transition pressure ratio B_lam (–).
     """
 
     area_max: float = 5e-5

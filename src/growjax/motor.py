@@ -22,6 +22,12 @@ class PID(eqx.Module):
 
     Shipped gains P 20, I 80, D 0.5, N 100 s⁻¹ (the paper quotes 80/25/0.5: :func:`paper_pid`).
     Units: output Pa of equivalent syringe pressure per Pa of error.
+
+    Attributes:
+        proportional: K_P (–).
+        integral: K_I, 1/s.
+        derivative: K_D, s.
+        filter_coefficient: N of the derivative filter, 1/s.
     """
 
     proportional: float = 20.0

@@ -54,7 +54,8 @@ class GrowingRobot(eqx.Module):
         active_channel_force: F_AC, N, pull of the active channel (0 in the shipped model).
         stroke: maximum elongation from zero length, m.  initial_length: L(t0), m.
         hard_stop_bound: ±bound of the rod hard stop, m (never reached in normal use).
-        hard_stop_stiffness: N/m.  hard_stop_damping: N·s/m.
+        hard_stop_stiffness: stiffness of the rod hard stop, N/m.
+        hard_stop_damping: damping of the rod hard stop, N·s/m.
         penetration_coefficient: end-stop coefficient of the cylinder, N·s/m².
         growth_law: ``"reference"`` or ``"lockhart"`` (static; see the module docstring).
         lockhart_rate: φ_L, m/s: growth speed at 1 kPa above the rest pressure (Lockhart law only).
