@@ -34,6 +34,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "data"))
 
 import make_synthetic as mk
+from _environment import environment  # benchmarks/ is on sys.path when run as a script
 
 import growjax as gj
 from growjax import sweep as sw
@@ -150,7 +151,7 @@ def summarise(rows: list[dict], out: Path) -> dict:
                                      "rmse_mm_max": max(r["rmse_mm"] for r in rs),
                                      "max_mm_max": max(r["max_mm"] for r in rs)} for (law, demand), rs in per.items()]
     print(json.dumps({k: v for k, v in summary.items() if k != "reference_failures"}, indent=1))
-    out.write_text(json.dumps({"summary": summary, "rows": rows}, indent=1) + "\n")
+    out.write_text(json.dumps({"summary": summary, "rows": rows, "environment": environment()}, indent=1) + "\n")
     return summary
 
 

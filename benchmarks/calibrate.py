@@ -1,4 +1,4 @@
-"""Benchmark of calibration on the measured data (issue 4): fit time, NUTS cost, and the fast approximation.
+"""Benchmark of calibration on the measured data: fit time, NUTS cost, and the fast approximation.
 
 Run: ``python benchmarks/calibrate.py [--out benchmarks/results/calibrate.json] [--t-end 10]
 [--chains 4 --warmup 500 --samples 500] [--direct-iterations 20]``. The JSON holds:
@@ -40,7 +40,7 @@ def main():
     parser.add_argument("--direct-iterations", type=int, default=20, help="warm-up = draws of the direct baseline")
     args = parser.parse_args()
     folder = ex.shared_experiment_dir()
-    exp = ex.read(folder / "experiment.csv") if folder else ex.read(REPO / "data" / "synthetic_forward.csv")
+    exp = ex.read(folder / "experiment.csv") if folder else ex.read(REPO / "src" / "growjax" / "datasets" / "synthetic_forward.csv")
     base = gj.reference()
     cfg = gj.Config(t1=args.t_end)
     inputs = ex.to_inputs(exp, "forward", base, cfg.t0, cfg.t1)

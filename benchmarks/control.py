@@ -70,7 +70,7 @@ def main():
     print(f"profile optimised in {res['profile_optimisation_s']:.1f} s, fast RMSE {1e3 * prof.rmse_m:.3f} mm", flush=True)
     cfg_ev = gj.Config(fidelity=ev, t1=T)
     tr = gc.simulate_profile(p, target, prof, cfg_ev)
-    r = gc._score(np.asarray(tr.time), np.asarray(tr.length), np.asarray(tr.pressure), prof.demand, prof.knots,
+    r = gc.score(np.asarray(tr.time), np.asarray(tr.length), np.asarray(tr.pressure), prof.demand, prof.knots,
                   target, lim, int(tr.status))
     record("forward open-loop profile", r, knots=int(prof.knots.size))
 

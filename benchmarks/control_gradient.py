@@ -3,7 +3,7 @@
 Run: ``python benchmarks/control_gradient.py [--t-end 10] [--out benchmarks/results/control_gradient.json]``.
 
 Why ``control.tune_pid`` takes its gradient by central differences over 0.02 decades: ``jax.jacfwd`` through
-the closed loop (``control._pid_loop``, each tick integrated by the Rosenbrock loop) agrees with fine central
+the closed loop (``control.pid_loop``, each tick integrated by the Rosenbrock loop) agrees with fine central
 differences over 2 s, but at tuned high gains and over 5–10 s both diverge or turn erratic: the loop's
 tangent grows along the run and the cost is rough on small scales. The script evaluates
 ∂J/∂log₁₀(Kp, Ki, Kd) of ``control.pid_cost_fn`` (fast configuration, public experiment or the shipped
@@ -36,7 +36,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "control_gradient.json"))
     args = ap.parse_args(argv)
     folder = ex.shared_experiment_dir()
-    data = folder / "experiment.csv" if folder else REPO / "data" / "synthetic_forward.csv"
+    data = folder / "experiment.csv" if folder else REPO / "src" / "growjax" / "datasets" / "synthetic_forward.csv"
     t_end = args.t_end
     target = gc.target_from_experiment(ex.read(data), t_end)
     params = gc.plant_params("forward", target)

@@ -1,6 +1,6 @@
 """Why the stepper controller runs at f = 3 Hz: its own tracking error on the measured length, per rate.
 
-Run: ``python benchmarks/controller_rate.py``. For each f, the shipped step counter (PHYSICS.md §1.7)
+Run: ``python benchmarks/controller_rate.py``. For each f, the shipped step counter
 is fed the demand in steps from kings_ts (0–10 s); printed are the steps issued and the RMS of
 (step count − demand) over 0–10 s. No ODE solve is involved.
 """

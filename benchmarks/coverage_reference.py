@@ -1,8 +1,8 @@
-"""Fit intervals against the truth on data made by the reference configuration (issue 9, "honest").
+"""Fit intervals against the truth on data made by the reference configuration (data the fast model did not make).
 
 Run: ``python benchmarks/coverage_reference.py [--seeds 1] [--out benchmarks/results/coverage_reference.json]``.
 
-For each of the five shipped reference-made experiments (``data/reference_lengths.csv``: the published pulse
+For each of the five shipped reference-made experiments (``growjax/datasets/reference_lengths.csv``: the published pulse
 train, 0–10 s, Y from 6 to 14 kPa) plus Gaussian noise of 0.2 mm (seeds 100 + k, as the default test run draws
 them, then further seeds), ``growjax.fit`` estimates Y on the fast configuration twice: with the noise alone in
 its covariance, and with the fast configuration's measured model error added (the default). Printed per case:

@@ -2,7 +2,7 @@
 
 Run: ``python benchmarks/discover_linearise.py [--candidates all|no-velocity] [--batch 6] [--per-effect]``.
 
-On ``data/discovery/active_channel_force.csv`` (10 s) with the 8-effect superset (or the 5 effects whose rod
+On ``growjax/datasets/discovery/active_channel_force.csv`` (10 s) with the 8-effect superset (or the 5 effects whose rod
 force does not depend on the velocity), for a model with Y and the pull fitted: tracing and lowering, then
 XLA's compile, timed apart; the first call and the median of 5 later calls. ``--batch B`` also times B such
 models linearised under one ``vmap`` (members stepped together) against the same B one after another: why
@@ -52,7 +52,7 @@ def main():
     ap.add_argument("--per-effect", action="store_true",
                     help="also time one linearisation with each candidate on, at each of discover's starts")
     args = ap.parse_args()
-    exp = ex.read(REPO / "data" / "discovery" / "active_channel_force.csv")
+    exp = ex.read(REPO / "src" / "growjax" / "datasets" / "discovery" / "active_channel_force.csv")
     cfg = gj.Config(t1=10.0)
     inputs = ex.to_inputs(exp, "forward", gj.reference(), cfg.t0, cfg.t1)
     keep = exp.time >= cfg.t0

@@ -1,4 +1,4 @@
-"""NUTS directly through the model (no emulator) on the public experiment, Lockhart growth law (issue 9).
+"""NUTS directly through the model (no emulator) on the public experiment, Lockhart growth law.
 
 Run: ``python benchmarks/nuts_direct.py [--chains 4 --warmup 500 --samples 500] [--target-accept 0.98]
 [--max-tree-depth 10] [--vectorised-gradient] [--gradients-only] [--small-loops] [--sequential]
@@ -65,7 +65,7 @@ def main():
     if not args.sequential:
         jax.config.update("jax_num_cpu_devices", max(args.chains, 1))  # one chain per device, before JAX starts
     folder = ex.shared_experiment_dir()
-    exp = ex.read(folder / "experiment.csv") if folder else ex.read(REPO / "data" / "synthetic_forward.csv")
+    exp = ex.read(folder / "experiment.csv") if folder else ex.read(REPO / "src" / "growjax" / "datasets" / "synthetic_forward.csv")
     base = gj.reference(growth_law="lockhart")
     cfg = gj.Config(t1=args.t_end)
     inputs = ex.to_inputs(exp, "forward", base, cfg.t0, cfg.t1)

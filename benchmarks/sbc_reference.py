@@ -1,4 +1,4 @@
-"""Simulation-based calibration on data made by the reference configuration (issue 9, "honest").
+"""Simulation-based calibration on data made by the reference configuration (data the fast model did not make).
 
 Run: ``python benchmarks/sbc_reference.py [--replicates 100] [--t-end 0.8] [--noise-scale 2e-4]
 [--out benchmarks/results/sbc_reference.json]``.

@@ -29,6 +29,7 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 import numpy as np
+from _environment import environment  # benchmarks/ is on sys.path when run as a script
 
 import growjax as gj
 from growjax import experiment as ex
@@ -139,12 +140,13 @@ def main():
     args = parser.parse_args()
     small_loops = xla_flags.apply() if args.small_loops else xla_flags.applied()
     folder = ex.shared_experiment_dir()
-    exp = ex.read(folder / "experiment.csv") if folder else ex.read(REPO / "data" / "synthetic_forward.csv")
+    exp = ex.read(folder / "experiment.csv") if folder else ex.read(REPO / "src" / "growjax" / "datasets" / "synthetic_forward.csv")
     fast = bench_simulation("forward", exp, args.repeat)
     gradient = bench_gradient(exp, args.repeat)
     results = {
         "data": exp.source,
         "device": str(jax.devices()[0]),
+        "environment": environment(),
         "small_loops": small_loops,
         "simulation": fast,
         "gradient": gradient,

@@ -5,7 +5,7 @@ Run: ``python benchmarks/sweep.py [--out benchmarks/results/sweep.json] [--quick
 compiled sweep of N sets spends its time, by XLA operation, printed).
 
 Measured, on the public experiment (``../shared/data/mammobot``) or, when it is absent, on
-``data/synthetic_forward.csv``, with the paper's box (n 0.9–1.1, Y 5–15 kPa, ext 4000–10000):
+``growjax/datasets/synthetic_forward.csv``, with the paper's box (n 0.9–1.1, Y 5–15 kPa, ext 4000–10000):
 
 1. ``growjax.sweep.lhs_sweep`` of 500 sets in the fast configuration: wall time after compilation
    (median of repeated calls of the compiled program, as ``SweepResult.wall_s``; target ≤ 1 s), compile
@@ -25,7 +25,7 @@ Measured, on the public experiment (``../shared/data/mammobot``) or, when it is 
    (target ≥ 50×).
 
 Every CPU core is a JAX device (``jax_num_cpu_devices``; ``GROWJAX_CPU_DEVICES`` overrides), so the
-sweep shards across them. Times are wall-clock seconds on this machine, taken in one session.
+sweep shards across them. Times are wall-clock seconds on this machine, taken in one process.
 """
 
 from __future__ import annotations
@@ -51,6 +51,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _environment import environment  # benchmarks/ is on sys.path when run as a script
 from scipy.integrate import solve_ivp
 
 import growjax as gj
@@ -72,7 +73,7 @@ TARGETS = {"sweep_wall_s": 1.0, "ratio_min": 50.0, "agreement_m": 1e-4}
 def experiment_path() -> Path:
     """The public experiment's CSV if it is beside the checkout, else the shipped synthetic one."""
     folder = ex.shared_experiment_dir()
-    return folder / "experiment.csv" if folder else REPO / "data" / "synthetic_forward.csv"
+    return folder / "experiment.csv" if folder else REPO / "src" / "growjax" / "datasets" / "synthetic_forward.csv"
 
 
 def measured_series(exp, config: gj.Config):
@@ -626,6 +627,7 @@ def main():
         "baseline_over_warm_cli_process": baseline / out["cli_process"]["warm"]["process_wall_s"],
     }
     out["targets"] = TARGETS
+    out["environment"] = environment()
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(out, indent=2) + "\n")
     report(out)

@@ -1,9 +1,9 @@
-"""Make the small example experiments with a hidden effect in data/discovery/ (and the effect tests' reference traces).
+"""Make the small example experiments with a hidden effect in src/growjax/datasets/discovery/ (and the effect tests' reference traces).
 
 Run from the repository root: ``python data/make_discovery_examples.py`` (a few minutes: the reference
 configuration compiles once, then each 10 s solve takes tens of seconds). Deterministic.
 
-data/discovery/<name>.csv + <name>.json — 0.01–10 s at 100 Hz, forward drive, made by
+src/growjax/datasets/discovery/<name>.csv + <name>.json — 0.01–10 s at 100 Hz, forward drive, made by
 :func:`growjax.synthetic.make_experiment` (reference configuration, rtol 1e-6) on synthetic inputs
 (catheter 0.004 + 0.004 t m and the published 0/150 kPa pulse; no public data are copied),
 Gaussian noise σ = 0.2 mm on the length and 500 Pa on the pressure. The JSON sidecar holds the truth
@@ -15,7 +15,7 @@ Gaussian noise σ = 0.2 mm on the length and 500 Pa on the pressure. The JSON si
 * ``outside_oscillating_force``: a zero-mean force 0.02 N·sin(2πt/2.1 s), outside the catalogue;
 * ``outside_hose_compliance``: a hose compliance growing with pressure, outside the catalogue.
 
-data/discovery/reference/effect_lengths.csv + .json — noise-free robot length (m), 0.01–3 s, made by
+src/growjax/datasets/discovery/reference/effect_lengths.csv + .json — noise-free robot length (m), 0.01–3 s, made by
 the *reference* configuration (rtol 1e-7) with each catalogue effect at its moderate magnitude
 (:func:`growjax.synthetic.moderate_magnitude`) and with none (column ``none``), on the shipped
 synthetic inputs (catheter 0.004 + 0.004 t m, published pulse), so that tests/test_effects.py checks the
@@ -37,7 +37,7 @@ from growjax import synthetic as sy
 from growjax.effects import CATALOGUE
 
 HERE = Path(__file__).resolve().parent
-OUT = HERE / "discovery"
+OUT = HERE.parent / "src" / "growjax" / "datasets" / "discovery"  # package resources
 REFERENCE = OUT / "reference" / "effect_lengths.csv"
 SEED = 20261122
 T_END = 10.0

@@ -1,4 +1,4 @@
-"""Make the small synthetic experiments shipped in data/ (and with the package).
+"""Make the small synthetic experiments shipped with the package (``src/growjax/datasets/``).
 
 Run from the repository root: ``python data/make_synthetic.py``. Deterministic:
 seed 20261121. Ground truth and noise are written beside each CSV as JSON.
@@ -28,11 +28,12 @@ from growjax import experiment as ex
 
 SEED = 20261121
 HERE = Path(__file__).resolve().parent
+DATASETS = HERE.parent / "src" / "growjax" / "datasets"  # package resources
 TRUTH = {"Y": 9000.0}
 NOISE = {"robot_length_m": 2e-4, "pressure_Pa": 500.0}
 
 
-def make_forward(path: Path = HERE / "synthetic_forward.csv") -> Path:
+def make_forward(path: Path = DATASETS / "synthetic_forward.csv") -> Path:
     time = np.round(np.arange(1, 1001) * 0.01, 10)
     catheter = 0.004 + 0.004 * time
     params = gj.replace(gj.reference("forward"), **TRUTH)
@@ -126,7 +127,7 @@ def reference_inputs(demand_name: str):
     return gj.Inputs(catheter_length=catheter, pressure_demand=demand(demand_name, grid))
 
 
-def make_reference_lengths(path: Path = HERE / "reference_lengths.csv") -> Path:
+def make_reference_lengths(path: Path = DATASETS / "reference_lengths.csv") -> Path:
     """Simulate every reference case; the files are rewritten after each case, and a case the reference
     solver cannot finish is listed under "failed" rather than written."""
     time = np.round(np.arange(1, 1001) * 0.01, 10)
@@ -149,7 +150,7 @@ def make_reference_lengths(path: Path = HERE / "reference_lengths.csv") -> Path:
     return path
 
 
-def read_reference_lengths(path: Path = HERE / "reference_lengths.csv"):
+def read_reference_lengths(path: Path = DATASETS / "reference_lengths.csv"):
     """(time s (T,), {case: length m (T,)}, {case: {"parameters", "demand"}}) of the shipped reference traces."""
     table = np.genfromtxt(path, delimiter=",", names=True)
     names = [n for n in table.dtype.names if n != "time_s"]

@@ -30,7 +30,7 @@ def main() -> int:
 
     jax.config.update("jax_platforms", "cpu")
     jax.config.update("jax_num_cpu_devices", args.devices)
-    if os.environ.get("GROWJAX_CACHE_DIR"):  # set by tests/conftest.py; the same cache as the test session
+    if os.environ.get("GROWJAX_CACHE_DIR"):  # set by tests/conftest.py; the same cache as the test run
         jax.config.update("jax_compilation_cache_dir", os.environ["GROWJAX_CACHE_DIR"])
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
     if args.coordinator:
@@ -41,7 +41,7 @@ def main() -> int:
     from growjax import experiment as ex
     from growjax import sweep as sw
 
-    exp = ex.read(REPO / "data" / "synthetic_forward.csv")
+    exp = ex.read(REPO / "src" / "growjax" / "datasets" / "synthetic_forward.csv")
     base = gj.reference()
     inputs = ex.to_inputs(exp, "forward", base)
     dims = (sw.Dimension("robot.yield_pressure", 5e3, 15e3), sw.Dimension("robot.extensibility", 4000.0, 10000.0))

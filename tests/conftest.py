@@ -23,6 +23,7 @@ import growjax as gj
 from growjax import experiment as ex
 
 REPO = Path(__file__).resolve().parents[1]
+DATASETS = REPO / "src" / "growjax" / "datasets"
 
 
 @pytest.fixture(scope="session")
@@ -36,8 +37,8 @@ def shared_experiment():
 
 @pytest.fixture(scope="session")
 def synthetic_experiment():
-    """The synthetic forward-drive experiment shipped in data/."""
-    return ex.read(REPO / "data" / "synthetic_forward.csv")
+    """The synthetic forward-drive experiment shipped with the package (growjax/datasets)."""
+    return ex.read(DATASETS / "synthetic_forward.csv")
 
 
 def forward_inputs(amplitude=150e3, catheter=0.02):

@@ -12,19 +12,76 @@ from growjax import experiment as ex
 
 def test_simulate_command_writes_an_experiment_csv_a_figure_and_json(tmp_path):
     out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "growjax.cli", "simulate", "--t-end", "3", "--param", "Y=9000",
-           "--out", str(out), "--json", str(tmp_path / "s.json")]
+    cmd = [sys.executable, "-m", "growjax.cli", "simulate", "--t-end", "3", "--out", str(out),
+           "--json", str(tmp_path / "s.json")]
     done = subprocess.run(cmd, capture_output=True, text=True, check=False, timeout=600)
     assert done.returncode == 0, done.stderr
     summary = json.loads((tmp_path / "s.json").read_text())
     for key in ("rmse_length_m", "final_length_m", "peak_pressure_Pa", "solver_steps", "status"):
         assert key in summary
     assert summary["status"] == "ok"
-    assert summary["rmse_length_m"] < 4e-4  # truth Y = 9000 Pa, noise σ = 0.2 mm
+    # The shipped data were made with Y = 9 kPa, recorded beside them: the command uses it and says so.
+    assert summary["parameters"]["recorded_beside_data"] == {"Y": 9000.0}
+    assert summary["rmse_length_m"] < 4e-4  # noise σ = 0.2 mm
+    assert "recorded beside the data: Y = 9.000 kPa" in done.stdout and "length RMSE" in done.stdout
+    assert not done.stdout.lstrip().startswith("{")  # a summary for people; JSON only on request
     traj = ex.read(out / "trajectory.csv")  # a trajectory reads back as an experiment
     assert traj.time[-1] == pytest.approx(3.0)
     assert (out / "trajectory.png").stat().st_size > 10_000
     assert np.all(np.diff(traj.time) > 0)
+
+
+def test_a_failed_run_exits_nonzero_with_the_reason_and_still_writes_its_summary(tmp_path):
+    data = tmp_path / "loud.csv"
+    t = np.round(np.arange(1, 201) * 0.01, 10)
+    ex.write_csv(data, t, {"catheter_length_m": np.full(t.size, 0.02), "pressure_demand_Pa": np.full(t.size, 600e3)})
+    cmd = [sys.executable, "-m", "growjax.cli", "simulate", str(data), "--t-end", "2", "--out", str(tmp_path / "o"),
+           "--json", "-"]
+    done = subprocess.run(cmd, capture_output=True, text=True, check=False, timeout=600)
+    assert done.returncode == 1, done.stderr
+    assert "membrane limit" in done.stderr.splitlines()[-1]
+    summary = json.loads(done.stdout)  # --json -: stdout is the JSON alone
+    assert summary["status"] == "pressure_limit" and "failure" in summary
+
+
+def test_version_lists_and_option_errors(capsys):
+    from growjax import __version__, cli
+
+    with pytest.raises(SystemExit) as stop:
+        cli.main(["--version"])
+    assert stop.value.code == 0 and capsys.readouterr().out.strip() == f"growjax {__version__}"
+
+    assert cli.main(["params", "--json", "-"]) == 0
+    rows = {r["name"]: r for r in json.loads(capsys.readouterr().out)["parameters"]}
+    y = rows["robot.yield_pressure"]
+    assert y["symbol"] == "Y" and y["unit"] == "Pa" and y["range"] == [0.0, 1e6] and y["value"] == pytest.approx(7920.46)
+    assert cli.main(["params"]) == 0 and "robot.yield_pressure" in capsys.readouterr().out
+
+    assert cli.main(["effects"]) == 0
+    text = capsys.readouterr().out
+    assert "fluid_leak.conductance" in text and "separated by" in text
+
+    with pytest.raises(SystemExit) as stop:
+        cli.main(["discover", "--candidates", "bogus_effect"])
+    err = capsys.readouterr().err.strip()
+    assert stop.value.code == 2 and len(err.splitlines()) == 1
+    assert "bogus_effect" in err and "fluid_leak" in err and "actuation_lag" in err
+
+
+def test_every_command_shares_the_options_and_shows_defaults():
+    from growjax import cli
+
+    parser = cli.build_parser()
+    commands = parser._subparsers._group_actions[0].choices
+    for name in ("simulate", "sweep", "fit", "posterior", "discover", "control"):
+        sub = commands[name]
+        options = {o for a in sub._actions for o in a.option_strings}
+        assert {"--drive", "--param", "--fidelity", "--rtol", "--seed", "--out", "--json"} <= options, name
+        assert sub.parse_args([]).out.replace("\\", "/") == f"out/{name}"
+        helptext = sub.format_help()
+        assert all(a.help for a in sub._actions), name
+        assert "(default: out/" in " ".join(helptext.split()), name
+    assert "--range" in {o for a in commands["sweep"]._actions for o in a.option_strings}
 
 
 def test_simulate_command_reports_bad_input(tmp_path):

@@ -1,4 +1,4 @@
-"""Component laws checked against PHYSICS.md values and against their own definitions (no ODE solve)."""
+"""Component laws checked against the published model's values and against their own definitions (no ODE solve)."""
 
 import jax
 import jax.numpy as jnp
@@ -71,7 +71,7 @@ def test_check_valve_blocks_reverse_flow_unless_bypass_opens():
     # Below cracking, forward flow is leak-only, through the check valve and the network alike.
     below = hy.valve_network_flow(net, 0.5 * y, 0.5 * y)
     assert 0 < float(below) < 1e-10
-    # Above cracking the valve passes the growth flow of PHYSICS.md §7 (168 kPa → 6.7 mm/s).
+    # Above cracking the valve passes the published model's growth flow (168 kPa → 6.7 mm/s).
     q = hy.valve_network_flow(net, 168e3, 60e3)
     assert float(q) / p.robot.area == pytest.approx(6.7e-3, rel=0.05)
 
@@ -88,14 +88,14 @@ def test_catheter_friction_assists_growth_as_shipped():
     r = gj.reference().robot
     assert float(catheter_friction_gain(r, 0.04)) == pytest.approx(0.1758, rel=1e-3)
     p_r = rod_pressure(rod_balance(r, (1e-6, 1e-6)), 150e3, 0.0, 0.03, 0.04, 0.0)
-    assert float(p_r) == pytest.approx(-18.45e3, rel=2e-3)  # PHYSICS.md §7
+    assert float(p_r) == pytest.approx(-18.45e3, rel=2e-3)  # the rod pressure of the published model at rest
 
 
 def test_velocity_term_is_negligible_in_the_shipped_model():
     r = gj.reference().robot
     lo = rod_pressure(rod_balance(r, (1e-6, 1e-6)), 150e3, 0.0, 0.03, 0.04, 0.0)
     hi = rod_pressure(rod_balance(r, (1e-6, 1e-6)), 150e3, 0.01, 0.03, 0.04, 0.0)
-    assert 0 < float(hi - lo) * r.area < 1e-10  # N, the ~1e-11 N of PHYSICS.md §7
+    assert 0 < float(hi - lo) * r.area < 1e-10  # N, the ~1e-11 N velocity term
 
 
 def test_smooth_primitives_are_exact_outside_their_band():

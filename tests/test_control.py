@@ -191,23 +191,6 @@ def test_microstepping_driver_is_the_same_in_both_configurations():
     assert np.max(np.abs(b - reference(p, [0, 1, 1, 1]))) > 1e-4  # the reference did microstep (not round)
 
 
-@pytest.mark.slow
-def test_control_notebook_executes():
-    """The walkthrough (linearise → optimise → tune → evaluate) runs top to bottom on its quick setting."""
-    import os
-    from pathlib import Path
-
-    nbformat = pytest.importorskip("nbformat")
-    nbclient = pytest.importorskip("nbclient")
-    path = Path(__file__).resolve().parents[1] / "notebooks" / "control_design.ipynb"
-    nb = nbformat.read(path, as_version=4)
-    os.environ["GROWJAX_NOTEBOOK_QUICK"] = "1"
-    nbclient.NotebookClient(nb, timeout=900, kernel_name="python3",
-                            resources={"metadata": {"path": str(path.parent)}}).execute()
-    text = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", []))
-    assert "closed-loop RMSE" in text
-
-
 def test_posterior_draws_are_joint_seeded_and_only_model_parameters(tmp_path):
     import arviz as az
 

@@ -98,9 +98,9 @@ def test_discover_on_reference_made_examples(name):
 @pytest.mark.slow
 def test_a_hidden_lag_is_fitted_in_its_own_basin_and_no_other_effect_is_claimed():
     """A 15 ms actuation lag (10 s, public inputs, reference-made, seed 1000). Its joint fit with Y has more than
-    one minimum; from the single start (η = 2 % of the range) it stopped in a side basin (Y 8 687 Pa, τ 8.6 ms)
-    and ``discover`` claimed trapped_air. Fitted from every start, the lag's misfit falls to the noise and
-    trapped air is no longer claimed: the lag is named or, trading with Y, reported confounded."""
+    one minimum: a single start (η = 2 % of the range) stops in a side basin (Y 8 687 Pa, τ 8.6 ms), where
+    ``discover`` would claim trapped_air. Fitted from every start, the lag's misfit falls to the noise and
+    trapped air is not claimed: the lag is named or, trading with Y, reported confounded."""
     from growjax import synthetic as sy
 
     exp = sy.make_experiment("actuation_lag", sy.moderate_magnitude("actuation_lag"), seed=1000, t_end=10.0)
@@ -149,11 +149,11 @@ SMALL_T_END = 3.0  # s: two retractions of the published pulse
 
 
 def _shipped(name, **kw):
-    """A shipped example of data/discovery/ (reference-made, noise 0.2 mm) on 0–3 s, and its truth."""
+    """A shipped example of growjax/datasets/discovery/ (reference-made, noise 0.2 mm) on 0–3 s, and its truth."""
     import json
     from pathlib import Path
 
-    folder = Path(__file__).resolve().parents[1] / "data" / "discovery"
+    folder = Path(__file__).resolve().parents[1] / "src" / "growjax" / "datasets" / "discovery"
     cfg = gj.Config(t1=SMALL_T_END)
     exp = ex.read(folder / f"{name}.csv").window(SMALL_T_END + 1e-9)
     inputs = ex.to_inputs(exp, "forward", gj.reference(), cfg.t0, cfg.t1)
@@ -212,7 +212,7 @@ def test_candidate_fits_stay_in_their_physical_ranges():
     from growjax import effects as fx
 
     cfg = gj.Config(t1=SMALL_T_END)
-    exp = ex.read(Path(__file__).resolve().parents[1] / "data" / "discovery" / "clean.csv").window(SMALL_T_END + 1e-9)
+    exp = ex.read(Path(__file__).resolve().parents[1] / "src" / "growjax" / "datasets" / "discovery" / "clean.csv").window(SMALL_T_END + 1e-9)
     inputs = ex.to_inputs(exp, "forward", gj.reference(), cfg.t0, cfg.t1)
     times = exp.time[(exp.time >= cfg.t0) & (exp.time <= cfg.t1)]
     top = gd.candidate_parameter("fluid_leak")[2][1]

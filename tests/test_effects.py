@@ -7,7 +7,7 @@ All runs are 0–3 s of the forward drive under the published pulse with the shi
 which is the same model as the effect alone and shares one compiled solver between all effects.
 
 The fast configuration is checked against noise-free traces made by the reference configuration
-(rtol 1e-7) and shipped in data/discovery/reference/ (``python data/make_discovery_examples.py reference``):
+(rtol 1e-7) and shipped in growjax/datasets/discovery/reference/ (``python data/make_discovery_examples.py reference``):
 the reference cannot be cached on disk (its solve uses host callbacks) and costs about a minute to
 compile per process, so the live comparison runs under ``-m slow``.
 """
@@ -32,7 +32,7 @@ import make_discovery_examples as mde  # the shipped reference traces, made and 
 
 NAMES = list(fx.CATALOGUE)
 T1 = 3.0
-FAST = gj.Config(t1=T1)
+FAST = gj.Config(t1=T1, adjoint="forward")  # forward mode along the tangent (jvp)
 TIME = np.round(np.arange(1, 301) * 0.01, 10)  # s: the save grid of the shipped reference traces
 TS = np.concatenate([[FAST.t0], TIME])
 NOISE = 2e-4  # m: the rig's length noise
@@ -85,12 +85,14 @@ def test_an_effect_at_zero_contributes_nothing(name):
     rng = np.random.default_rng(7)
     for _ in range(20):
         t, p, v = rng.uniform(0, 10), rng.uniform(-5e3, 3e5), rng.normal(0.0, 0.02)
-        rod = fx.Rod(t, p, v, rng.uniform(0, 0.08), rng.uniform(0, 0.05), params.robot.inner_radius, params.robot.area)
+        rod = fx.Rod(t=t, pressure=p, velocity=v, length=rng.uniform(0, 0.08), catheter_length=rng.uniform(0, 0.05),
+                     inner_radius=params.robot.inner_radius, area=params.robot.area)
         assert float(effect.rod_force(rod, state)) == 0.0
         assert float(effect.chamber_outflow(t, p, state)) == 0.0
         commanded = rng.normal(0.0, 50.0)
         assert float(effect.drive(commanded, state)) == commanded
-        instant = fx.Instant(t, p, p - 100.0, v * params.robot.area, v, 0.02, commanded)
+        instant = fx.Instant(t=t, pressure=p, robot_pressure=p - 100.0, robot_flow=v * params.robot.area, velocity=v,
+                             length=0.02, drive=commanded)
         np.testing.assert_array_equal(np.asarray(effect.rates(instant, state)), 0.0)
     same = jax.tree_util.tree_map(lambda a, b: bool(np.all(np.asarray(a) == np.asarray(b))), effect.apply(params), params)
     assert all(jax.tree_util.tree_leaves(same))
@@ -313,8 +315,8 @@ def test_the_effect_parameter_is_a_differentiable_leaf(inputs, name):
 @pytest.mark.parametrize("name", ["fluid_leak", "active_channel_force"])
 def test_the_derivative_at_an_absent_effect_is_finite_and_right(inputs, name):
     """At θ = 0 (the effect absent) a unit tangent in SI units has no size of its own to scale the difference
-    step: the effect's range sets it (a leak's 1e-12 m³/(s·Pa), not 1). Before, the step was ε^⅓ in SI, the
-    shifted solve failed and every derivative came back NaN. Now d(final length)/dθ matches the forward
+    step: the effect's range sets it (a leak's 1e-12 m³/(s·Pa), not 1); a step of ε^⅓ in SI would make the
+    shifted solve fail and every derivative NaN. d(final length)/dθ matches the forward
     difference to 10 % of the moderate magnitude within 5 % (both effects are nearly linear there)."""
     k = list(sy.ALL_EFFECTS).index(name)
     m = sy.moderate_magnitude(name)
@@ -386,8 +388,8 @@ def test_make_experiment_noise_seeds_cache_and_format(monkeypatch, tmp_path, tra
 
 
 def test_shipped_discovery_examples():
-    """data/discovery/: small CSVs with a JSON truth beside each, 0.01–10 s, length noise 0.2 mm as stated."""
-    folder = REPO / "data" / "discovery"
+    """growjax/datasets/discovery/: small CSVs with a JSON truth beside each, 0.01–10 s, length noise 0.2 mm as stated."""
+    folder = REPO / "src" / "growjax" / "datasets" / "discovery"
     paths = sorted(folder.glob("*.csv"))
     assert {p.stem for p in paths} >= {"clean", "active_channel_force", "retraction_folding"}
     assert any(sy.read_truth(p)["in_catalogue"] is False for p in paths)

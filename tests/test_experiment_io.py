@@ -65,7 +65,7 @@ def test_shipped_controller_stalls_at_high_rate_and_moves_at_3hz(shared_experime
     demand = ex.demand_steps(params, shared_experiment["robot_length_m"])
     assert demand.min() == pytest.approx(2.89, abs=0.01) and demand.max() == pytest.approx(21.47, abs=0.01)
     fast_t, _ = step_schedule(demand, shared_experiment.time, 100.0, 0.001, 10.0)
-    assert len(fast_t) == 3 and fast_t.max() < 0.05  # only the initial transient: PHYSICS.md §8.11
+    assert len(fast_t) == 3 and fast_t.max() < 0.05  # only the initial transient
     _, k3 = step_schedule(demand, shared_experiment.time, 3.0, 0.001, 10.0)
     final_demand = np.interp(10.0, shared_experiment.time, demand)
     assert abs(k3[-1] - final_demand) < 1.5

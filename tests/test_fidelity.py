@@ -18,7 +18,7 @@ FAST = gj.Config(t1=10.0)
 
 @pytest.fixture(scope="module")
 def reference_traces():
-    """Noise-free lengths made by the reference configuration (rtol 1e-7), data/reference_lengths.csv."""
+    """Noise-free lengths made by the reference configuration (rtol 1e-7), growjax/datasets/reference_lengths.csv."""
     return mk.read_reference_lengths()
 
 

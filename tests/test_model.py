@@ -37,7 +37,7 @@ def test_volume_balance_holds_through_every_demand_edge(demand):
     defect = delivered - grown - stored
     scale = np.max(np.abs(delivered))
     assert scale > 5e-8
-    assert np.max(np.abs(defect)) < 1e-3 * scale  # the 0.1 % of the delivered volume
+    assert np.max(np.abs(defect)) < 1e-3 * scale  # 0.1 % of the delivered volume
 
 
 def test_zero_demand_never_grows_the_robot():

@@ -127,7 +127,7 @@ def test_sobol_indices_find_that_yield_pressure_dominates(setup):
 
 def test_sweep_command_writes_table_figures_and_summary(tmp_path):
     out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "growjax.cli", "sweep", str(REPO / "data" / "synthetic_forward.csv"), "--n", "16",
+    cmd = [sys.executable, "-m", "growjax.cli", "sweep", str(REPO / "src" / "growjax" / "datasets" / "synthetic_forward.csv"), "--n", "16",
            "--t-end", "2", "--seed", "5", "--out", str(out), "--json", str(out / "s.json")]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, check=False)
     assert proc.returncode == 0, proc.stderr[-2000:]
@@ -138,7 +138,7 @@ def test_sweep_command_writes_table_figures_and_summary(tmp_path):
     rows = (out / "sweep.csv").read_text().splitlines()
     assert len(rows) == 17 and rows[0].endswith("rmse_length_m,final_length_m,status")
     assert (out / "sweep.png").stat().st_size > 10_000  # (--sobol: test_sobol_indices_find_that_yield_pressure_dominates)
-    bad = subprocess.run([sys.executable, "-m", "growjax.cli", "sweep", "--param", "Y=9:1"], capture_output=True, text=True, check=False)
+    bad = subprocess.run([sys.executable, "-m", "growjax.cli", "sweep", "--range", "Y=9:1"], capture_output=True, text=True, check=False)
     assert bad.returncode == 2 and "LOW < HIGH" in bad.stderr
 
 

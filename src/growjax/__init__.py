@@ -5,9 +5,11 @@ spans pressures of 1e5 Pa and compliances of 1e-13 m³/Pa, which float32 cannot 
 :mod:`growjax.xla_flags` holds an opt-in XLA:CPU option that compiles the solver's loop into one kernel.
 """
 
+__version__ = "0.3.0"  # the one version string: pyproject.toml reads it (setuptools dynamic version)
+
 import jax
 
-jax.config.update("jax_enable_x64", True)
+jax.config.update("jax_enable_x64", True)  # the package's one global setting; see the module docstring
 
 from growjax import effects
 from growjax.config import Config
@@ -68,4 +70,3 @@ __all__ = [
     "validate",
     "with_effects",
 ]
-__version__ = "0.2.0"

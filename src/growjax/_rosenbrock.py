@@ -51,8 +51,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from growjax import xla_flags
-
 OK, EVENT, FAILED = 0, 1, 2
 
 
@@ -352,6 +350,7 @@ def integrate(
     tableau: RosenbrockTableau = ROS34PW2,
     batched: bool = False,
     save_ts: jax.Array | None = None,
+    small_loops: bool = False,
 ) -> Result:
     """Integrate y' = f(t, y) from t0 to t1 (y: flat (n,) array of states scaled to O(1)), and optionally
     its forward sensitivities S' = ∂f/∂y S + ∂f/∂θ d (one row per direction d) under the same error control.
@@ -378,6 +377,8 @@ def integrate(
             (``Result.saved``), interpolated in the loop as each step is taken, so that no step record is
             kept (only the last step, for the event). A step then covers at most ``SAVE_WINDOW`` of them
             (binding only where they lie closer than about dtmax / (SAVE_WINDOW − 1)); times beyond the end get its state.
+        small_loops: a single run writes W⁻¹ in elementwise operations (:func:`_inverse`) instead of a LAPACK
+            call, so that XLA:CPU can compile its whole loop into one kernel (:mod:`growjax.xla_flags`).
 
     The state block is (1 + p, n): row 0 the state, rows 1… the sensitivities. Every row shares
     W = I − hγJ, J the state's Jacobian (the block-diagonal W a W-method allows). The error norm
@@ -394,7 +395,6 @@ def integrate(
     k_order = tableau.order
     inf = jnp.asarray(jnp.inf, dtype)
     eye = jnp.eye(n, dtype=dtype)
-    small_loops = xla_flags.applied()  # the loop may be compiled whole: no LAPACK call inside it
     t_start, t_end = jnp.asarray(t0, dtype), jnp.asarray(t1, dtype)
 
     saving = save_ts is not None

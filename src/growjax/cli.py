@@ -1,15 +1,52 @@
-"""Command line: ``growjax simulate [DATA] ...`` and ``growjax sweep [DATA] ...`` (``growjax --help``)."""
+"""Command line: ``growjax COMMAND [DATA] [options]`` (``growjax --help``, ``growjax COMMAND --help``).
+
+Every workflow command takes the same shared options (``--drive``, ``--param``, ``--fidelity``, ``--rtol``,
+``--seed``, ``--t-end``, ``--out``, ``--json``), prints a short summary in mm and kPa, and exits with status 0 when
+its runs succeeded, 1 when a run failed (the reason on stderr) and 2 for a bad option or file.
+"""
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import math
 import os
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+from growjax._data import default_data_path
+
+OK, RUN_FAILED, BAD_INPUT = 0, 1, 2
+DRIVES = ("forward", "inverse")
+FIDELITIES = ("fast", "reference")
+
+
+class RunFailed(Exception):
+    """A run finished but failed (solver failure, failed sweep member, fit not converged, limit crossed)."""
+
+    def __init__(self, reason: str, summary: dict):
+        super().__init__(reason)
+        self.summary = summary
+
+
+class _Formatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Every option's default shown, except where its help already says it."""
+
+    def _get_help_string(self, action):
+        if "(default:" in (action.help or ""):
+            return action.help
+        return super()._get_help_string(action)
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with a one-line error (no usage block) naming the problem and the valid values."""
+
+    def error(self, message):
+        self.exit(BAD_INPUT, f"{self.prog}: error: {message}\n")
 
 
 def _enable_compile_cache():
@@ -18,104 +55,6 @@ def _enable_compile_cache():
     cache = os.environ.get("GROWJAX_CACHE_DIR", str(Path.home() / ".cache" / "growjax" / "jax"))
     jax.config.update("jax_compilation_cache_dir", cache)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
-
-
-def parse_param(text: str):
-    """``NAME=VALUE`` → (name, float); ValueError with the problem named."""
-    if "=" not in text:
-        raise ValueError(f"--param expects NAME=VALUE, got {text!r}")
-    name, value = text.split("=", 1)
-    try:
-        return name.strip(), float(value)
-    except ValueError:
-        raise ValueError(f"--param {name}: {value!r} is not a number") from None
-
-
-def default_data_path() -> Path:
-    """The synthetic experiment shipped with the package."""
-    from importlib import resources
-
-    return Path(str(resources.files("growjax") / "datasets" / "synthetic_forward.csv"))
-
-
-def make_config(args, drive: str = "forward", **extra):
-    """The :class:`growjax.Config` named by the common options (--fidelity, --rtol, --t-end)."""
-    import growjax as gj
-
-    return gj.Config(fidelity=args.fidelity, drive=drive, t1=args.t_end, rtol=args.rtol, atol=args.rtol, **extra)
-
-
-def simulate_command(args) -> dict:
-    import jax
-
-    import growjax as gj
-    from growjax import experiment as ex
-    from growjax.metrics import length_rmse
-    from growjax.plotting import trajectory_figure
-
-    data = Path(args.data) if args.data else default_data_path()
-    exp = ex.read(data).window(args.t_end + 1e-9)
-    params = gj.reference(args.drive)
-    overrides = dict(parse_param(p) for p in args.param)
-    params = gj.replace(params, **overrides) if overrides else params
-    gj.validate(params)
-    config = make_config(args, args.drive)
-    inputs = ex.to_inputs(exp, args.drive, params, config.t0, config.t1)
-    ts = exp.time[(exp.time >= config.t0) & (exp.time <= config.t1)]
-    ts = np.unique(np.concatenate([[config.t0], ts, [config.t1]]))
-
-    start = time.perf_counter()
-    traj = jax.block_until_ready(gj.simulate(params, inputs, config, ts=ts))
-    first = time.perf_counter() - start
-    start = time.perf_counter()
-    traj = jax.block_until_ready(gj.simulate(params, inputs, config, ts=ts))
-    wall = time.perf_counter() - start
-
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    series = {
-        "robot_length_m": np.asarray(traj.length),
-        "pressure_Pa": np.asarray(traj.pressure),
-        "catheter_length_m": np.asarray(jax.vmap(inputs.catheter_length)(traj.time)),
-    }
-    if args.drive == "forward":
-        series["pressure_demand_Pa"] = np.asarray(traj.pressure_demand)
-    else:
-        series["desired_length_m"] = np.asarray(jax.vmap(inputs.desired_length)(traj.time))
-    series["robot_flow_m3_s"] = np.asarray(traj.robot_flow)
-    series["syringe_displacement_m"] = np.asarray(traj.syringe_displacement)
-    ex.write_csv(out / "trajectory.csv", traj.time, series)
-
-    measured = (exp.time, exp["robot_length_m"]) if "robot_length_m" in exp else None
-    summary = {
-        "data": str(data),
-        "drive": args.drive,
-        "t_end_s": args.t_end,
-        "status": gj.status_name(traj.status),
-        "limit_time_s": None if not np.isfinite(float(traj.limit_time)) else float(traj.limit_time),
-        "pressure_limit_Pa": float(gj.pressure_limit(params.robot)),
-        "final_length_m": float(np.asarray(traj.length)[np.isfinite(traj.length)][-1]),
-        "peak_pressure_Pa": float(np.nanmax(traj.pressure)),
-        "solver_steps": int(traj.n_steps),
-        "wall_s": wall,
-        "first_call_s": first,
-        "overrides": overrides,
-        "trajectory_csv": str(out / "trajectory.csv"),
-    }
-    if measured is not None:
-        rmse = length_rmse(traj, *measured, t_start=config.t0, t_end=config.t1)
-        summary["rmse_length_m"] = float(rmse)
-    fig = trajectory_figure(
-        traj,
-        out / "trajectory.png",
-        measured=measured,
-        desired=(np.asarray(traj.time), series["desired_length_m"]) if args.drive == "inverse" else None,
-        title=f"{args.drive} drive on {data.name}"
-        + (f": length RMSE {1e3 * summary['rmse_length_m']:.2f} mm" if measured is not None else ""),
-        pressure_limit=summary["pressure_limit_Pa"],
-    )
-    summary["figure"] = str(fig)
-    return summary
 
 
 def _use_all_cpu_cores(at_least: int = 1):
@@ -133,25 +72,164 @@ def _use_all_cpu_cores(at_least: int = 1):
         pass  # older JAX, or the backend is already initialised
 
 
-def sweep_command(args) -> dict:
+# -- parsing helpers --------------------------------------------------------------------------------------------
+
+
+def parse_param(text: str):
+    """``NAME=VALUE`` → (name, float); ValueError with the problem named."""
+    if "=" not in text:
+        raise ValueError(f"--param expects NAME=VALUE, got {text!r}")
+    name, value = text.split("=", 1)
+    try:
+        return name.strip(), float(value)
+    except ValueError:
+        raise ValueError(f"--param {name}: {value!r} is not a number") from None
+
+
+def _effect_name(text: str) -> str:
+    from growjax.effects import CATALOGUE
+
+    if text not in CATALOGUE:
+        raise argparse.ArgumentTypeError(f"unknown effect {text!r}; choose from {', '.join(CATALOGUE)}")
+    return text
+
+
+def recorded_parameters(data: Path) -> dict:
+    """Parameter values recorded in a JSON file beside ``data`` (``X.json`` beside ``X.csv``), under ``"truth"`` or
+    ``"parameters"`` ({name: value}, SI units); {} when there is none."""
+    beside = data.with_suffix(".json") if data.suffix else None
+    if beside is None or not beside.is_file():
+        return {}
+    try:
+        record = json.loads(beside.read_text())
+    except (OSError, ValueError):
+        return {}
+    values = record.get("truth", record.get("parameters")) if isinstance(record, dict) else None
+    if not isinstance(values, dict):
+        return {}
+    return {k: float(v) for k, v in values.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
+
+
+def _setup(args, drive: str, growth_law: str = "reference"):
+    """(data path, experiment, parameters, what they came from) for a workflow command."""
+    import growjax as gj
+    from growjax import experiment as ex
+
+    data = Path(args.data) if args.data else default_data_path()
+    exp = ex.read(data).window(args.t_end + 1e-9)
+    params = gj.reference(drive, growth_law=growth_law)
+    recorded = recorded_parameters(data)
+    fixed = dict(parse_param(p) for p in args.param)
+    values = {**recorded, **fixed}
+    if values:
+        params = gj.replace(params, **values)
+    gj.validate(params)
+    origin = {"recorded_beside_data": {k: v for k, v in recorded.items() if k not in fixed}, "fixed": fixed}
+    return data, exp, params, origin
+
+
+def make_config(args, drive: str = "forward", **extra):
+    """The :class:`growjax.Config` named by the shared options (--fidelity, --rtol, --t-end)."""
+    import growjax as gj
+
+    return gj.Config(fidelity=args.fidelity, drive=drive, t1=args.t_end, rtol=args.rtol, atol=args.rtol, **extra)
+
+
+def _out(args) -> Path:
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    return out
+
+
+# -- commands ---------------------------------------------------------------------------------------------------
+
+
+def simulate_command(args) -> dict:
     import jax
 
     import growjax as gj
     from growjax import experiment as ex
+    from growjax.metrics import length_rmse
+    from growjax.plotting import trajectory_figure
+
+    data, exp, params, origin = _setup(args, args.drive)
+    config = make_config(args, args.drive)
+    inputs = ex.to_inputs(exp, args.drive, params, config.t0, config.t1)
+    ts = exp.time[(exp.time >= config.t0) & (exp.time <= config.t1)]
+    ts = np.unique(np.concatenate([[config.t0], ts, [config.t1]]))
+
+    start = time.perf_counter()
+    traj = jax.block_until_ready(gj.simulate(params, inputs, config, ts=ts))
+    first = time.perf_counter() - start
+    start = time.perf_counter()
+    traj = jax.block_until_ready(gj.simulate(params, inputs, config, ts=ts))
+    wall = time.perf_counter() - start
+
+    out = _out(args)
+    series = {
+        "robot_length_m": np.asarray(traj.length),
+        "pressure_Pa": np.asarray(traj.pressure),
+        "catheter_length_m": np.asarray(jax.vmap(inputs.catheter_length)(traj.time)),
+    }
+    if args.drive == "forward":
+        series["pressure_demand_Pa"] = np.asarray(traj.pressure_demand)
+    else:
+        series["desired_length_m"] = np.asarray(jax.vmap(inputs.desired_length)(traj.time))
+    series["robot_flow_m3_s"] = np.asarray(traj.robot_flow)
+    series["syringe_displacement_m"] = np.asarray(traj.syringe_displacement)
+    ex.write_csv(out / "trajectory.csv", traj.time, series)
+
+    measured = (exp.time, exp["robot_length_m"]) if "robot_length_m" in exp else None
+    finite = np.isfinite(np.asarray(traj.length))
+    summary = {
+        "command": "simulate",
+        "data": str(data),
+        "drive": args.drive,
+        "fidelity": config.fidelity,
+        "t_end_s": args.t_end,
+        "parameters": origin,
+        "status": gj.status_name(traj.status),
+        "limit_time_s": None if not np.isfinite(float(traj.limit_time)) else float(traj.limit_time),
+        "pressure_limit_Pa": float(gj.pressure_limit(params.robot)),
+        "final_length_m": float(np.asarray(traj.length)[finite][-1]) if np.any(finite) else None,
+        "peak_pressure_Pa": float(np.nanmax(traj.pressure)) if np.any(np.isfinite(traj.pressure)) else None,
+        "solver_steps": int(traj.n_steps),
+        "wall_s": wall,
+        "first_call_s": first,
+        "trajectory_csv": str(out / "trajectory.csv"),
+    }
+    if measured is not None and summary["status"] == "ok":
+        summary["rmse_length_m"] = float(length_rmse(traj, *measured, t_start=config.t0, t_end=config.t1))
+    title = f"{args.drive} drive on {data.name}"
+    if "rmse_length_m" in summary:
+        title += f": length RMSE {1e3 * summary['rmse_length_m']:.2f} mm"
+    summary["figure"] = str(trajectory_figure(
+        traj, out / "trajectory.png", measured=measured,
+        desired=(np.asarray(traj.time), series["desired_length_m"]) if args.drive == "inverse" else None,
+        title=title, pressure_limit=summary["pressure_limit_Pa"]))
+    if summary["status"] == "pressure_limit":
+        raise RunFailed(f"the sensed pressure crossed the membrane limit ({summary['pressure_limit_Pa'] / 1e3:.1f} kPa) "
+                        f"at t = {summary['limit_time_s']:.3f} s; the run stopped there", summary)
+    if summary["status"] != "ok":
+        raise RunFailed(f"the solver failed ({summary['status']}) after {summary['solver_steps']} steps", summary)
+    return summary
+
+
+def sweep_command(args) -> dict:
+    import jax
+
+    from growjax import experiment as ex
     from growjax import sweep as sw
     from growjax.plotting import sobol_figure, sweep_figure
 
-    data = Path(args.data) if args.data else default_data_path()
-    exp = ex.read(data).window(args.t_end + 1e-9)
-    base = gj.reference("forward")
-    dims = tuple(sw.parse_dimension(p, base) for p in args.param) if args.param else sw.paper_box()
-    config = make_config(args)
-    inputs = ex.to_inputs(exp, "forward", base, config.t0, config.t1)
+    data, exp, base, origin = _setup(args, args.drive)
+    dims = tuple(sw.parse_dimension(p, base) for p in args.range) if args.range else sw.paper_box()
+    config = make_config(args, args.drive)
+    inputs = ex.to_inputs(exp, args.drive, base, config.t0, config.t1)
     measured = (exp.time, exp["robot_length_m"]) if "robot_length_m" in exp else None
     result = sw.lhs_sweep(args.n, base, inputs, config, dims, seed=args.seed, measured=measured,
                           chunk_size=args.chunk_size, progress=True)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = _out(args)
     result.write_csv(out / "sweep.csv")
     best = result.best()
     title = f"{args.n}-set Latin hypercube on {data.name}"
@@ -163,12 +241,15 @@ def sweep_command(args) -> dict:
         if why != "ok":
             failed[why] = failed.get(why, 0) + 1
     summary = {
+        "command": "sweep",
         "data": str(data),
-        "fidelity": args.fidelity,
+        "drive": args.drive,
+        "fidelity": config.fidelity,
         "t_end_s": args.t_end,
         "n": args.n,
         "seed": args.seed,
-        "parameters": [{"name": d.name, "low": d.low, "high": d.high, "log": d.log} for d in dims],
+        "parameters": origin,
+        "ranges": [{"name": d.name, "low": d.low, "high": d.high, "log": d.log} for d in dims],
         "best": best,
         "n_failed": int(np.sum(result.failed)),
         "failed_reasons": failed,
@@ -186,6 +267,10 @@ def sweep_command(args) -> dict:
         summary["sobol"] = {"names": sob["names"], "n_runs": sob["n_runs"], "indices": sob["indices"],
                             "wall_s": sob["sweep"].wall_s}
         summary["sobol_figure"] = str(sobol_figure(sob, out / "sobol.png", title=f"Sobol indices ({sob['n_runs']} runs)"))
+    if summary["n_failed"]:
+        reasons = ", ".join(f"{n} {why}" for why, n in failed.items())
+        raise RunFailed(f"{summary['n_failed']} of {args.n} sweep members failed ({reasons}); see {out / 'sweep.csv'}",
+                        summary)
     return summary
 
 
@@ -195,180 +280,425 @@ def fit_command(args) -> dict:
     from growjax import fit as gf
     from growjax.plotting import trajectory_figure
 
-    data = Path(args.data) if args.data else default_data_path()
-    exp = ex.read(data).window(args.t_end + 1e-9)
+    data, exp, base, origin = _setup(args, args.drive)
     if "robot_length_m" not in exp:
         raise ValueError(f"{data} has no robot_length_m column to fit")
-    base = gj.reference(args.drive)
     config = make_config(args, args.drive, adjoint="forward")
     inputs = ex.to_inputs(exp, args.drive, base, config.t0, config.t1)
     pressure = exp["pressure_Pa"] if "pressure_Pa" in exp else None  # noqa: SIM401 (Experiment is not a dict)
     result = gf.fit(exp.time, exp["robot_length_m"], inputs, free=args.free or ["Y"], base=base, config=config,
                     pressure=pressure, n_starts=args.starts, seed=args.seed)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = _out(args)
     fitted = gj.replace(base, **result.estimate)
     traj = gj.simulate(fitted, inputs, config)
     fig = trajectory_figure(traj, out / "fit.png", measured=(exp.time, exp["robot_length_m"]),
                             title=f"fit of {', '.join(result.names)}: RMSE {1e3 * result.rmse_length_m:.2f} mm")
-    summary = {"data": str(data), "drive": args.drive, "t_end_s": args.t_end, "fidelity": config.fidelity,
-               **result.summary(), "figure": str(fig)}
+    summary = {"command": "fit", "data": str(data), "drive": args.drive, "t_end_s": args.t_end,
+               "fidelity": config.fidelity, "fixed_parameters": origin, **result.summary(), "figure": str(fig)}
+    if result.status != "converged":
+        raise RunFailed(f"the fit did not converge ({result.status}); try more --starts or fewer free parameters",
+                        summary)
     return summary
 
 
 def posterior_command(args) -> dict:
-    import growjax as gj
     from growjax import experiment as ex
     from growjax import posterior as gpost
 
-    data = Path(args.data) if args.data else default_data_path()
-    exp = ex.read(data).window(args.t_end + 1e-9)
-    base = gj.reference("forward", growth_law=args.law)
-    config = make_config(args, adjoint="forward")
-    inputs = ex.to_inputs(exp, "forward", base, config.t0, config.t1)
+    data, exp, base, origin = _setup(args, args.drive, growth_law=args.law)
+    if "robot_length_m" not in exp:
+        raise ValueError(f"{data} has no robot_length_m column to calibrate against")
+    config = make_config(args, args.drive, adjoint="forward")
+    inputs = ex.to_inputs(exp, args.drive, base, config.t0, config.t1)
     priors = gpost.paper_priors() if args.law == "reference" else gpost.lockhart_priors()
     res = gpost.sample(exp.time, exp["robot_length_m"], inputs, base, config, priors=priors, chains=args.chains,
                        warmup=args.warmup, samples=args.samples, seed=args.seed, progress=True,
                        emulate=args.emulate)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = _out(args)
     res.idata.to_netcdf(str(out / "posterior.nc"))
-    return {"data": str(data), "t_end_s": args.t_end, "growth_law": args.law, **res.summary,
-            "inference_data": str(out / "posterior.nc")}
+    summary = {"command": "posterior", "data": str(data), "drive": args.drive, "t_end_s": args.t_end,
+               "fidelity": config.fidelity, "growth_law": args.law, "fixed_parameters": origin, **res.summary,
+               "inference_data": str(out / "posterior.nc")}
+    rhat = summary.get("rhat_max")
+    if args.chains > 1 and (rhat is None or not math.isfinite(rhat) or rhat > 1.1):
+        raise RunFailed(f"the chains did not mix (R-hat max {rhat}); run more --warmup and --samples", summary)
+    return summary
 
 
 def discover_command(args) -> dict:
-    import growjax as gj
     from growjax import discover as gd
     from growjax import experiment as ex
     from growjax.plotting import discovery_figure
 
-    data = Path(args.data) if args.data else default_data_path()
-    exp = ex.read(data).window(args.t_end + 1e-9)
+    data, exp, base, origin = _setup(args, args.drive)
     if "robot_length_m" not in exp:
         raise ValueError(f"{data} has no robot_length_m column to explain")
     config = make_config(args, args.drive, adjoint="forward")
-    base = gj.reference(args.drive)
     inputs = ex.to_inputs(exp, args.drive, base, config.t0, config.t1)
     keep = (exp.time >= config.t0) & (exp.time <= config.t1)
     res = gd.discover(exp.time[keep], exp["robot_length_m"][keep], inputs, base=base, config=config,
                       candidates=args.candidates or None, progress=True, workers=args.workers)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = _out(args)
     figure = discovery_figure(res, out / "discover.png", title=f"{data.name}: {res.effect}")
-    print(gd.summary_text(res), file=sys.stderr)
-    return {"data": str(data), "drive": args.drive, "t_end_s": args.t_end, **res.report(), "figure": str(figure)}
+    return {"command": "discover", "data": str(data), "drive": args.drive, "t_end_s": args.t_end,
+            "fixed_parameters": origin, **res.report(), "figure": str(figure), "text": gd.summary_text(res)}
+
+
+def control_command(args) -> dict:
+    """Design on the fast model, evaluate on ``--fidelity``, write a figure."""
+    import importlib
+
+    from growjax import experiment as ex
+
+    design_module = importlib.import_module("growjax.control.design")  # the module (the package re-exports design())
+    targets_module = importlib.import_module("growjax.control.targets")
+
+    if args.rtol is not None:
+        raise ValueError("growjax control does not take --rtol: designs use each configuration's default tolerance")
+    data, _, _, origin = _setup(args, args.drive)
+    target = targets_module.target_from_experiment(ex.read(data), args.t_end)
+    fixed = {**origin["recorded_beside_data"], **origin["fixed"]}
+    out = _out(args)
+    with contextlib.ExitStack() as stack:
+        if fixed:  # the designs start from the published parameters: give them the fixed ones instead
+            from unittest import mock
+
+            import growjax as gj
+
+            def plant_params(drive, target=None, base=None):
+                return targets_module.plant_params(drive, target, base=gj.replace(gj.reference(drive), **fixed))
+
+            stack.enter_context(mock.patch.object(design_module, "plant_params", plant_params))
+        summary = design_module.design(target, args.drive, args.method, args.t_end, robust=args.robust,
+                                       n_draws=args.draws, iterations=args.iterations, microsteps=args.microsteps,
+                                       evaluate_on=args.fidelity, seed=args.seed, figure=out / "control.png")
+    summary = {"command": "control", "data": str(data), "fixed_parameters": origin, **summary}
+    if summary.get("pressure_limit_crossed"):
+        raise RunFailed(f"the design crossed the membrane pressure limit ({summary['pressure_limit_Pa'] / 1e3:.1f} kPa; "
+                        f"peak {summary['peak_pressure_Pa'] / 1e3:.1f} kPa)", summary)
+    rmse = summary.get("tracking_rmse_m")
+    if rmse is None or not math.isfinite(rmse) or summary.get("status") not in ("ok", None):
+        raise RunFailed(f"the evaluation run failed ({summary.get('status')})", summary)
+    return summary
+
+
+def params_command(args) -> dict:
+    import growjax as gj
+    from growjax import params as gp
+
+    base = gj.reference(args.drive)
+    symbols = {q: s for s, q in gp.ALIASES.items() if s not in ("phi",)}
+    ranges = gp.physical_ranges(base)
+    rows = []
+    for q in gp.parameter_names(base):
+        block, field = q.split(".")
+        value = gp.get(base, q)
+        if value is None or np.ndim(value) != 0:
+            continue
+        cls = type(getattr(base, block))
+        about = _attribute_text(cls.__doc__ or "", field)
+        lo, hi, unit = ranges.get(q, (None, None, ""))
+        unit = unit or _unit_of(about)
+        rows.append({"name": q, "symbol": symbols.get(q, ""), "value": float(value), "unit": unit,
+                     "range": None if lo is None else [lo, hi], "description": about})
+    return {"command": "params", "drive": args.drive, "parameters": rows}
+
+
+def _attribute_text(doc: str, field: str) -> str:
+    """The description of ``field`` in a Google-style ``Attributes:`` section (one line), or ''."""
+    import re
+
+    flat = " ".join(doc.split("Attributes:", 1)[-1].split())
+    m = re.search(rf"(?:^|[\s.:]){re.escape(field)}: (.*?)(?=\s+[a-z_]+: |$)", flat)
+    return m.group(1).strip() if m else ""
+
+
+def _unit_of(description: str) -> str:
+    """The SI unit a docstring states at the end of a parameter's description ("..., kg/m³.", "... (–)."), or ''."""
+    import re
+
+    text = re.sub(r"\s*\((?![^()]*/)[^()]*\)\.?$", "", description.strip()).rstrip(". ")  # drop a closing remark
+    if "(–)" in description and not re.search(r",\s*\S+$", text):
+        return "-"
+    last = text.rsplit(", ", 1)[-1] if ", " in text else text
+    last = last.split(":")[0].split(";")[0].strip()
+    if last and " " not in last and len(last) <= 16 and (not last.isalpha() or last in ("m", "s", "N", "Pa", "kg",
+                                                                                         "V", "A", "H", "rad", "Hz", "Ω")):
+        return last
+    return "-" if "(–)" in description else ""
+
+
+def effects_command(args) -> dict:
+    from growjax.discover import SEPARATING
+    from growjax.effects import CATALOGUE
+
+    rows = []
+    for name, cls in CATALOGUE.items():
+        (field, (lo, hi)), = cls.ranges.items()
+        rows.append({"name": name, "parameter": f"{name}.{field}", "unit": cls.units.get(field, ""),
+                     "range": [lo, hi], "description": cls.description,
+                     "separated_by": SEPARATING.get(name, "")})
+    return {"command": "effects", "effects": rows}
+
+
+# -- terminal summaries -----------------------------------------------------------------------------------------
+
+
+def _kpa(x) -> str:
+    return "–" if x is None else f"{x / 1e3:.1f} kPa"
+
+
+def _mm(x) -> str:
+    return "–" if x is None else f"{1e3 * x:.2f} mm"
+
+
+def _value(name: str, v: float) -> str:
+    if name.endswith("yield_pressure") or name == "Y":
+        return f"{v / 1e3:.3f} kPa"
+    return f"{v:.4g}"
+
+
+def _origin_lines(origin: dict) -> list[str]:
+    lines = []
+    if origin.get("recorded_beside_data"):
+        shown = ", ".join(f"{k} = {_value(k, v)}" for k, v in origin["recorded_beside_data"].items())
+        lines.append(f"  parameters recorded beside the data: {shown} (--param overrides)")
+    if origin.get("fixed"):
+        lines.append("  fixed by --param: " + ", ".join(f"{k} = {_value(k, v)}" for k, v in origin["fixed"].items()))
+    return lines
+
+
+def summary_lines(s: dict) -> list[str]:
+    """A few lines for the terminal, in mm and kPa."""
+    cmd = s.get("command")
+    name = Path(s["data"]).name if s.get("data") else ""
+    if cmd == "simulate":
+        lines = [f"simulate: {name}, {s['drive']} drive, {s['fidelity']} configuration, 0–{s['t_end_s']:g} s",
+                 *_origin_lines(s["parameters"]),
+                 (f"  status {s['status']}; final length {_mm(s['final_length_m'])}; peak pressure "
+                 f"{_kpa(s['peak_pressure_Pa'])} (membrane limit {_kpa(s['pressure_limit_Pa'])})")]
+        if "rmse_length_m" in s:
+            lines.append(f"  length RMSE against the measured length: {_mm(s['rmse_length_m'])}")
+        lines.append(f"  {s['solver_steps']} solver steps, {1e3 * s['wall_s']:.0f} ms after compiling "
+                     f"({s['first_call_s']:.1f} s first call)")
+        lines.append(f"  wrote {s['trajectory_csv']}, {s['figure']}")
+        return lines
+    if cmd == "sweep":
+        ranges = ", ".join(f"{r['name']} {r['low']:g}–{r['high']:g}" + (" (log)" if r["log"] else "") for r in s["ranges"])
+        lines = [f"sweep: {name}, {s['n']} sets (seed {s['seed']}) over {ranges}", *_origin_lines(s["parameters"]),
+                 (f"  {s['n_failed']} failed; sweep {s['wall_s']:.2f} s after {s['compile_s']:.1f} s compiling, "
+                 f"{s['n_devices']} {s['device']} devices")]
+        if s.get("best"):
+            best = ", ".join(f"{k} = {_value(k, v)}" for k, v in s["best"]["parameters"].items())
+            lines.append(f"  best: {best}; length RMSE {_mm(s['best']['rmse_length_m'])}")
+        for output, table in s.get("sobol", {}).get("indices", {}).items():
+            if "S1" in table:
+                shown = ", ".join(f"{n.split('.')[-1]} {a:.2f}/{b:.2f}" for n, a, b in
+                                  zip(s["sobol"]["names"], table["S1"], table["ST"]))
+                lines.append(f"  Sobol S1/ST of {output}: {shown}")
+        lines.append(f"  wrote {s['table_csv']}, {s['figure']}")
+        return lines
+    if cmd == "fit":
+        lines = [f"fit: {name}, {s['drive']} drive, 0–{s['t_end_s']:g} s: {s['status']}",
+                 *_origin_lines(s["fixed_parameters"])]
+        for p, v in s["parameters"].items():
+            interval = v["interval_90"]
+            shown = "undetermined" if interval is None else f"90 % {_value(p, interval[0])} – {_value(p, interval[1])}"
+            lines.append(f"  {p} = {_value(p, v['estimate'])} ({shown})")
+        lines.append(f"  length RMSE {_mm(s['rmse_length_m'])}; {s['wall_s']:.1f} s")
+        lines.append(f"  wrote {s['figure']}")
+        return lines
+    if cmd == "posterior":
+        lines = [(f"posterior: {name}, {s['growth_law']} growth law, {s['chains']} chains × "
+                 f"({s['warmup']} + {s['samples']})"), *_origin_lines(s["fixed_parameters"])]
+        for p, v in s["parameters"].items():
+            lo, hi = v["interval_90"]
+            if p == "sigma":
+                lines.append(f"  σ = {_mm(v['mean'])} (90 % {_mm(lo)} – {_mm(hi)})")
+            else:
+                lines.append(f"  {p} = {_value(p, v['mean'])} (90 % {_value(p, lo)} – {_value(p, hi)})")
+        lines.append(f"  R-hat max {s['rhat_max']:.3f}, bulk ESS min {s['ess_bulk_min']:.0f}, divergences "
+                     f"{s['divergences']}, measured points in the 90 % band {s['coverage_90']:.2f}; {s['wall_s']:.0f} s")
+        lines.append(f"  wrote {s['inference_data']}")
+        return lines
+    if cmd == "discover":
+        return [f"discover: {name}", *_origin_lines(s["fixed_parameters"]),
+                *("  " + line for line in s["text"].splitlines()), f"  wrote {s['figure']}"]
+    if cmd == "control":
+        lines = [(f"control: {name}, {s['drive']} drive, {s['method']}, evaluated on the {s['evaluated_on']} "
+                 f"configuration"), *_origin_lines(s["fixed_parameters"]),
+                 (f"  tracking RMSE {_mm(s.get('tracking_rmse_m'))}; peak pressure {_kpa(s.get('peak_pressure_Pa'))} "
+                 f"(limit {_kpa(s.get('pressure_limit_Pa'))}, demand ceiling {_kpa(s.get('max_demand_Pa'))})")]
+        if s.get("gains"):
+            lines.append("  gains: " + ", ".join(f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}"
+                                                 for k, v in s["gains"].items()))
+        if s.get("figure"):
+            lines.append(f"  wrote {s['figure']}")
+        return lines
+    if cmd == "params":
+        lines = [f"{'name':34s} {'symbol':7s} {'value':>12s} {'unit':16s} {'physical range':24s} description"]
+        for r in s["parameters"]:
+            rng = "" if r["range"] is None else f"{r['range'][0]:g} – {r['range'][1]:g}"
+            lines.append(f"{r['name']:34s} {r['symbol']:7s} {r['value']:12.5g} {r['unit']:16s} {rng:24s} "
+                         f"{r['description'][:70]}")
+        return lines
+    if cmd == "effects":
+        lines = []
+        for r in s["effects"]:
+            lines.append(f"{r['name']}: {r['description']}")
+            lines.append(f"    parameter {r['parameter']} in [{r['range'][0]:g}, {r['range'][1]:g}] {r['unit']}")
+            lines.append(f"    separated by: {r['separated_by']}")
+        return lines
+    return [json.dumps(s, default=str)]
+
+
+# -- the parser -------------------------------------------------------------------------------------------------
+
+
+def _shared(p: argparse.ArgumentParser, command: str, fidelity_default: str = "fast", fidelity_help: str = ""):
+    p.add_argument("data", nargs="?", default=None,
+                   help="experiment CSV, or a folder with kings_ts.mat and lin_c_ts.mat (default: the synthetic "
+                        "experiment shipped with growjax)")
+    p.add_argument("--drive", choices=DRIVES, default="forward",
+                   help="forward: PID on the pressure with ideal torque sources; inverse: stepper motor and its step "
+                        "controller")
+    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                   help="fix a parameter, SI units (repeat; names as in `growjax params`); overrides values recorded "
+                        "beside the data")
+    p.add_argument("--fidelity", choices=FIDELITIES, default=fidelity_default,
+                   help=fidelity_help or "configuration that solves the model: fast, or the reference network (slow)")
+    p.add_argument("--rtol", type=float, default=None,
+                   help="solver tolerance on the scaled states (None: 1e-4 fast, 1e-6 reference)")
+    p.add_argument("--seed", type=int, default=0, help="seed of every random choice")
+    p.add_argument("--t-end", type=float, default=10.0, metavar="S", help="end of the simulated window, s")
+    p.add_argument("--out", default=str(Path("out") / command), metavar="DIR", help="folder for the files the command writes")
+    p.add_argument("--json", metavar="FILE", default=None, help="write the full summary as JSON to FILE ('-': stdout)")
 
 
 def build_parser():
-    parser = argparse.ArgumentParser(prog="growjax", description="MAMMOBOT growing-robot simulator")
-    sub = parser.add_subparsers(dest="command", required=True)
-    sim = sub.add_parser("simulate", help="simulate an experiment and compare with its measured length")
-    sim.add_argument("data", nargs="?", help="experiment CSV (or folder with kings_ts.mat, lin_c_ts.mat); default: shipped synthetic data")
-    sim.add_argument("--drive", choices=["forward", "inverse"], default="forward")
-    sim.add_argument("--t-end", type=float, default=10.0, help="end time, s (default 10)")
-    sim.add_argument("--param", action="append", default=[], metavar="NAME=VALUE", help="override a parameter (SI units), e.g. Y=8000")
-    sim.add_argument("--out", default="out", help="output folder (trajectory.csv, trajectory.png)")
-    sim.add_argument("--json", help="also write the JSON summary to this file")
+    from growjax import __version__
 
-    swp = sub.add_parser("sweep", help="Latin-hypercube parameter sweep scored against the measured length")
-    swp.add_argument("data", nargs="?", help="experiment CSV or folder (default: shipped synthetic data)")
-    swp.add_argument("--n", type=int, default=500, help="number of parameter sets (default 500)")
-    swp.add_argument("--param", action="append", default=[], metavar="NAME=LOW:HIGH[:log]",
-                     help="swept parameter and range, SI units (repeat); default the paper's n, Y, ext box")
-    swp.add_argument("--seed", type=int, default=0, help="seed of the design (default 0)")
-    swp.add_argument("--t-end", type=float, default=10.0, help="end time, s (default 10)")
+    fmt = _Formatter
+    parser = _Parser(prog="growjax", formatter_class=fmt,
+                     description="MAMMOBOT soft growing robot: simulate, sweep, fit, sample, discover, control")
+    parser.add_argument("--version", action="version", version=f"growjax {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
+
+    sim = sub.add_parser("simulate", formatter_class=fmt, help="simulate an experiment against its measured length")
+    _shared(sim, "simulate")
+
+    swp = sub.add_parser("sweep", formatter_class=fmt, help="Latin-hypercube sweep scored against the measured length")
+    _shared(swp, "sweep")
+    swp.add_argument("--n", type=int, default=500, help="number of parameter sets")
+    swp.add_argument("--range", action="append", default=[], metavar="NAME=LOW:HIGH[:log]",
+                     help="swept parameter and its range, SI units (repeat); none: the paper's n, Y, ext box")
     swp.add_argument("--sobol", action="store_true", help="also compute Sobol indices of RMSE and final length")
-    swp.add_argument("--sobol-n", type=int, default=256, help="Saltelli base points (power of 2; runs = N·(d+2))")
-    swp.add_argument("--chunk-size", type=int, default=None, help="sets per compiled call (default: memory-sized)")
-    swp.add_argument("--out", default="out", help="output folder (sweep.csv, sweep.png, sobol.png)")
-    swp.add_argument("--json", help="also write the JSON summary to this file")
+    swp.add_argument("--sobol-n", type=int, default=256, help="Saltelli base points (a power of 2; runs = N·(d+2))")
+    swp.add_argument("--chunk-size", type=int, default=None, help="sets per compiled call (None: sized to memory)")
 
-    fit = sub.add_parser("fit", help="least-squares fit of parameters to the measured length (and pressure)")
-    fit.add_argument("data", nargs="?", help="experiment CSV or folder (default: shipped synthetic data)")
-    fit.add_argument("--drive", choices=["forward", "inverse"], default="forward")
-    fit.add_argument("--t-end", type=float, default=10.0, help="end time, s (default 10)")
-    fit.add_argument("--free", action="append", default=[], metavar="NAME", help="parameter to fit (repeat; default Y)")
-    fit.add_argument("--starts", type=int, default=3, help="multi-start count, from the best LHS sets (default 3)")
-    fit.add_argument("--seed", type=int, default=0)
-    fit.add_argument("--out", default="out", help="output folder (fit.png)")
-    fit.add_argument("--json", help="also write the JSON summary to this file")
+    fit = sub.add_parser("fit", formatter_class=fmt, help="least-squares fit to the measured length (and pressure)")
+    _shared(fit, "fit")
+    fit.add_argument("--free", action="append", default=[], metavar="NAME",
+                     help="parameter to fit (repeat; none: Y)")
+    fit.add_argument("--starts", type=int, default=3, help="starts, from the best sets of a Latin hypercube")
 
-    post = sub.add_parser("posterior", help="NUTS posterior of Y, ext, n (or Y, phi_L, n_L) and the noise scale")
-    post.add_argument("data", nargs="?", help="experiment CSV or folder (default: shipped synthetic data)")
-    post.add_argument("--t-end", type=float, default=10.0, help="end time, s (default 10)")
+    post = sub.add_parser("posterior", formatter_class=fmt,
+                          help="NUTS posterior of Y, ext, n (or Y, phi_L, n_L) and the noise")
+    _shared(post, "posterior")
     post.add_argument("--law", choices=["reference", "lockhart"], default="reference",
-                      help="growth law: the published velocity term (default) or Lockhart's")
+                      help="growth law: the published velocity term, or Lockhart's")
     post.add_argument("--emulate", action="store_true",
-                      help="sample through a validated tensor-grid emulator instead of the model itself (worth it when "
-                           "the data leave directions flat, as ext and n of the published law: NUTS then runs to its "
-                           "maximum tree depth, and each gradient through the model costs ~0.1 s)")
-    post.add_argument("--chains", type=int, default=4)
-    post.add_argument("--warmup", type=int, default=500)
-    post.add_argument("--samples", type=int, default=500)
-    post.add_argument("--seed", type=int, default=0)
-    post.add_argument("--out", default="out", help="output folder (posterior.nc)")
-    post.add_argument("--json", help="also write the JSON summary to this file")
-    dis = sub.add_parser("discover", help="find the physical effect the base model misses (catalogue of effects)")
-    dis.add_argument("data", nargs="?", help="experiment CSV or folder (default: shipped synthetic data)")
-    dis.add_argument("--drive", choices=["forward", "inverse"], default="forward")
-    dis.add_argument("--t-end", type=float, default=10.0, help="end time, s (default 10)")
-    dis.add_argument("--candidates", nargs="+", metavar="NAME", help="catalogue effects to test (default: all)")
-    dis.add_argument("--workers", type=int, help="fits run at a time (default: one per CPU core)")
-    dis.add_argument("--out", default="out", help="output folder (discover.png)")
-    dis.add_argument("--json", help="also write the JSON report to this file")
+                      help="sample through a validated emulator of the model (fast; worth it where the data leave "
+                           "directions flat, as ext and n of the published law)")
+    post.add_argument("--chains", type=int, default=4, help="NUTS chains")
+    post.add_argument("--warmup", type=int, default=500, help="warm-up draws per chain")
+    post.add_argument("--samples", type=int, default=500, help="kept draws per chain")
 
-    from growjax import control as gcontrol
+    dis = sub.add_parser("discover", formatter_class=fmt,
+                         help="which catalogue effect the data need beyond the model (`growjax effects`)")
+    _shared(dis, "discover")
+    dis.add_argument("--candidates", nargs="+", metavar="EFFECT", type=_effect_name, default=None,
+                     help="catalogue effects to test (None: all of `growjax effects`)")
+    dis.add_argument("--workers", type=int, default=None, help="fits run at a time (None: one per CPU core)")
 
-    ctl = sub.add_parser("control", help="length control design: open-loop profile, feedback, MPC")
-    gcontrol.add_arguments(ctl)
-    for command in (sim, swp, fit, post, dis):
-        command.add_argument("--fidelity", choices=["fast", "reference"], default="fast",
-                             help="fast configuration (default) or the reference network (slow; for checks)")
-        command.add_argument("--rtol", type=float, default=None,
-                             help="solver tolerance on scaled states (default: 1e-4 fast, 1e-6 reference)")
+    ctl = sub.add_parser("control", formatter_class=fmt,
+                         help="length control design: open-loop profile, feedback, MPC")
+    _shared(ctl, "control", fidelity_default="reference",
+            fidelity_help="configuration the design is evaluated on (designs use the fast one)")
+    ctl.add_argument("--method", choices=["open-loop", "feedback", "mpc"], default="feedback",
+                     help="open-loop demand profile (or step schedule), tuned feedback, or MPC (forward drive)")
+    ctl.add_argument("--robust", metavar="POSTERIOR.nc", default=None,
+                     help="tune on the cost averaged over draws of this posterior")
+    ctl.add_argument("--draws", type=int, default=8, help="posterior draws to tune on (with --robust)")
+    ctl.add_argument("--iterations", type=int, default=10, help="optimiser and tuning iterations")
+    ctl.add_argument("--microsteps", type=int, default=1, help="stepper driver microsteps (1: the full-step driver)")
+
+    par = sub.add_parser("params", formatter_class=fmt,
+                         help="list the parameters: names, symbols, defaults, units, physical ranges")
+    par.add_argument("--drive", choices=DRIVES, default="forward", help="which drive's published parameter set")
+    par.add_argument("--json", metavar="FILE", default=None, help="write the table as JSON to FILE ('-': stdout)")
+    eff = sub.add_parser("effects", formatter_class=fmt,
+                         help="list the effect catalogue: parameter, range, what separates each")
+    eff.add_argument("--json", metavar="FILE", default=None, help="write the catalogue as JSON to FILE ('-': stdout)")
     return parser
 
 
-def main(argv=None) -> int:
-    args = build_parser().parse_args(argv)
-    _enable_compile_cache()
-    if args.command in ("simulate", "fit") and args.fidelity == "fast":  # compile-bound: XLA's quicker emitters
-        from growjax import xla_flags
+COMMANDS = {"simulate": simulate_command, "sweep": sweep_command, "fit": fit_command,
+            "posterior": posterior_command, "discover": discover_command, "control": control_command,
+            "params": params_command, "effects": effects_command}
 
+
+def _write_json(summary: dict, where: str | None):
+    if not where:
+        return
+    text = json.dumps({k: v for k, v in summary.items() if k != "text"}, indent=2, default=str)
+    if where == "-":
+        print(text)
+    else:
+        Path(where).parent.mkdir(parents=True, exist_ok=True)
+        Path(where).write_text(text + "\n")
+
+
+def main(argv=None) -> int:
+    import matplotlib
+
+    matplotlib.use("Agg")  # the commands write figures to files
+    args = build_parser().parse_args(argv)
+    to_stdout = getattr(args, "json", None) == "-"
+    human = sys.stderr if to_stdout else sys.stdout
+    if args.command in ("params", "effects"):
+        summary = COMMANDS[args.command](args)
+        _write_json(summary, args.json)
+        if not to_stdout:
+            print("\n".join(summary_lines(summary)), file=human)
+        return OK
+    _enable_compile_cache()
+    from growjax import xla_flags
+
+    if args.command in ("simulate", "fit") and args.fidelity == "fast":  # compile-bound: XLA's quicker emitters
         xla_flags.apply_quick_compile()
+    elif args.command == "sweep":
+        _use_all_cpu_cores()
+    elif args.command == "posterior":
+        _use_all_cpu_cores(at_least=args.chains)  # chains in parallel, one per device
+        if not args.emulate:  # thousands of gradients through the solver: its loop compiled whole
+            xla_flags.apply()
     from growjax.experiment import ExperimentError
 
+    status, failure = OK, None
     try:
-        if args.command == "sweep":
-            _use_all_cpu_cores()
-            summary = sweep_command(args)
-        elif args.command == "fit":
-            summary = fit_command(args)
-        elif args.command == "posterior":
-            _use_all_cpu_cores(at_least=args.chains)  # chains in parallel, one per device
-            if not args.emulate:  # thousands of gradients through the solver: its loop compiled whole
-                from growjax import xla_flags
-
-                xla_flags.apply()
-            summary = posterior_command(args)
-        elif args.command == "discover":
-            summary = discover_command(args)
-        elif args.command == "control":
-            from growjax import control as gcontrol
-
-            summary = gcontrol.command(args)
-        else:
-            summary = simulate_command(args)
-    except (ExperimentError, ValueError) as err:
-        print(f"growjax: error: {err}", file=sys.stderr)
-        return 2
-    text = json.dumps(summary, indent=2, default=str)
-    print(text)
-    if args.json:
-        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.json).write_text(text + "\n")
-    return 0 if summary.get("status") != "solver_failed" else 1
+        summary = COMMANDS[args.command](args)
+    except (ExperimentError, ValueError, FileNotFoundError) as err:
+        print(f"growjax {args.command}: error: {err}", file=sys.stderr)
+        return BAD_INPUT
+    except RunFailed as failed:
+        summary, status, failure = failed.summary, RUN_FAILED, str(failed)
+        summary["failure"] = failure
+    _write_json(summary, args.json)
+    print("\n".join(summary_lines(summary)), file=human)
+    if failure:
+        print(f"growjax {args.command}: failed: {failure}", file=sys.stderr)
+    return status
 
 
 if __name__ == "__main__":

@@ -35,11 +35,20 @@ class Config:
         crack_width: C¹ band of the check-valve opening, Pa.
         switch_width: band over which the bypass opens as the valve pressure drop turns negative, Pa.
         flow_width: band of the nozzle's loss-coefficient switch, m³/s.
-        adjoint: ``"reverse"`` (checkpointed, for ``jax.grad``) or ``"forward"`` (for ``jax.jvp``/``jacfwd``).
-        tangents: how the fast configuration's forward sensitivities take the field's derivative:
+        adjoint: how derivatives are taken. ``"reverse"``: ``jax.grad`` and forward mode both work (reference:
+            diffrax's checkpointed adjoint; fast: the forward-mode Jacobian in the leaves that carry tangents,
+            contracted with them). ``"forward"``: forward mode only (``jax.jvp``/``jacfwd``), the cheapest for
+            a few directions (reference: diffrax's forward mode; fast: sensitivities along the tangents).
+        tangents: (fast only) how the forward sensitivities take the field's derivative:
             ``"forward"`` (``jax.jvp``), ``"differences"`` (central differences) or ``"auto"`` (forward mode
-            where the solver's loop is compiled whole, :mod:`growjax.xla_flags`, or under the Lockhart law;
+            where the solver's loop is compiled whole, ``small_loops``, or under the Lockhart law;
             differences otherwise). Both agree to ~1e-5 relative; only the speed differs.
+        small_loops: (fast only) the integrator writes its linear solve in elementwise operations so that
+            XLA:CPU can compile its loop into one kernel (:mod:`growjax.xla_flags`); the rounding differs from
+            LAPACK's. None: whether ``XLA_FLAGS`` sets the small-loop limit, read by :meth:`resolved` where a
+            simulation starts (outside any trace), so the compiled program is keyed on the value in force.
+
+    A field that does not apply to the chosen fidelity must keep its default (``ValueError`` otherwise).
     """
 
     fidelity: str = "fast"
@@ -58,6 +67,7 @@ class Config:
     flow_width: float = 1e-10
     adjoint: str = "reverse"
     tangents: str = "auto"
+    small_loops: bool | None = None
 
     def __post_init__(self):
         if self.fidelity not in FIDELITIES:
@@ -72,6 +82,11 @@ class Config:
             raise ValueError(f"adjoint must be 'reverse' or 'forward', got {self.adjoint!r}")
         if self.tangents not in TANGENTS:
             raise ValueError(f"tangents must be one of {TANGENTS}, got {self.tangents!r}")
+        for name in _FIDELITY_FIELDS[_other(self.fidelity)]:
+            default = _DEFAULTS[name]
+            if getattr(self, name) != default:
+                raise ValueError(f"{name} applies to the {_other(self.fidelity)!r} fidelity only; with fidelity="
+                                 f"{self.fidelity!r} leave it at its default {default!r}")
         for name in ("rtol", "atol"):
             v = getattr(self, name)
             if v is not None and not 0 < v < 1:
@@ -92,6 +107,24 @@ class Config:
         n = max(1, math.ceil((self.t1 - self.t0) / self.save_dt - 1e-9))
         return np.append(self.t0 + self.save_dt * np.arange(n), self.t1)
 
+    def resolved(self) -> Config:
+        """This configuration with every option left to the environment made explicit (``small_loops`` from
+        ``XLA_FLAGS``): what a compiled program is keyed on. Call it outside any trace."""
+        if self.fidelity == "fast" and self.small_loops is None:
+            from growjax import xla_flags
+
+            return dataclasses.replace(self, small_loops=xla_flags.applied())
+        return self
+
     def replace(self, **changes) -> Config:
         """A copy with the given fields changed."""
         return dataclasses.replace(self, **changes)
+
+
+# Fields that apply to one fidelity only: with the other they must keep their defaults.
+_FIDELITY_FIELDS = {"fast": ("tangents", "small_loops"), "reference": ("flow_width",)}
+_DEFAULTS = {f.name: f.default for f in dataclasses.fields(Config)}
+
+
+def _other(fidelity: str) -> str:
+    return "reference" if fidelity == "fast" else "fast"

@@ -20,31 +20,34 @@ iterations instead of one fixed-point pass.
 
 The catalogue (:data:`CATALOGUE`, name → class): ``active_channel_force``, ``fluid_leak``,
 ``actuation_lag``, ``trapped_air``, ``catheter_friction``, ``lumen_friction``,
-``growth_rate_limit``, ``retraction_folding``.
+``growth_rate_limit``, ``retraction_folding``. :func:`register` adds an effect of your own.
 """
 
 from __future__ import annotations
 
-from typing import ClassVar, NamedTuple
+import dataclasses
+from typing import ClassVar
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 
 from growjax._smooth import smooth_ramp
+from growjax.robot import LOCKHART_PRESSURE_SCALE, lockhart_pressure
 
 FRICTION_VELOCITY = 1e-4  # m/s: velocity over which a friction force turns from one sign to the other
 RAMP_VELOCITY = 1e-6  # m/s: C¹ band of the ramps max(v, 0) of the velocity
 
 
-class Rod(NamedTuple):
-    """The growing element as an effect sees it in the rod balance (SI units).
+class Rod(eqx.Module):
+    """The growing element as an effect sees it in the rod balance (SI units); built by keyword only.
 
     t: s.  pressure: sensed pressure P before the check valve, Pa.  velocity: robot
     velocity (inflow / A_r), m/s.  length: robot length, m.  catheter_length: m.
     inner_radius: r_i of the robot, m.  area: its annular piston area A_r = π(r_o² − r_i²), m².
     """
 
+    _: dataclasses.KW_ONLY
     t: jax.Array
     pressure: jax.Array
     velocity: jax.Array
@@ -54,12 +57,15 @@ class Rod(NamedTuple):
     area: jax.Array
 
 
-class Instant(NamedTuple):
-    """The solved model at one instant, for the rates of effect states (SI units).
+class Instant(eqx.Module):
+    """The solved model at one instant, for the rates of effect states (SI units); built by keyword only.
 
-    ``drive``: the commanded drive (forward: force on the platform, N; inverse: motor torque, N·m).
+    t: s.  pressure: sensed pressure, Pa.  robot_pressure: Pa.  robot_flow: m³/s.  velocity: robot velocity, m/s.
+    length: robot length, m.  drive: the commanded drive (forward: force on the platform, N; inverse: motor
+    torque, N·m).
     """
 
+    _: dataclasses.KW_ONLY
     t: jax.Array
     pressure: jax.Array
     robot_pressure: jax.Array
@@ -197,8 +203,6 @@ class TrappedAir(Effect):
     extra_fraction: float = 0.0
 
     def apply(self, params):
-        import dataclasses
-
         fluid = dataclasses.replace(params.fluid, air_fraction=params.fluid.air_fraction + self.extra_fraction)
         return dataclasses.replace(params, fluid=fluid)
 
@@ -214,7 +218,7 @@ class CatheterFriction(Effect):
     F = μ·P·2π r_i·L_c·s(v), with P the sensed pressure (taken ≥ 0: the contact cannot pull),
     r_i the robot's inner radius, L_c the catheter length in contact and s the smooth sign of the
     robot velocity (:func:`friction_sign`). The shipped model's own catheter term (μ_c = 0.01)
-    *assists* growth (PHYSICS.md §8.4); this one opposes growth and retraction alike.
+    *assists* growth; this one opposes growth and retraction alike.
 
     Attributes:
         coefficient: μ (–) (0 = absent).
@@ -257,9 +261,9 @@ class LumenFriction(Effect):
 class GrowthRateLimit(Effect):
     """Membrane-limited growth speed: growing at v > 0 needs Δp = p_ref·(κ·v)^m more rod pressure.
 
-    The inverse of a Lockhart-type law v = (Δp/p_ref)^(1/m)/κ, with p_ref = 1 kPa and m = 4 fixed
-    (the calibration found Lockhart's exponent n_L ≈ 0.25, m = 1/n_L). Zero while the robot holds
-    or retracts (a C¹ ramp of v). Rod force A_r·Δp.
+    The inverse of a Lockhart-type law v = (Δp/p_ref)^(1/m)/κ (:func:`growjax.robot.lockhart_pressure`), with
+    p_ref = 1 kPa and m = 4 fixed (the calibration found Lockhart's exponent n_L ≈ 0.25, m = 1/n_L). Zero while
+    the robot holds or retracts (a C¹ ramp of v). Rod force A_r·Δp.
 
     Attributes:
         inverse_speed: κ, s/m: the inverse of the growth speed at 1 kPa of excess pressure (0 = absent).
@@ -270,13 +274,12 @@ class GrowthRateLimit(Effect):
     units: ClassVar[dict] = {"inverse_speed": "s/m"}
     ranges: ClassVar[dict] = {"inverse_speed": (0.0, 2000.0)}
     velocity_dependent: ClassVar[bool] = True
-    reference_pressure: ClassVar[float] = 1e3  # Pa: p_ref
+    reference_pressure: ClassVar[float] = LOCKHART_PRESSURE_SCALE  # Pa: p_ref
     exponent: ClassVar[float] = 4.0  # m = 1/n_L
     inverse_speed: float = 0.0
 
     def rod_force(self, rod, state):
-        growth = self.inverse_speed * smooth_ramp(rod.velocity, RAMP_VELOCITY)  # κ·v (–)
-        return rod.area * self.reference_pressure * growth**self.exponent
+        return rod.area * lockhart_pressure(rod.velocity, self.inverse_speed, self.exponent, RAMP_VELOCITY)
 
 
 class RetractionFolding(Effect):
@@ -309,6 +312,26 @@ class RetractionFolding(Effect):
 
 CATALOGUE = {cls.name: cls for cls in (ActiveChannelForce, FluidLeak, ActuationLag, TrappedAir, CatheterFriction,
                                        LumenFriction, GrowthRateLimit, RetractionFolding)}
+
+
+def register(cls: type[Effect]) -> type[Effect]:
+    """Add an :class:`Effect` subclass to :data:`CATALOGUE`, so that :func:`growjax.discover.discover` tests it.
+
+    The class needs a ``name`` not already in the catalogue, a one-line ``description``, and exactly one
+    parameter field with its unit (``units``) and physical range (``ranges``), the range including 0 (absent).
+    Usable as a class decorator; returns the class.
+    """
+    if not (isinstance(cls, type) and issubclass(cls, Effect)):
+        raise TypeError(f"register expects an Effect subclass, got {cls!r}")
+    if not cls.name or cls.name in CATALOGUE:
+        raise ValueError(f"an effect needs a name not in the catalogue ({sorted(CATALOGUE)}), got {cls.name!r}")
+    if len(cls.ranges) != 1:
+        raise ValueError(f"{cls.name}: discover fits one parameter per effect; ranges has {len(cls.ranges)}")
+    (field, (low, high)), = cls.ranges.items()
+    if field not in cls.units or not low <= 0.0 <= high:
+        raise ValueError(f"{cls.name}.{field}: needs a unit in `units` and a range that includes 0")
+    CATALOGUE[cls.name] = cls
+    return cls
 
 
 # -- what the assemblies call: the sum over a tuple of effects -------------------------------------------

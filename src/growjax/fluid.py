@@ -1,4 +1,4 @@
-"""Working fluid: water with entrained air (Simscape 'Hydraulic Fluid' block, PHYSICS.md §3.1, §4)."""
+"""Working fluid: water with entrained air (Simscape 'Hydraulic Fluid' block)."""
 
 from __future__ import annotations
 

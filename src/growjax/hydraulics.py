@@ -1,4 +1,4 @@
-"""Hydraulic components between the syringes and the robot (PHYSICS.md §3.2–3.6).
+"""Hydraulic components between the syringes and the robot.
 
 Sign convention (Simscape): pressures are gauge, Pa; a flow q (m³/s) is positive
 from port A to port B. Each component is a small pytree of parameters plus pure
@@ -44,8 +44,9 @@ class Pipeline(eqx.Module):
         length: L, m (chamber volume A_c·L).
         length_additional: aggregate equivalent length of local resistances, m.
         roughness: internal surface roughness, m.
-        shape_factor: laminar friction constant s (64 for a circle).
-        re_laminar, re_turbulent: Reynolds bounds of the transition region.
+        shape_factor: laminar friction constant s (64 for a circle) (–).
+        re_laminar: Reynolds number where the laminar–turbulent transition region starts (–).
+        re_turbulent: Reynolds number where it ends (–).
         diameter_compliance: static pressure–diameter coefficient k_p, m/Pa (0 = rigid wall).
         wall_time_constant: viscoelastic time constant τ of the wall, s.
         initial_pressure: gauge pressure at t0, Pa.
@@ -75,7 +76,7 @@ def circular_pipeline(diameter: float, length: float, **kw) -> Pipeline:
 
 
 def _friction_times_reynolds(pipe: Pipeline, re):
-    """f(Re)·Re: laminar s below Re_lam, Haaland above Re_turb, C¹ blend between (PHYSICS.md §3.2)."""
+    """f(Re)·Re: laminar s below Re_lam, Haaland above Re_turb, C¹ blend between."""
     re_safe = jnp.maximum(re, 1.0)
     rel = pipe.roughness / pipe.hydraulic_diameter / 3.7
     f_turb = 1.0 / (-1.8 * jnp.log10(6.9 / re_safe + rel**1.11)) ** 2
@@ -96,20 +97,35 @@ def chamber_pressure_rate(pipe: Pipeline, fluid: Fluid, p, wall_strain, net_infl
     """dp/dt (Pa/s) and dδ/dt (m/s) of a pipeline chamber at pressure ``p`` with diameter increase δ.
 
     Rigid wall: (V/E) ṗ = q. Flexible wall: τ δ̇ = k_p p − δ and
-    q = (V(δ)/E) ṗ + (π(d+δ)/2) L (1 + p/E) δ̇, V(δ) = π(d+δ)²L/4 (PHYSICS.md §3.2).
+    q = (V(δ)/E) ṗ + (π(d+δ)/2) L (1 + p/E) δ̇, V(δ) = π(d+δ)²L/4.
     """
     e = bulk_modulus(fluid, p)
-    d = pipe.hydraulic_diameter
     rigid = pipe.diameter_compliance == 0.0
-    dd = (pipe.diameter_compliance * p - wall_strain) / pipe.wall_time_constant
-    dd = jnp.where(rigid, 0.0, dd)
-    volume = jnp.where(rigid, pipe.volume, jnp.pi * (d + wall_strain) ** 2 / 4.0 * pipe.length)
-    wall_flow = jnp.pi * (d + wall_strain) / 2.0 * pipe.length * (1.0 + p / e) * dd
+    dd = wall_strain_rate(pipe, p, wall_strain)
+    volume = jnp.where(rigid, pipe.volume, strained_volume(pipe, wall_strain))
+    wall_flow = jnp.pi * (pipe.hydraulic_diameter + wall_strain) / 2.0 * pipe.length * (1.0 + p / e) * dd
     return (net_inflow - wall_flow) * e / volume, dd
 
 
+def strained_volume(pipe: Pipeline, wall_strain, count=1):
+    """Chamber volume of ``count`` pipes like ``pipe`` at diameter increase δ = ``wall_strain`` (m): n·π(d + δ)²L/4, m³."""
+    return count * jnp.pi * (pipe.hydraulic_diameter + wall_strain) ** 2 / 4.0 * pipe.length
+
+
+def wall_strain_rate(pipe: Pipeline, p, wall_strain):
+    """dδ/dt (m/s) of the viscoelastic wall at gauge pressure ``p`` (Pa): τ δ̇ = k_p p − δ (0 for a rigid wall)."""
+    rate = (pipe.diameter_compliance * p - wall_strain) / pipe.wall_time_constant
+    return jnp.where(pipe.diameter_compliance == 0.0, 0.0, rate)
+
+
 class Orifice(eqx.Module):
-    """Fixed orifice. ``area`` m², ``discharge_coefficient`` C_D, ``b_lam`` laminar pressure ratio."""
+    """Fixed orifice.
+
+    Attributes:
+        area: opening area A, m².
+        discharge_coefficient: C_D (–).
+        b_lam: laminar transition pressure ratio B_lam (–).
+    """
 
     area: float = 1.2566e-5
     discharge_coefficient: float = 0.7
@@ -122,7 +138,15 @@ def orifice_conductance(area, cd, fluid: Fluid):
 
 
 class Nozzle(eqx.Module):
-    """Gradual area change (semi-empirical Gibson losses). Port A small, B large; diameters m, angle rad."""
+    """Gradual area change (semi-empirical Gibson losses). Port A small, B large.
+
+    Attributes:
+        small_diameter: diameter at port A, m.
+        large_diameter: diameter at port B, m.
+        angle: included angle of the transition, rad.
+        correction: factor on the loss coefficients (–).
+        b_lam: laminar transition pressure ratio B_lam (–).
+    """
 
     small_diameter: float = 2e-3
     large_diameter: float = 15e-3
@@ -154,9 +178,17 @@ def nozzle_pressure_drop(noz: Nozzle, fluid: Fluid, q_ab, p_avg, flow_width):
 
 
 class CheckValve(eqx.Module):
-    """Check valve with linear opening between cracking and max-opening pressure (PHYSICS.md §3.5).
+    """Check valve with linear opening between cracking and max-opening pressure.
 
     ``crack_pressure`` is None in the shipped model: it is tied to the robot's yield pressure Y.
+
+    Attributes:
+        area_max: fully open area, m².
+        max_open_pressure: pressure drop at which the valve is fully open, Pa.
+        discharge_coefficient: C_D (–).
+        leak_area: area when closed, m².
+        b_lam: laminar transition pressure ratio B_lam (–).
+        crack_pressure: cracking pressure, Pa (None: the robot's yield pressure Y).
     """
 
     area_max: float = 2.5e-4
@@ -174,9 +206,15 @@ def check_valve_flow(cv: CheckValve, fluid: Fluid, dp, p_avg, crack_pressure, cr
 
 
 class DirectionalValve(eqx.Module):
-    """3-way directional valve whose spool follows the robot-flow sign (PS Switch, PHYSICS.md §1.4, §3.6).
+    """3-way directional valve whose spool follows the robot-flow sign (PS Switch).
 
     Spool +1 (robot flow ≥ 0): P–A open, A–T closed; −1: A–T open (check valve bypassed).
+
+    Attributes:
+        area_max: fully open area of a path, m².
+        discharge_coefficient: C_D (–).
+        leak_area: area of a closed path, m².
+        b_lam: laminar transition pressure ratio B_lam (–).
     """
 
     area_max: float = 5e-5
@@ -224,7 +262,7 @@ def valve_network_flow(net: ValveNetwork, dp, p_avg):
     (A–T) area is therefore opened for Δp < 0 only, ramping from leak to full over
     ``switch_width`` Pa, so no forward flow ever bypasses the check valve. The open P–A
     orifice in series with the check valve is omitted: its resistance is < 1e-5 of the
-    check valve's (PHYSICS.md §7), a relative flow error below 1e-5.
+    check valve's, a relative flow error below 1e-5.
     """
     q_check = _check_flow(net, dp, critical_pressure(p_avg, net.check_laminar_ratio))
     bypass_open = 1.0 - smooth_step(dp + net.switch_width, net.switch_width)

@@ -1,4 +1,4 @@
-"""Drives of the syringe pump (PHYSICS.md §1.5–1.7, §3.11, §3.14–3.15).
+"""Drives of the syringe pump.
 
 * forward drive: PID on the sensed pressure → two ideal torque sources (paper eq. 1);
 * inverse drive: desired length → syringe displacement (eq. 2) → step counter →
@@ -22,6 +22,12 @@ class PID(eqx.Module):
 
     Shipped gains P 20, I 80, D 0.5, N 100 s⁻¹ (the paper quotes 80/25/0.5: :func:`paper_pid`).
     Units: output Pa of equivalent syringe pressure per Pa of error.
+
+    Attributes:
+        proportional: K_P (–).
+        integral: K_I, 1/s.
+        derivative: K_D, s.
+        filter_coefficient: N of the derivative filter, 1/s.
     """
 
     proportional: float = 20.0
@@ -101,7 +107,7 @@ def motor_equilibrium_offset(motor: StepperMotor):
 
 
 def motor_derivatives(motor: StepperMotor, theta, omega, i_a, i_b, v_a, v_b):
-    """Electrical torque T_e (N·m) and current rates (A/s) of the PM stepper (PHYSICS.md §3.15)."""
+    """Electrical torque T_e (N·m) and current rates (A/s) of the PM stepper."""
     nr = motor.teeth
     km = motor.torque_constant
     e_a = -km * omega * jnp.sin(nr * theta)
@@ -114,7 +120,7 @@ def motor_derivatives(motor: StepperMotor, theta, omega, i_a, i_b, v_a, v_b):
 
 
 def step_schedule(demand_steps: np.ndarray, times: np.ndarray, rate: float, t0: float, t1: float):
-    """Steps issued by the shipped position controller (PHYSICS.md §1.7) for a demand in steps.
+    """Steps issued by the shipped position controller for a demand in steps.
 
     Every 1/f s the demand is sampled (zero-order hold) and the counter c advances by
     e = sat(d − c, −1, 1). The driver sees a pulse of 5|e| V in the second half of the

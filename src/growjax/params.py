@@ -1,6 +1,6 @@
 """All model parameters as one typed pytree, with override by name and validation.
 
-Values are the shipped model's (PHYSICS.md §0, §2), SI units throughout. A parameter
+Values are the shipped model's, SI units throughout. A parameter
 is addressed as ``block.field`` (``robot.yield_pressure``), by its bare field name
 when that is unique, or by the published symbol (``Y``, ``ext``, ``n``, ``As`` …).
 """

@@ -1,12 +1,10 @@
-"""Figures (matplotlib, Agg backend): the paper's Fig. 3/4 style trajectory plot."""
+"""Figures (matplotlib, whichever backend the caller has selected): the paper's Fig. 3/4 style trajectory plot, and
+the closed-loop figure of a control design."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
@@ -169,3 +167,30 @@ def discovery_figure(result, path, title: str = ""):
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
+
+
+def control_figure(res, target, path, lim, title: str, drive: str):
+    """Command, pressure and length against the target (three panels) of a closed loop ``res``
+    (:class:`growjax.control.ClosedLoopResult`), a :class:`growjax.control.Target` and :class:`growjax.control.Limits`."""
+    fig, ax = plt.subplots(3, 1, figsize=(8, 8), sharex=True)
+    if drive == "forward":
+        ax[0].plot(res.tick_time, np.asarray(res.command) / 1e3, drawstyle="steps-post")
+        ax[0].set_ylabel("demand (kPa)")
+    else:
+        ax[0].step(res.tick_time, res.command, where="post")
+        ax[0].set_ylabel("step count")
+    ax[1].plot(res.time, res.pressure / 1e3)
+    ax[1].axhline(lim.pressure_limit / 1e3, color="r", ls="--", label="membrane limit")
+    ax[1].set_ylabel("pressure (kPa)")
+    ax[1].legend(loc="upper left")
+    ax[2].plot(target.time, 1e3 * target.length, "k", lw=1, label="target")
+    ax[2].plot(res.time, 1e3 * res.length, label="robot")
+    ax[2].set_ylabel("length (mm)")
+    ax[2].set_xlabel("time (s)")
+    ax[2].set_xlim(0, res.time[-1])
+    ax[2].legend(loc="upper left")
+    ax[0].set_title(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return Path(path)

@@ -1,4 +1,4 @@
-"""Syringe pump: two syringes on one platform driven by two lead screws (PHYSICS.md §3.7–3.9).
+"""Syringe pump: two syringes on one platform driven by two lead screws.
 
 The platform position x_p (m) is positive when it pushes the plungers in; each
 syringe then delivers q = A_s ẋ_p into its hose. The syringes start on their

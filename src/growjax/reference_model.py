@@ -1,6 +1,6 @@
 """The reference configuration: the shipped network node by node, solved by a stiff ESDIRK method.
 
-Topology (PHYSICS.md §1): drive → lead screws → platform → 2 syringes → 2 hoses →
+Topology: drive → lead screws → platform → 2 syringes → 2 hoses →
 junction → orifice → tank → nozzle → node P (sensor) → check valve ∥ 3-way bypass →
 robot. The hoses and the tank are chambers with their own pressures; the platform has its
 1 g mass. Node pressures between resistances are algebraic and eliminated in
@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, NamedTuple
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 
@@ -23,17 +24,9 @@ from growjax import effects as fx
 from growjax import hydraulics as hy
 from growjax._smooth import bracketed_root
 from growjax.config import Config
-from growjax.effects import Instant, Rod
-from growjax.motor import (
-    ideal_torque_drive_force,
-    motor_derivatives,
-    motor_equilibrium_offset,
-    pid_output,
-    winding_voltages,
-)
 from growjax.params import Parameters
-from growjax.pump import platform_force, syringe_load_force
-from growjax.robot import RodBalance, pressure_limit, rod_balance, rod_pressure
+from growjax.pump import platform_force
+from growjax.robot import RodBalance, pressure_limit, rod_pressure
 from growjax.trajectory import finish
 
 if TYPE_CHECKING:
@@ -63,7 +56,7 @@ class Network(NamedTuple):
     length: jax.Array  # m
 
 
-class Prepared(NamedTuple):
+class Prepared(eqx.Module):
     """Constants of the rod and valve laws, computed once per solve."""
 
     valves: hy.ValveNetwork
@@ -71,16 +64,15 @@ class Prepared(NamedTuple):
 
 
 def prepare(params: Parameters, config: Config) -> Prepared:
-    robot = params.robot
-    crack = robot.yield_pressure if params.check_valve.crack_pressure is None else params.check_valve.crack_pressure
-    valves = hy.valve_network(params.check_valve, params.valve, params.fluid, crack, config.crack_width, config.switch_width)
-    return Prepared(valves, rod_balance(robot, (config.velocity_eps, config.stop_width)))
+    """The :class:`Prepared` constants of ``params`` under ``config``."""
+    valves, rod = assembly.valves_and_rod(params, config)
+    return Prepared(valves=valves, rod=rod)
 
 
 def network(params: Parameters, inputs, config: Config, prep: Prepared, t, v_platform, p_tube, p_tank, displacement,
             effect_states) -> Network:
     """Solve the resistive network for flows and node pressures given the chamber pressures and motions."""
-    fl, pump, robot = params.fluid, params.pump, params.robot
+    fl, pump = params.fluid, params.pump
     n = pump.n_syringes
 
     q_syringe = pump.syringe_area * v_platform
@@ -100,12 +92,11 @@ def network(params: Parameters, inputs, config: Config, prep: Prepared, t, v_pla
     q_series = hy.orifice_flow(k_or, dp_or, p_cr_or)
 
     # Tank → nozzle → node P → valves → robot, with the rod balance: unknown is Δ = P − p_robot.
-    length = robot.initial_length + displacement - fx.length_offset(params.effects, effect_states)
-    catheter = jnp.maximum(inputs.catheter_length(t), 0.0)
+    length = assembly.robot_length(params, displacement, effect_states)
+    catheter = assembly.catheter_length(inputs, t)
 
     def rod(sensor, v):
-        force = fx.rod_force(params.effects, effect_states, Rod(t, sensor, v, length, catheter,
-                                                                params.robot.inner_radius, prep.rod.area))
+        force = assembly.effect_force(params, effect_states, prep.rod, t, sensor, length, catheter)(v)
         return rod_pressure(prep.rod, sensor, v, length, catheter, force)
 
     def branch(delta):
@@ -136,48 +127,36 @@ def _forward_rates(t, y, params, inputs, config, prep):
     x_p, v_p, p_tube, wall, p_tank, xi, z_i, z_d = y[:8]
     e = y[8:]
     net = network(params, inputs, config, prep, t, v_p, p_tube, p_tank, xi, e)
-    u, dz_i, dz_d = pid_output(params.pid, inputs.pressure_demand(t) - net.sensor_pressure, z_i, z_d)
+    commanded, drive, dz_i, dz_d = assembly.pid_drive(params, inputs, t, net.sensor_pressure, z_i, z_d, e)
     pump = params.pump
-    commanded = ideal_torque_drive_force(pump.syringe_area, pump.n_syringes, u)
-    drive = fx.applied_drive(params.effects, e, commanded)
     accel = platform_force(pump, drive, net.syringe_pressure, x_p, v_p, config.stop_width) / pump.platform_mass
     leak = fx.chamber_outflow(params.effects, e, t, p_tank)
     dp_tube, d_wall, dp_tank = _chambers(params, net, p_tube, wall, p_tank, leak)
-    instant = Instant(t, net.sensor_pressure, net.robot_pressure, net.robot_flow, net.robot_velocity, net.length, commanded)
-    rates = jnp.concatenate([
-        jnp.stack([v_p, accel, dp_tube, d_wall, dp_tank, net.robot_flow / prep.rod.area, dz_i, dz_d]),
-        fx.rates(params.effects, e, instant),
-    ])
-    return rates, (net, x_p)
+    base = [v_p, accel, dp_tube, d_wall, dp_tank, net.robot_flow / prep.rod.area, dz_i, dz_d]
+    return _rates_of(params, e, base, t, net, prep, commanded), (net, x_p)
 
 
 def _inverse_rates(t, y, params, inputs, config, prep):
     angle, omega, i_a, i_b, p_tube, wall, p_tank, xi = y[:8]
     e = y[8:]
-    pump, motor = params.pump, params.motor
-    ratio = pump.screw_ratio
-    x_p, v_p = angle / ratio, omega / ratio
+    x_p, v_p = assembly.platform_of_rotor(params.pump, angle, omega)
     net = network(params, inputs, config, prep, t, v_p, p_tube, p_tank, xi, e)
-    v_a, v_b = winding_voltages(motor, inputs.steps(t))
-    torque, di_a, di_b = motor_derivatives(motor, angle + motor_equilibrium_offset(motor), omega, i_a, i_b, v_a, v_b)
-    applied = fx.applied_drive(params.effects, e, torque)
-    # Each motor drives one screw and one syringe; the platform mass is shared between the screws.
-    load = -syringe_load_force(pump, net.syringe_pressure, x_p, v_p, config.stop_width) / (pump.n_syringes * ratio)
-    inertia = motor.rotor_inertia + pump.platform_mass / (pump.n_syringes * ratio**2)
-    damping = motor.rotor_damping + pump.screw_viscous_friction
-    d_omega = (applied - damping * omega - load) / inertia
+    torque, d_omega, di_a, di_b = assembly.stepper(params, inputs, t, angle, omega, i_a, i_b, net.syringe_pressure, e,
+                                                   config.stop_width)
     leak = fx.chamber_outflow(params.effects, e, t, p_tank)
     dp_tube, d_wall, dp_tank = _chambers(params, net, p_tube, wall, p_tank, leak)
-    instant = Instant(t, net.sensor_pressure, net.robot_pressure, net.robot_flow, net.robot_velocity, net.length, torque)
-    rates = jnp.concatenate([
-        jnp.stack([omega, d_omega, di_a, di_b, dp_tube, d_wall, dp_tank, net.robot_flow / prep.rod.area]),
-        fx.rates(params.effects, e, instant),
-    ])
-    return rates, (net, x_p)
+    base = [omega, d_omega, di_a, di_b, dp_tube, d_wall, dp_tank, net.robot_flow / prep.rod.area]
+    return _rates_of(params, e, base, t, net, prep, torque), (net, x_p)
+
+
+def _rates_of(params, effect_states, base, t, net: Network, prep: Prepared, drive):
+    return assembly.state_rates(params, effect_states, base, t=t, pressure=net.sensor_pressure,
+                                robot_pressure=net.robot_pressure, robot_flow=net.robot_flow, area=prep.rod.area,
+                                length=net.length, drive=drive)
 
 
 # The scaled field diffrax integrates: ``vector_field(t, ys, (params, inputs, config, prep))``.
-_rates, vector_field = assembly.vector_fields(_forward_rates, _inverse_rates, lambda p, d: layout(p, d))
+rates, vector_field = assembly.vector_fields(_forward_rates, _inverse_rates, lambda p, d: layout(p, d))
 
 
 def initial_state(params: Parameters, config: Config) -> jax.Array:
@@ -189,14 +168,15 @@ def initial_state(params: Parameters, config: Config) -> jax.Array:
         base = [zero, zero, zero + tube.initial_pressure, zero + wall0, zero + tank.initial_pressure, zero, zero, zero]
     else:
         base = [zero, zero, zero, zero, zero + tube.initial_pressure, zero + wall0, zero + tank.initial_pressure, zero]
-    y = jnp.concatenate([jnp.stack(base), fx.initial_states(params.effects, params, config.drive)])
-    return y / jnp.asarray(layout(params, config.drive)[1])
+    return assembly.scaled_initial_state(params, config.drive, base, layout(params, config.drive)[1])
 
 
-def _outputs(t, ys, params, inputs, config, prep):
+def outputs(t, ys, params, inputs, config, prep) -> dict:
+    """The outputs (:data:`growjax._assembly.OUTPUTS`, SI) of a scaled state."""
     scales = jnp.asarray(layout(params, config.drive)[1])
-    net, x_p = _rates(t, ys * scales, params, inputs, config, prep)[1]
-    return net.length, net.sensor_pressure, net.robot_flow, x_p, net.robot_pressure
+    net, x_p = rates(t, ys * scales, params, inputs, config, prep)[1]
+    values = (net.length, net.sensor_pressure, net.robot_flow, x_p, net.robot_pressure)
+    return dict(zip(assembly.OUTPUTS, values))
 
 
 def pressure_limit_event(pressure, limit) -> diffrax.Event:
@@ -231,8 +211,12 @@ def solver_status(sol):
                      jnp.where(sol.result == diffrax.RESULTS.event_occurred, 1, 2))
 
 
-def solve(params: Parameters, inputs, config: Config, ts, jump_ts, step_ts):
-    """Integrate the reference configuration and return a :class:`growjax.trajectory.Trajectory` on ``ts``."""
+def solve(params: Parameters, inputs, config: Config, ts, jump_ts, step_ts, start=None):
+    """Integrate the reference configuration and return a :class:`growjax.trajectory.Trajectory` on ``ts``.
+
+    ``start`` = (t_start s, t_end s, scaled state (n,)), each may be traced: the window and the initial state in
+    place of ``config``'s.
+    """
     import diffrax
 
     rtol, atol = config.tolerances
@@ -241,23 +225,19 @@ def solve(params: Parameters, inputs, config: Config, ts, jump_ts, step_ts):
     limit = pressure_limit(params.robot)
     event = None
     if config.stop_at_pressure_limit:
-        event = pressure_limit_event(lambda t, y: _outputs(t, y, params, inputs, config, prep)[1], limit)
+        event = pressure_limit_event(lambda t, y: outputs(t, y, params, inputs, config, prep)["pressure"], limit)
     controller = diffrax.ClipStepSizeController(
         diffrax.PIDController(rtol=rtol, atol=atol, pcoeff=0.3, icoeff=0.4, dtmax=0.05),
         step_ts=step_ts, jump_ts=jump_ts)
     adjoint = diffrax.ForwardMode() if config.adjoint == "forward" else diffrax.RecursiveCheckpointAdjoint()
+    t0, t1, y0 = (config.t0, config.t1, initial_state(params, config)) if start is None else start
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(vector_field), diffrax.Kvaerno5(), config.t0, config.t1, 1e-7, initial_state(params, config),
+        diffrax.ODETerm(vector_field), diffrax.Kvaerno5(), t0, t1, 1e-7, y0,
         args=args, saveat=save_at(ts), stepsize_controller=controller, adjoint=adjoint, event=event,
         max_steps=config.step_budget, throw=False,
     )
-    saved = sol.ys[0]
-    finite = jnp.all(jnp.isfinite(saved), axis=1)
-    safe = jnp.where(finite[:, None], saved, initial_state(params, config))
-    length, pressure, q_r, x_p, p_r = jax.vmap(lambda t, y: _outputs(t, y, params, inputs, config, prep))(ts, safe)
-    nan = jnp.where(finite, 0.0, jnp.nan)
-    outputs = {"length": length + nan, "pressure": pressure + nan, "robot_flow": q_r + nan,
-               "syringe_displacement": x_p + nan, "robot_pressure": p_r + nan}
+    values, _ = assembly.outputs_where_finite(lambda t, y: outputs(t, y, params, inputs, config, prep), ts, sol.ys[0],
+                                              y0)
     demand = jax.vmap(inputs.pressure_demand)(ts)
-    return finish(ts, outputs, limit, demand, config.stop_at_pressure_limit, t_final=sol.ts[1][-1],
+    return finish(ts, values, limit, demand, config.stop_at_pressure_limit, t_final=sol.ts[1][-1],
                   status=solver_status(sol), n_steps=sol.stats["num_accepted_steps"], final_state=sol.ys[1][-1])

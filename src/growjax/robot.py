@@ -1,4 +1,4 @@
-"""The growing element: force balance of the everting robot (paper eq. 7; PHYSICS.md eq. 1, §3.7).
+"""The growing element: force balance of the everting robot (paper eq. 7).
 
 The robot is a massless single-acting cylinder of annular area A_r = π(r_o² − r_i²).
 The Simulink force S_F (eq. 1) acts on its rod, so the rod balance A_r p_r + S_F − F_c = 0
@@ -8,18 +8,18 @@ gives the robot pressure p_r needed to move at velocity v:
 
 with F_c the cylinder's end stops, F_hs the rod hard stop and F_e the forces of added
 effects (:mod:`growjax.effects`), all opposing the motion. The catheter-friction term enters
-with the sign that *assists* growth, as in the shipped model (PHYSICS.md §8.4).
+with the sign that *assists* growth, as in the shipped model.
 
 Two growth laws set the velocity term ψ(v) (``GrowingRobot.growth_law``):
 
 * ``"reference"`` — the shipped diagram's sgn(v)|v/ext|^n (Pa). With the published ext it is
-  ~1e-10 of the other forces (PHYSICS.md §9), so ext and n cannot be identified.
+  ~1e-10 of the other forces, so ext and n cannot be identified.
 * ``"lockhart"`` — Lockhart's law v = φ_L·((p_r − p_0)/p_ref)^(n_L) while the robot grows,
   with φ_L a velocity (m/s) at the reference excess p_ref = 1 kPa and p_0 the rest pressure.
   Its inverse ψ(v) = p_ref·(v/φ_L)^(1/n_L) for v > 0 (and 0 while it holds or retracts: the law
   describes irreversible extension of the membrane) gives the everting membrane a physically
   sized resistance in series with the check valve. A deviation added beside the reference,
-  not in place of it (PHYSICS.md: "add better-posed variants").
+  not in place of it.
 """
 
 from __future__ import annotations
@@ -54,7 +54,8 @@ class GrowingRobot(eqx.Module):
         active_channel_force: F_AC, N, pull of the active channel (0 in the shipped model).
         stroke: maximum elongation from zero length, m.  initial_length: L(t0), m.
         hard_stop_bound: ±bound of the rod hard stop, m (never reached in normal use).
-        hard_stop_stiffness: N/m.  hard_stop_damping: N·s/m.
+        hard_stop_stiffness: stiffness of the rod hard stop, N/m.
+        hard_stop_damping: damping of the rod hard stop, N·s/m.
         penetration_coefficient: end-stop coefficient of the cylinder, N·s/m².
         growth_law: ``"reference"`` or ``"lockhart"`` (static; see the module docstring).
         lockhart_rate: φ_L, m/s: growth speed at 1 kPa above the rest pressure (Lockhart law only).
@@ -151,9 +152,16 @@ def growth_pressure(rod: RodBalance, velocity):
     """
     eps = rod.velocity_eps
     if rod.growth_law == "lockhart":
-        growth = smooth_ramp(velocity, eps) * rod.law_scale
-        return LOCKHART_PRESSURE_SCALE * smooth_abs_power(growth, rod.law_exponent, eps * rod.law_scale)
+        return lockhart_pressure(velocity, rod.law_scale, rod.law_exponent, eps)
     return smooth_abs_power(velocity * rod.law_scale, rod.law_exponent, eps * rod.law_scale)
+
+
+def lockhart_pressure(velocity, inverse_speed, exponent, eps):
+    """Excess pressure (Pa) of Lockhart's law to grow at ``velocity`` (m/s): p_ref·(κ·v)^m for v > 0, 0 otherwise
+    (p_ref = 1 kPa, κ = ``inverse_speed`` s/m, m = ``exponent``), the ramp of v and the power regularised over
+    ``eps`` m/s (C¹ at v = 0). The inverse of v = ((p − p₀)/p_ref)^(1/m)/κ."""
+    growth = smooth_ramp(velocity, eps) * inverse_speed
+    return LOCKHART_PRESSURE_SCALE * smooth_abs_power(growth, exponent, eps * inverse_speed)
 
 
 def velocity_pressure(robot: GrowingRobot, velocity, velocity_eps):

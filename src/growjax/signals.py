@@ -13,6 +13,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Float
 
 
 class Constant(eqx.Module):
@@ -144,13 +145,13 @@ class Inputs(eqx.Module):
     steps: eqx.Module = StepSchedule(np.zeros(0), np.zeros(0))
     desired_length: eqx.Module | None = None
 
-    def jump_times(self, t0, t1):
+    def jump_times(self, t0: float, t1: float) -> Float[np.ndarray, " J"]:
         """All input discontinuities in (t0, t1), s, sorted."""
         ts = np.concatenate([self.pressure_demand.jump_times(t0, t1), self.steps.jump_times(t0, t1),
                              self.catheter_length.jump_times(t0, t1)])
         return np.unique(ts)
 
-    def kink_times(self, t0, t1):
+    def kink_times(self, t0: float, t1: float) -> Float[np.ndarray, " K"]:
         """Significant slope breaks of the inputs in (t0, t1), s, sorted."""
         ts = np.concatenate([self.pressure_demand.kink_times(t0, t1), self.catheter_length.kink_times(t0, t1)])
         return np.unique(ts)

@@ -8,14 +8,18 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, ArrayLike, Float
 
+from growjax import _fast_solve, reference_model
 from growjax import effects as fx
-from growjax import fast_model, reference_model
 from growjax.config import Config
+from growjax.params import Parameters
+from growjax.signals import Inputs
 from growjax.trajectory import Trajectory
 
 _PAD_BLOCK = 32
 _DEFAULT_CONFIG = Config()  # Config is immutable: one default instance serves every call
+Breaks = tuple[Float[Array, " J"], Float[Array, " K"]]  # (jump times, slope-break times), s, padded beyond t1
 
 
 def _traced(tree) -> bool:
@@ -44,7 +48,7 @@ def _padded(times, t1: float) -> jax.Array:
     return jnp.asarray(np.concatenate([np.sort(times), np.full(size - times.size, t1 + 1.0)]))
 
 
-def input_breaks(inputs, config: Config) -> tuple[jax.Array, jax.Array]:
+def input_breaks(inputs: Inputs, config: Config) -> Breaks:
     """(jump times, slope-break times) of ``inputs`` inside the window, padded: what the solvers step onto.
 
     Needs concrete inputs; under a trace, compute it outside and pass it to :func:`simulate`. Remembered per
@@ -95,7 +99,8 @@ def sample_times(times, config: Config):
     return jnp.clip(jnp.asarray(times, float), config.t0, config.t1)
 
 
-def simulate(params, inputs, config: Config = _DEFAULT_CONFIG, ts=None, breaks=None) -> Trajectory:
+def simulate(params: Parameters, inputs: Inputs, config: Config = _DEFAULT_CONFIG,
+             ts: Float[ArrayLike, " T"] | None = None, breaks: Breaks | None = None) -> Trajectory:
     """Simulate the robot: (parameters, inputs, configuration) → :class:`growjax.Trajectory`.
 
     Pure and usable under ``jax.jit``, ``jax.vmap``, ``jax.grad`` and ``jax.jvp`` with respect to
@@ -108,7 +113,8 @@ def simulate(params, inputs, config: Config = _DEFAULT_CONFIG, ts=None, breaks=N
     return _solve(*_arguments(params, inputs, config, ts, breaks))
 
 
-def simulate_members(params, inputs, config: Config = _DEFAULT_CONFIG, ts=None, breaks=None) -> Trajectory:
+def simulate_members(params: Parameters, inputs: Inputs, config: Config = _DEFAULT_CONFIG,
+                     ts: Float[ArrayLike, " T"] | None = None, breaks: Breaks | None = None) -> Trajectory:
     """:func:`simulate` for a batch of parameter sets: every leaf of ``params`` with a leading axis B (e.g. made by
     ``jax.vmap`` of :func:`growjax.replace`), the inputs, ``ts`` and ``breaks`` shared. → a
     :class:`growjax.Trajectory` whose fields have a leading axis B.
@@ -119,6 +125,28 @@ def simulate_members(params, inputs, config: Config = _DEFAULT_CONFIG, ts=None, 
     return _solve_members(*_arguments(params, inputs, config, ts, breaks))
 
 
+def simulate_from(params: Parameters, inputs: Inputs, config: Config, state: Float[ArrayLike, " n"],
+                  window: tuple[Float[ArrayLike, ""], Float[ArrayLike, ""]], ts: Float[ArrayLike, " T"],
+                  breaks: Breaks) -> Trajectory:
+    """:func:`simulate` from a scaled state ``state`` (the configuration's layout, as ``Trajectory.final_state``)
+    over ``window`` = (t_start, t_end) s in place of ``config``'s [t0, t1] and its state at rest: a plant stepped
+    tick by tick. The state and window may be traced (``breaks`` must then be given: (jump times, slope-break
+    times), each padded beyond t_end); ``ts`` (s) within the window. Under ``vmap`` each member is its own loop.
+    Forward-mode differentiable through the integrator (not in the state or window).
+    """
+    jump_ts, step_ts = breaks
+    config = config.resolved()
+    start = (jnp.asarray(window[0], float), jnp.asarray(window[1], float), jnp.asarray(state, float))
+    return _solve_from(as_arrays(params), as_arrays(inputs), config, jnp.asarray(ts, float), jump_ts, step_ts, start)
+
+
+@eqx.filter_jit
+def _solve_from(params, inputs, config: Config, ts, jump_ts, step_ts, start) -> Trajectory:
+    params = fx.apply_all(params)
+    solve = _fast_solve.solve_from if config.fidelity == "fast" else reference_model.solve
+    return solve(params, inputs, config, ts, jump_ts, step_ts, start)
+
+
 def _arguments(params, inputs, config: Config, ts, breaks):
     """(params, inputs, config, ts, jump times, slope-break times) of a solve: the save grid checked (default
     ``config.save_grid()``), the inputs' breaks found unless given, Python numbers as arrays."""
@@ -126,7 +154,7 @@ def _arguments(params, inputs, config: Config, ts, breaks):
         ts = config.save_grid()
     _check_times(ts, config)
     jump_ts, step_ts = input_breaks(inputs, config) if breaks is None else breaks
-    return as_arrays(params), as_arrays(inputs), config, jnp.asarray(ts, float), jump_ts, step_ts
+    return as_arrays(params), as_arrays(inputs), config.resolved(), jnp.asarray(ts, float), jump_ts, step_ts
 
 
 def _check_times(ts, config: Config):
@@ -145,7 +173,7 @@ def _check_times(ts, config: Config):
 @eqx.filter_jit
 def _solve(params, inputs, config: Config, ts, jump_ts, step_ts) -> Trajectory:
     params = fx.apply_all(params)
-    solve = fast_model.solve if config.fidelity == "fast" else reference_model.solve
+    solve = _fast_solve.solve if config.fidelity == "fast" else reference_model.solve
     return solve(params, inputs, config, ts, jump_ts, step_ts)
 
 
@@ -153,14 +181,14 @@ def _solve(params, inputs, config: Config, ts, jump_ts, step_ts) -> Trajectory:
 def _solve_members(params, inputs, config: Config, ts, jump_ts, step_ts) -> Trajectory:
     params = jax.vmap(fx.apply_all)(params)
     if config.fidelity == "fast":
-        return fast_model.solve_members(params, inputs, config, ts, jump_ts, step_ts)
+        return _fast_solve.solve_members(params, inputs, config, ts, jump_ts, step_ts)
     return jax.vmap(reference_model.solve, in_axes=(0, None, None, None, None, None))(params, inputs, config, ts, jump_ts,
                                                                                      step_ts)
 
 
 def length_jacobian(params_of, w, inputs, config: Config, ts, breaks=None) -> tuple[Trajectory, jax.Array]:
     """(trajectory, ∂length/∂w (T, p)) of the fast configuration at ``params_of(w)``, w (p,), on the save grid
-    ``ts`` (s): one solve carries the p sensitivities and gives both (:func:`growjax.fast_model.solve_with_sensitivities`),
+    ``ts`` (s): one solve carries the p sensitivities and gives both (:func:`growjax._fast_solve.solve_with_sensitivities`),
     where ``jax.jacfwd`` of :func:`simulate` adds a plain solve for the primal. ``params_of``: w → Parameters
     (traceable; hashable, the compiled program is kept per function). ``breaks`` as in :func:`simulate`.
     """
@@ -170,7 +198,7 @@ def length_jacobian(params_of, w, inputs, config: Config, ts, breaks=None) -> tu
     if breaks is None:
         breaks = input_breaks(inputs, config)
     jump_ts, step_ts = breaks
-    return _length_jacobian(params_of, jnp.asarray(w, float), as_arrays(inputs), config, jnp.asarray(ts, float),
+    return _length_jacobian(params_of, jnp.asarray(w, float), as_arrays(inputs), config.resolved(), jnp.asarray(ts, float),
                             jump_ts, step_ts)
 
 
@@ -189,6 +217,6 @@ def _length_jacobian(params_of, w, inputs, config: Config, ts, jump_ts, step_ts)
     d_float = jax.vmap(lambda e: jax.jvp(lambda v: eqx.filter(applied(v), mask), (w,), (e,))[1])(jnp.eye(p))
     d_params = eqx.combine(d_float, jax.tree_util.tree_map(zeros, eqx.filter(params, mask, inverse=True)))
     d_inputs = jax.tree_util.tree_map(zeros, inputs)
-    traj, tangents = fast_model.solve_with_sensitivities(params, inputs, config, ts, jump_ts, step_ts,
+    traj, tangents = _fast_solve.solve_with_sensitivities(params, inputs, config, ts, jump_ts, step_ts,
                                                          (d_params, d_inputs))
     return traj, tangents["length"].T

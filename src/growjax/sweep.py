@@ -13,7 +13,6 @@ others are unaffected.
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import math
 import time
 from collections.abc import Sequence
@@ -26,6 +25,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from growjax import params as gp
 from growjax import xla_flags
+from growjax._pytree_hash import content_key
 from growjax.config import Config
 from growjax.metrics import rmse_at_samples
 from growjax.simulate import as_arrays, input_breaks, sample_times, simulate_members
@@ -101,8 +101,9 @@ class SweepResult:
         names: qualified parameter names, (d,).  values: (n, d) parameter values, SI.
         rmse: (n,) length RMSE, m (NaN where no data or failed).  final_length: (n,) m.
         status: (n,) codes, see :data:`REASONS`.  wall_s: evaluation time after compilation, s.
-        compile_s: compilation time, s (tracing and lowering included).  lower_s: the part of ``compile_s`` spent
-        tracing and lowering the program to StableHLO, s; the rest is XLA's (0 where this process had compiled it).
+        compile_s: compilation time, s (tracing and lowering included).
+        lower_s: the part of ``compile_s`` spent tracing and lowering the program to StableHLO, s; the rest is
+            XLA's (0 where this process had compiled it).
         n_devices: devices the sweep was split over.
     """
 
@@ -182,28 +183,13 @@ def make_members(base: gp.Parameters, names: Sequence[str], inputs, config, meas
     return members
 
 
-# Designs up to this many rows compile with XLA's quicker emitters (xla_flags.QUICK_COMPILE). Measured on the
-# 2-core CPU, 500 sets of 10 s: compile 1.2 s shorter, sweep 7 % (0.26 ms per set) longer; break-even ~4500 sets
-# (2026-11-24). After the batch's in-loop saving and forward-mode Jacobian (2026-11-25): compile 1.3 s shorter,
-# sweep ~5 % (0.1 ms per set) longer (``benchmarks/sweep.py`` prints both); the threshold was left as it was.
-# After the batch's elementwise W⁻¹ and variation check (2026-11-25, two alternating pairs in separate processes):
-# compile 4.79–4.85 s against 6.34–6.41 s (1.55 s shorter), sweep 0.822–0.830 s against 0.783–0.786 s (0.07–0.09 ms
-# per set longer); break-even ~17 000–22 000 sets, so the quick compile now serves designs up to 15 000.
+# Designs up to this many rows compile with XLA's quicker emitters (xla_flags.QUICK_COMPILE). On a 2-core CPU,
+# 500 sets of 10 s compile ~1.5 s sooner and sweep ~0.08 ms per set slower with them (``benchmarks/sweep.py``
+# measures both), so they pay up to ~17 000 sets.
 QUICK_COMPILE_ROWS = 15_000
 
 # Compiled sweep programs of this process, keyed by everything they close over (at most 8 kept).
 _COMPILED: dict = {}
-
-
-def _content_key(tree) -> tuple:
-    """Hashable fingerprint of a pytree's structure and leaf values (the constants a sweep program closes over)."""
-    leaves, treedef = jax.tree_util.tree_flatten(tree)
-    digest = hashlib.sha1()
-    for leaf in leaves:
-        a = np.asarray(leaf)
-        digest.update(str((a.dtype, a.shape)).encode())
-        digest.update(repr(leaf).encode() if a.dtype == object else a.tobytes())
-    return (str(treedef), digest.hexdigest())
 
 
 def _mesh(devices=None) -> Mesh:
@@ -275,8 +261,8 @@ def evaluate(
     dynamic, static = eqx.partition((as_arrays(base), as_arrays(inputs), breaks, measured), eqx.is_array)
     shapes = jax.tree_util.tree_map(lambda a: (a.shape, str(a.dtype)), dynamic)
     quick = n <= QUICK_COMPILE_ROWS
-    key = (names, config, chunk, quick, None if window is None else tuple(window), tuple(d.id for d in mesh.devices.flat),
-           str(jax.tree_util.tree_structure(dynamic)), str(jax.tree_util.tree_leaves(shapes)), _content_key(static))
+    key = (names, config.resolved(), chunk, quick, None if window is None else tuple(window), tuple(d.id for d in mesh.devices.flat),
+           str(jax.tree_util.tree_structure(dynamic)), str(jax.tree_util.tree_leaves(shapes)), content_key(static))
     compiled = _COMPILED.get(key)
     lower_s = 0.0
     if compiled is None:

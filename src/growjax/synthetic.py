@@ -21,10 +21,10 @@ Inputs (``inputs=``):
   (:func:`growjax.experiment.shared_experiment_dir`, ``../shared/data/mammobot``) and, as the
   published model does, the published 0/150 kPa pulse (the demand was not recorded); the inverse
   drive takes the measured length as the desired one. **Where that folder is absent (CI)** the
-  shipped ``data/synthetic_forward.csv`` is used instead (catheter 0.004 + 0.004·t m, published
+  shipped ``growjax/datasets/synthetic_forward.csv`` is used instead (catheter 0.004 + 0.004·t m, published
   pulse, 0.01–10 s), and if that too is missing, the published pulse with the same catheter ramp.
   ``metadata["inputs"]`` says which was used.
-* ``"synthetic"``: always the shipped ``data/synthetic_forward.csv`` inputs (same fallback).
+* ``"synthetic"``: always the shipped ``growjax/datasets/synthetic_forward.csv`` inputs (same fallback).
 * a :class:`growjax.Inputs`: used as given, sampled every ``dt`` for the CSV columns.
 
 Magnitudes: :func:`moderate_magnitude` gives, per effect, a value inside its physical range that
@@ -42,7 +42,6 @@ from __future__ import annotations
 
 import collections
 import dataclasses
-import hashlib
 import json
 import math
 from pathlib import Path
@@ -55,6 +54,7 @@ import numpy as np
 import growjax as gj
 from growjax import effects as fx
 from growjax import experiment as ex
+from growjax._pytree_hash import content_key
 from growjax.effects import Effect
 
 # -- effects outside the catalogue (for false-claim tests) ------------------------------------------------
@@ -203,13 +203,10 @@ def hidden_effect_parameters(effect: Effect | None = None, base=None, *, superse
 
 
 def shipped_inputs_path() -> Path | None:
-    """The shipped ``synthetic_forward.csv`` (package data ``growjax/datasets``, i.e. the repository's ``data/``)."""
+    """The shipped ``synthetic_forward.csv`` (package data ``growjax/datasets``)."""
     from importlib import resources
 
     cand = Path(str(resources.files("growjax") / "datasets" / SHIPPED_INPUTS))
-    if cand.exists():
-        return cand
-    cand = Path(__file__).resolve().parents[2] / "data" / SHIPPED_INPUTS
     return cand if cand.exists() else None
 
 
@@ -298,14 +295,6 @@ def clear_cache() -> None:
     _CACHE.clear()
 
 
-def _leaves_key(tree) -> str:
-    leaves, treedef = jax.tree_util.tree_flatten(tree)
-    h = hashlib.sha1(str(treedef).encode())
-    for leaf in leaves:
-        h.update(np.ascontiguousarray(np.asarray(leaf, float)).tobytes())
-    return h.hexdigest()
-
-
 def _effect_spec(effect, magnitude):
     """(Effect instance or None, name, magnitude or None) from the arguments of :func:`make_experiment`."""
     if effect is None:
@@ -337,9 +326,9 @@ def noise_free(effect=None, magnitude: float | None = None, *, drive: str = "for
     """
     instance, name, magnitude = _effect_spec(effect, magnitude)
     base_params = gj.reference(drive) if base is None else base
-    inputs_key = inputs if isinstance(inputs, str) else ("inputs", _leaves_key(inputs))
-    key = (None if instance is None else (type(instance).__qualname__, _leaves_key(instance)), drive, inputs_key,
-           round(float(t_end), 9), float(dt), float(rtol), bool(superset), None if base is None else (_leaves_key(base), str(
+    inputs_key = inputs if isinstance(inputs, str) else ("inputs", content_key(inputs))
+    key = (None if instance is None else (type(instance).__qualname__, content_key(instance)), drive, inputs_key,
+           round(float(t_end), 9), float(dt), float(rtol), bool(superset), None if base is None else (content_key(base), str(
                jax.tree_util.tree_structure(base))))
     if key in _CACHE:
         _CACHE.move_to_end(key)

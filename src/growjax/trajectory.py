@@ -6,8 +6,8 @@ No diffrax here: the fast configuration runs without importing it (the reference
 from __future__ import annotations
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
+from jaxtyping import Array, Float, Int
 
 # Status codes of a trajectory.
 OK, PRESSURE_LIMIT, SOLVER_FAILED = 0, 1, 2
@@ -20,7 +20,8 @@ def status_name(code) -> str:
 
 
 class Trajectory(eqx.Module):
-    """Simulated outputs on the save grid (arrays of shape (T,), NaN after a stop) and run status.
+    """Simulated outputs on the save grid (arrays of shape (T,), NaN after a stop) and run status; a batch
+    (:func:`growjax.simulate_members`, ``jax.vmap``) adds leading axes ``*B`` to every field.
 
     Attributes:
         time: s.  length: robot length, m.  pressure: sensed pressure P before the check valve, Pa.
@@ -33,18 +34,18 @@ class Trajectory(eqx.Module):
         final_state: the solver's state at ``t_final`` (layout per configuration, see its ``STATES``).
     """
 
-    time: jax.Array
-    length: jax.Array
-    pressure: jax.Array
-    robot_flow: jax.Array
-    syringe_displacement: jax.Array
-    robot_pressure: jax.Array
-    pressure_demand: jax.Array
-    status: jax.Array
-    limit_time: jax.Array
-    t_final: jax.Array
-    n_steps: jax.Array
-    final_state: jax.Array
+    time: Float[Array, "*B T"]
+    length: Float[Array, "*B T"]
+    pressure: Float[Array, "*B T"]
+    robot_flow: Float[Array, "*B T"]
+    syringe_displacement: Float[Array, "*B T"]
+    robot_pressure: Float[Array, "*B T"]
+    pressure_demand: Float[Array, "*B T"]
+    status: Int[Array, "*B"]
+    limit_time: Float[Array, "*B"]
+    t_final: Float[Array, "*B"]
+    n_steps: Int[Array, "*B"]
+    final_state: Float[Array, "*B n"]
 
 
 def finish(ts, outputs: dict, limit, demand, stop_at_limit: bool, *, t_final, status, n_steps, final_state) -> Trajectory:

@@ -105,11 +105,11 @@ def quick_compile_known() -> bool:
     if jaxlib.__version__.startswith(QUICK_COMPILE_VERIFIED):
         return True
 
-    probe = ("import jax; jax.jit(lambda x: x + 1.0).lower(1.0).compile(compiler_options="
+    check = ("import jax; jax.jit(lambda x: x + 1.0).lower(1.0).compile(compiler_options="
              f"{QUICK_COMPILE!r})")
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
     env["JAX_PLATFORMS"] = "cpu"
-    run = subprocess.run([sys.executable, "-c", probe], capture_output=True, env=env, timeout=120, check=False)
+    run = subprocess.run([sys.executable, "-c", check], capture_output=True, env=env, timeout=120, check=False)
     return run.returncode == 0
 
 

@@ -1,0 +1,118 @@
+"""Write docs/benchmarks.md from the benchmark results in benchmarks/results/*.json.
+
+Run: ``python benchmarks/report.py [--results benchmarks/results] [--out docs/benchmarks.md]``, after any of
+the benchmark scripts (each writes its results file, with the machine and versions it ran on). The page
+is regenerated from the files alone: edit the scripts or rerun them, never the page.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+HEADER = """# Benchmarks
+
+This page is written by `python benchmarks/report.py` from the results files the benchmark scripts leave in
+`benchmarks/results/`; rerun a script, then the report, to refresh it. Times are wall-clock seconds on the
+machine named in each row, after compilation unless a row says otherwise.
+
+| script | what it measures |
+|---|---|
+| `benchmarks/simulate.py` | one 10 s simulation and one forward-mode gradient of the log-likelihood |
+| `benchmarks/sweep.py` | a 500-set Latin-hypercube sweep, the whole `growjax sweep` process, a SciPy BDF baseline |
+| `benchmarks/agreement.py` | fast against reference configuration across the parameter box, both growth laws, six inputs |
+| `benchmarks/calibrate.py` | fit, Laplace approximation and NUTS |
+| `benchmarks/discover.py` | the discovery matrix: hidden effects, seeds and verdicts |
+| `benchmarks/control.py` | control designs evaluated on the reference configuration |
+"""
+
+
+def _ms(x) -> str:
+    return f"{1e3 * float(x):.1f} ms"
+
+
+def _s(x) -> str:
+    return f"{float(x):.2f} s"
+
+
+def rows_simulate(r: dict) -> list[tuple[str, str, str]]:
+    sim, grad = r["simulation"], r["gradient"]
+    out = [("one 10 s simulation, fast configuration", _ms(sim["wall_s"]),
+            f"compile {_s(sim['compile_s'])}, {sim['solver_steps']} steps"),
+           ("forward-mode gradient of the 10 s log-likelihood in (Y, ext, n)", _ms(grad["wall_s"]),
+            f"compile {_s(grad['compile_s'])}")]
+    for run in r.get("other_runs", []):
+        out.append((f"{run['drive']} drive, rtol {run['rtol']:g}", _ms(run["wall_s"]), f"{run['solver_steps']} steps"))
+    return out
+
+
+def rows_sweep(r: dict) -> list[tuple[str, str, str]]:
+    s, b = r["sweep"], r["scipy_baseline"]
+    n = s.get("n", "")
+    out = [(f"{n}-set sweep, after compilation", _s(s["wall_s"]),
+            f"compile {_s(s['compile_s'])}, {r.get('n_devices', 1)} devices"),
+           (f"SciPy BDF baseline for {n} sets (extrapolated)", _s(b["wall_s_for_n"]), ""),
+           ("baseline ÷ sweep", f"{r['ratios']['baseline_over_sweep']:.0f}×", "")]
+    if "cli_process" in r:
+        out.append(("whole `growjax sweep` process", _s(r["cli_process"]["process_wall_s"]), "cold cache"))
+    return out
+
+
+def rows_agreement(r: dict) -> list[tuple[str, str, str]]:
+    s = r["summary"]
+    return [("fast vs reference, length RMSE (worst case)", f"{s['rmse_mm_max']:.3f} mm",
+             f"{s['n_compared']} of {s['n']} cases, target {s['targets']['rmse_mm']} mm"),
+            ("fast vs reference, largest length difference", f"{s['max_mm_max']:.3f} mm",
+             f"target {s['targets']['max_mm']} mm"),
+            ("volume balance error, share of the delivered volume", f"{s['volume_defect_share_max']:.1e}",
+             f"target {s['targets']['volume_defect_share']:g}")]
+
+
+def rows_generic(r: dict) -> list[tuple[str, str, str]]:
+    scalars = {k: v for k, v in r.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
+    return [(k, f"{v:.4g}", "") for k, v in list(scalars.items())[:8]]
+
+
+EXTRACTORS = {"simulate": rows_simulate, "sweep": rows_sweep, "agreement": rows_agreement}
+
+
+def environment_line(r: dict, path: Path) -> str:
+    env = r.get("environment")
+    if not env:
+        return "machine and versions not recorded (rerun the script)"
+    return (f"{env['machine']} ({env['device']}); Python {env['python']}, jax {env['jax']}, "
+            f"growjax {env['growjax']}; run {env['date']}")
+
+
+def render(results: Path) -> str:
+    parts = [HEADER]
+    files = sorted(results.glob("*.json")) if results.is_dir() else []
+    if not files:
+        parts.append("\nNo results yet: run a benchmark script, then `python benchmarks/report.py`.\n")
+    for path in files:
+        try:
+            r = json.loads(path.read_text())
+            rows = EXTRACTORS.get(path.stem, rows_generic)(r)
+        except (KeyError, TypeError, ValueError) as err:
+            rows, r = [("could not be read", type(err).__name__, str(err)[:60])], {}
+        data = f"; data: {Path(r['data']).name}" if r.get("data") else ""
+        parts.append(f"\n## {path.stem}\n\n{environment_line(r, path)}{data}\n\n| measurement | value | note |\n|---|---|---|\n")
+        parts.extend(f"| {a} | {b} | {c} |\n" for a, b, c in rows)
+    return "".join(parts)
+
+
+def main(argv=None) -> Path:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--results", default=str(REPO / "benchmarks" / "results"))
+    parser.add_argument("--out", default=str(REPO / "docs" / "benchmarks.md"))
+    args = parser.parse_args(argv)
+    out = Path(args.out)
+    out.write_text(render(Path(args.results)))
+    print("wrote", out)
+    return out
+
+
+if __name__ == "__main__":
+    main()

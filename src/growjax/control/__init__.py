@@ -1,0 +1,93 @@
+"""Control design on the differentiable model: linearisation, trajectory optimisation, length feedback, MPC.
+
+What is here, in the order a design uses it:
+
+* :func:`linearize` — the state-space model (A, B, C, D) of pressure demand → length (forward drive) or
+  step command → length (stepper) about an operating point, from exact JAX Jacobians of the fast
+  configuration's vector field, as a python-control ``StateSpace`` (``sys.A`` … work with ``scipy.signal``).
+* :func:`optimize_profile` — the pressure-demand profile (piecewise linear on fixed knots) that makes the
+  robot follow a desired length, by least squares with forward-mode Jacobians through :func:`growjax.simulate`
+  (all knots in one merged sensitivity solve), inside the demand box [0, p_max]. For the stepper drive
+  (integer commands) an open-loop step schedule is found on the model without gradients: :func:`optimize_steps`
+  searches the lead of a schedule read off the target, :func:`plan_steps` replays the steps the tuned
+  closed-loop step controller issues on the model.
+* :func:`run_closed_loop` — a sampled-data length controller around either configuration of the plant:
+  :class:`LengthPID` (forward drive, outer loop over the pressure PID, with the optimised profile as
+  feed-forward), :class:`StepController` (stepper: back-and-forth steps on the length error) and
+  :class:`MPC` (forward drive; nonlinear, Gauss–Newton on the fast model from the current state).
+* :func:`tune_pid` — gains by gradient descent on the closed-loop tracking cost, optionally averaged over
+  parameter draws (robust design, :func:`parameter_draws`).
+* :func:`design` — one design (drive × method) end to end, summarised for JSON (the ``growjax control`` command).
+
+The plant of a closed loop (:class:`Plant`) is stepped tick by tick from its state through
+:func:`growjax.simulate.simulate_from`, with the solver and settings of its configuration, so a controller
+designed on the fast model is evaluated on the model it was not designed on. All quantities SI: lengths m,
+pressures Pa, times s. Its figure: :func:`growjax.plotting.control_figure`.
+"""
+
+from growjax.control.controllers import (
+    MPC,
+    ClosedLoopResult,
+    LengthPID,
+    StepController,
+    pid_loop,
+    run_closed_loop,
+    score,
+)
+from growjax.control.design import design
+from growjax.control.linearise import linearize, operating_point
+from growjax.control.plant import (
+    Plant,
+    catheter_signal,
+    segment_inputs,
+    with_microstepping,
+)
+from growjax.control.profile import (
+    KnotProfile,
+    ProfileResult,
+    optimize_profile,
+    optimize_steps,
+    simulate_profile,
+    simulate_steps,
+    step_commands,
+)
+from growjax.control.targets import (
+    PRESSURE_MARGIN,
+    Limits,
+    Target,
+    limits,
+    plant_params,
+    ramp_with_pauses,
+    rmse,
+    step_length,
+    step_sequence,
+    target_from_experiment,
+)
+from growjax.control.tuning import (
+    DEFAULT_LOG_GAINS,
+    TuneResult,
+    parameter_draws,
+    pid_cost_fn,
+    plan_steps,
+    tune_pid,
+    tune_stepper,
+)
+
+
+def __getattr__(name):
+    """The figure of a closed loop, from :mod:`growjax.plotting` (matplotlib is imported only where it is used)."""
+    if name == "control_figure":
+        from growjax.plotting import control_figure
+
+        return control_figure
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+__all__ = [
+    "DEFAULT_LOG_GAINS", "MPC", "PRESSURE_MARGIN", "ClosedLoopResult", "KnotProfile", "LengthPID", "Limits", "Plant",
+    "ProfileResult", "StepController", "Target", "TuneResult", "catheter_signal", "design", "limits", "linearize",
+    "operating_point", "optimize_profile", "optimize_steps", "parameter_draws", "pid_cost_fn", "pid_loop",
+    "plan_steps", "plant_params", "ramp_with_pauses", "rmse", "run_closed_loop", "score", "segment_inputs",
+    "simulate_profile", "simulate_steps", "step_commands", "step_length", "step_sequence", "target_from_experiment",
+    "tune_pid", "tune_stepper", "with_microstepping",
+]

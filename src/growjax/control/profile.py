@@ -1,0 +1,144 @@
+"""Open-loop design: the forward drive's pressure-demand profile by least squares through :func:`growjax.simulate`,
+and the stepper's step schedules (integer commands: searched, not differentiated). SI units."""
+
+from __future__ import annotations
+
+import time
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Float
+
+import growjax as gj
+from growjax.control.plant import catheter_signal
+from growjax.control.targets import Limits, Target, limits, rmse, step_length
+from growjax.params import Parameters
+
+
+class KnotProfile(gj.Sampled):
+    """A piecewise-linear demand on fixed knots: every interior knot is declared a slope break, so the
+    solvers' breaks do not depend on the (optimised, traced) values."""
+
+    def kink_times(self, t0, t1, threshold: float = 0.0):
+        t = np.asarray(self.times, float)
+        return t[(t > t0) & (t < t1)]
+
+
+class ProfileResult(NamedTuple):
+    """An optimised demand profile: knots (K,) s, demand (K,) Pa, the cost per iteration, the tracking RMSE (m)
+    on the configuration optimised on, and the wall time (s)."""
+
+    knots: Float[np.ndarray, " K"]  # s
+    demand: Float[np.ndarray, " K"]  # Pa
+    cost_history: list
+    rmse_m: float  # on the configuration optimised on
+    wall_s: float
+
+
+def profile_inputs(target: Target, knots, values):
+    return gj.Inputs(catheter_length=catheter_signal(target), pressure_demand=KnotProfile(knots, values))
+
+
+def optimize_profile(params: Parameters, target: Target, t1: float | None = None, knot_dt: float = 0.2,
+                     iterations: int = 15, lim: Limits | None = None, smooth: float = 1e-3,
+                     initial: float = 120e3, config: gj.Config | None = None, lead: float = 0.0) -> ProfileResult:
+    """The forward drive's pressure-demand profile (piecewise linear, knots every ``knot_dt`` s) that makes the
+    length follow ``target``, by Levenberg–Marquardt on the tracking residuals.
+
+    Residuals: length error on the target's grid (mm), ``smooth``·knot differences (per 10 kPa), and the sensed
+    pressure's excess over ``lim.max_demand`` (per kPa); the knots are kept in [0, ``lim.max_demand``]
+    (projection). Jacobians by forward mode through :func:`growjax.simulate` (all knots in one solve).
+    """
+    t0w = time.perf_counter()
+    lim = lim or limits(params)
+    t1 = t1 if t1 is not None else float(target.time[-1])
+    config = config or gj.Config(t1=t1, adjoint="forward")
+    knots = np.arange(0.0, t1 + knot_dt - 1e-9, knot_dt)
+    ts = target.time[(target.time >= config.t0) & (target.time <= t1)]
+    ref = jnp.asarray(target.at(ts))
+    breaks = gj.input_breaks(profile_inputs(target, knots, np.full(knots.size, initial)), config)
+    scale = 1e5
+
+    def residuals(x):
+        values = x * scale
+        tr = gj.simulate(params, profile_inputs(target, knots, values), config, ts=ts, breaks=breaks)
+        err = (tr.length - ref) / 1e-3
+        over = jax.nn.relu(tr.pressure - lim.max_demand) / 1e3
+        return jnp.concatenate([err, np.sqrt(smooth) * jnp.diff(x) * 10.0, over])
+
+    res = jax.jit(residuals)
+    jac = jax.jit(jax.jacfwd(residuals))
+    hi = lim.max_demand / scale
+    x = np.full(knots.size, initial / scale)
+    if lead == 0.0:  # a first guess from the target's speed: demand rises with the growth speed needed
+        speed = np.gradient(target.at(knots + knot_dt), knots)
+        x = np.clip(0.6 + 12.0 * np.maximum(speed, 0.0) / 1e-2 * 0.1, 0.0, hi)
+    r = np.asarray(res(jnp.asarray(x)))
+    cost = float(np.sum(np.nan_to_num(r, nan=1e3) ** 2))
+    history, mu = [cost], 1e-2
+    for _ in range(iterations):
+        j = np.nan_to_num(np.asarray(jac(jnp.asarray(x))))
+        g, h = j.T @ np.nan_to_num(r, nan=1e3), j.T @ j
+        for _ in range(6):  # raise the damping until the step lowers the cost
+            step = np.linalg.solve(h + mu * (np.diag(np.diag(h)) + 1e-9 * np.eye(x.size)), -g)
+            x_new = np.clip(x + step, 0.0, hi)
+            r_new = np.asarray(res(jnp.asarray(x_new)))
+            c_new = float(np.sum(np.nan_to_num(r_new, nan=1e3) ** 2)) if np.all(np.isfinite(r_new)) else np.inf
+            if c_new < cost:
+                x, r, cost, mu = x_new, r_new, c_new, max(mu / 3, 1e-6)
+                break
+            mu *= 4
+        history.append(cost)
+    n = ts.size
+    return ProfileResult(knots, x * scale, history, float(np.sqrt(np.mean((r[:n] * 1e-3) ** 2))),
+                         time.perf_counter() - t0w)
+
+
+def simulate_profile(params, target: Target, profile: ProfileResult, config: gj.Config):
+    """The trajectory of the forward drive under an optimised profile (any configuration), on the target's grid."""
+    ts = target.time[(target.time >= config.t0) & (target.time <= config.t1)]
+    return gj.simulate(params, profile_inputs(target, profile.knots, profile.demand), config, ts=ts)
+
+
+def step_commands(params, target: Target, rate: float, lead: float, t1: float, lim: Limits | None = None,
+                  microsteps: int = 1):
+    """Open-loop stepper command: (tick times (s), step counts) = round(demand(t + lead)·microsteps)/microsteps
+    at ``rate`` Hz (≤ ``lim.max_step_rate``), at most one step per tick, back steps included."""
+    lim = lim or limits(params)
+    ticks = np.arange(0.0, t1, 1.0 / rate)
+    demand = (target.at(ticks + lead) - target.length[0]) / step_length(params)
+    if rate > lim.max_step_rate:
+        raise ValueError(f"tick rate {rate} Hz exceeds the motor's step rate {lim.max_step_rate} steps/s")
+    per_tick = 1.0  # one step per tick: a jump of two or more full steps at one edge makes the rotor skip
+    k, counts = 0.0, []
+    for d in demand:
+        k += float(np.clip(np.round((d - k) * microsteps) / microsteps, -per_tick, per_tick))
+        counts.append(k)
+    return ticks, np.asarray(counts)
+
+
+def optimize_steps(params, target: Target, t1: float, rate: float = 50.0, leads=None,
+                   config: gj.Config | None = None):
+    """The open-loop step schedule (integer steps: a search over the lead time, not gradients) of the stepper
+    drive minimising the length RMSE on ``config`` (default fast). → (best lead s, RMSE m, ticks, counts)."""
+    config = config or gj.Config(drive="inverse", t1=t1)
+    leads = np.linspace(0.0, 0.4, 9) if leads is None else leads
+    ts = target.time[(target.time >= config.t0) & (target.time <= t1)]
+    best = None
+    for lead in leads:
+        ticks, counts = step_commands(params, target, rate, lead, t1)
+        tr = simulate_steps(params, target, ticks, counts, config, ts)
+        e = rmse(ts, tr.length, target)
+        if best is None or e < best[1]:
+            best = (float(lead), e, ticks, counts)
+    return best
+
+
+def simulate_steps(params, target: Target, ticks, counts, config: gj.Config, ts):
+    """Simulate the stepper drive under a step schedule (tick times, counts; changes only)."""
+    change = np.concatenate([[counts[0] != 0], np.diff(counts) != 0])
+    sched = gj.StepSchedule(jnp.asarray(ticks[change]), jnp.asarray(counts[change]))
+    inputs = gj.Inputs(catheter_length=catheter_signal(target), steps=sched)
+    return gj.simulate(params, inputs, config, ts=ts)

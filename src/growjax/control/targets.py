@@ -1,0 +1,99 @@
+"""Targets of length control and the limits a design respects: desired lengths, actuator and membrane limits,
+the stepper's length per step, and the tracking error (SI units: m, Pa, s)."""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import equinox as eqx
+import numpy as np
+from jaxtyping import Float
+
+import growjax as gj
+
+PRESSURE_MARGIN = 0.9  # demand ceiling as a fraction of the membrane limit
+
+
+class Target(NamedTuple):
+    """A desired length: ``time`` (T,) s, ``length`` (T,) m, ``catheter`` (T,) m (catheter in contact; 0 if unknown)."""
+
+    time: Float[np.ndarray, " T"]
+    length: Float[np.ndarray, " T"]
+    catheter: Float[np.ndarray, " T"]
+
+    def at(self, t):
+        """Desired length (m) at times ``t`` (s), held at the ends."""
+        return np.interp(t, self.time, self.length)
+
+
+def target_from_experiment(exp, t_end: float = 10.0) -> Target:
+    """The target of an experiment: its ``desired_length_m`` column, else the measured ``robot_length_m``."""
+    exp = exp.window(t_end + 1e-9)
+    col = "desired_length_m" if "desired_length_m" in exp else "robot_length_m"
+    if col not in exp:
+        raise ValueError("the data need a desired_length_m or robot_length_m column to serve as the target")
+    cath = exp["catheter_length_m"] if "catheter_length_m" in exp else np.zeros_like(exp.time)
+    return Target(np.asarray(exp.time, float), np.asarray(exp[col], float), np.asarray(cath, float))
+
+
+def ramp_with_pauses(t_end=3.0, dt=0.01, start=0.010, speed=5e-3, move=0.5, pause=0.5) -> Target:
+    """A ramp at ``speed`` (m/s) for ``move`` s, then a pause of ``pause`` s, repeated; from ``start`` m."""
+    t = np.arange(dt, t_end + 1e-9, dt)
+    period = move + pause
+    moving = np.minimum(np.mod(t, period), move) + move * np.floor(t / period)
+    return Target(t, start + speed * moving, np.zeros_like(t))
+
+
+def step_sequence(t_end=3.0, dt=0.01, start=0.010, height=2e-3, every=1.0, rise=0.3) -> Target:
+    """Steps of ``height`` m every ``every`` s, each a ``rise`` s ramp (a physical robot cannot jump)."""
+    t = np.arange(dt, t_end + 1e-9, dt)
+    k = np.floor(t / every)
+    frac = np.clip((t - k * every) / rise, 0.0, 1.0)
+    return Target(t, start + height * (k + frac), np.zeros_like(t))
+
+
+class Limits(eqx.Module):
+    """Actuator and membrane limits a design must respect.
+
+    Attributes:
+        max_demand: Pa, ceiling of the pressure demand (a margin below the membrane limit).
+        pressure_limit: Pa, membrane limit (paper eq. 8).
+        syringe_stroke: m, travel of the syringe plungers.
+        max_syringe_speed: m/s, platform speed the pump can give.
+        max_step_rate: steps/s of the stepper drive.
+    """
+
+    max_demand: float
+    pressure_limit: float
+    syringe_stroke: float
+    max_syringe_speed: float = 5e-3
+    max_step_rate: float = 100.0
+
+
+def limits(params, margin: float = PRESSURE_MARGIN, **kw) -> Limits:
+    """The :class:`Limits` of ``params``: demand ceiling ``margin`` × membrane limit."""
+    plim = float(gj.pressure_limit(params.robot))
+    return Limits(margin * plim, plim, float(params.pump.syringe_stroke), **kw)
+
+
+def plant_params(drive: str, target: Target | None = None, base=None):
+    """Reference parameters of ``drive`` with the robot starting at the target's first length (m)."""
+    p = base if base is not None else gj.reference(drive)
+    if target is not None:
+        p = gj.replace(p, initial_length=float(target.length[0]))
+    return p
+
+
+def step_length(params) -> float:
+    """Robot length per full motor step, m: lead·(step angle/2π)·n A_s / A_r (3.1 mm for the published rig)."""
+    pump, motor = params.pump, params.motor
+    syringe = float(pump.lead) * float(motor.step_angle) / (2 * math.pi)
+    return syringe * pump.n_syringes * float(pump.syringe_area) / float(params.robot.area)
+
+
+def rmse(t, length, target: Target, t_start: float = 0.0) -> float:
+    """RMS of (length − target) over the samples at t ≥ ``t_start``, m (NaN if a sample is not finite)."""
+    t, length = np.asarray(t), np.asarray(length)
+    keep = t >= t_start - 1e-12
+    return float(np.sqrt(np.mean((length[keep] - target.at(t[keep])) ** 2)))

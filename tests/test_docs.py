@@ -1,0 +1,31 @@
+"""The documentation site builds with ``mkdocs build --strict``, executing every tutorial in quick mode."""
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def test_docs_build_strict_with_executed_tutorials(tmp_path):
+    pytest.importorskip("mkdocs")
+    pytest.importorskip("mkdocs_jupyter")
+    pytest.importorskip("mkdocstrings_handlers.python")
+    env = dict(os.environ, GROWJAX_QUICK="1", GROWJAX_DOCS_CACHE="false", NO_MKDOCS_2_WARNING="1")
+    start = time.perf_counter()
+    run = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "-d", str(tmp_path / "site")],
+                         cwd=REPO, env=env, capture_output=True, text=True, timeout=900, check=False)
+    wall = time.perf_counter() - start
+    assert run.returncode == 0, run.stderr[-6000:]
+    site = tmp_path / "site"
+    for page in ("getting-started", "model", "data", "results", "uncertainty", "benchmarks", "api",
+                 "tutorials/simulate", "tutorials/sweep", "tutorials/fit_posterior", "tutorials/discover",
+                 "tutorials/control"):
+        assert (site / page / "index.html").is_file(), page
+    simulate = (site / "tutorials" / "simulate" / "index.html").read_text()
+    assert "length RMSE against the data" in simulate and "data:image/png" in simulate  # executed, with figures
+    print(f"mkdocs build --strict: {wall:.1f} s")
