@@ -133,7 +133,7 @@ def test_intervals_cover_y_under_a_discrepancy_the_model_does_not_have(reference
         assert new.discrepancy["amplitude_m"] > 1e-4 and new.status == "converged"
         budget = new.budget[Y]
         assert sum(v**2 for v in budget.values()) == pytest.approx(new.standard_error[Y] ** 2, rel=1e-6)
-        assert set(budget) == {"noise", "discrepancy", "fast_model_error", *new.tolerances}
+        assert set(budget) == {"noise", "discrepancy", "fast_model_error", "hyperparameters", *new.tolerances}
 
 
 def test_no_blanket_inflation_on_white_noise(reference):
