@@ -287,13 +287,15 @@ def fit_command(args) -> dict:
     inputs = ex.to_inputs(exp, args.drive, base, config.t0, config.t1)
     pressure = exp["pressure_Pa"] if "pressure_Pa" in exp else None  # noqa: SIM401 (Experiment is not a dict)
     result = gf.fit(exp.time, exp["robot_length_m"], inputs, free=args.free or ["Y"], base=base, config=config,
-                    pressure=pressure, n_starts=args.starts, seed=args.seed)
+                    pressure=pressure, n_starts=args.starts, seed=args.seed, window=_window(args, config),
+                    discrepancy=args.discrepancy, tolerances=_tolerances(args))
     out = _out(args)
     fitted = gj.replace(base, **result.estimate)
     traj = gj.simulate(fitted, inputs, config)
     fig = trajectory_figure(traj, out / "fit.png", measured=(exp.time, exp["robot_length_m"]),
                             title=f"fit of {', '.join(result.names)}: RMSE {1e3 * result.rmse_length_m:.2f} mm")
     summary = {"command": "fit", "data": str(data), "drive": args.drive, "t_end_s": args.t_end,
+               "t_start_s": _window(args, config)[0],
                "fidelity": config.fidelity, "fixed_parameters": origin, **result.summary(), "figure": str(fig)}
     if result.status != "converged":
         raise RunFailed(f"the fit did not converge ({result.status}); try more --starts or fewer free parameters",
@@ -313,7 +315,8 @@ def posterior_command(args) -> dict:
     priors = gpost.paper_priors() if args.law == "reference" else gpost.lockhart_priors()
     res = gpost.sample(exp.time, exp["robot_length_m"], inputs, base, config, priors=priors, chains=args.chains,
                        warmup=args.warmup, samples=args.samples, seed=args.seed, progress=True,
-                       emulate=args.emulate)
+                       emulate=args.emulate, window=_window(args, config), discrepancy=args.discrepancy,
+                       tolerances=_tolerances(args))
     out = _out(args)
     res.idata.to_netcdf(str(out / "posterior.nc"))
     summary = {"command": "posterior", "data": str(data), "drive": args.drive, "t_end_s": args.t_end,
@@ -335,9 +338,11 @@ def discover_command(args) -> dict:
         raise ValueError(f"{data} has no robot_length_m column to explain")
     config = make_config(args, args.drive, adjoint="forward")
     inputs = ex.to_inputs(exp, args.drive, base, config.t0, config.t1)
-    keep = (exp.time >= config.t0) & (exp.time <= config.t1)
+    t0, t1 = _window(args, config)
+    keep = (exp.time >= t0) & (exp.time <= t1)
     res = gd.discover(exp.time[keep], exp["robot_length_m"][keep], inputs, base=base, config=config,
-                      candidates=args.candidates or None, progress=True, workers=args.workers)
+                      candidates=args.candidates or None, progress=True, workers=args.workers,
+                      discrepancy=args.discrepancy)
     out = _out(args)
     figure = discovery_figure(res, out / "discover.png", title=f"{data.name}: {res.effect}")
     return {"command": "discover", "data": str(data), "drive": args.drive, "t_end_s": args.t_end,
@@ -499,12 +504,21 @@ def summary_lines(s: dict) -> list[str]:
         lines.append(f"  wrote {s['table_csv']}, {s['figure']}")
         return lines
     if cmd == "fit":
-        lines = [f"fit: {name}, {s['drive']} drive, 0–{s['t_end_s']:g} s: {s['status']}",
+        lines = [f"fit: {name}, {s['drive']} drive, {s.get('t_start_s', 0.0):g}–{s['t_end_s']:g} s scored: {s['status']}",
                  *_origin_lines(s["fixed_parameters"])]
         for p, v in s["parameters"].items():
             interval = v["interval_90"]
             shown = "undetermined" if interval is None else f"90 % {_value(p, interval[0])} – {_value(p, interval[1])}"
             lines.append(f"  {p} = {_value(p, v['estimate'])} ({shown})")
+            if v.get("budget_sd"):
+                parts = sorted(v["budget_sd"].items(), key=lambda kv: -kv[1])
+                lines.append("    sd from " + ", ".join(f"{k} {_value(p, x)}" for k, x in parts if x > 0))
+        d = s.get("discrepancy") or {}
+        if d.get("kind") == "matern32":
+            lines.append(f"  discrepancy {_mm(d['amplitude_m'])} over {d['time_scale_s']:.2g} s, noise "
+                         f"{_mm(d['noise_m'])}; {s['samples_used']} samples scored")
+        elif d:
+            lines.append(f"  independent noise {_mm(d['noise_m'])}")
         lines.append(f"  length RMSE {_mm(s['rmse_length_m'])}; {s['wall_s']:.1f} s")
         lines.append(f"  wrote {s['figure']}")
         return lines
@@ -575,6 +589,40 @@ def _shared(p: argparse.ArgumentParser, command: str, fidelity_default: str = "f
     p.add_argument("--json", metavar="FILE", default=None, help="write the full summary as JSON to FILE ('-': stdout)")
 
 
+def _likelihood(p: argparse.ArgumentParser, tolerances: bool = True):
+    """The options of the likelihood that fit, posterior and discover share."""
+    p.add_argument("--t-start", type=float, default=None, metavar="S",
+                   help="score only the data from this time on, s (the model still runs from the start)")
+    p.add_argument("--discrepancy", choices=["matern32", "none"], default="matern32",
+                   help="matern32: the model plus a smooth Matérn-3/2 discrepancy plus sensor noise; none: "
+                        "independent noise around an exact model")
+    if tolerances:
+        p.add_argument("--tolerance", action="append", default=[], metavar="NAME=REL",
+                       help="relative standard uncertainty of a fixed parameter, e.g. Kp=0.1 (repeat; overrides "
+                            "the default budget of `growjax params`; 'none' drops the budget)")
+
+
+def _tolerances(args):
+    """The ``tolerances`` argument of fit and posterior from ``--tolerance`` (None: the default budget)."""
+    from growjax import tolerance as tl
+
+    if not args.tolerance:
+        return None
+    if [t.strip().lower() for t in args.tolerance] == ["none"]:
+        return {}
+    from growjax import params as gp
+
+    base = gp.reference(args.drive)
+    return {**tl.default_budget(base), **dict(tl.parse(t) for t in args.tolerance)}
+
+
+def _window(args, config):
+    t0 = config.t0 if args.t_start is None else args.t_start
+    if not t0 < config.t1:
+        raise ValueError(f"--t-start {t0} s must lie before --t-end {config.t1} s")
+    return (t0, config.t1)
+
+
 def build_parser():
     from growjax import __version__
 
@@ -601,6 +649,7 @@ def build_parser():
     fit.add_argument("--free", action="append", default=[], metavar="NAME",
                      help="parameter to fit (repeat; none: Y)")
     fit.add_argument("--starts", type=int, default=3, help="starts, from the best sets of a Latin hypercube")
+    _likelihood(fit)
 
     post = sub.add_parser("posterior", formatter_class=fmt,
                           help="NUTS posterior of Y, ext, n (or Y, phi_L, n_L) and the noise")
@@ -613,6 +662,7 @@ def build_parser():
     post.add_argument("--chains", type=int, default=4, help="NUTS chains")
     post.add_argument("--warmup", type=int, default=500, help="warm-up draws per chain")
     post.add_argument("--samples", type=int, default=500, help="kept draws per chain")
+    _likelihood(post)
 
     dis = sub.add_parser("discover", formatter_class=fmt,
                          help="which catalogue effect the data need beyond the model (`growjax effects`)")
@@ -620,6 +670,7 @@ def build_parser():
     dis.add_argument("--candidates", nargs="+", metavar="EFFECT", type=_effect_name, default=None,
                      help="catalogue effects to test (None: all of `growjax effects`)")
     dis.add_argument("--workers", type=int, default=None, help="fits run at a time (None: one per CPU core)")
+    _likelihood(dis, tolerances=False)
 
     ctl = sub.add_parser("control", formatter_class=fmt,
                          help="length control design: open-loop profile, feedback, MPC")
