@@ -37,7 +37,7 @@ from growjax import tolerance as tl
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "data"))
-import make_synthetic as mk  # noqa: E402
+import make_synthetic as mk
 
 NOISE = 2e-4  # m
 SIZES = (2e-5, 5e-5, 1e-4, 2e-4, 5e-4)  # m RMS

@@ -27,8 +27,8 @@ from growjax import discover as gd
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "data"))
 sys.path.insert(0, str(REPO / "benchmarks"))
-import coverage_discrepancy as cd  # noqa: E402
-import make_synthetic as mk  # noqa: E402
+import coverage_discrepancy as cd
+import make_synthetic as mk
 
 OFF = [("pid.proportional", 1.1), ("pump.screw_viscous_friction", 0.9), ("tank.length", 1.1),
        ("robot.catheter_friction", 1.1), ("pid.integral", 0.9), ("pump.syringe_area", 1.1)]

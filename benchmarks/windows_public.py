@@ -15,7 +15,6 @@ paper's Y box (5–15 kPa).
 from __future__ import annotations
 
 import argparse
-import itertools
 import json
 import time
 from pathlib import Path
@@ -29,9 +28,9 @@ from growjax import fit as gf
 REPO = Path(__file__).resolve().parents[1]
 WINDOWS = [(0.0, 10.0), (0.0, 5.0), (5.0, 10.0), (0.0, 3.4), (3.4, 6.7), (6.7, 10.0)]
 PAIRS = [((0.0, 5.0), (5.0, 10.0)), ((0.0, 3.4), (3.4, 6.7)), ((3.4, 6.7), (6.7, 10.0)), ((0.0, 3.4), (6.7, 10.0))]
-LIKELIHOODS = {"discrepancy+tolerances": dict(discrepancy="matern32"),
-               "discrepancy": dict(discrepancy="matern32", tolerances={}),
-               "independent": dict(discrepancy="none")}
+LIKELIHOODS = {"discrepancy+tolerances": {"discrepancy": "matern32"},
+               "discrepancy": {"discrepancy": "matern32", "tolerances": {}},
+               "independent": {"discrepancy": "none"}}
 Y = "robot.yield_pressure"
 
 

@@ -19,7 +19,7 @@ from growjax import tolerance as tl
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "data"))
-import make_synthetic as mk  # noqa: E402
+import make_synthetic as mk
 
 Y = "robot.yield_pressure"
 
@@ -151,7 +151,7 @@ def test_no_blanket_inflation_on_white_noise(reference):
 
 
 def test_a_window_scores_only_its_samples(reference):
-    t, lengths, cases, _ = reference
+    t, lengths, _cases, _ = reference
     data = lengths["published_Y7920"] + np.random.default_rng(2).normal(0.0, 2e-4, t.size)
     res = _fit(reference, data, window=(5.0, 10.0), tolerances={})
     assert res.samples_used == int(np.sum((t >= 5.0) & (t <= 10.0)))
@@ -177,7 +177,7 @@ def test_the_numpyro_model_carries_the_same_likelihood():
     priors = (gpost.Prior("Y", "robot.yield_pressure", 5e3, 15e3),)
     y = mu + np.random.default_rng(0).normal(0.0, 3e-4, t.size)
     values = {"Y": 8e3, "sigma": 2e-4, "delta_amplitude": 4e-4, "delta_time_scale": 0.8}
-    model = lambda data: gpost.growth_model(data, mean_length=lambda th: jnp.asarray(mu), priors=priors,  # noqa: E731
+    model = lambda data: gpost.growth_model(data, mean_length=lambda th: jnp.asarray(mu), priors=priors,
                                             residuals=residuals)
     total, _ = log_density(model, (jnp.asarray(y),), {}, values)
     hyper = dc.Hyper.of(4e-4, 0.8, 2e-4)

@@ -439,7 +439,7 @@ class Scorer:
         if self.kind == "none":
             return misfit_test(residual, self.sigma)
         smooth, hyper = self.profile(residual)
-        white, white_hyper = self.profile(residual, "none")
+        white = self.profile(residual, "none")[0]
         out = misfit_test(residual, float(hyper.noise))
         lr = 2.0 * (smooth - white)
         out.update({"discrepancy": hyper.as_dict(), "discrepancy_lr": lr, "noise_sigma_m": float(hyper.noise),

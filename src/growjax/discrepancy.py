@@ -47,7 +47,7 @@ class Hyper(eqx.Module):
 
     @classmethod
     def of(cls, amplitude, time_scale, noise) -> Hyper:
-        f = lambda x: jnp.asarray(x, float)  # noqa: E731
+        f = lambda x: jnp.asarray(x, float)
         return cls(f(amplitude), f(time_scale), f(noise))
 
     def as_dict(self) -> dict:

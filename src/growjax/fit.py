@@ -24,9 +24,9 @@ from growjax import experiment
 from growjax import params as gp
 from growjax import sweep as sw
 from growjax import tolerance as tl
+from growjax._least_squares import levenberg_marquardt, linearise
 from growjax.config import Config
 from growjax.simulate import as_arrays, input_breaks, sample_times, simulate
-from growjax._least_squares import levenberg_marquardt, linearise  # noqa: F401  (public through fit)
 from growjax.trajectory import OK
 
 # Multi-start boxes: the paper's investigation where it has one, else [θ/2, 2θ] around the reference.
@@ -249,7 +249,7 @@ def fit(
     hyper = None
     for _ in range(OUTER_STEPS):
         hyper = likelihood.estimate(raw[0], discrepancy, hyper)
-        z_new, _, converged, _, jac_w = levenberg_marquardt(lambda w: likelihood.whitened(*model(w), hyper), z,
+        z_new, _, converged, _, jac_w = levenberg_marquardt(lambda w, h=hyper: likelihood.whitened(*model(w), h), z,
                                                            max_steps, LM_TOLERANCE, bounds=bounds,
                                                            cost_resolution=COST_RESOLUTION)
         sd = np.sqrt(np.diag(np.linalg.pinv(jac_w.T @ jac_w, rcond=1e-10, hermitian=True)))
@@ -257,7 +257,7 @@ def fit(
         z, raw = np.asarray(z_new), model(jnp.asarray(z_new))
         if np.all(moved <= OUTER_TOLERANCE * sd):
             break
-    r_w, jac_w = (np.asarray(a) for a in likelihood.whitened(*raw, hyper))
+    _r_w, jac_w = (np.asarray(a) for a in likelihood.whitened(*raw, hyper))
     starts = [{"start": dict(zip(names, map(float, start_values[i]))),
                "estimate": dict(zip(names, map(float, refs * np.exp(zs[k])))),
                "cost": float(costs[k]), "converged": bool(oks[k])} for k, i in enumerate(order)]

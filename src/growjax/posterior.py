@@ -33,9 +33,9 @@ from growjax import discrepancy as dc
 from growjax import emulator as em
 from growjax import experiment
 from growjax import params as gp
+from growjax import tolerance as tl
 from growjax.config import Config
 from growjax.emulator import predicted_length, sample_times
-from growjax import tolerance as tl
 from growjax.simulate import as_arrays, input_breaks, length_jacobian
 from growjax.trajectory import OK
 
@@ -407,9 +407,6 @@ def sample(
         mean, model_error = emulated_mean(emu), float(emu.error_rms)
         emu_info = {"error_rms_m": float(emu.error_rms), "error_max_m": float(emu.error_max),
                     "nodes": dict(zip(emu.names, emu.nodes)), "build_s": time.perf_counter() - start}
-    def make_model(mean_length, priors=priors):
-        return functools.partial(growth_model, mean_length=mean_length, priors=priors, model_error=model_error)
-
     if discrepancy not in dc.KINDS:
         raise ValueError(f"discrepancy must be one of {dc.KINDS}, got {discrepancy!r}")
     residuals, extra_init = None, {}
@@ -882,7 +879,7 @@ def forecast(result: PosteriorResult, priors, base, inputs, config, times, seed:
         g = jnp.asarray(tolerance_sensitivity(mean_theta, base, inputs, config, union,
                                               dict(zip(res.tolerance_names, map(float, res.tolerance)))))
         u = jnp.asarray(res.tolerance)
-    flat = lambda site: jnp.asarray(np.asarray(post[site]).ravel()[take]) if site in post else None  # noqa: E731
+    flat = lambda site: jnp.asarray(np.asarray(post[site]).ravel()[take]) if site in post else None
     amp, ell = flat("delta_amplitude"), flat("delta_time_scale")
     hyper = dc.Hyper(jnp.zeros(take.size) if amp is None else amp, jnp.ones(take.size) if ell is None else ell,
                      jnp.asarray(np.sqrt(sigma[take] ** 2 + result.summary.get("model_error_m", 0.0) ** 2)))
