@@ -31,15 +31,17 @@ from growjax import discover as gd
 from growjax import effects as fx
 from growjax import experiment as ex
 from growjax import synthetic as sy
+from growjax.discover import _candidates as gd_fits
 
 REPO = Path(__file__).resolve().parents[1]
 
 
 class Profile:
-    """Times every call of discover's linearisation (one forward-mode solve), by the candidates switched on."""
+    """Times every call of discover's linearisation (one forward-mode solve), by the candidates switched on; installed
+    in ``growjax.discover._candidates``, where the fits look the linearisation up."""
 
     def __init__(self):
-        self.calls, self.inner = [], gd._linearised
+        self.calls, self.inner = [], gd_fits._linearised
 
     def __call__(self, w, problem, mask, select, z_fixed):
         start = time.perf_counter()
@@ -66,13 +68,13 @@ def one_run(effect, magnitude, seed, t_end, profile=False):
     keep = exp.time >= cfg.t0
     timer = Profile() if profile else None
     if timer is not None:
-        gd._linearised = timer
+        gd_fits._linearised = timer
     start = time.perf_counter()
     try:
         res = gd.discover(exp.time[keep], exp["robot_length_m"][keep], inputs, config=cfg)
     finally:
         if timer is not None:
-            gd._linearised = timer.inner
+            gd_fits._linearised = timer.inner
     truth = exp.metadata
     named = res.effect == effect
     confounded = res.effect == "confounded" and effect in res.confounded_with  # not if another effect is claimed

@@ -7,7 +7,6 @@ its runs succeeded, 1 when a run failed (the reason on stderr) and 2 for a bad o
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import json
 import math
@@ -18,11 +17,11 @@ from pathlib import Path
 
 import numpy as np
 
+from growjax._cli_parser import BAD_INPUT, build_parser, scored_window, tolerances_of
+from growjax._cli_summary import summary_lines
 from growjax._data import default_data_path
 
-OK, RUN_FAILED, BAD_INPUT = 0, 1, 2
-DRIVES = ("forward", "inverse")
-FIDELITIES = ("fast", "reference")
+OK, RUN_FAILED = 0, 1  # exit statuses (BAD_INPUT, 2, as the parser's)
 
 
 class RunFailed(Exception):
@@ -32,21 +31,6 @@ class RunFailed(Exception):
         super().__init__(reason)
         self.summary = summary
 
-
-class _Formatter(argparse.ArgumentDefaultsHelpFormatter):
-    """Every option's default shown, except where its help already says it."""
-
-    def _get_help_string(self, action):
-        if "(default:" in (action.help or ""):
-            return action.help
-        return super()._get_help_string(action)
-
-
-class _Parser(argparse.ArgumentParser):
-    """argparse with a one-line error (no usage block) naming the problem and the valid values."""
-
-    def error(self, message):
-        self.exit(BAD_INPUT, f"{self.prog}: error: {message}\n")
 
 
 def _enable_compile_cache():
@@ -85,13 +69,6 @@ def parse_param(text: str):
     except ValueError:
         raise ValueError(f"--param {name}: {value!r} is not a number") from None
 
-
-def _effect_name(text: str) -> str:
-    from growjax.effects import CATALOGUE
-
-    if text not in CATALOGUE:
-        raise argparse.ArgumentTypeError(f"unknown effect {text!r}; choose from {', '.join(CATALOGUE)}")
-    return text
 
 
 def recorded_parameters(data: Path) -> dict:
@@ -287,15 +264,15 @@ def fit_command(args) -> dict:
     inputs = ex.to_inputs(exp, args.drive, base, config.t0, config.t1)
     pressure = exp["pressure_Pa"] if "pressure_Pa" in exp else None  # noqa: SIM401 (Experiment is not a dict)
     result = gf.fit(exp.time, exp["robot_length_m"], inputs, free=args.free or ["Y"], base=base, config=config,
-                    pressure=pressure, n_starts=args.starts, seed=args.seed, window=_window(args, config),
-                    discrepancy=args.discrepancy, tolerances=_tolerances(args))
+                    pressure=pressure, n_starts=args.starts, seed=args.seed, window=scored_window(args, config),
+                    discrepancy=args.discrepancy, tolerances=tolerances_of(args))
     out = _out(args)
     fitted = gj.replace(base, **result.estimate)
     traj = gj.simulate(fitted, inputs, config)
     fig = trajectory_figure(traj, out / "fit.png", measured=(exp.time, exp["robot_length_m"]),
                             title=f"fit of {', '.join(result.names)}: RMSE {1e3 * result.rmse_length_m:.2f} mm")
     summary = {"command": "fit", "data": str(data), "drive": args.drive, "t_end_s": args.t_end,
-               "t_start_s": _window(args, config)[0],
+               "t_start_s": scored_window(args, config)[0],
                "fidelity": config.fidelity, "fixed_parameters": origin, **result.summary(), "figure": str(fig)}
     if result.status != "converged":
         raise RunFailed(f"the fit did not converge ({result.status}); try more --starts or fewer free parameters",
@@ -315,8 +292,8 @@ def posterior_command(args) -> dict:
     priors = gpost.paper_priors() if args.law == "reference" else gpost.lockhart_priors()
     res = gpost.sample(exp.time, exp["robot_length_m"], inputs, base, config, priors=priors, chains=args.chains,
                        warmup=args.warmup, samples=args.samples, seed=args.seed, progress=True,
-                       emulate=args.emulate, window=_window(args, config), discrepancy=args.discrepancy,
-                       tolerances=_tolerances(args))
+                       emulate=args.emulate, window=scored_window(args, config), discrepancy=args.discrepancy,
+                       tolerances=tolerances_of(args))
     out = _out(args)
     res.idata.to_netcdf(str(out / "posterior.nc"))
     summary = {"command": "posterior", "data": str(data), "drive": args.drive, "t_end_s": args.t_end,
@@ -338,7 +315,7 @@ def discover_command(args) -> dict:
         raise ValueError(f"{data} has no robot_length_m column to explain")
     config = make_config(args, args.drive, adjoint="forward")
     inputs = ex.to_inputs(exp, args.drive, base, config.t0, config.t1)
-    t0, t1 = _window(args, config)
+    t0, t1 = scored_window(args, config)
     keep = (exp.time >= t0) & (exp.time <= t1)
     res = gd.discover(exp.time[keep], exp["robot_length_m"][keep], inputs, base=base, config=config,
                       candidates=args.candidates or None, progress=True, workers=args.workers,
@@ -446,254 +423,6 @@ def effects_command(args) -> dict:
     return {"command": "effects", "effects": rows}
 
 
-# -- terminal summaries -----------------------------------------------------------------------------------------
-
-
-def _kpa(x) -> str:
-    return "–" if x is None else f"{x / 1e3:.1f} kPa"
-
-
-def _mm(x) -> str:
-    return "–" if x is None else f"{1e3 * x:.2f} mm"
-
-
-def _value(name: str, v: float) -> str:
-    if name.endswith("yield_pressure") or name == "Y":
-        return f"{v / 1e3:.3f} kPa"
-    return f"{v:.4g}"
-
-
-def _origin_lines(origin: dict) -> list[str]:
-    lines = []
-    if origin.get("recorded_beside_data"):
-        shown = ", ".join(f"{k} = {_value(k, v)}" for k, v in origin["recorded_beside_data"].items())
-        lines.append(f"  parameters recorded beside the data: {shown} (--param overrides)")
-    if origin.get("fixed"):
-        lines.append("  fixed by --param: " + ", ".join(f"{k} = {_value(k, v)}" for k, v in origin["fixed"].items()))
-    return lines
-
-
-def summary_lines(s: dict) -> list[str]:
-    """A few lines for the terminal, in mm and kPa."""
-    cmd = s.get("command")
-    name = Path(s["data"]).name if s.get("data") else ""
-    if cmd == "simulate":
-        lines = [f"simulate: {name}, {s['drive']} drive, {s['fidelity']} configuration, 0–{s['t_end_s']:g} s",
-                 *_origin_lines(s["parameters"]),
-                 (f"  status {s['status']}; final length {_mm(s['final_length_m'])}; peak pressure "
-                 f"{_kpa(s['peak_pressure_Pa'])} (membrane limit {_kpa(s['pressure_limit_Pa'])})")]
-        if "rmse_length_m" in s:
-            lines.append(f"  length RMSE against the measured length: {_mm(s['rmse_length_m'])}")
-        lines.append(f"  {s['solver_steps']} solver steps, {1e3 * s['wall_s']:.0f} ms after compiling "
-                     f"({s['first_call_s']:.1f} s first call)")
-        lines.append(f"  wrote {s['trajectory_csv']}, {s['figure']}")
-        return lines
-    if cmd == "sweep":
-        ranges = ", ".join(f"{r['name']} {r['low']:g}–{r['high']:g}" + (" (log)" if r["log"] else "") for r in s["ranges"])
-        lines = [f"sweep: {name}, {s['n']} sets (seed {s['seed']}) over {ranges}", *_origin_lines(s["parameters"]),
-                 (f"  {s['n_failed']} failed; sweep {s['wall_s']:.2f} s after {s['compile_s']:.1f} s compiling, "
-                 f"{s['n_devices']} {s['device']} devices")]
-        if s.get("best"):
-            best = ", ".join(f"{k} = {_value(k, v)}" for k, v in s["best"]["parameters"].items())
-            lines.append(f"  best: {best}; length RMSE {_mm(s['best']['rmse_length_m'])}")
-        for output, table in s.get("sobol", {}).get("indices", {}).items():
-            if "S1" in table:
-                shown = ", ".join(f"{n.split('.')[-1]} {a:.2f}/{b:.2f}" for n, a, b in
-                                  zip(s["sobol"]["names"], table["S1"], table["ST"]))
-                lines.append(f"  Sobol S1/ST of {output}: {shown}")
-        lines.append(f"  wrote {s['table_csv']}, {s['figure']}")
-        return lines
-    if cmd == "fit":
-        lines = [f"fit: {name}, {s['drive']} drive, {s.get('t_start_s', 0.0):g}–{s['t_end_s']:g} s scored: {s['status']}",
-                 *_origin_lines(s["fixed_parameters"])]
-        for p, v in s["parameters"].items():
-            interval = v["interval_90"]
-            shown = "undetermined" if interval is None else f"90 % {_value(p, interval[0])} – {_value(p, interval[1])}"
-            lines.append(f"  {p} = {_value(p, v['estimate'])} ({shown})")
-            if v.get("budget_sd"):
-                parts = sorted(v["budget_sd"].items(), key=lambda kv: -kv[1])
-                lines.append("    sd from " + ", ".join(f"{k} {_value(p, x)}" for k, x in parts if x > 0))
-        d = s.get("discrepancy") or {}
-        if d.get("kind") == "matern32":
-            lines.append(f"  discrepancy {_mm(d['amplitude_m'])} over {d['time_scale_s']:.2g} s, noise "
-                         f"{_mm(d['noise_m'])}; {s['samples_used']} samples scored")
-        elif d:
-            lines.append(f"  independent noise {_mm(d['noise_m'])}")
-        lines.append(f"  length RMSE {_mm(s['rmse_length_m'])}; {s['wall_s']:.1f} s")
-        lines.append(f"  wrote {s['figure']}")
-        return lines
-    if cmd == "posterior":
-        lines = [(f"posterior: {name}, {s['growth_law']} growth law, {s['chains']} chains × "
-                 f"({s['warmup']} + {s['samples']})"), *_origin_lines(s["fixed_parameters"])]
-        for p, v in s["parameters"].items():
-            lo, hi = v["interval_90"]
-            if p == "sigma":
-                lines.append(f"  σ = {_mm(v['mean'])} (90 % {_mm(lo)} – {_mm(hi)})")
-            else:
-                lines.append(f"  {p} = {_value(p, v['mean'])} (90 % {_value(p, lo)} – {_value(p, hi)})")
-        lines.append(f"  R-hat max {s['rhat_max']:.3f}, bulk ESS min {s['ess_bulk_min']:.0f}, divergences "
-                     f"{s['divergences']}, measured points in the 90 % band {s['coverage_90']:.2f}; {s['wall_s']:.0f} s")
-        lines.append(f"  wrote {s['inference_data']}")
-        return lines
-    if cmd == "discover":
-        return [f"discover: {name}", *_origin_lines(s["fixed_parameters"]),
-                *("  " + line for line in s["text"].splitlines()), f"  wrote {s['figure']}"]
-    if cmd == "control":
-        lines = [(f"control: {name}, {s['drive']} drive, {s['method']}, evaluated on the {s['evaluated_on']} "
-                 f"configuration"), *_origin_lines(s["fixed_parameters"]),
-                 (f"  tracking RMSE {_mm(s.get('tracking_rmse_m'))}; peak pressure {_kpa(s.get('peak_pressure_Pa'))} "
-                 f"(limit {_kpa(s.get('pressure_limit_Pa'))}, demand ceiling {_kpa(s.get('max_demand_Pa'))})")]
-        if s.get("gains"):
-            lines.append("  gains: " + ", ".join(f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}"
-                                                 for k, v in s["gains"].items()))
-        if s.get("figure"):
-            lines.append(f"  wrote {s['figure']}")
-        return lines
-    if cmd == "params":
-        lines = [f"{'name':34s} {'symbol':7s} {'value':>12s} {'unit':16s} {'physical range':24s} description"]
-        for r in s["parameters"]:
-            rng = "" if r["range"] is None else f"{r['range'][0]:g} – {r['range'][1]:g}"
-            lines.append(f"{r['name']:34s} {r['symbol']:7s} {r['value']:12.5g} {r['unit']:16s} {rng:24s} "
-                         f"{r['description'][:70]}")
-        return lines
-    if cmd == "effects":
-        lines = []
-        for r in s["effects"]:
-            lines.append(f"{r['name']}: {r['description']}")
-            lines.append(f"    parameter {r['parameter']} in [{r['range'][0]:g}, {r['range'][1]:g}] {r['unit']}")
-            lines.append(f"    separated by: {r['separated_by']}")
-        return lines
-    return [json.dumps(s, default=str)]
-
-
-# -- the parser -------------------------------------------------------------------------------------------------
-
-
-def _shared(p: argparse.ArgumentParser, command: str, fidelity_default: str = "fast", fidelity_help: str = ""):
-    p.add_argument("data", nargs="?", default=None,
-                   help="experiment CSV, or a folder with kings_ts.mat and lin_c_ts.mat (default: the synthetic "
-                        "experiment shipped with growjax)")
-    p.add_argument("--drive", choices=DRIVES, default="forward",
-                   help="forward: PID on the pressure with ideal torque sources; inverse: stepper motor and its step "
-                        "controller")
-    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
-                   help="fix a parameter, SI units (repeat; names as in `growjax params`); overrides values recorded "
-                        "beside the data")
-    p.add_argument("--fidelity", choices=FIDELITIES, default=fidelity_default,
-                   help=fidelity_help or "configuration that solves the model: fast, or the reference network (slow)")
-    p.add_argument("--rtol", type=float, default=None,
-                   help="solver tolerance on the scaled states (None: 1e-4 fast, 1e-6 reference)")
-    p.add_argument("--seed", type=int, default=0, help="seed of every random choice")
-    p.add_argument("--t-end", type=float, default=10.0, metavar="S", help="end of the simulated window, s")
-    p.add_argument("--out", default=str(Path("out") / command), metavar="DIR", help="folder for the files the command writes")
-    p.add_argument("--json", metavar="FILE", default=None, help="write the full summary as JSON to FILE ('-': stdout)")
-
-
-def _likelihood(p: argparse.ArgumentParser, tolerances: bool = True):
-    """The options of the likelihood that fit, posterior and discover share."""
-    p.add_argument("--t-start", type=float, default=None, metavar="S",
-                   help="score only the data from this time on, s (the model still runs from the start)")
-    p.add_argument("--discrepancy", choices=["matern32", "none"], default="matern32",
-                   help="matern32: the model plus a smooth Matérn-3/2 discrepancy plus sensor noise; none: "
-                        "independent noise around an exact model")
-    if tolerances:
-        p.add_argument("--tolerance", action="append", default=[], metavar="NAME=REL",
-                       help="relative standard uncertainty of a fixed parameter, e.g. Kp=0.1 (repeat; overrides "
-                            "the default budget of `growjax params`; 'none' drops the budget)")
-
-
-def _tolerances(args):
-    """The ``tolerances`` argument of fit and posterior from ``--tolerance`` (None: the default budget)."""
-    from growjax import tolerance as tl
-
-    if not args.tolerance:
-        return None
-    if [t.strip().lower() for t in args.tolerance] == ["none"]:
-        return {}
-    from growjax import params as gp
-
-    base = gp.reference(args.drive)
-    return {**tl.default_budget(base), **dict(tl.parse(t) for t in args.tolerance)}
-
-
-def _window(args, config):
-    t0 = config.t0 if args.t_start is None else args.t_start
-    if not t0 < config.t1:
-        raise ValueError(f"--t-start {t0} s must lie before --t-end {config.t1} s")
-    return (t0, config.t1)
-
-
-def build_parser():
-    from growjax import __version__
-
-    fmt = _Formatter
-    parser = _Parser(prog="growjax", formatter_class=fmt,
-                     description="MAMMOBOT soft growing robot: simulate, sweep, fit, sample, discover, control")
-    parser.add_argument("--version", action="version", version=f"growjax {__version__}")
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
-
-    sim = sub.add_parser("simulate", formatter_class=fmt, help="simulate an experiment against its measured length")
-    _shared(sim, "simulate")
-
-    swp = sub.add_parser("sweep", formatter_class=fmt, help="Latin-hypercube sweep scored against the measured length")
-    _shared(swp, "sweep")
-    swp.add_argument("--n", type=int, default=500, help="number of parameter sets")
-    swp.add_argument("--range", action="append", default=[], metavar="NAME=LOW:HIGH[:log]",
-                     help="swept parameter and its range, SI units (repeat); none: the paper's n, Y, ext box")
-    swp.add_argument("--sobol", action="store_true", help="also compute Sobol indices of RMSE and final length")
-    swp.add_argument("--sobol-n", type=int, default=256, help="Saltelli base points (a power of 2; runs = N·(d+2))")
-    swp.add_argument("--chunk-size", type=int, default=None, help="sets per compiled call (None: sized to memory)")
-
-    fit = sub.add_parser("fit", formatter_class=fmt, help="least-squares fit to the measured length (and pressure)")
-    _shared(fit, "fit")
-    fit.add_argument("--free", action="append", default=[], metavar="NAME",
-                     help="parameter to fit (repeat; none: Y)")
-    fit.add_argument("--starts", type=int, default=3, help="starts, from the best sets of a Latin hypercube")
-    _likelihood(fit)
-
-    post = sub.add_parser("posterior", formatter_class=fmt,
-                          help="NUTS posterior of Y, ext, n (or Y, phi_L, n_L) and the noise")
-    _shared(post, "posterior")
-    post.add_argument("--law", choices=["reference", "lockhart"], default="reference",
-                      help="growth law: the published velocity term, or Lockhart's")
-    post.add_argument("--emulate", action="store_true",
-                      help="sample through a validated emulator of the model (fast; worth it where the data leave "
-                           "directions flat, as ext and n of the published law)")
-    post.add_argument("--chains", type=int, default=4, help="NUTS chains")
-    post.add_argument("--warmup", type=int, default=500, help="warm-up draws per chain")
-    post.add_argument("--samples", type=int, default=500, help="kept draws per chain")
-    _likelihood(post)
-
-    dis = sub.add_parser("discover", formatter_class=fmt,
-                         help="which catalogue effect the data need beyond the model (`growjax effects`)")
-    _shared(dis, "discover")
-    dis.add_argument("--candidates", nargs="+", metavar="EFFECT", type=_effect_name, default=None,
-                     help="catalogue effects to test (None: all of `growjax effects`)")
-    dis.add_argument("--workers", type=int, default=None, help="fits run at a time (None: one per CPU core)")
-    _likelihood(dis, tolerances=False)
-
-    ctl = sub.add_parser("control", formatter_class=fmt,
-                         help="length control design: open-loop profile, feedback, MPC")
-    _shared(ctl, "control", fidelity_default="reference",
-            fidelity_help="configuration the design is evaluated on (designs use the fast one)")
-    ctl.add_argument("--method", choices=["open-loop", "feedback", "mpc"], default="feedback",
-                     help="open-loop demand profile (or step schedule), tuned feedback, or MPC (forward drive)")
-    ctl.add_argument("--robust", metavar="POSTERIOR.nc", default=None,
-                     help="tune on the cost averaged over draws of this posterior")
-    ctl.add_argument("--draws", type=int, default=8, help="posterior draws to tune on (with --robust)")
-    ctl.add_argument("--iterations", type=int, default=10, help="optimiser and tuning iterations")
-    ctl.add_argument("--microsteps", type=int, default=1, help="stepper driver microsteps (1: the full-step driver)")
-
-    par = sub.add_parser("params", formatter_class=fmt,
-                         help="list the parameters: names, symbols, defaults, units, physical ranges")
-    par.add_argument("--drive", choices=DRIVES, default="forward", help="which drive's published parameter set")
-    par.add_argument("--json", metavar="FILE", default=None, help="write the table as JSON to FILE ('-': stdout)")
-    eff = sub.add_parser("effects", formatter_class=fmt,
-                         help="list the effect catalogue: parameter, range, what separates each")
-    eff.add_argument("--json", metavar="FILE", default=None, help="write the catalogue as JSON to FILE ('-': stdout)")
-    return parser
-
-
 COMMANDS = {"simulate": simulate_command, "sweep": sweep_command, "fit": fit_command,
             "posterior": posterior_command, "discover": discover_command, "control": control_command,
             "params": params_command, "effects": effects_command}
@@ -754,3 +483,4 @@ def main(argv=None) -> int:
 
 if __name__ == "__main__":
     sys.exit(main())
+

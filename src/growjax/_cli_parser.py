@@ -1,0 +1,161 @@
+"""The command line's parser: the shared options, each command's own, and one-line errors."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+BAD_INPUT = 2  # exit status for a bad option or file
+DRIVES = ("forward", "inverse")
+FIDELITIES = ("fast", "reference")
+
+
+class _Formatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Every option's default shown, except where its help already says it."""
+
+    def _get_help_string(self, action):
+        if "(default:" in (action.help or ""):
+            return action.help
+        return super()._get_help_string(action)
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with a one-line error (no usage block) naming the problem and the valid values."""
+
+    def error(self, message):
+        self.exit(BAD_INPUT, f"{self.prog}: error: {message}\n")
+
+
+def _effect_name(text: str) -> str:
+    from growjax.effects import CATALOGUE
+
+    if text not in CATALOGUE:
+        raise argparse.ArgumentTypeError(f"unknown effect {text!r}; choose from {', '.join(CATALOGUE)}")
+    return text
+
+
+def _shared(p: argparse.ArgumentParser, command: str, fidelity_default: str = "fast", fidelity_help: str = ""):
+    p.add_argument("data", nargs="?", default=None,
+                   help="experiment CSV, or a folder with kings_ts.mat and lin_c_ts.mat (default: the synthetic "
+                        "experiment shipped with growjax)")
+    p.add_argument("--drive", choices=DRIVES, default="forward",
+                   help="forward: PID on the pressure with ideal torque sources; inverse: stepper motor and its step "
+                        "controller")
+    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                   help="fix a parameter, SI units (repeat; names as in `growjax params`); overrides values recorded "
+                        "beside the data")
+    p.add_argument("--fidelity", choices=FIDELITIES, default=fidelity_default,
+                   help=fidelity_help or "configuration that solves the model: fast, or the reference network (slow)")
+    p.add_argument("--rtol", type=float, default=None,
+                   help="solver tolerance on the scaled states (None: 1e-4 fast, 1e-6 reference)")
+    p.add_argument("--seed", type=int, default=0, help="seed of every random choice")
+    p.add_argument("--t-end", type=float, default=10.0, metavar="S", help="end of the simulated window, s")
+    p.add_argument("--out", default=str(Path("out") / command), metavar="DIR", help="folder for the files the command writes")
+    p.add_argument("--json", metavar="FILE", default=None, help="write the full summary as JSON to FILE ('-': stdout)")
+
+
+def _likelihood(p: argparse.ArgumentParser, tolerances: bool = True):
+    """The options of the likelihood that fit, posterior and discover share."""
+    p.add_argument("--t-start", type=float, default=None, metavar="S",
+                   help="score only the data from this time on, s (the model still runs from the start)")
+    p.add_argument("--discrepancy", choices=["matern32", "none"], default="matern32",
+                   help="matern32: the model plus a smooth Matérn-3/2 discrepancy plus sensor noise; none: "
+                        "independent noise around an exact model")
+    if tolerances:
+        p.add_argument("--tolerance", action="append", default=[], metavar="NAME=REL",
+                       help="relative standard uncertainty of a fixed parameter, e.g. Kp=0.1 (repeat; overrides "
+                            "the default budget of `growjax params`; 'none' drops the budget)")
+
+
+
+def tolerances_of(args):
+    """The ``tolerances`` argument of fit and posterior from ``--tolerance`` (None: the default budget)."""
+    from growjax import tolerance as tl
+
+    if not args.tolerance:
+        return None
+    if [t.strip().lower() for t in args.tolerance] == ["none"]:
+        return {}
+    from growjax import params as gp
+
+    base = gp.reference(args.drive)
+    return {**tl.default_budget(base), **dict(tl.parse(t) for t in args.tolerance)}
+
+
+def scored_window(args, config):
+    """(t0, t1) s of the data scored: ``--t-start`` (default the configuration's start) to ``--t-end``."""
+    t0 = config.t0 if args.t_start is None else args.t_start
+    if not t0 < config.t1:
+        raise ValueError(f"--t-start {t0} s must lie before --t-end {config.t1} s")
+    return (t0, config.t1)
+
+
+def build_parser():
+    from growjax import __version__
+
+    fmt = _Formatter
+    parser = _Parser(prog="growjax", formatter_class=fmt,
+                     description="MAMMOBOT soft growing robot: simulate, sweep, fit, sample, discover, control")
+    parser.add_argument("--version", action="version", version=f"growjax {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
+
+    sim = sub.add_parser("simulate", formatter_class=fmt, help="simulate an experiment against its measured length")
+    _shared(sim, "simulate")
+
+    swp = sub.add_parser("sweep", formatter_class=fmt, help="Latin-hypercube sweep scored against the measured length")
+    _shared(swp, "sweep")
+    swp.add_argument("--n", type=int, default=500, help="number of parameter sets")
+    swp.add_argument("--range", action="append", default=[], metavar="NAME=LOW:HIGH[:log]",
+                     help="swept parameter and its range, SI units (repeat); none: the paper's n, Y, ext box")
+    swp.add_argument("--sobol", action="store_true", help="also compute Sobol indices of RMSE and final length")
+    swp.add_argument("--sobol-n", type=int, default=256, help="Saltelli base points (a power of 2; runs = N·(d+2))")
+    swp.add_argument("--chunk-size", type=int, default=None, help="sets per compiled call (None: sized to memory)")
+
+    fit = sub.add_parser("fit", formatter_class=fmt, help="least-squares fit to the measured length (and pressure)")
+    _shared(fit, "fit")
+    fit.add_argument("--free", action="append", default=[], metavar="NAME",
+                     help="parameter to fit (repeat; none: Y)")
+    fit.add_argument("--starts", type=int, default=3, help="starts, from the best sets of a Latin hypercube")
+    _likelihood(fit)
+
+    post = sub.add_parser("posterior", formatter_class=fmt,
+                          help="NUTS posterior of Y, ext, n (or Y, phi_L, n_L) and the noise")
+    _shared(post, "posterior")
+    post.add_argument("--law", choices=["reference", "lockhart"], default="reference",
+                      help="growth law: the published velocity term, or Lockhart's")
+    post.add_argument("--emulate", action="store_true",
+                      help="sample through a validated emulator of the model (fast; worth it where the data leave "
+                           "directions flat, as ext and n of the published law)")
+    post.add_argument("--chains", type=int, default=4, help="NUTS chains")
+    post.add_argument("--warmup", type=int, default=500, help="warm-up draws per chain")
+    post.add_argument("--samples", type=int, default=500, help="kept draws per chain")
+    _likelihood(post)
+
+    dis = sub.add_parser("discover", formatter_class=fmt,
+                         help="which catalogue effect the data need beyond the model (`growjax effects`)")
+    _shared(dis, "discover")
+    dis.add_argument("--candidates", nargs="+", metavar="EFFECT", type=_effect_name, default=None,
+                     help="catalogue effects to test (None: all of `growjax effects`)")
+    dis.add_argument("--workers", type=int, default=None, help="fits run at a time (None: one per CPU core)")
+    _likelihood(dis, tolerances=False)
+
+    ctl = sub.add_parser("control", formatter_class=fmt,
+                         help="length control design: open-loop profile, feedback, MPC")
+    _shared(ctl, "control", fidelity_default="reference",
+            fidelity_help="configuration the design is evaluated on (designs use the fast one)")
+    ctl.add_argument("--method", choices=["open-loop", "feedback", "mpc"], default="feedback",
+                     help="open-loop demand profile (or step schedule), tuned feedback, or MPC (forward drive)")
+    ctl.add_argument("--robust", metavar="POSTERIOR.nc", default=None,
+                     help="tune on the cost averaged over draws of this posterior")
+    ctl.add_argument("--draws", type=int, default=8, help="posterior draws to tune on (with --robust)")
+    ctl.add_argument("--iterations", type=int, default=10, help="optimiser and tuning iterations")
+    ctl.add_argument("--microsteps", type=int, default=1, help="stepper driver microsteps (1: the full-step driver)")
+
+    par = sub.add_parser("params", formatter_class=fmt,
+                         help="list the parameters: names, symbols, defaults, units, physical ranges")
+    par.add_argument("--drive", choices=DRIVES, default="forward", help="which drive's published parameter set")
+    par.add_argument("--json", metavar="FILE", default=None, help="write the table as JSON to FILE ('-': stdout)")
+    eff = sub.add_parser("effects", formatter_class=fmt,
+                         help="list the effect catalogue: parameter, range, what separates each")
+    eff.add_argument("--json", metavar="FILE", default=None, help="write the catalogue as JSON to FILE ('-': stdout)")
+    return parser

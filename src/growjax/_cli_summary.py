@@ -1,0 +1,144 @@
+"""The command line's terminal summaries: a few lines per command, in mm and kPa."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+
+def _kpa(x) -> str:
+    return "–" if x is None else f"{x / 1e3:.1f} kPa"
+
+
+def _mm(x) -> str:
+    return "–" if x is None else f"{1e3 * x:.2f} mm"
+
+
+def _value(name: str, v: float) -> str:
+    if name.endswith("yield_pressure") or name == "Y":
+        return f"{v / 1e3:.3f} kPa"
+    return f"{v:.4g}"
+
+
+def _origin_lines(origin: dict) -> list[str]:
+    lines = []
+    if origin.get("recorded_beside_data"):
+        shown = ", ".join(f"{k} = {_value(k, v)}" for k, v in origin["recorded_beside_data"].items())
+        lines.append(f"  parameters recorded beside the data: {shown} (--param overrides)")
+    if origin.get("fixed"):
+        lines.append("  fixed by --param: " + ", ".join(f"{k} = {_value(k, v)}" for k, v in origin["fixed"].items()))
+    return lines
+
+
+def _simulate(s: dict, name: str) -> list[str]:
+    lines = [f"simulate: {name}, {s['drive']} drive, {s['fidelity']} configuration, 0–{s['t_end_s']:g} s",
+             *_origin_lines(s["parameters"]),
+             (f"  status {s['status']}; final length {_mm(s['final_length_m'])}; peak pressure "
+             f"{_kpa(s['peak_pressure_Pa'])} (membrane limit {_kpa(s['pressure_limit_Pa'])})")]
+    if "rmse_length_m" in s:
+        lines.append(f"  length RMSE against the measured length: {_mm(s['rmse_length_m'])}")
+    lines.append(f"  {s['solver_steps']} solver steps, {1e3 * s['wall_s']:.0f} ms after compiling "
+                 f"({s['first_call_s']:.1f} s first call)")
+    lines.append(f"  wrote {s['trajectory_csv']}, {s['figure']}")
+    return lines
+
+
+def _sweep(s: dict, name: str) -> list[str]:
+    ranges = ", ".join(f"{r['name']} {r['low']:g}–{r['high']:g}" + (" (log)" if r["log"] else "") for r in s["ranges"])
+    lines = [f"sweep: {name}, {s['n']} sets (seed {s['seed']}) over {ranges}", *_origin_lines(s["parameters"]),
+             (f"  {s['n_failed']} failed; sweep {s['wall_s']:.2f} s after {s['compile_s']:.1f} s compiling, "
+             f"{s['n_devices']} {s['device']} devices")]
+    if s.get("best"):
+        best = ", ".join(f"{k} = {_value(k, v)}" for k, v in s["best"]["parameters"].items())
+        lines.append(f"  best: {best}; length RMSE {_mm(s['best']['rmse_length_m'])}")
+    for output, table in s.get("sobol", {}).get("indices", {}).items():
+        if "S1" in table:
+            shown = ", ".join(f"{n.split('.')[-1]} {a:.2f}/{b:.2f}" for n, a, b in
+                              zip(s["sobol"]["names"], table["S1"], table["ST"]))
+            lines.append(f"  Sobol S1/ST of {output}: {shown}")
+    lines.append(f"  wrote {s['table_csv']}, {s['figure']}")
+    return lines
+
+
+def _fit(s: dict, name: str) -> list[str]:
+    lines = [f"fit: {name}, {s['drive']} drive, {s.get('t_start_s', 0.0):g}–{s['t_end_s']:g} s scored: {s['status']}",
+             *_origin_lines(s["fixed_parameters"])]
+    for p, v in s["parameters"].items():
+        interval = v["interval_90"]
+        shown = "undetermined" if interval is None else f"90 % {_value(p, interval[0])} – {_value(p, interval[1])}"
+        lines.append(f"  {p} = {_value(p, v['estimate'])} ({shown})")
+        if v.get("budget_sd"):
+            parts = sorted(v["budget_sd"].items(), key=lambda kv: -kv[1])
+            lines.append("    sd from " + ", ".join(f"{k} {_value(p, x)}" for k, x in parts if x > 0))
+    d = s.get("discrepancy") or {}
+    if d.get("kind") == "matern32":
+        lines.append(f"  discrepancy {_mm(d['amplitude_m'])} over {d['time_scale_s']:.2g} s, noise "
+                     f"{_mm(d['noise_m'])}; {s['samples_used']} samples scored")
+    elif d:
+        lines.append(f"  independent noise {_mm(d['noise_m'])}")
+    lines.append(f"  length RMSE {_mm(s['rmse_length_m'])}; {s['wall_s']:.1f} s")
+    lines.append(f"  wrote {s['figure']}")
+    return lines
+
+
+def _posterior(s: dict, name: str) -> list[str]:
+    lines = [(f"posterior: {name}, {s['growth_law']} growth law, {s['chains']} chains × "
+             f"({s['warmup']} + {s['samples']})"), *_origin_lines(s["fixed_parameters"])]
+    for p, v in s["parameters"].items():
+        lo, hi = v["interval_90"]
+        if p == "sigma":
+            lines.append(f"  σ = {_mm(v['mean'])} (90 % {_mm(lo)} – {_mm(hi)})")
+        else:
+            lines.append(f"  {p} = {_value(p, v['mean'])} (90 % {_value(p, lo)} – {_value(p, hi)})")
+    lines.append(f"  R-hat max {s['rhat_max']:.3f}, bulk ESS min {s['ess_bulk_min']:.0f}, divergences "
+                 f"{s['divergences']}, measured points in the 90 % band {s['coverage_90']:.2f}; {s['wall_s']:.0f} s")
+    lines.append(f"  wrote {s['inference_data']}")
+    return lines
+
+
+def _discover(s: dict, name: str) -> list[str]:
+    return [f"discover: {name}", *_origin_lines(s["fixed_parameters"]),
+            *("  " + line for line in s["text"].splitlines()), f"  wrote {s['figure']}"]
+
+
+def _control(s: dict, name: str) -> list[str]:
+    lines = [(f"control: {name}, {s['drive']} drive, {s['method']}, evaluated on the {s['evaluated_on']} "
+             f"configuration"), *_origin_lines(s["fixed_parameters"]),
+             (f"  tracking RMSE {_mm(s.get('tracking_rmse_m'))}; peak pressure {_kpa(s.get('peak_pressure_Pa'))} "
+             f"(limit {_kpa(s.get('pressure_limit_Pa'))}, demand ceiling {_kpa(s.get('max_demand_Pa'))})")]
+    if s.get("gains"):
+        lines.append("  gains: " + ", ".join(f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}"
+                                             for k, v in s["gains"].items()))
+    if s.get("figure"):
+        lines.append(f"  wrote {s['figure']}")
+    return lines
+
+
+def _params(s: dict, name: str) -> list[str]:
+    lines = [f"{'name':34s} {'symbol':7s} {'value':>12s} {'unit':16s} {'physical range':24s} description"]
+    for r in s["parameters"]:
+        rng = "" if r["range"] is None else f"{r['range'][0]:g} – {r['range'][1]:g}"
+        lines.append(f"{r['name']:34s} {r['symbol']:7s} {r['value']:12.5g} {r['unit']:16s} {rng:24s} "
+                     f"{r['description'][:70]}")
+    return lines
+
+
+def _effects(s: dict, name: str) -> list[str]:
+    lines = []
+    for r in s["effects"]:
+        lines.append(f"{r['name']}: {r['description']}")
+        lines.append(f"    parameter {r['parameter']} in [{r['range'][0]:g}, {r['range'][1]:g}] {r['unit']}")
+        lines.append(f"    separated by: {r['separated_by']}")
+    return lines
+
+
+SUMMARIES = {"simulate": _simulate, "sweep": _sweep, "fit": _fit, "posterior": _posterior, "discover": _discover,
+             "control": _control, "params": _params, "effects": _effects}  # command → its lines (summary, data name)
+
+
+def summary_lines(s: dict) -> list[str]:
+    """A few lines for the terminal, in mm and kPa."""
+    command_lines = SUMMARIES.get(s.get("command"))
+    if command_lines is None:
+        return [json.dumps(s, default=str)]
+    return command_lines(s, Path(s["data"]).name if s.get("data") else "")

@@ -1,0 +1,143 @@
+"""Scoring a model against the data: the noise, the misfit test, and the likelihood-ratio and Bayes-factor
+scores of a round's candidates."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy import stats
+
+from growjax import discrepancy as dc
+from growjax import experiment
+
+from ._candidates import Z90, CandidateFit, candidate_parameter
+
+PINNED_FACTOR = 2.0  # a correlated effect whose 90 % interval lies within [η/2, 2η] is determined, not confounded
+MATERIAL_MISFIT = 5e-4  # m: a smooth misfit below this amplitude is left to the discrepancy term
+STRUCTURE_THRESHOLD = float(stats.chi2.isf(0.01, df=2))
+
+
+def noise_from_differences(residual) -> float:
+    """White-noise σ (m) of a residual series from its successive differences: var(Δr)/2 (von Neumann)."""
+    d = np.diff(np.asarray(residual, float))
+    return float(np.sqrt(np.mean(d**2) / 2.0))
+
+
+def misfit_test(residual, sigma: float, z_limit: float = 4.0, ratio_limit: float = 1.2) -> dict:
+    """Whether the residuals (m) carry structure beyond white noise of scale ``sigma`` (m).
+
+    Two statistics: the lag-1 autocorrelation ρ̂ (its z-score ρ̂·√m is N(0, 1) for white noise) and
+    the ratio RMSE/σ (≈ 1 for white noise). Structured if z > ``z_limit`` or the ratio > ``ratio_limit``.
+    """
+    r = np.asarray(residual, float)
+    m = r.size
+    c = r - r.mean()
+    rho = float(np.sum(c[1:] * c[:-1]) / max(np.sum(c * c), 1e-300))
+    z = rho * math.sqrt(m)
+    rmse = float(np.sqrt(np.mean(r**2)))
+    ratio = rmse / sigma if sigma > 0 else math.inf
+    return {"rmse_m": rmse, "noise_sigma_m": float(sigma), "rmse_over_noise": ratio, "lag1_autocorrelation": rho,
+            "autocorrelation_z": z, "structured": bool(z > z_limit or ratio > ratio_limit)}
+
+
+class Scorer:
+    """Likelihood-ratio scores and the misfit test under the fit's likelihood (:mod:`growjax.discrepancy`).
+
+    ``discrepancy="matern32"``: a model's score is its log-likelihood with the residual model's
+    hyperparameters at their mode for that model's residuals; the misfit is structured where the discrepancy
+    is significant against white noise (2ΔlogL above the 1 % point of χ²₂) and larger than the noise, and
+    material where its amplitude also exceeds ``material`` (m): only a material misfit that no candidate
+    removes is reported ``unexplained``; a smaller one is left to the discrepancy term. ``"none"``: independent noise of sd ``sigma`` (m) and :func:`misfit_test`.
+    A record interpolated between keyframes is scored at its keyframes.
+    """
+
+    def __init__(self, times, length, sigma: float, discrepancy: str, material: float = MATERIAL_MISFIT):
+        self.times, self.sigma, self.kind, self.material = np.asarray(times, float), sigma, discrepancy, material
+        self.observed = experiment.informative_samples(length) if discrepancy != "none" else None
+        self._cache = {}
+
+    def profile(self, residual, kind: str | None = None) -> tuple[float, dc.Hyper]:
+        """(log-likelihood, nats, at the hyperparameters' mode for ``residual``; that mode)."""
+        kind = kind or self.kind
+        r = np.asarray(residual, float)
+        key = (kind, r.tobytes())
+        if key not in self._cache:
+            hyper = dc.estimate(r, self.times, kind, observed=self.observed)
+            value = dc.log_likelihood(r, self.times, hyper, observed=self.observed)
+            self._cache[key] = (float(value), hyper)
+        return self._cache[key]
+
+    def noise(self, residual) -> float:
+        return float(self.profile(residual)[1].noise)
+
+    def lr(self, worse, better, signed: bool = False) -> float:
+        """2ΔlogL of the model with residuals ``better`` (m) over the one with ``worse`` (≥ 0 unless ``signed``)."""
+        if self.kind == "none":
+            value = (float(np.sum(np.asarray(worse) ** 2)) - float(np.sum(np.asarray(better) ** 2))) / self.sigma**2
+        else:
+            value = 2.0 * (self.profile(better)[0] - self.profile(worse)[0])
+        return value if signed else max(value, 0.0)
+
+    def misfit(self, residual) -> dict:
+        """:func:`misfit_test`'s statistics, and under the discrepancy its amplitude, time scale and noise, the
+        2ΔlogL of the discrepancy against white noise, and ``structured`` by the rule above."""
+        if self.kind == "none":
+            return misfit_test(residual, self.sigma)
+        smooth, hyper = self.profile(residual)
+        white = self.profile(residual, "none")[0]
+        out = misfit_test(residual, float(hyper.noise))
+        lr = 2.0 * (smooth - white)
+        out.update({"discrepancy": hyper.as_dict(), "discrepancy_lr": lr, "noise_sigma_m": float(hyper.noise),
+                    "rmse_over_noise": out["rmse_m"] / float(hyper.noise),
+                    "structured": bool(lr > STRUCTURE_THRESHOLD and float(hyper.amplitude) > float(hyper.noise)),
+                    "material": bool(float(hyper.amplitude) > self.material)})
+        return out
+
+
+def _pinned(estimate: float, interval) -> bool:
+    """Whether a 90 % interval excludes zero and lies within a factor :data:`PINNED_FACTOR` of the estimate. An
+    interval of (near) zero width is not pinned: the effect's Jacobian column vanished (η deep in softplus's flat
+    end) and the pseudo-inverse dropped its variance instead of making it infinite."""
+    lo, hi = interval
+    size = abs(estimate)
+    return (lo * hi > 0 and hi - lo > 1e-6 * size and min(abs(lo), abs(hi)) >= size / PINNED_FACTOR
+            and max(abs(lo), abs(hi)) <= PINNED_FACTOR * size)
+
+
+def score_candidate(name: str, fitted: CandidateFit, residual, scorer: Scorer, threshold: float,
+                    confounding_correlation: float, held_lr: float = 0.0, trades: bool = False) -> dict:
+    """The evidence for candidate ``name`` from its fit ``fitted`` on top of the current model (residuals ``residual``,
+    m): 2ΔlogL and its p-value, the Laplace log Bayes factor against a uniform prior on the effect's range, the
+    estimate and interval, the correlation with the base parameters, and whether it clears ``threshold``, is pinned,
+    lies at its range's edge or is confounded. ``held_lr``: its 2ΔlogL with the base held (first round);
+    ``trades``: whether with the base held it trades with a base parameter (first round)."""
+    qname, unit, rng = candidate_parameter(name)
+    lr = scorer.lr(residual, fitted.residual_m)
+    sd = max((fitted.interval_90[qname][1] - fitted.interval_90[qname][0]) / (2 * Z90), 1e-300)
+    corr = fitted.correlation.get(qname, {})
+    _, c = max(corr.items(), key=lambda kv: abs(kv[1]), default=(None, 0.0))
+    pinned = lr > threshold and _pinned(fitted.estimate[qname], fitted.interval_90[qname])
+    return {
+        "parameter": qname, "unit": unit, "estimate": fitted.estimate[qname],
+        "interval_90": fitted.interval_90[qname], "lr_statistic": lr,
+        "p_value": float(0.5 * stats.chi2.sf(lr, df=1)) if lr > 0 else 1.0,
+        "log_bayes_factor": 0.5 * lr + math.log(math.sqrt(2 * math.pi) * sd / (rng[1] - max(rng[0], 0.0))),
+        "rmse_m": float(np.sqrt(np.mean(fitted.residual_m**2))),
+        "lr_statistic_base_held": held_lr, "correlation_with_base": corr,
+        "clears_threshold": bool(lr > threshold), "pinned": bool(pinned),
+        # the fit pressed against its range's top (or a signed effect's bottom): the data ask for more
+        "at_range_edge": bool(fitted.estimate[qname] >= rng[1] * (1 - 1e-6)
+                              or (rng[0] < 0 and fitted.estimate[qname] <= rng[0] * (1 - 1e-6))),
+        "confounded": bool(abs(c) > confounding_correlation and (lr > threshold or trades) and not pinned),
+    }
+
+
+def score_round(fits: dict, residual, scorer: Scorer, threshold: float, confounding_correlation: float,
+                held: dict | None = None) -> dict:
+    """{candidate: :func:`score_candidate`} of a round's ``fits`` {candidate: CandidateFit} on top of the current
+    model (residuals ``residual``, m). ``held`` {candidate: (2ΔlogL with the base held, trades)}: the first round's
+    base-held evidence (None in later rounds)."""
+    return {name: score_candidate(name, fitted, residual, scorer, threshold, confounding_correlation,
+                                  *(held[name] if held is not None else ()))
+            for name, fitted in fits.items()}

@@ -1,0 +1,75 @@
+"""Bayesian calibration: a NumPyro model of the measured length, NUTS, ArviZ diagnostics, predictive bands.
+
+The statistical model reads like its maths::
+
+    Y ~ Uniform(5, 15) kPa,  ext ~ Uniform(4000, 10000),  n ~ Uniform(0.9, 1.1)   (the paper's box)
+    σ ~ HalfNormal(1 mm)
+    L_obs(t_i) ~ Normal(L_model(t_i; Y, ext, n), σ)
+
+NumPyro samples the bounded priors in unconstrained (logit) coordinates, which are O(1).
+The model runs in the fast configuration by default, with forward-mode gradients (or through an
+emulator, opt-in); through the model, NUTS starts at the mode found in those coordinates, with the
+Hessian there as its mass matrix (:func:`laplace_unconstrained`), and a prior whose mode lies
+against a bound is sampled in a softplus coordinate instead (:class:`SoftplusPrior`, :func:`bound_start`), the
+others across the ridge they form with it (:class:`RidgePrior`). A failed solve gives zero likelihood
+(−∞ log density, rejected by NUTS), never an exception.
+
+The model, its priors and its mean length (``_priors``, ``_model``), NUTS's start (``_laplace``), the sampler
+(``_sample``) and the checks on its output (``_checks``).
+"""
+
+from ._checks import (
+    compare_loo,
+    diagnostics,
+    forecast,
+    laplace,
+    predict,
+    predictive_band,
+    sbc,
+)
+from ._laplace import (
+    LAPLACE_DECREMENT,
+    LAPLACE_MAX_STEPS,
+    LAPLACE_STALL,
+    PRIOR_CURVATURE_FLOOR,
+    bound_start,
+    laplace_unconstrained,
+    precondition,
+    ridge_coordinates,
+)
+from ._model import (
+    DirectMean,
+    Residuals,
+    build_emulator,
+    direct_mean,
+    emulated_mean,
+    growth_model,
+    tolerance_sensitivity,
+    value_and_jacobian,
+    with_model_tangents,
+)
+from ._model import (
+    _jitted_jacobian as _jitted_jacobian,  # benchmarks/nuts_direct.py times the compiled Jacobian
+)
+from ._priors import (
+    BOUND_FRACTION,
+    Prior,
+    RidgePrior,
+    SoftplusPrior,
+    bound_coordinates,
+    coordinate,
+    fraction,
+    lockhart_priors,
+    paper_priors,
+)
+from ._sample import PosteriorResult, build_residuals, observation_draws, sample
+
+__all__ = [
+    "BOUND_FRACTION", "LAPLACE_DECREMENT", "LAPLACE_MAX_STEPS", "LAPLACE_STALL", "PRIOR_CURVATURE_FLOOR",
+    "DirectMean", "PosteriorResult", "Prior", "Residuals", "RidgePrior", "SoftplusPrior",
+    "bound_coordinates", "bound_start", "build_emulator", "build_residuals", "compare_loo", "coordinate",
+    "diagnostics", "direct_mean", "emulated_mean", "forecast", "fraction", "growth_model", "laplace",
+    "laplace_unconstrained", "lockhart_priors", "observation_draws", "paper_priors", "precondition", "predict",
+    "predictive_band", "ridge_coordinates", "sample", "sbc", "tolerance_sensitivity", "value_and_jacobian",
+    "with_model_tangents",
+]

@@ -1,0 +1,204 @@
+"""Checks and uses of a posterior: diagnostics, predictive bands and forecasts, SBC, LOO, Laplace."""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from growjax import discrepancy as dc
+from growjax import emulator as em
+from growjax.emulator import predicted_length
+
+from ._model import Residuals, emulated_mean, growth_model, tolerance_sensitivity
+from ._priors import Prior
+
+if TYPE_CHECKING:
+    from ._sample import PosteriorResult
+
+
+def predictive_band(draws, level: float = 0.9):
+    """(lower, upper) pointwise quantiles of predictive draws (S, T) at ``level``."""
+    a = 0.5 * (1.0 - level)
+    return np.nanquantile(draws, a, axis=0), np.nanquantile(draws, 1.0 - a, axis=0)
+
+
+def diagnostics(idata, priors, observed, mcmc=None, residuals: Residuals | None = None) -> dict:
+    """Posterior means and 90 % intervals, R-hat, ESS, divergences, BFMI and predictive coverage (the share of
+    the measured samples inside the pointwise 90 % band of replicated data)."""
+    import arviz as az
+
+    sites = [p.site for p in priors] + ["sigma"]
+    sites += [s for s in ("delta_amplitude", "delta_time_scale") if s in idata.posterior]
+    rhat = az.rhat(idata, var_names=sites)
+    ess_bulk = az.ess(idata, var_names=sites, method="bulk")
+    ess_tail = az.ess(idata, var_names=sites, method="tail")
+    post = idata.posterior
+    params = {}
+    for s in sites:
+        x = np.asarray(post[s]).ravel()
+        params[s] = {"mean": float(x.mean()), "sd": float(x.std()),
+                     "interval_90": [float(np.quantile(x, 0.05)), float(np.quantile(x, 0.95))],
+                     "rhat": float(rhat[s]), "ess_bulk": float(ess_bulk[s]), "ess_tail": float(ess_tail[s])}
+    div = int(np.asarray(idata.sample_stats["diverging"]).sum()) if "diverging" in idata.sample_stats else 0
+    pp = np.asarray(idata.posterior_predictive["length"])
+    lo, hi = predictive_band(pp.reshape(-1, pp.shape[-1]))
+    observed = np.asarray(observed)
+    coverage = float(np.mean((observed >= lo) & (observed <= hi)))
+    return {
+        "parameters": params,
+        "rhat_max": float(max(p["rhat"] for p in params.values())),
+        "ess_bulk_min": float(min(p["ess_bulk"] for p in params.values())),
+        "ess_tail_min": float(min(p["ess_tail"] for p in params.values())),
+        "divergences": div,
+        "bfmi_min": float(np.min(az.bfmi(idata))),
+        "coverage_90": coverage,
+    }
+
+
+def predict(idata, priors, base, inputs, config, times, seed: int = 0, max_draws: int = 400):
+    """Posterior predictive length draws (S, T) for new ``inputs`` (e.g. another pressure profile), noise included."""
+    post = idata.posterior
+    flat = {p.site: np.asarray(post[p.site]).ravel() for p in priors}
+    sigma = np.asarray(post["sigma"]).ravel()
+    take = np.random.default_rng(seed).choice(sigma.size, size=min(max_draws, sigma.size), replace=False)
+    thetas = {p.name: jnp.asarray(flat[p.site][take]) for p in priors}
+    mu = jax.jit(jax.vmap(lambda th: predicted_length(th, base, inputs, config, jnp.asarray(times))))(thetas)
+    noise = np.random.default_rng(seed + 1).normal(size=mu.shape) * sigma[take][:, None]
+    return np.asarray(mu) + noise
+
+
+def forecast(result: PosteriorResult, priors, base, inputs, config, times, seed: int = 0, max_draws: int = 400):
+    """Posterior predictive length draws (S, T), m, at ``times`` (s) beyond or between the data the posterior was
+    fitted on, conditioned on them: each draw's model run over the fitted and the new times, its discrepancy
+    (and rig terms) at the new times given its residuals at the fitted samples (the Kalman forecast), and fresh
+    noise. Without a discrepancy (``result.residuals`` None) the draws are the model plus noise."""
+    post = result.idata.posterior
+    t_fit, y_fit = (np.asarray(a, float) for a in result.data)
+    t_new = np.asarray(times, float)
+    union = np.unique(np.concatenate([t_fit, t_new]))
+    sigma = np.asarray(post["sigma"]).ravel()
+    take = np.random.default_rng(seed).choice(sigma.size, size=min(max_draws, sigma.size), replace=False)
+    thetas = {p.name: jnp.asarray(np.asarray(post[p.site]).ravel()[take]) for p in priors}
+    mu = np.asarray(jax.jit(jax.vmap(lambda th: predicted_length(th, base, inputs, config, jnp.asarray(union))))(thetas))
+    at_fit, at_new = np.searchsorted(union, t_fit), np.searchsorted(union, t_new)
+    res = result.residuals
+    rng = np.random.default_rng(seed + 1)
+    if res is None:
+        return mu[:, at_new] + sigma[take][:, None] * rng.standard_normal((take.size, at_new.size))
+    observed = np.zeros(union.size, bool)
+    observed[at_fit[res.observed]] = True
+    g = u = None
+    if res.sensitivity is not None:
+        mean_theta = {n: float(np.mean(v)) for n, v in thetas.items()}
+        g = jnp.asarray(tolerance_sensitivity(mean_theta, base, inputs, config, union,
+                                              dict(zip(res.tolerance_names, map(float, res.tolerance)))))
+        u = jnp.asarray(res.tolerance)
+    flat = lambda site: jnp.asarray(np.asarray(post[site]).ravel()[take]) if site in post else None
+    amp, ell = flat("delta_amplitude"), flat("delta_time_scale")
+    hyper = dc.Hyper(jnp.zeros(take.size) if amp is None else amp, jnp.ones(take.size) if ell is None else ell,
+                     jnp.asarray(np.sqrt(sigma[take] ** 2 + result.summary.get("model_error_m", 0.0) ** 2)))
+    r = np.zeros_like(mu)
+    r[:, at_fit] = y_fit[None, :] - mu[:, at_fit]
+    mean, var = jax.jit(jax.vmap(lambda ri, h: dc.forecast(ri, jnp.asarray(union), jnp.asarray(observed), h, g, u)))(
+        jnp.asarray(r), hyper)
+    scale = np.sqrt(np.asarray(var)[:, at_new] + np.asarray(hyper.noise)[:, None] ** 2)
+    return mu[:, at_new] + np.asarray(mean)[:, at_new] + scale * rng.standard_normal(scale.shape)
+
+
+def sbc(emulator: em.Emulator, priors: Sequence[Prior], replicates: int = 100, warmup: int = 200,
+        samples: int = 200, seed: int = 0, noise_scale: float = 1e-3, level: float = 0.9,
+        truth_model=None, model_error: float = 0.0) -> dict:
+    """Simulation-based calibration (Talts et al. 2018) of NUTS on :func:`growth_model`, all replicates at once.
+
+    Each replicate draws θ and σ from the prior and a data set from the model (here its
+    emulator, which is then exact by construction), and samples the posterior with NUTS
+    (diagonal mass adapted in warm-up). All replicates run in one ``vmap``ped program
+    (NumPyro's functional NUTS). A calibrated sampler ranks the truth uniformly among the
+    draws and covers it with the central ``level`` interval in a share ``level`` of replicates.
+
+    ``truth_model({qualified name: (replicates,) values}) → (replicates, m)`` clean lengths (m) at the emulator's
+    times: data from another configuration (the reference), plus σ-noise, so the check also sees the
+    emulated configuration's error against it; the likelihood then carries the emulator's RMS error and
+    ``model_error`` (m, e.g. :data:`growjax.fit.FAST_MODEL_ERROR`, the fast configuration's against the
+    reference), both as independent noise.
+
+    Returns ``ranks`` {site: (replicates,) ints in [0, samples]}, ``coverage`` {site: share},
+    ``divergences`` (total) and ``draws`` (samples per replicate).
+    """
+    from numpyro.infer import Predictive
+    from numpyro.infer.hmc import hmc
+    from numpyro.infer.util import initialize_model
+
+    if truth_model is not None:
+        model_error = float(np.hypot(float(emulator.error_rms), model_error))
+        if not np.isfinite(model_error):
+            raise ValueError("sbc with a truth_model needs a validated emulator (growjax.emulator.validate): its "
+                             "error joins the noise")
+    model = functools.partial(growth_model, mean_length=emulated_mean(emulator), priors=priors,
+                              noise_scale=noise_scale, model_error=model_error)
+    k_prior, k_init, k_run, k_noise = jax.random.split(jax.random.PRNGKey(seed), 4)
+    truth = Predictive(model, num_samples=replicates)(k_prior)
+    if truth_model is not None:
+        clean = jnp.asarray(truth_model({p.name: np.asarray(truth[p.site]) for p in priors}))
+        noise = jax.random.normal(k_noise, clean.shape, clean.dtype) * truth["sigma"][:, None]
+        truth = {**truth, "length": clean + noise}
+    sites = [p.site for p in priors] + ["sigma"]
+    info = initialize_model(k_init, model, model_args=(truth["length"][0],), dynamic_args=True)
+    init_kernel, sample_kernel = hmc(potential_fn_gen=info.potential_fn, algo="NUTS")
+
+    def run(key, data):
+        state = init_kernel(info.param_info.z, warmup, model_args=(data,), rng_key=key, target_accept_prob=0.9)
+
+        def step(state, _):
+            state = sample_kernel(state, model_args=(data,))
+            return state, (state.z, state.diverging)
+
+        _, (zs, div) = jax.lax.scan(step, state, None, length=warmup + samples)
+        kept = jax.tree_util.tree_map(lambda a: a[warmup:], zs)
+        values = jax.vmap(info.postprocess_fn(data))(kept)
+        return {s: values[s] for s in sites}, jnp.sum(div[warmup:])
+
+    draws, div = jax.jit(jax.vmap(run))(jax.random.split(k_run, replicates), truth["length"])
+    a = 0.5 * (1.0 - level)
+    ranks, coverage = {}, {}
+    for s in sites:
+        d, t = np.asarray(draws[s]), np.asarray(truth[s])[:, None]
+        ranks[s] = np.sum(d < t, axis=1)
+        lo, hi = np.quantile(d, a, axis=1), np.quantile(d, 1.0 - a, axis=1)
+        coverage[s] = float(np.mean((t[:, 0] >= lo) & (t[:, 0] <= hi)))
+    return {"ranks": ranks, "coverage": coverage, "divergences": int(np.sum(np.asarray(div))), "draws": samples}
+
+
+def compare_loo(results: dict) -> dict:
+    """PSIS-LOO of several posteriors of the same data ({label: PosteriorResult}) via ArviZ.
+
+    Returns per model ``elpd_loo``, its standard error, ``p_loo``, the largest Pareto k̂, and
+    the ArviZ ranking (``elpd_diff``, ``dse``, ``weight``). The likelihood treats residuals as
+    independent; when they are autocorrelated (model discrepancy) the standard errors are optimistic.
+    """
+    import arviz as az
+
+    table = az.compare({k: r.idata for k, r in results.items()}, ic="loo", var_name="length")
+    out = {}
+    for label, r in results.items():
+        loo = az.loo(r.idata, pointwise=True, var_name="length")
+        out[label] = {"elpd_loo": float(loo.elpd_loo), "se": float(loo.se), "p_loo": float(loo.p_loo),
+                      "pareto_k_max": float(np.max(np.asarray(loo.pareto_k))),
+                      "rank": int(table.loc[label, "rank"]), "elpd_diff": float(table.loc[label, "elpd_diff"]),
+                      "dse": float(table.loc[label, "dse"]), "weight": float(table.loc[label, "weight"])}
+    return out
+
+
+def laplace(fit_result, sigma: float | None = None) -> dict:
+    """Laplace (Gauss–Newton) approximation at a fit: per-parameter mean, sd and 90 % interval (log-normal in θ)."""
+    out = {}
+    for i, n in enumerate(fit_result.names):
+        sd_z = float(np.sqrt(max(fit_result.covariance_log[i, i], 0.0)))
+        est = fit_result.estimate[n]
+        out[n] = {"mean": est, "sd": est * sd_z, "interval_90": fit_result.interval_90[n]}
+    return out

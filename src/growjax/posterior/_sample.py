@@ -1,0 +1,252 @@
+"""NUTS over the priors: the likelihood's terms, the start, the run and its record."""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import time
+from collections.abc import Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import numpyro
+
+from growjax import discrepancy as dc
+from growjax import emulator as em
+from growjax import experiment
+from growjax import params as gp
+from growjax import tolerance as tl
+from growjax.config import Config
+
+from ._checks import diagnostics
+from ._laplace import _scout, bound_start, precondition
+from ._model import (
+    Residuals,
+    build_emulator,
+    direct_mean,
+    emulated_mean,
+    growth_model,
+    tolerance_sensitivity,
+    with_model_tangents,
+)
+from ._priors import Prior, coordinate, paper_priors
+
+
+@dataclasses.dataclass
+class PosteriorResult:
+    """NUTS output: ArviZ InferenceData plus the headline diagnostics."""
+
+    idata: object
+    summary: dict
+    wall_s: float
+    residuals: Residuals | None = None  # the likelihood's discrepancy, samples and tolerances (None: independent)
+    data: tuple = ()  # (times (n,) s, length (n,) m) the posterior was fitted on
+
+
+def _window(times, length, config, window):
+    t0, t1 = window if window is not None else (config.t0, config.t1)
+    keep = (np.asarray(times) >= t0) & (np.asarray(times) <= t1)
+    return np.asarray(times)[keep], np.asarray(length)[keep]
+
+
+def sample(
+    times,
+    length,
+    inputs,
+    base: gp.Parameters | None = None,
+    config: Config | None = None,
+    priors: Sequence[Prior] | None = None,
+    chains: int = 4,
+    warmup: int = 500,
+    samples: int = 500,
+    seed: int = 0,
+    dense_mass: bool = True,
+    target_accept: float = 0.9,
+    window=None,
+    progress: bool = True,
+    emulate: bool | em.Emulator = False,
+    max_tree_depth: int = 10,
+    chain_method: str | None = None,
+    discrepancy: str = "matern32",
+    tolerances: dict | None = None,
+) -> PosteriorResult:
+    """NUTS over the priors and σ given a measured length (m) at ``times`` (s).
+
+    ``emulate``: True samples through an :class:`~growjax.emulator.Emulator` of the model built over
+    the prior box (its validated RMS error joins the noise); an ``Emulator`` is used as given; False
+    (default) runs the model in every gradient (forward mode). ``max_tree_depth``: NUTS's cap on the
+    tree (at most 2^depth − 1 leapfrog steps per draw). ``chain_method``: NumPyro's; None runs the chains
+    ``"vectorized"`` through an emulator, and through the model ``"parallel"`` (one chain per JAX device,
+    each on its own thread: expose CPU cores as devices before JAX starts, as ``growjax posterior`` does)
+    when there are as many devices as chains, else ``"sequential"``: the vmapped forward-mode solve
+    (members stepped together) costs what the chains cost one after another, and the chains' trees, built
+    in lockstep, would wait for the deepest (`benchmarks/nuts_direct.py` measures both).
+
+    ``discrepancy`` and ``tolerances``: the likelihood, as in :func:`growjax.fit.fit` (:func:`growth_model`): the
+    discrepancy's amplitude and time scale are sampled with the parameters; the rig's tolerances enter through
+    the length's sensitivities at the start point (linearised), marginalised exactly.
+
+    Returns InferenceData with posterior, pointwise log-likelihood (for LOO), posterior
+    predictive of the length, observed data and sample stats, and a summary: per-parameter
+    mean and 90 % interval, ``rhat_max``, ``ess_bulk_min``, ``ess_tail_min``,
+    ``divergences``, ``bfmi_min``, ``coverage_90`` (share of measured points inside the 90 %
+    predictive band), ``emulator`` (its error and build time), ``chain_method``, ``coordinates`` (each prior's:
+    ``"numpyro"``, ``"softplus"`` or ``"ridge"``, :func:`bound_start`), ``laplace_s`` (the start and
+    mass matrix through the model, :func:`laplace_unconstrained`, compilation included) and ``wall_s`` (everything).
+    """
+    import arviz as az
+
+    base = base if base is not None else gp.reference()
+    config = (config if config is not None else Config()).replace(adjoint="forward")
+    priors = tuple(priors) if priors is not None else paper_priors()
+    t, y = _window(times, length, config, window)
+    start = time.perf_counter()
+    mean, model_error, emu_info = _mean_length(emulate, priors, base, inputs, config, t, seed, start)
+    residuals, extra_init = _likelihood_terms(discrepancy, tolerances, t, y, mean, priors, base, inputs, config, seed)
+
+    def make_model(mean_length, priors=priors):
+        return functools.partial(growth_model, mean_length=mean_length, priors=priors, model_error=model_error,
+                                 residuals=residuals)
+
+    start_precondition = time.perf_counter()
+    sampled, init_values, inverse_mass = _nuts_start(make_model, priors, mean, y, seed, emulate, extra_init)
+    precondition_s = time.perf_counter() - start_precondition
+    nuts = {"dense_mass": dense_mass, "target_accept": target_accept, "max_tree_depth": max_tree_depth,
+            "chains": chains, "warmup": warmup, "samples": samples, "progress": progress,
+            "chain_method": chain_method or _chain_method(chains, emulate is not False)}
+    mcmc = _run_nuts(make_model(mean, sampled), init_values, inverse_mass, y, seed, emulate is False, **nuts)
+    post = mcmc.get_samples(group_by_chain=True)
+    loglik, predicted = observation_draws(post["length_model"], post["sigma"], model_error, y, seed + 1, residuals,
+                                          post.get("delta_amplitude"), post.get("delta_time_scale"))
+    idata = az.from_numpyro(mcmc, log_likelihood=False, posterior_predictive={"length": predicted})
+    idata.add_groups(log_likelihood={"length": loglik})
+    wall = time.perf_counter() - start
+    summary = diagnostics(idata, priors, y, mcmc, residuals)
+    summary.update({"wall_s": wall, "emulator": emu_info, "laplace_s": precondition_s if emulate is False else None,
+                    "chain_method": mcmc.chain_method, "coordinates": {p.site: coordinate(p) for p in sampled},
+                    "chains": chains, "warmup": warmup, "samples": samples, "discrepancy": discrepancy,
+                    **_likelihood_record(residuals, y)})
+    return PosteriorResult(idata, summary, wall, residuals, (t, y))
+
+
+def _mean_length(emulate, priors, base, inputs, config, t, seed: int, start: float):
+    """(``mean_length`` at the times ``t``, the emulator's RMS error (m, 0 through the model), the emulator's record
+    or None) for :func:`sample`: the model with its own tangents, or an emulator (given, or built over the priors'
+    box, its build time counted from ``start``)."""
+    if emulate is False:
+        mean = with_model_tangents(direct_mean(base, inputs, config, t), [p.name for p in priors])
+        return mean, 0.0, None
+    emu = emulate if isinstance(emulate, em.Emulator) else build_emulator(priors, base, inputs, config, t, seed)
+    if emu.times.shape != t.shape or not np.allclose(np.asarray(emu.times), t):
+        raise ValueError("the emulator was built for other measurement times than these data")
+    emu_info = {"error_rms_m": float(emu.error_rms), "error_max_m": float(emu.error_max),
+                "nodes": dict(zip(emu.names, emu.nodes)), "build_s": time.perf_counter() - start}
+    return emulated_mean(emu), float(emu.error_rms), emu_info
+
+
+def _likelihood_terms(discrepancy: str, tolerances, t, y, mean, priors, base, inputs, config, seed: int):
+    """(:class:`Residuals` or None for independent noise, start values of σ and the discrepancy's sites)."""
+    if discrepancy not in dc.KINDS:
+        raise ValueError(f"discrepancy must be one of {dc.KINDS}, got {discrepancy!r}")
+    tol = tl.budget(base, tolerances, [p.name for p in priors], use_default=tolerances is None and discrepancy != "none")
+    if discrepancy == "none" and not tol:
+        return None, {}
+    residuals, hyper = build_residuals(discrepancy, t, y, mean, priors, base, inputs, config, tol, seed)
+    return residuals, {**residuals.hyper_sites(hyper), "sigma": float(hyper.noise)}
+
+
+def _nuts_start(make_model, priors, mean, y, seed: int, emulate, extra_init: dict):
+    """(priors as sampled, start, inverse mass matrix): :func:`precondition`, then through the model
+    :func:`bound_start`."""
+    init_values, inverse_mass = precondition(make_model(mean), priors, mean, y, seed, optimise=emulate is not False,
+                                             make_model=make_model if emulate is False else None,
+                                             extra_init=extra_init)
+    if emulate is not False:
+        return priors, init_values, inverse_mass
+    return bound_start(make_model, priors, mean, y, init_values, inverse_mass)
+
+
+def _run_nuts(model, init_values, inverse_mass, y, seed: int, forward_mode: bool, *, dense_mass: bool,
+              target_accept: float, max_tree_depth: int, chains: int, warmup: int, samples: int, progress: bool,
+              chain_method: str):
+    """NumPyro's MCMC run of NUTS on ``model`` from ``init_values`` with ``inverse_mass`` (dense, or its diagonal)."""
+    from numpyro.infer import MCMC, NUTS
+
+    kernel = NUTS(model, dense_mass=dense_mass, target_accept_prob=target_accept, max_tree_depth=max_tree_depth,
+                  inverse_mass_matrix=inverse_mass if dense_mass else jnp.diag(inverse_mass),
+                  init_strategy=numpyro.infer.init_to_value(values=init_values),
+                  # through the ODE, forward mode is 5× cheaper than reverse mode through the scan
+                  forward_mode_differentiation=forward_mode)
+    mcmc = MCMC(kernel, num_warmup=warmup, num_samples=samples, num_chains=chains, chain_method=chain_method,
+                progress_bar=progress)
+    mcmc.run(jax.random.PRNGKey(seed), jnp.asarray(y), extra_fields=("diverging", "energy", "num_steps"))
+    return mcmc
+
+
+def _likelihood_record(residuals: Residuals | None, y) -> dict:
+    """The summary's ``tolerances`` {name: relative sd} and ``samples_used``."""
+    tolerances = dict(zip(residuals.tolerance_names, map(float, residuals.tolerance))) if (
+        residuals is not None and residuals.tolerance is not None) else {}
+    return {"tolerances": tolerances,
+            "samples_used": int(np.sum(residuals.observed)) if residuals is not None else int(y.size)}
+
+
+def build_residuals(discrepancy: str, times, length, mean_length, priors, base, inputs, config, tol: dict,
+                    seed: int = 0) -> tuple[Residuals, dc.Hyper]:
+    """The :class:`Residuals` of a posterior and its hyperparameters' start: the samples scored
+    (:func:`growjax.experiment.informative_samples` with a discrepancy), the rig's sensitivities at the scout's
+    best θ, and the hyperparameters' mode given the residuals there."""
+    theta, _, _, _ = _scout(priors, mean_length, length, seed)
+    observed = experiment.informative_samples(length) if discrepancy != "none" else np.ones(len(length), bool)
+    g = u = None
+    if tol:
+        g = tolerance_sensitivity(theta, base, inputs, config, times, tol)
+        u = np.asarray(list(tol.values()))
+    r = np.asarray(length) - np.asarray(jax.jit(mean_length)({k: jnp.asarray(v) for k, v in theta.items()}))
+    hyper = dc.estimate(r, times, discrepancy, g, u, observed)
+    return Residuals(discrepancy, np.asarray(times), observed, g, u, tuple(tol)), hyper
+
+
+def observation_draws(mean_length, sigma, model_error: float, observed, seed: int, residuals: Residuals | None = None,
+                      amplitude=None, time_scale=None):
+    """Pointwise log-likelihood and posterior predictive length (m), both (C, S, T), of every draw.
+
+    ``mean_length`` (C, S, T): the model's length (m) at each draw, which :func:`growth_model` records as
+    ``length_model`` while NUTS samples; ``sigma`` (C, S): the noise scale (m); ``model_error`` (m) joins it as in
+    the model; ``residuals``, ``amplitude`` and ``time_scale`` (C, S): the discrepancy and tolerances, if any. The
+    pointwise terms are then the one-step-ahead log-densities log p(yᵢ | earlier y) (0 at samples not scored),
+    and a predictive draw carries a fresh discrepancy and rig error. Nothing is simulated again: NumPyro's
+    ``Predictive`` and ArviZ's log-likelihood would each run the model once more per draw. Seeded by ``seed``.
+    """
+    from scipy.stats import norm
+
+    mean_length = np.asarray(mean_length, float)
+    scale = np.sqrt(np.asarray(sigma, float) ** 2 + model_error**2)
+    finite = np.isfinite(mean_length)
+    if residuals is None:
+        loglik = np.where(finite, norm.logpdf(np.asarray(observed, float), np.where(finite, mean_length, 0.0),
+                                              scale[..., None]), -np.inf)
+        noise = np.random.default_rng(seed).standard_normal(mean_length.shape)
+        return loglik, mean_length + scale[..., None] * noise
+    shape = mean_length.shape
+    mu = np.where(finite, mean_length, 0.0).reshape(-1, shape[-1])
+    ones = np.ones(shape[:-1])
+    amp = np.zeros(shape[:-1]) if amplitude is None else np.asarray(amplitude, float)
+    ell = ones if time_scale is None else np.asarray(time_scale, float)
+    hyper = dc.Hyper(jnp.asarray(amp.ravel()), jnp.asarray(ell.ravel()), jnp.asarray(scale.ravel()))
+    y = jnp.asarray(observed, float)
+
+    def one(m, h, key):
+        return residuals.pointwise(y, m, h), residuals.replicate(m, h).sample(key)
+
+    keys = jax.random.split(jax.random.PRNGKey(seed), mu.shape[0])
+    loglik, predicted = jax.jit(jax.vmap(one))(jnp.asarray(mu), hyper, keys)
+    loglik = np.where(np.all(finite, axis=-1, keepdims=True), np.asarray(loglik).reshape(shape), -np.inf)
+    return loglik, np.asarray(predicted).reshape(shape)
+
+
+def _chain_method(chains: int, emulated: bool) -> str:
+    if emulated:
+        return "vectorized"
+    return "parallel" if chains > 1 and jax.local_device_count() >= chains else "sequential"
