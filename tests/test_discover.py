@@ -123,7 +123,7 @@ def test_a_base_shift_the_fast_models_own_error_explains_is_no_confounding():
     """Clean reference-made data (10 s, public inputs, σ 0.2 mm, clean seed 2007 of the benchmark matrix). The fast
     configuration's error against the reference shifts the fitted Y by ~6 Pa from the true (given) value, which
     on 1000 samples is 2ΔlogL ≈ 9 > the threshold 6.24, and a leak or folding with Y held absorbed it: the
-    matrix counted a false positive (``confounded``). Allowing for the model's error (m·e²/σ² ≈ 24) gives ``none``;
+    matrix counted a false positive (``confounded``). Allowing for the model's error (m·e²/σ² ≈ 6) gives ``none``;
     without the allowance the same data still report ``confounded``."""
     from growjax import synthetic as sy
 
@@ -133,7 +133,7 @@ def test_a_base_shift_the_fast_models_own_error_explains_is_no_confounding():
     keep = exp.time >= cfg.t0
     res = gd.discover(exp.time[keep], exp["robot_length_m"][keep], inputs, config=cfg)
     assert res.effect == "none" and not res.confounded_with, gd.summary_text(res)
-    assert 10.0 < res.trade_allowance < 50.0
+    assert 2.0 < res.trade_allowance < 50.0
     strict = gd.discover(exp.time[keep], exp["robot_length_m"][keep], inputs, config=cfg, model_error=0.0)
     assert strict.effect == "confounded" and strict.trade_allowance == 0.0, gd.summary_text(strict)
     for name in strict.confounded_with:  # with -s: what the base-held fits gave the confounded candidates

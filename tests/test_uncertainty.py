@@ -198,7 +198,7 @@ def test_discovery_leaves_a_small_smooth_discrepancy_to_the_discrepancy_term():
     from outside the catalogue: no effect is named and nothing is called confounded."""
     from growjax import discover as gd
 
-    folder = REPO / "data" / "discovery"
+    folder = REPO / "src" / "growjax" / "datasets" / "discovery"
     cfg = gj.Config(t1=3.0)
     exp = ex.read(folder / "clean.csv").window(3.0 + 1e-9)
     keep = (exp.time >= cfg.t0) & (exp.time <= cfg.t1)

@@ -361,7 +361,7 @@ class Likelihood(eqx.Module):
         return (evecs * np.clip(evals, 0.0, None)) @ evecs.T
 
 
-HYPER_GRID = (np.geomspace(1e-3, 10.0, 15), np.geomspace(0.1, 10.0, 9), np.geomspace(0.5, 2.0, 5))  # × the mode
+HYPER_GRID = (np.geomspace(1e-3, 10.0, 11), np.geomspace(0.1, 10.0, 7), np.geomspace(0.5, 2.0, 3))  # × the mode
 
 
 def _hyper_grid(hyper) -> dc.Hyper:

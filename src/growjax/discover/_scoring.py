@@ -55,6 +55,7 @@ class Scorer:
     def __init__(self, times, length, sigma: float, discrepancy: str, material: float = MATERIAL_MISFIT):
         self.times, self.sigma, self.kind, self.material = np.asarray(times, float), sigma, discrepancy, material
         self.observed = experiment.informative_samples(length) if discrepancy != "none" else None
+        self.scored = int(np.sum(self.observed)) if self.observed is not None else len(self.times)
         self._cache = {}
 
     def profile(self, residual, kind: str | None = None) -> tuple[float, dc.Hyper]:
@@ -106,12 +107,15 @@ def _pinned(estimate: float, interval) -> bool:
 
 
 def score_candidate(name: str, fitted: CandidateFit, residual, scorer: Scorer, threshold: float,
-                    confounding_correlation: float, held_lr: float = 0.0, trades: bool = False) -> dict:
+                    confounding_correlation: float, held_lr: float = 0.0, trades: bool = False,
+                    allowance: float = 0.0) -> dict:
     """The evidence for candidate ``name`` from its fit ``fitted`` on top of the current model (residuals ``residual``,
     m): 2ΔlogL and its p-value, the Laplace log Bayes factor against a uniform prior on the effect's range, the
     estimate and interval, the correlation with the base parameters, and whether it clears ``threshold``, is pinned,
     lies at its range's edge or is confounded. ``held_lr``: its 2ΔlogL with the base held (first round);
-    ``trades``: whether with the base held it trades with a base parameter (first round)."""
+    ``trades``: whether with the base held it trades with a base parameter (first round); ``allowance``: the
+    2ΔlogL the fitted configuration's own error can buy through a candidate correlated with a base parameter
+    (such a candidate is confounded only above ``threshold + allowance``)."""
     qname, unit, rng = candidate_parameter(name)
     lr = scorer.lr(residual, fitted.residual_m)
     sd = max((fitted.interval_90[qname][1] - fitted.interval_90[qname][0]) / (2 * Z90), 1e-300)
@@ -129,15 +133,15 @@ def score_candidate(name: str, fitted: CandidateFit, residual, scorer: Scorer, t
         # the fit pressed against its range's top (or a signed effect's bottom): the data ask for more
         "at_range_edge": bool(fitted.estimate[qname] >= rng[1] * (1 - 1e-6)
                               or (rng[0] < 0 and fitted.estimate[qname] <= rng[0] * (1 - 1e-6))),
-        "confounded": bool(abs(c) > confounding_correlation and (lr > threshold or trades) and not pinned),
+        "confounded": bool(abs(c) > confounding_correlation and (lr > threshold + allowance or trades) and not pinned),
     }
 
 
 def score_round(fits: dict, residual, scorer: Scorer, threshold: float, confounding_correlation: float,
-                held: dict | None = None) -> dict:
+                held: dict | None = None, allowance: float = 0.0) -> dict:
     """{candidate: :func:`score_candidate`} of a round's ``fits`` {candidate: CandidateFit} on top of the current
     model (residuals ``residual``, m). ``held`` {candidate: (2ΔlogL with the base held, trades)}: the first round's
     base-held evidence (None in later rounds)."""
     return {name: score_candidate(name, fitted, residual, scorer, threshold, confounding_correlation,
-                                  *(held[name] if held is not None else ()))
+                                  *(held[name] if held is not None else (0.0, False)), allowance)
             for name, fitted in fits.items()}

@@ -75,15 +75,16 @@ def discover(
     model_error = default_model_error(config) if model_error is None else model_error
     first = _first_round(fitter, candidates, times, length, discrepancy, material_misfit)
     held_lr, held_trades = _held_round(fitter, first, candidates, threshold)
-    # 2ΔlogL the model's own error can buy a base shift (under the discrepancy, δ carries that error)
-    allowance = times.size * model_error**2 / first.sigma**2 if discrepancy == "none" else 0.0
+    # 2ΔlogL the fitted configuration's own error (a slow drift, too small for the discrepancy to be estimated
+    # from) can buy through a candidate that trades with a base parameter
+    allowance = first.scorer.scored * model_error**2 / first.sigma**2
     misfit_before = first.scorer.misfit(first.base_fit.residual_m)
     # Unstructured residuals at the start: an effect (or a confounding) needs the threshold cleared with the base
     # refitted, never a trade with the base held.
     held = {name: (h, h > threshold + allowance and held_trades[name]
                    and (discrepancy == "none" or misfit_before["structured"])) for name, h in held_lr.items()}
     current, added, evidence, confounded = _rounds(fitter, first, candidates, held, threshold, confounding_correlation,
-                                                   max_effects)
+                                                   max_effects, allowance)
     misfit_after = first.scorer.misfit(current.residual_m)
     # The model's traces at the data's times: the length is the data plus the residual, the pressure comes with the fit.
     before_trace, after_trace = length + first.base_fit.residual_m, length + current.residual_m
@@ -153,7 +154,7 @@ def _held_round(fitter: Fitter, first: _FirstRound, candidates, threshold: float
 
 
 def _rounds(fitter: Fitter, first: _FirstRound, candidates, held: dict, threshold: float,
-            confounding_correlation: float, max_effects: int):
+            confounding_correlation: float, max_effects: int, allowance: float = 0.0):
     """(the final model's fit, the effects added, the evidence per round, {candidate: confounding record}): each
     round scores the remaining candidates on top of the current model (the first round's with ``held``, its
     base-held evidence), records the confounded ones and adds the best clean one, until none clears the threshold,
@@ -170,7 +171,7 @@ def _rounds(fitter: Fitter, first: _FirstRound, candidates, held: dict, threshol
             fits = {candidates[k]: fitter.summarise(o, first.sigma, tuple(added) + (candidates[k],))
                     for k, o in zip(others, outs)}
         scores = score_round(fits, current.residual_m, scorer, threshold, confounding_correlation,
-                             held if round_no == 0 else None)
+                             held if round_no == 0 else None, allowance)
         confounded.update(confounded_with_base(scores))
         evidence.append(scores)
         best = choose(scores, threshold, confounded)

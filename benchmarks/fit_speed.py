@@ -1,0 +1,62 @@
+"""The fit's cost under the discrepancy likelihood against the independent-noise likelihood, in one process.
+
+Run: ``python benchmarks/fit_speed.py [--out benchmarks/results/fit_speed.json]``.
+
+On the shipped synthetic experiment and (where present) the public one, 0–10 s, free Y, the default starts:
+``growjax.fit.fit`` with ``discrepancy="none", tolerances={}`` (independent noise, as the fit was) and with the
+defaults (Matérn-3/2 discrepancy, the default tolerance budget), each run three times; the first run of each
+compiles. Printed: the median warm wall time of each and their ratio (target ≤ 1.5), and the first runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+import growjax as gj
+from growjax import _data
+from growjax import experiment as ex
+from growjax import fit as gf
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "fit_speed.json"))
+    args = ap.parse_args()
+    sources = {"shipped synthetic": _data.default_data_path()}
+    public = ex.shared_experiment_dir()
+    if public is not None:
+        sources["public experiment"] = public / "experiment.csv"
+    out = {}
+    for label, path in sources.items():
+        exp = ex.read(path).window(10.0 + 1e-9)
+        base, config = gj.reference("forward"), gj.Config(t1=10.0)
+        inputs = ex.to_inputs(exp, "forward", base, config.t0, config.t1)
+        row = {}
+        for kind, options in (("independent", {"discrepancy": "none", "tolerances": {}}), ("discrepancy", {})):
+            walls = []
+            for _ in range(args.repeat):
+                clock = time.perf_counter()
+                gf.fit(exp.time, exp["robot_length_m"], inputs, free=["Y"], base=base, config=config, **options)
+                walls.append(time.perf_counter() - clock)
+            row[kind] = {"first_s": walls[0], "warm_s": float(np.median(walls[1:]))}
+        row["ratio_warm"] = row["discrepancy"]["warm_s"] / row["independent"]["warm_s"]
+        row["ratio_first"] = row["discrepancy"]["first_s"] / row["independent"]["first_s"]
+        out[label] = row
+        print(f"{label}: independent {row['independent']['warm_s']:.2f} s, discrepancy {row['discrepancy']['warm_s']:.2f} s "
+              f"warm (ratio {row['ratio_warm']:.2f}); first runs {row['independent']['first_s']:.1f} / "
+              f"{row['discrepancy']['first_s']:.1f} s", flush=True)
+    path = Path(args.out)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(out, indent=1))
+
+
+if __name__ == "__main__":
+    main()
