@@ -211,19 +211,7 @@ def fit(
     tol = tl.budget(base, tolerances, names, use_default=tolerances is None and discrepancy != "none")
     window = _check_window(window, config)
     start_clock = time.perf_counter()
-    if sweep_n < 0 or n_starts < 1:
-        raise ValueError(f"sweep_n must be >= 0 and n_starts >= 1, got {sweep_n} and {n_starts}")
-    if sweep_n == 0:  # no scouting sweep: start at the given values
-        start_values, order = refs[None, :], [0]
-    else:
-        dims = [sw.Dimension(n, *default_range(base, n), log=True) for n in names]
-        measured = (np.asarray(times), np.asarray(length))
-        scout = sw.lhs_sweep(sweep_n, base, inputs, config, dims, seed=seed, measured=measured, window=window)
-        start_values = scout.values
-        order = [i for i in np.argsort(np.nan_to_num(scout.rmse, nan=np.inf)) if scout.status[i] == OK][:n_starts]
-        if not order:
-            raise RuntimeError("no start of the multi-start sweep simulated successfully")
-
+    start_values, order = _starts(base, names, refs, inputs, config, times, length, window, n_starts, sweep_n, seed)
     problem = make_problem(base, names, inputs, config, times, length, pressure, window, sigma_length, sigma_pressure)
     n_len = int(problem.times.size)
     used = (experiment.informative_samples(np.asarray(problem.length)) if discrepancy != "none"
@@ -235,9 +223,48 @@ def fit(
     def model(z):
         return _linearised(z, problem)
 
-    # Least squares from every start (one after another through one compiled solver): consistent under any
-    # correlation of the residuals, and a start that a discrepancy absorbing the misfit cannot trap. Then the
-    # rig's sensitivities there, and generalised least squares alternating with the hyperparameters' mode.
+    zs, costs, oks, z, raw, hyper, converged, likelihood = _solve(model, likelihood, z0s, bounds, max_steps, problem,
+                                                                  tol, discrepancy)
+    _r_w, jac_w = (np.asarray(a) for a in likelihood.whitened(*raw, hyper))
+    starts = [{"start": dict(zip(names, map(float, start_values[i]))),
+               "estimate": dict(zip(names, map(float, refs * np.exp(zs[k])))),
+               "cost": float(costs[k]), "converged": bool(oks[k])} for k, i in enumerate(order)]
+    theta = refs * np.exp(z)
+    if model_error is None:
+        model_error = default_model_error(config)
+    cov, parts, gain = likelihood.covariance(np.asarray(raw[1]), jac_w, hyper, model_error)
+    if discrepancy != "none":  # the hyperparameters are estimated, not known: average over them
+        spread = likelihood.hyperparameter_spread(raw, hyper, cov)
+        parts["hyperparameters"], cov = spread, cov + spread
+    result = _result(names, theta, z, cov, parts, jac_w, hyper, likelihood, raw, starts, converged, bounds,
+                     start_clock, int(np.sum(used)), discrepancy)
+    result.tolerance_gain = {n: {t: float(theta[i] * gain[i, j]) for j, t in enumerate(likelihood.tolerance_names)}
+                             for i, n in enumerate(names)}
+    return result
+
+
+def _starts(base, names, refs, inputs, config, times, length, window, n_starts: int, sweep_n: int, seed: int):
+    """(start values (k, p) SI, the indices of the ``n_starts`` best): a Latin-hypercube scout of ``sweep_n`` sets over
+    each parameter's :func:`default_range` ranked by length RMSE, or the values in ``base`` when ``sweep_n`` is 0."""
+    if sweep_n < 0 or n_starts < 1:
+        raise ValueError(f"sweep_n must be >= 0 and n_starts >= 1, got {sweep_n} and {n_starts}")
+    if sweep_n == 0:  # no scouting sweep: start at the given values
+        return refs[None, :], [0]
+    dims = [sw.Dimension(n, *default_range(base, n), log=True) for n in names]
+    measured = (np.asarray(times), np.asarray(length))
+    scout = sw.lhs_sweep(sweep_n, base, inputs, config, dims, seed=seed, measured=measured, window=window)
+    order = [i for i in np.argsort(np.nan_to_num(scout.rmse, nan=np.inf)) if scout.status[i] == OK][:n_starts]
+    if not order:
+        raise RuntimeError("no start of the multi-start sweep simulated successfully")
+    return scout.values, order
+
+
+def _solve(model, likelihood, z0s, bounds, max_steps: int, problem, tol: dict, discrepancy: str):
+    """Least squares from every start (one after another through one compiled solver: consistent under any
+    correlation of the residuals, and a start that a discrepancy absorbing the misfit cannot trap); the rig's
+    sensitivities at the best; then generalised least squares alternating with the hyperparameters' mode.
+    Returns (z per start, cost per start, converged per start, z, the linearisation at z, the hyperparameters,
+    converged, the likelihood with its tolerances)."""
     solved = [levenberg_marquardt(lambda w: likelihood.weighted(*model(w)), z0, max_steps, LM_TOLERANCE,
                                   bounds=bounds) for z0 in z0s]
     zs, costs, oks = (np.asarray([s[k] for s in solved]) for k in range(3))
@@ -257,22 +284,7 @@ def fit(
         z, raw = np.asarray(z_new), model(jnp.asarray(z_new))
         if np.all(moved <= OUTER_TOLERANCE * sd):
             break
-    _r_w, jac_w = (np.asarray(a) for a in likelihood.whitened(*raw, hyper))
-    starts = [{"start": dict(zip(names, map(float, start_values[i]))),
-               "estimate": dict(zip(names, map(float, refs * np.exp(zs[k])))),
-               "cost": float(costs[k]), "converged": bool(oks[k])} for k, i in enumerate(order)]
-    theta = refs * np.exp(z)
-    if model_error is None:
-        model_error = default_model_error(config)
-    cov, parts, gain = likelihood.covariance(np.asarray(raw[1]), jac_w, hyper, model_error)
-    if discrepancy != "none":  # the hyperparameters are estimated, not known: average over them
-        spread = likelihood.hyperparameter_spread(raw, hyper, cov)
-        parts["hyperparameters"], cov = spread, cov + spread
-    result = _result(names, theta, z, cov, parts, jac_w, hyper, likelihood, raw, starts, converged, bounds,
-                     start_clock, int(np.sum(used)), discrepancy)
-    result.tolerance_gain = {n: {t: float(theta[i] * gain[i, j]) for j, t in enumerate(likelihood.tolerance_names)}
-                             for i, n in enumerate(names)}
-    return result
+    return zs, costs, oks, z, raw, hyper, converged, likelihood
 
 
 # The smallest change of the whitened cost (nats) that matters: a 90 % interval spans 1.35 nats, and the
