@@ -47,6 +47,8 @@ def levenberg_marquardt(linearised, z0, max_steps: int = 100, tol: float = 1e-6,
     (optimistix's LM compiles the model's primal and tangent solves several times into one program and
     needs tens of iterations on residuals that carry the solver's tolerance-level noise; this loop
     compiles one program.)
+    One function: the damping, the active set, the last rejected point and the stall count are the state of
+    one loop, and read best together.
     """
     z = np.asarray(z0, float)
     r, jac = (np.asarray(a) for a in linearised(jnp.asarray(z)))

@@ -225,6 +225,7 @@ def inflow(rod: RodBalance, valves, pressure, length, catheter_length, effect_fo
     ``newton`` (bool array or None): where given, the Newton solve runs only where it is True and the
     one pass where False (``lax.cond``: the pass alone is paid when every velocity-dependent force is
     absent, e.g. the candidates of a superset model switched off).
+    One function: the bracket, the step cap and the stopping tests are the state of one safeguarded loop.
     """
     if iterations > 0 and newton is not None:
         return jax.lax.cond(newton,

@@ -232,6 +232,9 @@ def evaluate(
     simulated window). Rows with invalid parameters are flagged, not simulated. Chunks
     hold ``chunk_size`` rows (default: as many as ``memory_budget_bytes`` allows), rounded
     to a multiple of the device count; the last chunk is padded, so one shape compiles once.
+
+    One function: chunking, placing the chunks on the devices and flagging failed members act on the same
+    arrays in one pass.
     """
     values = np.atleast_2d(np.asarray(values, float))
     names = tuple(gp.resolve_name(base, n) for n in names)
