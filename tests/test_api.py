@@ -10,10 +10,15 @@ import pytest
 
 import growjax as gj
 from growjax import control as gc
+from growjax import discover as gdisc
+from growjax import discrepancy as dc
+from growjax import fit as gfit
+from growjax import posterior as gpost
 from growjax.simulate import simulate_from
 
 ANNOTATED = [gj.simulate, gj.simulate_members, gj.input_breaks, simulate_from, gj.Inputs.jump_times,
-             gj.Inputs.kink_times, gc.optimize_profile, gc.run_closed_loop, gc.Plant.advance]
+             gj.Inputs.kink_times, gc.optimize_profile, gc.run_closed_loop, gc.Plant.advance, gfit.fit,
+             gpost.sample, gpost.forecast, gdisc.discover, dc.log_likelihood, dc.whiten]
 RECORDS = [gj.Trajectory, gc.Target, gc.ProfileResult, gc.ClosedLoopResult, gc.LengthPID]
 
 
@@ -29,7 +34,7 @@ def _shaped(hint) -> bool:
 @pytest.mark.parametrize("fn", ANNOTATED, ids=lambda f: f.__qualname__)
 def test_entry_points_resolve_their_annotations_and_carry_shapes(fn):
     hints = typing.get_type_hints(fn)
-    assert "return" in hints or fn in (gj.Inputs.jump_times,)
+    assert "return" in hints or fn in (gj.Inputs.jump_times, dc.log_likelihood, dc.whiten)
     assert any(_shaped(h) for h in hints.values()), hints
 
 

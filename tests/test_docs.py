@@ -11,6 +11,7 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 
 
+@pytest.mark.docs
 def test_docs_build_strict_with_executed_tutorials(tmp_path):
     pytest.importorskip("mkdocs")
     pytest.importorskip("mkdocs_jupyter")

@@ -27,6 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import numpyro.distributions as _dist
+from jaxtyping import ArrayLike, Float
 
 KINDS = ("matern32", "none")
 
@@ -114,7 +115,7 @@ def kalman_filter(residuals, times, hyper: Hyper, sensitivity=None, tolerance=No
     return v, s, pred, pred_var
 
 
-def log_likelihood(residuals, times, hyper: Hyper, sensitivity=None, tolerance=None, observed=None,
+def log_likelihood(residuals: Float[ArrayLike, " n"], times: Float[ArrayLike, " n"], hyper: Hyper, sensitivity=None, tolerance=None, observed=None,
                    pointwise: bool = False):
     """Exact log-likelihood (nats) of ``residuals`` (n,) m at the ``observed`` samples (default all) under the
     residual model; ``pointwise``: the (n,) one-step-ahead terms log p(yᵢ | earlier observed y), whose sum is
@@ -126,7 +127,8 @@ def log_likelihood(residuals, times, hyper: Hyper, sensitivity=None, tolerance=N
     return terms if pointwise else jnp.sum(terms)
 
 
-def whiten(residuals, times, hyper: Hyper, sensitivity=None, tolerance=None, observed=None):
+def whiten(residuals: Float[ArrayLike, " n"] | Float[ArrayLike, " n k"], times: Float[ArrayLike, " n"], hyper: Hyper,
+           sensitivity=None, tolerance=None, observed=None):
     """Whitened residuals (n,) or (n, k): v/√S, independent N(0, 1) under the model (0 at samples not
     ``observed``). Linear in the residuals, so Gauss–Newton on the whitened residuals and whitened Jacobian
     is generalised least squares."""

@@ -17,6 +17,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import ArrayLike, Float
 from scipy import stats
 
 from growjax import discrepancy as dc
@@ -162,14 +163,14 @@ def _linearised(z, problem: Problem):
 
 
 def fit(
-    times,
-    length,
+    times: Float[ArrayLike, " m"],
+    length: Float[ArrayLike, " m"],
     inputs,
     free: Sequence[str] = ("Y",),
     base: gp.Parameters | None = None,
     config: Config | None = None,
-    pressure=None,
-    window=None,
+    pressure: Float[ArrayLike, " m"] | None = None,
+    window: tuple[float, float] | None = None,
     n_starts: int = 3,
     sweep_n: int = 64,
     seed: int = 0,

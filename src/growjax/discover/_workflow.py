@@ -8,6 +8,7 @@ import time
 from collections.abc import Sequence
 
 import numpy as np
+from jaxtyping import ArrayLike, Float
 from scipy import stats
 
 from growjax import discrepancy as dc
@@ -24,8 +25,8 @@ from ._scoring import MATERIAL_MISFIT, Scorer, noise_from_differences, score_rou
 
 
 def discover(
-    times,
-    length,
+    times: Float[ArrayLike, " m"],
+    length: Float[ArrayLike, " m"],
     inputs,
     *,
     base: gp.Parameters | None = None,

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import ArrayLike, Float
 
 from growjax import discrepancy as dc
 from growjax import emulator as em
@@ -16,9 +16,6 @@ from growjax.emulator import predicted_length
 
 from ._model import Residuals, emulated_mean, growth_model, tolerance_sensitivity
 from ._priors import Prior
-
-if TYPE_CHECKING:
-    from ._sample import PosteriorResult
 
 
 def predictive_band(draws, level: float = 0.9):
@@ -72,7 +69,8 @@ def predict(idata, priors, base, inputs, config, times, seed: int = 0, max_draws
     return np.asarray(mu) + noise
 
 
-def forecast(result: PosteriorResult, priors, base, inputs, config, times, seed: int = 0, max_draws: int = 400):
+def forecast(result, priors, base, inputs, config, times: Float[ArrayLike, " T"], seed: int = 0,
+             max_draws: int = 400) -> Float[np.ndarray, "S T"]:
     """Posterior predictive length draws (S, T), m, at ``times`` (s) beyond or between the data the posterior was
     fitted on, conditioned on them: each draw's model run over the fitted and the new times, its discrepancy
     (and rig terms) at the new times given its residuals at the fitted samples (the Kalman forecast), and fresh

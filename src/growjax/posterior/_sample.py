@@ -11,6 +11,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import numpyro
+from jaxtyping import ArrayLike, Float
 
 from growjax import discrepancy as dc
 from growjax import emulator as em
@@ -51,8 +52,8 @@ def _window(times, length, config, window):
 
 
 def sample(
-    times,
-    length,
+    times: Float[ArrayLike, " m"],
+    length: Float[ArrayLike, " m"],
     inputs,
     base: gp.Parameters | None = None,
     config: Config | None = None,
