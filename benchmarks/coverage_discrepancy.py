@@ -36,6 +36,9 @@ from growjax import fit as gf
 from growjax import tolerance as tl
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "benchmarks"))
+from _environment import environment
+
 sys.path.insert(0, str(REPO / "data"))
 import make_synthetic as mk
 
@@ -146,7 +149,7 @@ def main():
         print(g, summary[g], flush=True)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"summary": summary, "rows": rows, "wall_s": time.perf_counter() - clock}, indent=1))
+    out.write_text(json.dumps({"environment": environment(), "summary": summary, "rows": rows, "wall_s": time.perf_counter() - clock}, indent=1))
 
 
 if __name__ == "__main__":

@@ -25,6 +25,9 @@ import growjax as gj
 from growjax import discover as gd
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "benchmarks"))
+from _environment import environment
+
 sys.path.insert(0, str(REPO / "data"))
 sys.path.insert(0, str(REPO / "benchmarks"))
 import coverage_discrepancy as cd
@@ -87,7 +90,7 @@ def main():
     print(f"none on {none} of {len(rows)} (independent noise: {none_iid}); target >= 19 of 20")
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"t_end_s": args.t_end, "none": none, "none_independent": none_iid, "sets": len(rows),
+    out.write_text(json.dumps({"environment": environment(), "t_end_s": args.t_end, "none": none, "none_independent": none_iid, "sets": len(rows),
                                "rows": rows, "wall_s": time.perf_counter() - clock}, indent=1))
 
 

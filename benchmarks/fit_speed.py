@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -23,6 +24,8 @@ from growjax import experiment as ex
 from growjax import fit as gf
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "benchmarks"))
+from _environment import environment
 
 
 def main():
@@ -55,7 +58,7 @@ def main():
               f"{row['discrepancy']['first_s']:.1f} s", flush=True)
     path = Path(args.out)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(out, indent=1))
+    path.write_text(json.dumps({"environment": environment(), **out}, indent=1))
 
 
 if __name__ == "__main__":

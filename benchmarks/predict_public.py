@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -23,6 +24,8 @@ from growjax import experiment as ex
 from growjax import posterior as gpost
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "benchmarks"))
+from _environment import environment
 
 
 def main():
@@ -66,7 +69,7 @@ def main():
               f"R-hat {res.summary['rhat_max']:.3f}, {res.summary['divergences']} divergences, {nuts_s:.0f} s", flush=True)
     path = Path(args.out)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps({"settings": vars(args), **out}, indent=1))
+    path.write_text(json.dumps({"environment": environment(), "settings": vars(args), **out}, indent=1))
     import matplotlib
 
     matplotlib.use("Agg")

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -26,6 +27,9 @@ from growjax import experiment as ex
 from growjax import fit as gf
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "benchmarks"))
+from _environment import environment
+
 WINDOWS = [(0.0, 10.0), (0.0, 5.0), (5.0, 10.0), (0.0, 3.4), (3.4, 6.7), (6.7, 10.0)]
 PAIRS = [((0.0, 5.0), (5.0, 10.0)), ((0.0, 3.4), (3.4, 6.7)), ((3.4, 6.7), (6.7, 10.0)), ((0.0, 3.4), (6.7, 10.0))]
 LIKELIHOODS = {"discrepancy+tolerances": {"discrepancy": "matern32"},
@@ -81,7 +85,7 @@ def main():
     print(f"0-10 s interval: {width_share:.2f} of the 5-15 kPa box (target <= 0.33)")
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"rows": rows, "pairs": pairs, "interval_share_of_box": width_share,
+    out.write_text(json.dumps({"environment": environment(), "rows": rows, "pairs": pairs, "interval_share_of_box": width_share,
                                "wall_s": time.process_time()}, indent=1))
 
 
