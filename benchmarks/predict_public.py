@@ -19,13 +19,12 @@ from pathlib import Path
 
 import numpy as np
 
-import growjax as gj
-from growjax import experiment as ex
 from growjax import posterior as gpost
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "benchmarks"))
 from _environment import environment
+from _public import public_experiment
 
 
 def main():
@@ -37,12 +36,7 @@ def main():
     ap.add_argument("--split", type=float, default=7.0, help="end of the fitted window, s")
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "predict_public.json"))
     args = ap.parse_args()
-    folder = Path(args.data) if args.data else ex.shared_experiment_dir()
-    if folder is None:
-        raise SystemExit("the public experiment was not found: pass --data DIR")
-    exp = ex.read(Path(folder) / "experiment.csv").window(10.0 + 1e-9)
-    base, config = gj.reference("forward"), gj.Config(t1=10.0)
-    inputs = ex.to_inputs(exp, "forward", base, config.t0, config.t1)
+    exp, base, config, inputs = public_experiment(args.data)
     priors = gpost.paper_priors()
     later = (exp.time > args.split) & (exp.time <= 10.0)
     t_new, y_new = exp.time[later], exp["robot_length_m"][later]

@@ -22,13 +22,12 @@ from pathlib import Path
 
 import numpy as np
 
-import growjax as gj
-from growjax import experiment as ex
 from growjax import fit as gf
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "benchmarks"))
 from _environment import environment
+from _public import public_experiment
 
 WINDOWS = [(0.0, 10.0), (0.0, 5.0), (5.0, 10.0), (0.0, 3.4), (3.4, 6.7), (6.7, 10.0)]
 PAIRS = [((0.0, 5.0), (5.0, 10.0)), ((0.0, 3.4), (3.4, 6.7)), ((3.4, 6.7), (6.7, 10.0)), ((0.0, 3.4), (6.7, 10.0))]
@@ -43,12 +42,7 @@ def main():
     ap.add_argument("--data", default=None, help="folder of the public experiment (default: ../shared/data/mammobot)")
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "windows_public.json"))
     args = ap.parse_args()
-    folder = Path(args.data) if args.data else ex.shared_experiment_dir()
-    if folder is None:
-        raise SystemExit("the public experiment was not found: pass --data DIR")
-    exp = ex.read(Path(folder) / "experiment.csv").window(10.0 + 1e-9)
-    base, config = gj.reference("forward"), gj.Config(t1=10.0)
-    inputs = ex.to_inputs(exp, "forward", base, config.t0, config.t1)
+    exp, base, config, inputs = public_experiment(args.data)
     rows = {}
     for label, options in LIKELIHOODS.items():
         for w in WINDOWS:
