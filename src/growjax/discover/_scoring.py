@@ -115,13 +115,14 @@ def score_candidate(name: str, fitted: CandidateFit, residual, scorer: Scorer, t
     lies at its range's edge or is confounded. ``held_lr``: its 2ΔlogL with the base held (first round);
     ``trades``: whether with the base held it trades with a base parameter (first round); ``allowance``: the
     2ΔlogL the fitted configuration's own error can buy through a candidate correlated with a base parameter
-    (such a candidate is confounded only above ``threshold + allowance``)."""
+    (such a candidate clears, or is confounded, only above ``threshold + allowance``)."""
     qname, unit, rng = candidate_parameter(name)
     lr = scorer.lr(residual, fitted.residual_m)
     sd = max((fitted.interval_90[qname][1] - fitted.interval_90[qname][0]) / (2 * Z90), 1e-300)
     corr = fitted.correlation.get(qname, {})
     _, c = max(corr.items(), key=lambda kv: abs(kv[1]), default=(None, 0.0))
-    pinned = lr > threshold and _pinned(fitted.estimate[qname], fitted.interval_90[qname])
+    bar = threshold + (allowance if abs(c) > confounding_correlation else 0.0)
+    pinned = lr > bar and _pinned(fitted.estimate[qname], fitted.interval_90[qname])
     return {
         "parameter": qname, "unit": unit, "estimate": fitted.estimate[qname],
         "interval_90": fitted.interval_90[qname], "lr_statistic": lr,
@@ -129,11 +130,11 @@ def score_candidate(name: str, fitted: CandidateFit, residual, scorer: Scorer, t
         "log_bayes_factor": 0.5 * lr + math.log(math.sqrt(2 * math.pi) * sd / (rng[1] - max(rng[0], 0.0))),
         "rmse_m": float(np.sqrt(np.mean(fitted.residual_m**2))),
         "lr_statistic_base_held": held_lr, "correlation_with_base": corr,
-        "clears_threshold": bool(lr > threshold), "pinned": bool(pinned),
+        "clears_threshold": bool(lr > bar), "pinned": bool(pinned),
         # the fit pressed against its range's top (or a signed effect's bottom): the data ask for more
         "at_range_edge": bool(fitted.estimate[qname] >= rng[1] * (1 - 1e-6)
                               or (rng[0] < 0 and fitted.estimate[qname] <= rng[0] * (1 - 1e-6))),
-        "confounded": bool(abs(c) > confounding_correlation and (lr > threshold + allowance or trades) and not pinned),
+        "confounded": bool(abs(c) > confounding_correlation and (lr > bar or trades) and not pinned),
     }
 
 
