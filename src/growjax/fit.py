@@ -1,10 +1,12 @@
-"""Gradient fits: least squares of the measured length (and pressure) through the differentiable model.
+"""Gradient fits of the measured length (and pressure) through the differentiable model.
 
-The free parameters are moved in log coordinates z = ln(θ/θ_ref), so every direction is
-O(1) and positivity holds. Residuals are non-dimensional (length / σ_L, pressure / σ_P).
-Levenberg–Marquardt (optimistix, forward-mode Jacobian) starts from the best sets of a
-Latin-hypercube sweep (multi-start). At the optimum the Gauss–Newton covariance
-s²(JᵀJ)⁺ gives intervals, and the eigen-directions of JᵀJ show what the data cannot pin down.
+The free parameters are moved in log coordinates z = ln(θ/θ_ref), so every direction is O(1) and positivity
+holds. Levenberg–Marquardt (:mod:`growjax._least_squares`, forward-mode Jacobian) starts from the best sets of a
+Latin-hypercube sweep; least squares from every start, then generalised least squares under the residual model
+of :mod:`growjax.discrepancy` (a smooth discrepancy plus sensor noise). The intervals are Gauss–Newton's under
+that model, plus the spread over its hyperparameters, the fast configuration's own error and the rig's
+tolerances (:mod:`growjax.tolerance`), reported term by term; the eigen-directions of the whitened J̃ᵀJ̃ show
+what the data cannot pin down.
 """
 
 from __future__ import annotations
