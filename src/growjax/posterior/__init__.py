@@ -3,8 +3,12 @@
 The statistical model reads like its maths::
 
     Y ~ Uniform(5, 15) kPa,  ext ~ Uniform(4000, 10000),  n ~ Uniform(0.9, 1.1)   (the paper's box)
-    σ ~ HalfNormal(1 mm)
-    L_obs(t_i) ~ Normal(L_model(t_i; Y, ext, n), σ)
+    σ ~ HalfNormal(1 mm),  a ~ HalfNormal(2 mm),  ℓ ~ LogNormal(ln 1 s, 1)
+    L_obs = L_model(t; Y, ext, n) + δ(t) + Σ_j g_j(t) b_j + ε,
+    δ ~ GP(0, Matérn-3/2(a, ℓ)),  b_j ~ N(0, u_j²),  ε_i ~ N(0, σ²)
+
+δ (the model discrepancy) and b (the rig's tolerances) are marginalised exactly by a Kalman filter
+(:mod:`growjax.discrepancy`); ``discrepancy="none"`` keeps L_obs(t_i) ~ Normal(L_model(t_i), σ).
 
 NumPyro samples the bounded priors in unconstrained (logit) coordinates, which are O(1).
 The model runs in the fast configuration by default, with forward-mode gradients (or through an
