@@ -86,8 +86,11 @@ def _posterior(s: dict, name: str) -> list[str]:
              f"({s['warmup']} + {s['samples']})"), *_origin_lines(s["fixed_parameters"])]
     for p, v in s["parameters"].items():
         lo, hi = v["interval_90"]
-        if p == "sigma":
-            lines.append(f"  σ = {_mm(v['mean'])} (90 % {_mm(lo)} – {_mm(hi)})")
+        if p in ("sigma", "delta_amplitude"):
+            label = "σ" if p == "sigma" else "discrepancy amplitude"
+            lines.append(f"  {label} = {_mm(v['mean'])} (90 % {_mm(lo)} – {_mm(hi)})")
+        elif p == "delta_time_scale":
+            lines.append(f"  discrepancy time scale = {v['mean']:.2g} s (90 % {lo:.2g} – {hi:.2g} s)")
         else:
             lines.append(f"  {p} = {_value(p, v['mean'])} (90 % {_value(p, lo)} – {_value(p, hi)})")
     lines.append(f"  R-hat max {s['rhat_max']:.3f}, bulk ESS min {s['ess_bulk_min']:.0f}, divergences "

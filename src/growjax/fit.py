@@ -419,14 +419,13 @@ def _tolerance_sensitivity(problem: Problem, z, r0, tol: dict) -> np.ndarray:
     """g (n, q): the length's change, m, per unit ln ψ of each toleranced parameter: the secant from ψ to ψ·e^u, u
     its tolerance (through the fit's own compiled program, the base being one of its leaves; ``r0`` (n,) the
     residuals at z, in units of σ_L)."""
-    n = problem.times.size
-    cols = []
-    for name, u in tol.items():
-        value = gp.get(problem.base, name)
-        shifted = eqx.tree_at(lambda pr: pr.base, problem, gp.replace(problem.base, **{name: value * np.exp(u)}))
-        r1 = np.asarray(_linearised(jnp.asarray(z), shifted)[0])[:n]
-        cols.append((r1 - np.asarray(r0)[:n]) * problem.sigma_length / u)
-    return np.stack(cols, axis=1)
+    n, scale = problem.times.size, problem.sigma_length
+
+    def residual_of(rig):  # m; the data cancel in the secant
+        shifted = eqx.tree_at(lambda pr: pr.base, problem, rig)
+        return np.asarray(_linearised(jnp.asarray(z), shifted)[0])[:n] * scale
+
+    return tl.sensitivity(residual_of, problem.base, tol, reference=np.asarray(r0)[:n] * scale)
 
 
 def _check_window(window, config: Config):

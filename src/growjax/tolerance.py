@@ -10,6 +10,8 @@ budget then reports how much of each fitted parameter's interval each tolerance 
 
 from __future__ import annotations
 
+import numpy as np
+
 from growjax import params as gp
 
 # Relative standard uncertainties (1 sd of ln ψ) of the reference rig, with the reason for each.
@@ -66,3 +68,16 @@ def budget(base: gp.Parameters, overrides: dict | None = None, free=(), use_defa
         if not float(gp.get(base, n)) > 0.0:
             raise ValueError(f"parameter {n} = {gp.get(base, n)} cannot carry a relative tolerance: it is not positive")
     return out
+
+
+def sensitivity(length_of, base: gp.Parameters, tol: dict, reference=None) -> np.ndarray:
+    """g (n, q): the length's change, m, per unit ln ψ of each toleranced parameter of ``tol`` {name: u}: the secant
+    from ψ to ψ·e^u. ``length_of(rig) → (n,)`` m is the model's length for a rig (the caller's own compiled run);
+    ``reference`` (n,) m its value at ``base`` if already known. RuntimeError where a run failed."""
+    l0 = np.asarray(length_of(base) if reference is None else reference, float)
+    cols = [(np.asarray(length_of(gp.replace(base, **{n: gp.get(base, n) * np.exp(u)})), float) - l0) / u
+            for n, u in tol.items()]
+    g = np.stack(cols, axis=1)
+    if not np.all(np.isfinite(g)):
+        raise RuntimeError("the model failed while measuring the rig's tolerance sensitivities")
+    return g

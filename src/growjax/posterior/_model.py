@@ -15,6 +15,7 @@ import numpyro.distributions as dist
 from growjax import discrepancy as dc
 from growjax import emulator as em
 from growjax import params as gp
+from growjax import tolerance as tl
 from growjax.emulator import predicted_length, sample_times
 from growjax.simulate import as_arrays, input_breaks, length_jacobian
 from growjax.trajectory import OK
@@ -158,13 +159,7 @@ def tolerance_sensitivity(theta: dict, base, inputs, config, times, tol: dict) -
     from ψ to ψ·e^u at θ (one compiled run of the model, the rig as its argument)."""
     times = jnp.asarray(times)
     run = jax.jit(lambda b: predicted_length(theta, b, inputs, config, times))
-    base = as_arrays(base)
-    l0 = np.asarray(run(base))
-    cols = [(np.asarray(run(gp.replace(base, **{n: gp.get(base, n) * np.exp(u)}))) - l0) / u for n, u in tol.items()]
-    g = np.stack(cols, axis=1)
-    if not np.all(np.isfinite(g)):
-        raise RuntimeError("the model failed while measuring the rig's tolerance sensitivities")
-    return g
+    return tl.sensitivity(run, as_arrays(base), tol)
 
 
 def value_and_jacobian(mean_length, names):
