@@ -19,10 +19,7 @@ from growjax import tolerance as tl
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "data"))
-sys.path.insert(0, str(REPO / "benchmarks"))
 import make_synthetic as mk
-from coverage_discrepancy import ar1 as _ar1  # the coverage study's own perturbations
-from coverage_discrepancy import smooth_perturbation as _smooth
 
 Y = "robot.yield_pressure"
 
@@ -91,6 +88,21 @@ def test_tolerances_parse_and_resolve():
 
 
 # -- fits of reference-made data (the shipped reference traces, fitted by the fast configuration) ------------
+
+def _smooth(rng, t, size, scale):
+    k = np.exp(-0.5 * ((t[:, None] - t[None, :]) / scale) ** 2) + 1e-9 * np.eye(t.size)
+    d = np.linalg.cholesky(k) @ rng.standard_normal(t.size)
+    return d * size / np.sqrt(np.mean(d**2))
+
+
+def _ar1(rng, t, sd, tau):
+    phi = np.exp(-0.01 / tau)
+    x = np.empty(t.size)
+    x[0] = rng.normal(0.0, sd)
+    for i in range(1, t.size):
+        x[i] = phi * x[i - 1] + rng.normal(0.0, sd * np.sqrt(1.0 - phi**2))
+    return x
+
 
 @pytest.fixture(scope="module")
 def reference():
