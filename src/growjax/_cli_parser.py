@@ -54,22 +54,21 @@ def _shared(p: argparse.ArgumentParser, command: str, fidelity_default: str = "f
     p.add_argument("--json", metavar="FILE", default=None, help="write the full summary as JSON to FILE ('-': stdout)")
 
 
-def _likelihood(p: argparse.ArgumentParser, tolerances: bool = True):
+def _likelihood(p: argparse.ArgumentParser):
     """The options of the likelihood that fit, posterior and discover share."""
     p.add_argument("--t-start", type=float, default=None, metavar="S",
                    help="score only the data from this time on, s (the model still runs from the start)")
     p.add_argument("--discrepancy", choices=["matern32", "none"], default="matern32",
                    help="matern32: the model plus a smooth Matérn-3/2 discrepancy plus sensor noise; none: "
                         "independent noise around an exact model")
-    if tolerances:
-        p.add_argument("--tolerance", action="append", default=[], metavar="NAME=REL",
-                       help="relative standard uncertainty of a fixed parameter, e.g. Kp=0.1 (repeat; overrides "
-                            "the default budget of `growjax params`; 'none' drops the budget)")
+    p.add_argument("--tolerance", action="append", default=[], metavar="NAME=REL",
+                   help="relative standard uncertainty of a fixed parameter, e.g. Kp=0.1 (repeat; overrides "
+                        "the default budget of `growjax params`; 'none' drops the budget)")
 
 
 
 def tolerances_of(args):
-    """The ``tolerances`` argument of fit and posterior from ``--tolerance`` (None: the default budget)."""
+    """The ``tolerances`` argument of fit, posterior and discover from ``--tolerance`` (None: the default budget)."""
     from growjax import tolerance as tl
 
     if not args.tolerance:
@@ -137,7 +136,7 @@ def build_parser():
     dis.add_argument("--candidates", nargs="+", metavar="EFFECT", type=_effect_name, default=None,
                      help="catalogue effects to test (None: all of `growjax effects`)")
     dis.add_argument("--workers", type=int, default=None, help="fits run at a time (None: one per CPU core)")
-    _likelihood(dis, tolerances=False)
+    _likelihood(dis)
 
     ctl = sub.add_parser("control", formatter_class=fmt,
                          help="length control design: open-loop profile, feedback, MPC")

@@ -73,7 +73,8 @@ def _fit(s: dict, name: str) -> list[str]:
     d = s.get("discrepancy") or {}
     if d.get("kind") == "matern32":
         lines.append(f"  discrepancy {_mm(d['amplitude_m'])} over {d['time_scale_s']:.2g} s, noise "
-                     f"{_mm(d['noise_m'])}; {s['samples_used']} samples scored")
+                     f"{_mm(d['noise_m'])} correlated over {1e3 * d.get('noise_time_s', 0.0):.2g} ms; "
+                     f"{s['samples_used']} samples scored")
     elif d:
         lines.append(f"  independent noise {_mm(d['noise_m'])}")
     lines.append(f"  length RMSE {_mm(s['rmse_length_m'])}; {s['wall_s']:.1f} s")
@@ -91,6 +92,8 @@ def _posterior(s: dict, name: str) -> list[str]:
             lines.append(f"  {label} = {_mm(v['mean'])} (90 % {_mm(lo)} – {_mm(hi)})")
         elif p == "delta_time_scale":
             lines.append(f"  discrepancy time scale = {v['mean']:.2g} s (90 % {lo:.2g} – {hi:.2g} s)")
+        elif p == "noise_time":
+            lines.append(f"  noise correlation time = {1e3 * v['mean']:.2g} ms (90 % {1e3 * lo:.2g} – {1e3 * hi:.2g} ms)")
         else:
             lines.append(f"  {p} = {_value(p, v['mean'])} (90 % {_value(p, lo)} – {_value(p, hi)})")
     lines.append(f"  R-hat max {s['rhat_max']:.3f}, bulk ESS min {s['ess_bulk_min']:.0f}, divergences "

@@ -319,7 +319,7 @@ def discover_command(args) -> dict:
     keep = (exp.time >= t0) & (exp.time <= t1)
     res = gd.discover(exp.time[keep], exp["robot_length_m"][keep], inputs, base=base, config=config,
                       candidates=args.candidates or None, progress=True, workers=args.workers,
-                      discrepancy=args.discrepancy)
+                      discrepancy=args.discrepancy, tolerances=tolerances_of(args))
     out = _out(args)
     figure = discovery_figure(res, out / "discover.png", title=f"{data.name}: {res.effect}")
     return {"command": "discover", "data": str(data), "drive": args.drive, "t_end_s": args.t_end,

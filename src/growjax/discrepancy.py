@@ -5,12 +5,13 @@ The measured length is written
     y(tᵢ) = L(tᵢ; θ) + δ(tᵢ) + Σⱼ gⱼ(tᵢ) bⱼ + εᵢ,
 
 with L the simulated length, δ a zero-mean Gaussian process in time (Matérn ν = 3/2, amplitude ``a`` m,
-time scale ``ℓ`` s), εᵢ independent sensor noise (sd ``σ`` m), and the last sum the linearised effect of
+time scale ``ℓ`` s), ε sensor noise (sd ``σ`` m, correlation time ``τ`` s: an Ornstein–Uhlenbeck process,
+corr(εᵢ, εⱼ) = exp(−|tᵢ − tⱼ|/τ); τ = 0 is independent noise), and the last sum the linearised effect of
 the fixed rig parameters held at their nominal values: bⱼ ~ N(0, uⱼ²) is parameter j's relative error
 (its tolerance uⱼ) and gⱼ(t) = ∂L/∂ln ψⱼ the length's sensitivity to it.
 
-A Matérn-3/2 process is the output of a two-state linear SDE, so this covariance is that of a linear
-Gaussian state-space model: a Kalman filter (:func:`kalman_filter`, a ``lax.scan``) gives the exact likelihood
+A Matérn-3/2 process is the output of a two-state linear SDE and the noise of a one-state one, so this
+covariance is that of a linear Gaussian state-space model: a Kalman filter (:func:`kalman_filter`, a ``lax.scan``) gives the exact likelihood
 in O(n) for any (also irregular) sampling, the whitened residuals for Gauss–Newton, forecasts and
 draws. The tolerance terms are static states of the same filter.
 
@@ -36,33 +37,43 @@ AMPLITUDE_SCALE = 2e-3  # m, half-normal scale of a: model errors up to a few mm
 TIME_SCALE_MEDIAN = 1.0  # s, log-normal median of ℓ: the drive's pulse period (1.3 s) to the whole run
 TIME_SCALE_LOG_SD = 1.0  # 90 % of the prior's mass on 0.19–5.2 s
 NOISE_SCALE = 1e-3  # m, half-normal scale of σ
+NOISE_TIME_MEDIAN = 0.03  # s, log-normal median of τ: a tracker's noise spans a few video frames
+NOISE_TIME_LOG_SD = 1.5  # 90 % of the prior's mass on 2.5 ms – 0.36 s, below the discrepancy's time scale
+NOISE_TIME_BOUNDS = (1e-4, 10.0)  # s, the estimate's search range
+_JITTER = 1e-24  # m², keeps an innovation variance positive where two samples coincide
 
 
 class Hyper(eqx.Module):
     """Hyperparameters of the residual model: discrepancy amplitude ``a`` (m), time scale ``ell`` (s), noise
-    ``sigma`` (m). ``a = 0`` is independent noise alone."""
+    sd ``sigma`` (m) and the noise's correlation time ``tau`` (s; 0: independent). ``a = 0`` is noise alone."""
 
     amplitude: jax.Array
     time_scale: jax.Array
     noise: jax.Array
+    noise_time: jax.Array
 
     @classmethod
-    def of(cls, amplitude, time_scale, noise) -> Hyper:
+    def of(cls, amplitude, time_scale, noise, noise_time=0.0) -> Hyper:
         f = lambda x: jnp.asarray(x, float)
-        return cls(f(amplitude), f(time_scale), f(noise))
+        return cls(f(amplitude), f(time_scale), f(noise), f(noise_time))
 
     def as_dict(self) -> dict:
         return {"amplitude_m": float(self.amplitude), "time_scale_s": float(self.time_scale),
-                "noise_m": float(self.noise)}
+                "noise_m": float(self.noise), "noise_time_s": float(self.noise_time)}
 
 
 def _transition(dt, hyper: Hyper):
-    """(A (2, 2), Q (2, 2)): the Matérn-3/2 state's transition over dt (s) and the noise it adds."""
+    """(A (3, 3), Q (3, 3), stationary covariance (3, 3)) of the state (δ, δ', ε) over dt (s): the Matérn-3/2
+    pair and the noise's Ornstein–Uhlenbeck state (for τ = 0 it forgets itself at every sample)."""
     lam = jnp.sqrt(3.0) / hyper.time_scale
     a2 = hyper.amplitude**2
-    stationary = jnp.diag(jnp.stack([a2, lam**2 * a2]))
+    s2 = hyper.noise**2
+    stationary = jnp.diag(jnp.stack([a2, lam**2 * a2, s2]))
     e = jnp.exp(-lam * dt)
-    trans = e * jnp.array([[1.0 + lam * dt, dt], [-(lam**2) * dt, 1.0 - lam * dt]])
+    tau = hyper.noise_time
+    rho = jnp.where(tau > 0, jnp.exp(-dt / jnp.where(tau > 0, tau, 1.0)), 0.0)
+    smooth = e * jnp.array([[1.0 + lam * dt, dt], [-(lam**2) * dt, 1.0 - lam * dt]])
+    trans = jax.scipy.linalg.block_diag(smooth, rho[None, None])
     return trans, stationary - trans @ stationary @ trans.T, stationary
 
 
@@ -71,8 +82,9 @@ def kalman_filter(residuals, times, hyper: Hyper, sensitivity=None, tolerance=No
 
     ``sensitivity`` (n, q) and ``tolerance`` (q,) add the rig terms Σⱼ gⱼ(t) bⱼ, bⱼ ~ N(0, uⱼ²); ``observed``
     (n,) bool marks the samples that update the filter (default all): at the others the filter only
-    predicts. Returns (innovations (n,) or (n, k) m, their variances (n,) m², predicted δ + rig term
-    (n,) or (n, k) m and its variance (n,) m² before each update).
+    predicts. Returns (innovations (n,) or (n, k) m, their variances (n,) m², the predicted residual
+    δ + rig term + ε (n,) or (n, k) m and its variance (n,) m² before each update; the innovation is the
+    residual less that prediction, so the two variances are one).
     """
     r = jnp.asarray(residuals, float)
     vector = r.ndim == 1
@@ -86,7 +98,6 @@ def kalman_filter(residuals, times, hyper: Hyper, sensitivity=None, tolerance=No
     _, _, stationary = _transition(0.0, hyper)
     p0 = jax.scipy.linalg.block_diag(stationary, jnp.diag(u2)) if q else stationary
     dts = jnp.diff(t, prepend=t[0])
-    s2 = hyper.noise**2
 
     def step(carry, inp):
         m, p = carry
@@ -96,11 +107,11 @@ def kalman_filter(residuals, times, hyper: Hyper, sensitivity=None, tolerance=No
         qn = jax.scipy.linalg.block_diag(q_d, jnp.zeros((q, q))) if q else q_d
         m = a @ m
         p = a @ p @ a.T + qn
-        h = jnp.concatenate([jnp.array([1.0, 0.0]), gk])
+        h = jnp.concatenate([jnp.array([1.0, 0.0, 1.0]), gk])
         ph = p @ h
-        pred_var = h @ ph
-        s = pred_var + s2
+        s = h @ ph + _JITTER
         pred = h @ m
+        pred_var = s
         v = y - pred
         gain = jnp.where(ok, ph / s, 0.0)
         m = m + gain[:, None] * v[None, :]
@@ -108,7 +119,7 @@ def kalman_filter(residuals, times, hyper: Hyper, sensitivity=None, tolerance=No
         p = 0.5 * (p + p.T)
         return (m, p), (v, s, pred, pred_var)
 
-    init = (jnp.zeros((2 + q, k)), p0)
+    init = (jnp.zeros((3 + q, k)), p0)
     _, (v, s, pred, pred_var) = jax.lax.scan(step, init, (dts, r, g, obs))
     if vector:
         v, pred = v[:, 0], pred[:, 0]
@@ -141,28 +152,30 @@ def whiten(residuals: Float[ArrayLike, " n"] | Float[ArrayLike, " n k"], times: 
 
 
 def forecast(residuals, times, observed, hyper: Hyper, sensitivity=None, tolerance=None):
-    """Predictive mean (n,) m and variance (n,) m² of δ + rig term at every sample, conditioned on the residuals
-    at the ``observed`` (n,) samples before it (the filter's prediction; beyond the last observed sample,
-    the forecast). Add σ² for a new measurement's variance."""
+    """Predictive mean (n,) m and variance (n,) m² of a measurement's residual (δ + rig term + noise) at every
+    sample, conditioned on the residuals at the ``observed`` (n,) samples before it (the filter's prediction;
+    beyond the last observed sample, the forecast)."""
     _, _, pred, pred_var = kalman_filter(residuals, times, hyper, sensitivity, tolerance, observed)
     return pred, pred_var
 
 
-def sample(key, times, hyper: Hyper, shape=()):
-    """Draws of δ at ``times`` (n,) from the Matérn-3/2 prior: shape ``shape + (n,)`` m (no noise)."""
+def sample(key, times, hyper: Hyper, shape=(), noise: bool = False):
+    """Draws of δ at ``times`` (n,) from the Matérn-3/2 prior, plus the sensor noise ε if ``noise``: shape
+    ``shape + (n,)`` m."""
     t = jnp.asarray(times, float)
     dts = jnp.diff(t, prepend=t[0])
     _, _, stationary = _transition(0.0, hyper)
     k0, k1 = jax.random.split(key)
-    x0 = jax.random.normal(k0, shape + (2,)) * jnp.sqrt(jnp.diag(stationary))
-    xi = jax.random.normal(k1, (t.size,) + shape + (2,))
+    x0 = jax.random.normal(k0, shape + (3,)) * jnp.sqrt(jnp.diag(stationary))
+    xi = jax.random.normal(k1, (t.size,) + shape + (3,))
+    h = jnp.array([1.0, 0.0, 1.0 if noise else 0.0])
 
     def step(x, inp):
         dt, e = inp
         a, q, _ = _transition(dt, hyper)
-        chol = jnp.linalg.cholesky(q + 1e-30 * jnp.eye(2))
+        chol = jnp.linalg.cholesky(q + 1e-30 * jnp.eye(3))
         x = x @ a.T + e @ chol.T
-        return x, x[..., 0]
+        return x, x @ h
 
     _, d = jax.lax.scan(step, x0, (dts, xi))
     return jnp.moveaxis(d, 0, -1)
@@ -175,19 +188,29 @@ def kernel(times, hyper: Hyper) -> np.ndarray:
     return float(hyper.amplitude) ** 2 * (1.0 + x) * np.exp(-x)
 
 
+def noise_kernel(times, hyper: Hyper) -> np.ndarray:
+    """Dense covariance (n, n) m² of the sensor noise at ``times``: σ² exp(−|Δt|/τ) (σ² I for τ = 0)."""
+    t = np.asarray(times, float)
+    tau = float(hyper.noise_time)
+    dt = np.abs(t[:, None] - t[None, :])
+    corr = np.exp(-dt / tau) if tau > 0 else (dt == 0).astype(float)
+    return float(hyper.noise) ** 2 * corr
+
+
 def log_prior(hyper: Hyper, amplitude_scale: float = AMPLITUDE_SCALE, noise_scale: float = NOISE_SCALE,
               time_scale_median: float = TIME_SCALE_MEDIAN, time_scale_log_sd: float = TIME_SCALE_LOG_SD):
-    """Log density (up to a constant) of the hyperparameters' priors, in the log coordinates (ln a, ln ℓ, ln σ):
-    a ~ HalfNormal, ℓ ~ LogNormal, σ ~ HalfNormal (the Jacobians of the logs included)."""
-    a, ell, s = hyper.amplitude, hyper.time_scale, hyper.noise
+    """Log density (up to a constant) of the hyperparameters' priors, in the log coordinates (ln a, ln ℓ, ln σ,
+    ln τ): a ~ HalfNormal, ℓ ~ LogNormal, σ ~ HalfNormal, τ ~ LogNormal (the Jacobians of the logs included)."""
+    a, ell, s, tau = hyper.amplitude, hyper.time_scale, hyper.noise, hyper.noise_time
     return (-0.5 * (a / amplitude_scale) ** 2 + jnp.log(a)
             - 0.5 * ((jnp.log(ell) - jnp.log(time_scale_median)) / time_scale_log_sd) ** 2
-            - 0.5 * (s / noise_scale) ** 2 + jnp.log(s))
+            - 0.5 * (s / noise_scale) ** 2 + jnp.log(s)
+            - 0.5 * ((jnp.log(tau) - jnp.log(NOISE_TIME_MEDIAN)) / NOISE_TIME_LOG_SD) ** 2)
 
 
 def _negative_log_posterior(log_hyper, residuals, times, sensitivity, tolerance, observed, kind):
     if kind == "none":
-        hyper = Hyper(jnp.asarray(0.0), jnp.asarray(1.0), jnp.exp(log_hyper[2]))
+        hyper = Hyper.of(0.0, 1.0, jnp.exp(log_hyper[2]), 0.0)
         return -(log_likelihood(residuals, times, hyper, sensitivity, tolerance, observed) - 0.5 * (hyper.noise / NOISE_SCALE) ** 2
                  + jnp.log(hyper.noise))
     hyper = Hyper(*jnp.exp(log_hyper))
@@ -201,9 +224,9 @@ def estimate(residuals, times, kind: str = "matern32", sensitivity=None, toleran
              start: Hyper | None = None) -> Hyper:
     """Hyperparameters at the mode of their posterior given ``residuals`` (n,) m (the model's θ held fixed).
 
-    ``kind="none"``: σ alone (a = 0). Quasi-Newton (L-BFGS-B) in the log coordinates, from ``start`` or from
-    a spread of starts (the likelihood can have one mode with δ absorbing the residual and one with the noise
-    doing so).
+    ``kind="none"``: σ alone (a = 0, τ = 0). Quasi-Newton (L-BFGS-B) in the log coordinates, from ``start`` or
+    from a spread of starts (the likelihood can have one mode with δ absorbing the residual and one with the
+    noise doing so).
     """
     from scipy.optimize import minimize
 
@@ -217,22 +240,26 @@ def estimate(residuals, times, kind: str = "matern32", sensitivity=None, toleran
     rms = max(float(np.sqrt(np.mean(np.asarray(r)[np.asarray(obs)] ** 2))), 1e-7)
     if start is not None:
         starts = [np.log([float(start.amplitude) if kind != "none" else 1.0, float(start.time_scale),
-                          float(start.noise)])]
+                          float(start.noise), max(float(start.noise_time), NOISE_TIME_BOUNDS[0])])]
     elif kind == "none":
-        starts = [np.log([1.0, 1.0, rms])]
+        starts = [np.log([1.0, 1.0, rms, NOISE_TIME_MEDIAN])]
     else:
-        starts = [np.log([rms, TIME_SCALE_MEDIAN, 0.3 * rms]), np.log([0.3 * rms, 0.2, rms])]
+        starts = [np.log([rms, TIME_SCALE_MEDIAN, 0.3 * rms, NOISE_TIME_MEDIAN]),
+                  np.log([0.3 * rms, 0.2, rms, NOISE_TIME_MEDIAN])]
 
     def fun(x):
         f, grad = _objective(jnp.asarray(x), r, t, g, u, obs, kind)
         f, grad = float(f), np.asarray(grad, float)
-        return (f, grad) if np.isfinite(f) and np.all(np.isfinite(grad)) else (1e300, np.zeros(3))
+        return (f, grad) if np.isfinite(f) and np.all(np.isfinite(grad)) else (1e300, np.zeros(4))
 
-    bounds = [(np.log(1e-9), np.log(1.0)), (np.log(1e-3), np.log(1e3)), (np.log(1e-9), np.log(1.0))]
-    best = min((minimize(fun, x0, jac=True, method="L-BFGS-B", bounds=bounds) for x0 in starts),
+    bounds = [(np.log(1e-9), np.log(1.0)), (np.log(1e-3), np.log(1e3)), (np.log(1e-9), np.log(1.0)),
+              tuple(np.log(NOISE_TIME_BOUNDS))]
+    # stop at a projected gradient of 1e-3 nats per unit of ln h: the mode to well within its own spread
+    best = min((minimize(fun, x0, jac=True, method="L-BFGS-B", bounds=bounds, options={"gtol": 1e-3})
+                for x0 in starts),
                key=lambda res: res.fun)
-    a, ell, s = np.exp(best.x)
-    return Hyper.of(0.0 if kind == "none" else a, ell, s)
+    a, ell, s, tau = np.exp(best.x)
+    return Hyper.of(0.0, ell, s, 0.0) if kind == "none" else Hyper.of(a, ell, s, tau)
 
 
 def distribution(mean, times, hyper: Hyper, sensitivity=None, tolerance=None, observed=None):
@@ -263,10 +290,9 @@ class MeasuredLength(_dist.Distribution):
                               self.observed, pointwise=True)
 
     def sample(self, key, sample_shape=()):
-        k_delta, k_noise, k_rig = jax.random.split(key, 3)
+        k_delta, k_rig = jax.random.split(key)
         shape = tuple(sample_shape)
-        y = self.model + sample(k_delta, self.times, self.hyper, shape)
-        y = y + self.hyper.noise * jax.random.normal(k_noise, shape + self.model.shape[-1:])
+        y = self.model + sample(k_delta, self.times, self.hyper, shape, noise=True)
         if self.sensitivity is not None:
             b = jax.random.normal(k_rig, shape + (self.sensitivity.shape[1],)) * self.tolerance
             y = y + b @ self.sensitivity.T

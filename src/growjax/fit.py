@@ -81,7 +81,7 @@ class FitResult:
     wall_s: float
     status: str
     at_bound: tuple = ()  # parameters whose estimate ended on an edge of its physical range
-    discrepancy: dict = dataclasses.field(default_factory=dict)  # kind, amplitude_m, time_scale_s, noise_m
+    discrepancy: dict = dataclasses.field(default_factory=dict)  # kind, amplitude_m, time_scale_s, noise_m, noise_time_s
     budget: dict = dataclasses.field(default_factory=dict)  # {name: {source: sd, SI}}: noise, discrepancy, tolerances
     tolerances: dict = dataclasses.field(default_factory=dict)  # {parameter: relative sd} carried
     samples_used: int = 0  # length samples the likelihood scored (an interpolated record: its keyframes)
@@ -219,7 +219,7 @@ def fit(
     n_len = int(problem.times.size)
     used = (experiment.informative_samples(np.asarray(problem.length)) if discrepancy != "none"
             else np.ones(n_len, bool))
-    likelihood = Likelihood(problem.times, jnp.asarray(used), sigma_length, n_len)
+    likelihood = Likelihood(problem.times, jnp.asarray(used), jnp.asarray(np.flatnonzero(used)), sigma_length, n_len)
     bounds = physical_bounds(base, names, refs)
     z0s = jnp.log(jnp.asarray(start_values[order]) / refs)
 
@@ -303,6 +303,7 @@ class Likelihood(eqx.Module):
 
     times: jax.Array  # (n,) s, the scored samples
     used: jax.Array  # (n,) bool, the samples the likelihood sees
+    index: jax.Array  # (n_used,) int, their rows (the filter runs over them alone: exact, the process is Markov)
     sigma_length: float = eqx.field(static=True)
     n_len: int = eqx.field(static=True)
     sensitivity: jax.Array | None = None  # (n, q) m per unit ln ψ
@@ -310,7 +311,7 @@ class Likelihood(eqx.Module):
     tolerance_names: tuple = eqx.field(static=True, default=())
 
     def with_tolerances(self, sensitivity, tol: dict):
-        return Likelihood(self.times, self.used, self.sigma_length, self.n_len, jnp.asarray(sensitivity),
+        return Likelihood(self.times, self.used, self.index, self.sigma_length, self.n_len, jnp.asarray(sensitivity),
                           jnp.asarray(list(tol.values())), tuple(tol))
 
     def weighted(self, r, jac):
@@ -322,7 +323,8 @@ class Likelihood(eqx.Module):
         return _whitened(self, r, jac, hyper)
 
     def estimate(self, r, kind, start=None):
-        return dc.estimate(np.asarray(r)[: self.n_len] * self.sigma_length, self.times, kind, observed=self.used,
+        index = np.asarray(self.index)
+        return dc.estimate(np.asarray(r)[: self.n_len][index] * self.sigma_length, np.asarray(self.times)[index], kind,
                            start=start)
 
     def covariance(self, jac, jac_w, hyper, model_error: float = 0.0):
@@ -336,7 +338,7 @@ class Likelihood(eqx.Module):
         used = np.asarray(self.used)
         t = np.asarray(self.times)[used]
         j_len = jac[: self.n_len][used] * self.sigma_length  # m per unit z
-        kernels = {"noise": float(hyper.noise) ** 2 * np.eye(t.size)}
+        kernels = {"noise": dc.noise_kernel(t, hyper)}
         if float(hyper.amplitude) > 0:
             kernels["discrepancy"] = dc.kernel(t, hyper)
         a = cov @ np.linalg.solve(sum(kernels.values()), j_len).T  # (p, n): ln θ per metre of residual
@@ -358,7 +360,8 @@ class Likelihood(eqx.Module):
     def hyperparameter_spread(self, raw, hyper, cov) -> np.ndarray:
         """The covariance (p, p) of z that the hyperparameters' own uncertainty adds.
 
-        On a grid around their mode (amplitude, time scale and noise, log-spaced), each point h is weighted by
+        On a grid around their mode (amplitude, time scale and noise, log-spaced; the noise's correlation time
+        held at its mode, a nuisance the data pin down where it matters), each point h is weighted by
         its posterior given the data, θ integrated out by Laplace at the linearisation ``raw``: the
         log-likelihood at the Gauss–Newton optimum ẑ(h), −½ log det J̃ᵀJ̃ and the hyperparameters' prior. The
         spread is the weighted Σ_h [C(h) + (ẑ(h) − ẑ)(ẑ(h) − ẑ)ᵀ] minus the covariance ``cov`` at the mode
@@ -382,26 +385,27 @@ HYPER_GRID = (np.geomspace(1e-3, 10.0, 11), np.geomspace(0.1, 10.0, 7), np.geoms
 def _hyper_grid(hyper) -> dc.Hyper:
     a, ell, s = (np.ravel(x) for x in np.meshgrid(*HYPER_GRID, indexing="ij"))
     amp = np.maximum(float(hyper.amplitude), 1e-3 * float(hyper.noise)) * a
-    return dc.Hyper(jnp.asarray(amp), jnp.asarray(float(hyper.time_scale) * ell), jnp.asarray(float(hyper.noise) * s))
+    return dc.Hyper(jnp.asarray(amp), jnp.asarray(float(hyper.time_scale) * ell), jnp.asarray(float(hyper.noise) * s),
+                    jnp.full(amp.shape, float(hyper.noise_time)))
 
 
 @eqx.filter_jit
 def _hyper_scan(likelihood: Likelihood, r, jac, grid: dc.Hyper):
     """Per grid point: log weight, the Gauss–Newton shift of z, its covariance (p, p)."""
     n, scale = likelihood.n_len, likelihood.sigma_length
-    cols = jnp.concatenate([r[:n, None], jac[:n]], axis=1) * scale
+    cols = (jnp.concatenate([r[:n, None], jac[:n]], axis=1) * scale)[likelihood.index]
+    t = likelihood.times[likelihood.index]
 
     def one(h):
-        v, s, _, _ = dc.kalman_filter(cols, likelihood.times, h, observed=likelihood.used)
-        ok = likelihood.used
-        w = jnp.where(ok[:, None], v / jnp.sqrt(s)[:, None], 0.0)
+        v, s, _, _ = dc.kalman_filter(cols, t, h)
+        w = v / jnp.sqrt(s)[:, None]
         wr, wj = jnp.concatenate([w[:, 0], r[n:]]), jnp.concatenate([w[:, 1:], jac[n:]], axis=0)
         info = wj.T @ wj
         c = jnp.linalg.pinv(info, hermitian=True)
         step = -c @ (wj.T @ wr)
         cost = 0.5 * (wr @ wr) - 0.5 * (wj.T @ wr) @ c @ (wj.T @ wr)
         logdet = jnp.linalg.slogdet(info)[1]
-        loglik = -cost - 0.5 * jnp.sum(jnp.where(ok, jnp.log(2.0 * jnp.pi * s), 0.0)) - 0.5 * logdet
+        loglik = -cost - 0.5 * jnp.sum(jnp.log(2.0 * jnp.pi * s)) - 0.5 * logdet
         return loglik + dc.log_prior(h), step, c
 
     return jax.vmap(one)(grid)
@@ -410,8 +414,8 @@ def _hyper_scan(likelihood: Likelihood, r, jac, grid: dc.Hyper):
 @eqx.filter_jit
 def _whitened(likelihood: Likelihood, r, jac, hyper):
     n, scale = likelihood.n_len, likelihood.sigma_length
-    cols = jnp.concatenate([r[:n, None], jac[:n]], axis=1) * scale
-    w = dc.whiten(cols, likelihood.times, hyper, observed=likelihood.used)
+    cols = (jnp.concatenate([r[:n, None], jac[:n]], axis=1) * scale)[likelihood.index]
+    w = dc.whiten(cols, likelihood.times[likelihood.index], hyper)
     return jnp.concatenate([w[:, 0], r[n:]]), jnp.concatenate([w[:, 1:], jac[n:]], axis=0)
 
 

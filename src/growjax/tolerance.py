@@ -10,6 +10,11 @@ budget then reports how much of each fitted parameter's interval each tolerance 
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
+
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 from growjax import params as gp
@@ -75,9 +80,32 @@ def sensitivity(length_of, base: gp.Parameters, tol: dict, reference=None) -> np
     from ψ to ψ·e^u. ``length_of(rig) → (n,)`` m is the model's length for a rig (the caller's own compiled run);
     ``reference`` (n,) m its value at ``base`` if already known. RuntimeError where a run failed."""
     l0 = np.asarray(length_of(base) if reference is None else reference, float)
-    cols = [(np.asarray(length_of(gp.replace(base, **{n: gp.get(base, n) * np.exp(u)})), float) - l0) / u
-            for n, u in tol.items()]
+
+    def column(item):
+        n, u = item
+        return (np.asarray(length_of(gp.replace(base, **{n: gp.get(base, n) * np.exp(u)})), float) - l0) / u
+
+    # the runs are independent: one thread per core (a compiled run releases the GIL; the result is the same)
+    with ThreadPoolExecutor(max_workers=max(1, min(len(tol), os.cpu_count() or 1))) as pool:
+        cols = list(pool.map(column, tol.items()))
     g = np.stack(cols, axis=1)
     if not np.all(np.isfinite(g)):
         raise RuntimeError("the model failed while measuring the rig's tolerance sensitivities")
     return g
+
+
+def length_sensitivity(theta: dict, base: gp.Parameters, inputs, config, times, tol: dict) -> np.ndarray:
+    """g (n, q): the model's length change (m) at ``times`` (n,) s per unit ln ψ of each toleranced parameter of
+    ``tol``, the secant from ψ to ψ·e^u at the values ``theta`` {qualified name: value} (one compiled run of
+    the model, the rig as its argument)."""
+    from growjax.simulate import as_arrays, sample_times, simulate
+    from growjax.trajectory import OK
+
+    ts = sample_times(jnp.asarray(times, float), config)
+
+    def run(rig):
+        traj = simulate(gp.replace(rig, **theta), inputs, config, ts=ts)
+        return jnp.where(traj.status == OK, traj.length, jnp.nan)
+
+    return sensitivity(jax.jit(run), as_arrays(base), tol)
+

@@ -44,6 +44,12 @@ The workflow (:func:`discover`), on a measured length L(t):
    structure remains that no candidate removes, the answer is ``unexplained``; with no misfit and no
    candidate over the threshold, ``none``.
 
+Under the default likelihood (``discrepancy="matern32"``, :mod:`growjax.discrepancy`) every 2ΔlogL above is a
+difference of profile log-likelihoods under a smooth discrepancy plus (possibly correlated) sensor noise,
+with the rig's tolerances marginalised (:mod:`growjax.tolerance`, sensitivities at the base fit); the misfit
+test becomes the discrepancy's significance against white noise, and the base-held trade of step 4 counts
+only where the misfit at the start is structured and material.
+
 Effect parameters are moved in u with η = s·softplus(u) (η ≥ 0) or η = s·u for effects whose range
 allows both signs; s is a tenth of the range's upper end. Every fit is bounded to the physical ranges
 (η to its effect's, above a thousandth of its top, ``ETA_FLOOR``; the base parameters to theirs): a wrong candidate that would climb past its range to

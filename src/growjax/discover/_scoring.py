@@ -45,7 +45,8 @@ class Scorer:
     """Likelihood-ratio scores and the misfit test under the fit's likelihood (:mod:`growjax.discrepancy`).
 
     ``discrepancy="matern32"``: a model's score is its log-likelihood with the residual model's
-    hyperparameters at their mode for that model's residuals; the misfit is structured where the discrepancy
+    hyperparameters at their mode for that model's residuals, and the rig's tolerances marginalised (after
+    :meth:`with_tolerances`: every model is then scored against what the fixed parameters' errors could do); the misfit is structured where the discrepancy
     is significant against white noise (2ΔlogL above the 1 % point of χ²₂) and larger than the noise, and
     material where its amplitude also exceeds ``material`` (m): only a material misfit that no candidate
     removes is reported ``unexplained``; a smaller one is left to the discrepancy term. ``"none"``: independent noise of sd ``sigma`` (m) and :func:`misfit_test`.
@@ -56,6 +57,13 @@ class Scorer:
         self.times, self.sigma, self.kind, self.material = np.asarray(times, float), sigma, discrepancy, material
         self.observed = experiment.informative_samples(length) if discrepancy != "none" else None
         self.scored = int(np.sum(self.observed)) if self.observed is not None else len(self.times)
+        self.sensitivity = self.tolerance = None
+        self._cache = {}
+
+    def with_tolerances(self, sensitivity, tolerance) -> None:
+        """Marginalise the rig's tolerances in every score from now on: ``sensitivity`` (n, q) m per unit ln ψ
+        (the length's, at the base fit), ``tolerance`` (q,) relative sds."""
+        self.sensitivity, self.tolerance = np.asarray(sensitivity, float), np.asarray(tolerance, float)
         self._cache = {}
 
     def profile(self, residual, kind: str | None = None) -> tuple[float, dc.Hyper]:
@@ -64,8 +72,10 @@ class Scorer:
         r = np.asarray(residual, float)
         key = (kind, r.tobytes())
         if key not in self._cache:
-            hyper = dc.estimate(r, self.times, kind, observed=self.observed)
-            value = dc.log_likelihood(r, self.times, hyper, observed=self.observed)
+            seen = slice(None) if self.observed is None else self.observed  # the filter over the scored rows: exact
+            t, g = self.times[seen], None if self.sensitivity is None else self.sensitivity[seen]
+            hyper = dc.estimate(r[seen], t, kind, g, self.tolerance)
+            value = dc.log_likelihood(r[seen], t, hyper, g, self.tolerance)
             self._cache[key] = (float(value), hyper)
         return self._cache[key]
 
@@ -74,7 +84,7 @@ class Scorer:
 
     def lr(self, worse, better, signed: bool = False) -> float:
         """2ΔlogL of the model with residuals ``better`` (m) over the one with ``worse`` (≥ 0 unless ``signed``)."""
-        if self.kind == "none":
+        if self.kind == "none" and self.sensitivity is None:
             value = (float(np.sum(np.asarray(worse) ** 2)) - float(np.sum(np.asarray(better) ** 2))) / self.sigma**2
         else:
             value = 2.0 * (self.profile(better)[0] - self.profile(worse)[0])

@@ -14,6 +14,7 @@ from scipy import stats
 from growjax import discrepancy as dc
 from growjax import effects as fx
 from growjax import params as gp
+from growjax import tolerance as tl
 from growjax.config import Config
 from growjax.fit import default_model_error
 
@@ -43,6 +44,7 @@ def discover(
     model_error: float | None = None,
     discrepancy: str = "matern32",
     material_misfit: float = MATERIAL_MISFIT,
+    tolerances: dict | None = None,
 ) -> DiscoveryResult:
     """Find which catalogue effect the measured ``length`` (m) at ``times`` (s) needs beyond the base model.
 
@@ -57,7 +59,11 @@ def discover(
     ``discrepancy``: the likelihood every test uses (:mod:`growjax.discrepancy`): ``"matern32"`` (default) scores
     each model by its profile log-likelihood under a smooth discrepancy plus noise (hyperparameters at their mode
     for that model's residuals), and calls the misfit structured only where the discrepancy is significant and
-    larger than ``material_misfit`` (m); ``"none"``: independent noise, σ from the residuals' differences.
+    larger than the noise, material where it also exceeds ``material_misfit`` (m); ``"none"``: independent
+    noise, σ from the residuals' differences. ``tolerances`` {parameter: relative sd}: the rig's fixed
+    parameters' uncertainty, marginalised in every score (:mod:`growjax.tolerance`; None: its default budget
+    with the discrepancy, none without), so that an effect must explain more than a fixed parameter held
+    within its tolerance could.
     See the module docstring for the procedure and its thresholds.
     """
     if discrepancy not in dc.KINDS:
@@ -74,16 +80,17 @@ def discover(
     fitter = Fitter(problem, length, multistart, workers, progress, max_steps)
     threshold = float(stats.chi2.isf(2.0 * false_positive_rate / len(candidates), df=1))  # ½χ²₀ + ½χ²₁, Bonferroni
     model_error = default_model_error(config) if model_error is None else model_error
-    first = _first_round(fitter, candidates, times, length, discrepancy, material_misfit)
+    tol = tl.budget(base, tolerances, base_names, use_default=tolerances is None and discrepancy != "none")
+    first = _first_round(fitter, candidates, times, length, discrepancy, material_misfit, (base, inputs, config, tol))
     held_lr, held_trades = _held_round(fitter, first, candidates, threshold)
     # 2ΔlogL the fitted configuration's own error (a slow drift, too small for the discrepancy to be estimated
     # from) can buy through a candidate that trades with a base parameter
     allowance = first.scorer.scored * model_error**2 / first.sigma**2
     misfit_before = first.scorer.misfit(first.base_fit.residual_m)
-    # Unstructured residuals at the start: an effect (or a confounding) needs the threshold cleared with the base
-    # refitted, never a trade with the base held.
-    held = {name: (h, h > threshold + allowance and held_trades[name]
-                   and (discrepancy == "none" or misfit_before["structured"])) for name, h in held_lr.items()}
+    # Residuals at the start within what the discrepancy term takes (unstructured, or not material): an effect
+    # (or a confounding) needs the threshold cleared with the base refitted, never a trade with the base held.
+    misfit_open = discrepancy == "none" or (misfit_before["structured"] and misfit_before["material"])
+    held = {name: (h, h > threshold + allowance and held_trades[name] and misfit_open) for name, h in held_lr.items()}
     current, added, evidence, confounded = _rounds(fitter, first, candidates, held, threshold, confounding_correlation,
                                                    max_effects, allowance)
     misfit_after = first.scorer.misfit(current.residual_m)
@@ -118,10 +125,12 @@ class _FirstRound:
     pressure: np.ndarray
 
 
-def _first_round(fitter: Fitter, candidates, times, length, discrepancy: str, material_misfit: float) -> _FirstRound:
+def _first_round(fitter: Fitter, candidates, times, length, discrepancy: str, material_misfit: float,
+                 rig) -> _FirstRound:
     """The base model, then every candidate on it with the base parameters refitted jointly, each starting from the
     base fit (the extended model then starts within its new term of the base optimum, not in a side minimum of the
-    base parameters that the given values may lie nearer to)."""
+    base parameters that the given values may lie nearer to). ``rig`` = (base, inputs, config, tolerances): the
+    rig's sensitivities are taken at the base fit and marginalised by the scorer."""
     p, k_all = fitter.p, fitter.k_all
     z0 = np.concatenate([np.zeros(p), np.zeros(k_all)])
     base_out = fitter.batch([((), True, z0)], "base")[0]
@@ -131,6 +140,10 @@ def _first_round(fitter: Fitter, candidates, times, length, discrepancy: str, ma
     base_fit = fitter.summarise(outs[0], sigma, ())
     fits = {candidates[k]: fitter.summarise(outs[k + 1], sigma, (candidates[k],)) for k in range(k_all)}
     scorer = Scorer(times, length, sigma, discrepancy, material_misfit)
+    base, inputs, config, tol = rig
+    if tol:
+        theta = {n: base_fit.estimate[n] for n in fitter.problem.base_names}
+        scorer.with_tolerances(tl.length_sensitivity(theta, base, inputs, config, times, tol), list(tol.values()))
     if discrepancy != "none":
         sigma = scorer.noise(base_fit.residual_m)
     return _FirstRound(outs, base_fit, fits, sigma, scorer, outs[0][5])

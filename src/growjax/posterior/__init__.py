@@ -48,7 +48,6 @@ from ._model import (
     direct_mean,
     emulated_mean,
     growth_model,
-    tolerance_sensitivity,
     value_and_jacobian,
     with_model_tangents,
 )
@@ -74,6 +73,6 @@ __all__ = [
     "bound_coordinates", "bound_start", "build_emulator", "build_residuals", "compare_loo", "coordinate",
     "diagnostics", "direct_mean", "emulated_mean", "forecast", "fraction", "growth_model", "laplace",
     "laplace_unconstrained", "lockhart_priors", "observation_draws", "paper_priors", "precondition", "predict",
-    "predictive_band", "ridge_coordinates", "sample", "sbc", "tolerance_sensitivity", "value_and_jacobian",
+    "predictive_band", "ridge_coordinates", "sample", "sbc", "value_and_jacobian",
     "with_model_tangents",
 ]

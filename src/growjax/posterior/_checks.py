@@ -12,9 +12,10 @@ from jaxtyping import ArrayLike, Float
 
 from growjax import discrepancy as dc
 from growjax import emulator as em
+from growjax import tolerance as tl
 from growjax.emulator import predicted_length
 
-from ._model import Residuals, emulated_mean, growth_model, tolerance_sensitivity
+from ._model import Residuals, emulated_mean, growth_model
 from ._priors import Prior
 
 
@@ -30,7 +31,7 @@ def diagnostics(idata, priors, observed, mcmc=None, residuals: Residuals | None 
     import arviz as az
 
     sites = [p.site for p in priors] + ["sigma"]
-    sites += [s for s in ("delta_amplitude", "delta_time_scale") if s in idata.posterior]
+    sites += [s for s in ("delta_amplitude", "delta_time_scale", "noise_time") if s in idata.posterior]
     rhat = az.rhat(idata, var_names=sites)
     ess_bulk = az.ess(idata, var_names=sites, method="bulk")
     ess_tail = az.ess(idata, var_names=sites, method="tail")
@@ -93,18 +94,19 @@ def forecast(result, priors, base, inputs, config, times: Float[ArrayLike, " T"]
     g = u = None
     if res.sensitivity is not None:
         mean_theta = {n: float(np.mean(v)) for n, v in thetas.items()}
-        g = jnp.asarray(tolerance_sensitivity(mean_theta, base, inputs, config, union,
+        g = jnp.asarray(tl.length_sensitivity(mean_theta, base, inputs, config, union,
                                               dict(zip(res.tolerance_names, map(float, res.tolerance)))))
         u = jnp.asarray(res.tolerance)
     flat = lambda site: jnp.asarray(np.asarray(post[site]).ravel()[take]) if site in post else None
-    amp, ell = flat("delta_amplitude"), flat("delta_time_scale")
+    amp, ell, tau = flat("delta_amplitude"), flat("delta_time_scale"), flat("noise_time")
     hyper = dc.Hyper(jnp.zeros(take.size) if amp is None else amp, jnp.ones(take.size) if ell is None else ell,
-                     jnp.asarray(np.sqrt(sigma[take] ** 2 + result.summary.get("model_error_m", 0.0) ** 2)))
+                     jnp.asarray(np.sqrt(sigma[take] ** 2 + result.summary.get("model_error_m", 0.0) ** 2)),
+                     jnp.zeros(take.size) if tau is None else tau)
     r = np.zeros_like(mu)
     r[:, at_fit] = y_fit[None, :] - mu[:, at_fit]
     mean, var = jax.jit(jax.vmap(lambda ri, h: dc.forecast(ri, jnp.asarray(union), jnp.asarray(observed), h, g, u)))(
         jnp.asarray(r), hyper)
-    scale = np.sqrt(np.asarray(var)[:, at_new] + np.asarray(hyper.noise)[:, None] ** 2)
+    scale = np.sqrt(np.asarray(var)[:, at_new])  # the filter's predictive variance includes the noise
     return mu[:, at_new] + np.asarray(mean)[:, at_new] + scale * rng.standard_normal(scale.shape)
 
 

@@ -15,9 +15,8 @@ import numpyro.distributions as dist
 from growjax import discrepancy as dc
 from growjax import emulator as em
 from growjax import params as gp
-from growjax import tolerance as tl
 from growjax.emulator import predicted_length, sample_times
-from growjax.simulate import as_arrays, input_breaks, length_jacobian
+from growjax.simulate import input_breaks, length_jacobian
 from growjax.trajectory import OK
 
 from ._priors import Prior
@@ -28,9 +27,9 @@ def growth_model(length=None, *, mean_length, priors: Sequence[Prior], noise_sca
     """NumPyro model of the measured length (m)::
 
         θ_j ~ prior_j,   σ ~ HalfNormal(noise_scale),
-        a ~ HalfNormal(2 mm),   ℓ ~ LogNormal(ln 1 s, 1)                       (with a discrepancy)
+        a ~ HalfNormal(2 mm),   ℓ ~ LogNormal(ln 1 s, 1),   τ ~ LogNormal(ln 30 ms, 1.5)   (with a discrepancy)
         L_obs = L_model(t; θ) + δ(t) + Σ_k g_k(t) b_k + ε,   δ ~ GP(0, Matérn-3/2(a, ℓ)),
-        b_k ~ N(0, u_k²),   ε_i ~ N(0, σ² + e²)
+        b_k ~ N(0, u_k²),   ε ~ GP(0, (σ² + e²) exp(−|Δt|/τ))   (τ = 0, independent, without one)
 
     ``mean_length(theta)`` is the model (or its emulator) at the measured times; ``e`` (m) is the
     emulator's RMS error (0 for the model itself). ``residuals`` (:class:`Residuals`) sets the discrepancy,
@@ -54,9 +53,10 @@ def growth_model(length=None, *, mean_length, priors: Sequence[Prior], noise_sca
         amplitude = numpyro.sample("delta_amplitude", dist.HalfNormal(dc.AMPLITUDE_SCALE))
         time_scale = numpyro.sample("delta_time_scale",
                                     dist.LogNormal(np.log(dc.TIME_SCALE_MEDIAN), dc.TIME_SCALE_LOG_SD))
+        noise_time = numpyro.sample("noise_time", dist.LogNormal(np.log(dc.NOISE_TIME_MEDIAN), dc.NOISE_TIME_LOG_SD))
     else:
-        amplitude, time_scale = jnp.zeros(()), jnp.ones(())
-    hyper = dc.Hyper(amplitude, time_scale, scale)
+        amplitude, time_scale, noise_time = jnp.zeros(()), jnp.ones(()), jnp.zeros(())
+    hyper = dc.Hyper(amplitude, time_scale, scale, noise_time)
     if length is None:  # replicated data at every sample
         numpyro.sample("length", residuals.replicate(mu, hyper))
     else:  # the scored samples
@@ -107,7 +107,8 @@ class Residuals:
         """Start values {site: value} of the hyperparameters' sites."""
         if self.discrepancy != "matern32":
             return {}
-        return {"delta_amplitude": max(float(hyper.amplitude), 1e-7), "delta_time_scale": float(hyper.time_scale)}
+        return {"delta_amplitude": max(float(hyper.amplitude), 1e-7), "delta_time_scale": float(hyper.time_scale),
+                "noise_time": max(float(hyper.noise_time), 1e-4)}
 
 
 class DirectMean:
@@ -152,14 +153,6 @@ def build_emulator(priors: Sequence[Prior], base, inputs, config, times, seed: i
     """Emulator over the prior box, validated at 64 seeded points."""
     emu = em.build([p.axis() for p in priors], base, inputs, config, times)
     return em.validate(emu, 64, seed)
-
-
-def tolerance_sensitivity(theta: dict, base, inputs, config, times, tol: dict) -> np.ndarray:
-    """g (n, q): the model's length change (m) at ``times`` per unit ln ψ of each toleranced parameter, the secant
-    from ψ to ψ·e^u at θ (one compiled run of the model, the rig as its argument)."""
-    times = jnp.asarray(times)
-    run = jax.jit(lambda b: predicted_length(theta, b, inputs, config, times))
-    return tl.sensitivity(run, as_arrays(base), tol)
 
 
 def value_and_jacobian(mean_length, names):

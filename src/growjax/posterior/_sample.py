@@ -28,7 +28,6 @@ from ._model import (
     direct_mean,
     emulated_mean,
     growth_model,
-    tolerance_sensitivity,
     with_model_tangents,
 )
 from ._priors import Prior, coordinate, paper_priors
@@ -119,7 +118,8 @@ def sample(
     mcmc = _run_nuts(make_model(mean, sampled), init_values, inverse_mass, y, seed, emulate is False, **nuts)
     post = mcmc.get_samples(group_by_chain=True)
     loglik, predicted = observation_draws(post["length_model"], post["sigma"], model_error, y, seed + 1, residuals,
-                                          post.get("delta_amplitude"), post.get("delta_time_scale"))
+                                          post.get("delta_amplitude"), post.get("delta_time_scale"),
+                                          post.get("noise_time"))
     idata = az.from_numpyro(mcmc, log_likelihood=False, posterior_predictive={"length": predicted})
     idata.add_groups(log_likelihood={"length": loglik})
     wall = time.perf_counter() - start
@@ -202,7 +202,7 @@ def build_residuals(discrepancy: str, times, length, mean_length, priors, base, 
     observed = experiment.informative_samples(length) if discrepancy != "none" else np.ones(len(length), bool)
     g = u = None
     if tol:
-        g = tolerance_sensitivity(theta, base, inputs, config, times, tol)
+        g = tl.length_sensitivity(theta, base, inputs, config, times, tol)
         u = np.asarray(list(tol.values()))
     r = np.asarray(length) - np.asarray(jax.jit(mean_length)({k: jnp.asarray(v) for k, v in theta.items()}))
     hyper = dc.estimate(r, times, discrepancy, g, u, observed)
@@ -210,12 +210,13 @@ def build_residuals(discrepancy: str, times, length, mean_length, priors, base, 
 
 
 def observation_draws(mean_length, sigma, model_error: float, observed, seed: int, residuals: Residuals | None = None,
-                      amplitude=None, time_scale=None):
+                      amplitude=None, time_scale=None, noise_time=None):
     """Pointwise log-likelihood and posterior predictive length (m), both (C, S, T), of every draw.
 
     ``mean_length`` (C, S, T): the model's length (m) at each draw, which :func:`growth_model` records as
     ``length_model`` while NUTS samples; ``sigma`` (C, S): the noise scale (m); ``model_error`` (m) joins it as in
-    the model; ``residuals``, ``amplitude`` and ``time_scale`` (C, S): the discrepancy and tolerances, if any. The
+    the model; ``residuals``, ``amplitude``, ``time_scale`` and ``noise_time`` (C, S): the discrepancy, the noise's
+    correlation time and the tolerances, if any. The
     pointwise terms are then the one-step-ahead log-densities log p(yᵢ | earlier y) (0 at samples not scored),
     and a predictive draw carries a fresh discrepancy and rig error. Nothing is simulated again: NumPyro's
     ``Predictive`` and ArviZ's log-likelihood would each run the model once more per draw. Seeded by ``seed``.
@@ -235,7 +236,9 @@ def observation_draws(mean_length, sigma, model_error: float, observed, seed: in
     ones = np.ones(shape[:-1])
     amp = np.zeros(shape[:-1]) if amplitude is None else np.asarray(amplitude, float)
     ell = ones if time_scale is None else np.asarray(time_scale, float)
-    hyper = dc.Hyper(jnp.asarray(amp.ravel()), jnp.asarray(ell.ravel()), jnp.asarray(scale.ravel()))
+    tau = np.zeros(shape[:-1]) if noise_time is None else np.asarray(noise_time, float)
+    hyper = dc.Hyper(jnp.asarray(amp.ravel()), jnp.asarray(ell.ravel()), jnp.asarray(scale.ravel()),
+                     jnp.asarray(tau.ravel()))
     y = jnp.asarray(observed, float)
 
     def one(m, h, key):
