@@ -1,8 +1,9 @@
 """The one least-squares engine: a forward-mode linearisation and a bounded Levenberg–Marquardt loop.
 
-Every workflow that minimises a sum of squares (the fit, discovery's nested fits, the control profile,
-the MPC, the Laplace step of the posterior) goes through :func:`levenberg_marquardt` with residuals
-linearised by :func:`linearise`.
+Every workflow that minimises a sum of squares goes through :func:`levenberg_marquardt`: the fit and
+discovery's nested fits, the control profile (residuals linearised by :func:`linearise`) and the MPC (a
+forward-difference Jacobian from one batched solve). The posterior's Laplace step does not: its potential is
+not a sum of squares (:func:`growjax.posterior.laplace_unconstrained`).
 """
 
 from __future__ import annotations
