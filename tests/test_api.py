@@ -56,6 +56,23 @@ def test_config_refuses_fields_of_the_other_fidelity():
     assert gj.Config(fidelity="reference").resolved().small_loops is None
 
 
+def test_config_records_the_emitters_its_programs_compile_with():
+    """``quick_compile`` (XLA:CPU's older emitters round differently) comes from the process where a program is
+    compiled under ``jax.jit``, and a value such a program cannot take is refused; within a sweep's own compile
+    (``xla_flags.compiling``) the sweep's choice holds."""
+    from growjax import xla_flags
+
+    quick = xla_flags.quick_compile_applied()
+    assert gj.Config().resolved().quick_compile is quick
+    assert gj.Config(fidelity="reference").resolved().quick_compile is quick
+    assert gj.Config(quick_compile=quick).resolved() == gj.Config().resolved()
+    with pytest.raises(ValueError, match="quick_compile"):
+        gj.Config(quick_compile=not quick).resolved()
+    with xla_flags.compiling(not quick):
+        assert gj.Config().resolved().quick_compile is (not quick)
+        assert gj.Config(quick_compile=not quick).resolved().quick_compile is (not quick)
+
+
 NAMES = ("Y", "check_valve.max_open_pressure")
 
 

@@ -229,6 +229,32 @@ def test_levenberg_marquardt_never_evaluates_a_rejected_point_twice():
     assert len(points) == len(set(points))
 
 
+
+def test_levenberg_marquardt_linearises_only_the_points_it_accepts():
+    """With ``residuals`` a trial point is scored by the residuals alone and linearised once accepted: the same
+    minimum as without, one linearisation at the start and per accepted step, ``max_steps`` accepted steps."""
+    f = lambda z: np.array([np.exp(3.0 * z[0]) - 1.5, 0.1 * z[0]])
+    steep, linearised_at, scored = _numeric(f), [], []
+
+    def linearised(z):
+        linearised_at.append(float(np.asarray(z)[0]))
+        return steep(z)
+
+    def residuals(z):
+        scored.append(float(np.asarray(z)[0]))
+        return f(np.asarray(z, float))
+
+    plain = gf.levenberg_marquardt(steep, np.array([-1.0]), max_steps=40, max_move=3.0)
+    z, cost, ok, _, _ = gf.levenberg_marquardt(linearised, np.array([-1.0]), max_steps=40, max_move=3.0,
+                                               residuals=residuals)
+    assert ok and z[0] == pytest.approx(plain[0][0], abs=1e-6) and cost == pytest.approx(plain[1], rel=1e-6)
+    assert set(linearised_at[1:]) <= set(scored) and len(scored) > len(linearised_at) - 1  # some were rejected
+    costs = [0.5 * float(f(np.array([x])) @ f(np.array([x]))) for x in linearised_at]
+    assert np.all(np.diff(costs) <= 0.0)  # every point linearised after the start was accepted
+    linearised_at.clear()
+    gf.levenberg_marquardt(linearised, np.array([-1.0]), max_steps=2, max_move=3.0, residuals=residuals)
+    assert len(linearised_at) == 3
+
 def test_physical_bounds_are_the_ranges_in_log_coordinates():
     base = gj.reference()
     names = ("robot.yield_pressure", "robot.growth_exponent", "robot.extensibility")

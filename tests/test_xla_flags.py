@@ -66,6 +66,15 @@ def test_quick_compile_joins_flags_and_falls_back_where_jaxlib_lacks_it(monkeypa
         xla_flags.compile_quickly(lowered)
 
 
+def test_a_program_compiles_with_either_emitters_whatever_the_process():
+    lowered = jax.jit(lambda x: 2.0 * x).lower(1.5)
+    for quick in (True, False):
+        assert float(xla_flags.compile_quickly(lowered, quick)(1.5)) == 3.0
+        with xla_flags.compiling(quick):
+            assert xla_flags.quick_compile_in_force() is quick
+    assert xla_flags.quick_compile_in_force() is xla_flags.quick_compile_applied()
+
+
 def test_quick_compile_for_a_process_leaves_a_users_setting_and_a_started_backend(monkeypatch):
     monkeypatch.setenv("XLA_FLAGS", "--xla_cpu_use_fusion_emitters=true")
     assert not xla_flags.apply_quick_compile() and os.environ["XLA_FLAGS"] == "--xla_cpu_use_fusion_emitters=true"

@@ -1,8 +1,13 @@
 """The one least-squares engine: a forward-mode linearisation and a bounded Levenberg–Marquardt loop.
 
-Every workflow that minimises a sum of squares (the fit, discovery's nested fits, the control profile,
-the MPC, the Laplace step of the posterior) goes through :func:`levenberg_marquardt` with residuals
-linearised by :func:`linearise`.
+Every workflow that minimises a sum of squares goes through :func:`levenberg_marquardt`: the fit and
+discovery's nested fits, the control profile (residuals linearised by :func:`linearise`) and the MPC (a
+forward-difference Jacobian from one batched solve). The posterior's Laplace step does not: its potential is
+not a sum of squares (:func:`growjax.posterior.laplace_unconstrained`).
+
+The loop is driven from Python around one compiled linearisation: optimistix's Levenberg–Marquardt compiles the
+model's primal and tangent solves several times into one program and needs tens of iterations on residuals
+that carry the solver's tolerance-level noise.
 """
 
 from __future__ import annotations
@@ -22,7 +27,7 @@ def linearise(residuals, z):
 
 def levenberg_marquardt(linearised, z0, max_steps: int = 100, tol: float = 1e-6, gain_tol: float = 1e-5,
                         max_move: float = 3.0, bounds=None, cost_resolution: float = 0.0, relative_resolution: float = 0.0,
-                        stall_steps: int = 3):
+                        stall_steps: int = 3, residuals=None):
     """Minimise ½‖r(z)‖² from z0 by Levenberg–Marquardt (Marquardt's scaling diag(JᵀJ), Nielsen's damping
     update), driven from Python.
 
@@ -43,12 +48,11 @@ def levenberg_marquardt(linearised, z0, max_steps: int = 100, tol: float = 1e-6,
     wander at that noise: the fit stops, converged, once ``stall_steps`` trial points in a row near the best
     (within ten resolutions of its cost) have not lowered it by more than one resolution. A trial point far
     above the best (a step too long, far from the minimum) neither counts nor resets the count.
-    Returns (z, cost, converged, r, J at z).
-    (optimistix's LM compiles the model's primal and tangent solves several times into one program and
-    needs tens of iterations on residuals that carry the solver's tolerance-level noise; this loop
-    compiles one program.)
-    One function: the damping, the active set, the last rejected point and the stall count are the state of
-    one loop, and read best together.
+    ``residuals(z) → r (m,)``, where given: trial points are scored by it alone and linearised once accepted
+    (r from ``residuals``, J from ``linearised``), for residuals whose Jacobian costs many evaluations of them;
+    ``max_steps`` then counts accepted steps (a rejected one costs one evaluation of the residuals).
+    Returns (z, cost, converged, r, J at z). One function: the damping, the active set, the last rejected
+    point and the stall count are the state of one loop, and read best together.
     """
     z = np.asarray(z0, float)
     r, jac = (np.asarray(a) for a in linearised(jnp.asarray(z)))
@@ -59,34 +63,23 @@ def levenberg_marquardt(linearised, z0, max_steps: int = 100, tol: float = 1e-6,
     stalled = 0  # trial points in a row near the best that did not lower it by a resolution
     rejected = None  # the last trial point rejected
     resolving = cost_resolution > 0.0 or relative_resolution > 0.0
-    for _ in range(max_steps):
-        jtj, g = jac.T @ jac, jac.T @ r
-        # A coordinate on its bound that the gradient pushes outwards is held there (the active set): the gain
-        # test and the step are those of the others.
-        free = np.ones(z.size, bool) if bounds is None else ~(((z <= bounds[0]) & (g > 0)) | ((z >= bounds[1]) & (g < 0)))
-        jtj_f, g_f = jtj[np.ix_(free, free)], g[free]
-        if 0.5 * float(g_f @ np.linalg.pinv(jtj_f, rcond=1e-12, hermitian=True) @ g_f) <= gain_tol * cost:
+    steps = 0
+    while steps < max_steps:
+        step, predicted = _damped_step(jac, r, z, cost, damping, max_move, bounds, gain_tol)
+        if step is None:
             return z, cost, True, r, jac  # a full Gauss–Newton step would gain < gain_tol of the cost
-        scale = np.maximum(np.diag(jtj_f), 1e-12 * max(float(np.max(np.diag(jtj), initial=0.0)), 1e-300))
-        step = np.zeros_like(z)
-        step[free] = np.linalg.solve(jtj_f + damping * np.diag(scale), -g_f)
-        step = np.clip(step, -max_move, max_move)  # a coordinate running to its range's edge moves no others less
-        if bounds is not None:
-            step = np.clip(z + step, *bounds) - z
-        predicted = 0.5 * float(step[free] @ (damping * scale * step[free] - g_f))  # the linear model's promise
         trial = z + step
         if rejected is not None and np.array_equal(trial, rejected):
             cost_new = np.inf  # evaluated already, and rejected: the model is deterministic
         else:
-            r_new, jac_new = (np.asarray(a) for a in linearised(jnp.asarray(trial)))
-            ok = np.all(np.isfinite(r_new)) and np.all(np.isfinite(jac_new))
-            cost_new = 0.5 * float(r_new @ r_new) if ok else np.inf
+            r_new, jac_new, cost_new = _scored(linearised, residuals, trial, cost)
             resolution = max(cost_resolution, relative_resolution * cost)
             if cost_new < cost - resolution:
                 stalled = 0
             elif cost_new < cost + 10.0 * resolution:
                 stalled += 1
         at_noise = resolving and stalled >= stall_steps
+        steps += 1 if residuals is None or cost_new <= cost else 0
         if cost_new <= cost:
             done = np.all(np.abs(step) < tol * (1.0 + np.abs(z))) and cost - cost_new <= tol * cost
             gain = (cost - cost_new) / max(predicted, 1e-300)
@@ -103,3 +96,34 @@ def levenberg_marquardt(linearised, z0, max_steps: int = 100, tol: float = 1e-6,
             if damping > 1e12 or at_noise:  # no descent left at the solver's resolution: a minimum
                 return z, cost, True, r, jac
     return z, cost, False, r, jac
+
+
+def _damped_step(jac, r, z, cost, damping, max_move, bounds, gain_tol):
+    """(step (p,), the decrease of ½‖r‖² the linear model promises for it) at ``damping``; (None, 0) where a full
+    Gauss–Newton step would gain < ``gain_tol`` of ``cost``. A coordinate on its bound that the gradient pushes
+    outwards is held there (the active set): the gain test and the step are those of the others."""
+    jtj, g = jac.T @ jac, jac.T @ r
+    free = np.ones(z.size, bool) if bounds is None else ~(((z <= bounds[0]) & (g > 0)) | ((z >= bounds[1]) & (g < 0)))
+    jtj_f, g_f = jtj[np.ix_(free, free)], g[free]
+    if 0.5 * float(g_f @ np.linalg.pinv(jtj_f, rcond=1e-12, hermitian=True) @ g_f) <= gain_tol * cost:
+        return None, 0.0
+    scale = np.maximum(np.diag(jtj_f), 1e-12 * max(float(np.max(np.diag(jtj), initial=0.0)), 1e-300))
+    step = np.zeros_like(z)
+    step[free] = np.linalg.solve(jtj_f + damping * np.diag(scale), -g_f)
+    step = np.clip(step, -max_move, max_move)  # a coordinate running to its range's edge moves no others less
+    if bounds is not None:
+        step = np.clip(z + step, *bounds) - z
+    return step, 0.5 * float(step[free] @ (damping * scale * step[free] - g_f))
+
+
+def _scored(linearised, residuals, trial, cost):
+    """(r, J, ½‖r‖²) at ``trial``, the cost ∞ where r or J is not finite; with ``residuals``, r from it and J
+    (else None) only where the trial's cost is no more than ``cost``."""
+    if residuals is None:
+        r, jac = (np.asarray(a) for a in linearised(jnp.asarray(trial)))
+    else:
+        r, jac = np.asarray(residuals(jnp.asarray(trial))), None
+        if np.all(np.isfinite(r)) and 0.5 * float(r @ r) <= cost:
+            jac = np.asarray(linearised(jnp.asarray(trial))[1])
+    ok = np.all(np.isfinite(r)) and (jac is None or np.all(np.isfinite(jac)))
+    return r, jac, 0.5 * float(r @ r) if ok else np.inf

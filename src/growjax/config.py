@@ -47,6 +47,12 @@ class Config:
             XLA:CPU can compile its loop into one kernel (:mod:`growjax.xla_flags`); the rounding differs from
             LAPACK's. None: whether ``XLA_FLAGS`` sets the small-loop limit, read by :meth:`resolved` where a
             simulation starts (outside any trace), so the compiled program is keyed on the value in force.
+        quick_compile: whether programs are compiled with XLA:CPU's older emitters
+            (:data:`growjax.xla_flags.QUICK_COMPILE`): quicker compiles, slower runs, other rounding (a 10 s run
+            moves by up to 0.3 µm). A program under ``jax.jit`` takes the process's setting (``XLA_FLAGS``, fixed
+            when JAX starts: :func:`growjax.xla_flags.apply_quick_compile`); a sweep compiles its own and takes
+            either. None: the setting in force (a sweep: quick up to ``growjax.sweep.QUICK_COMPILE_ROWS`` sets),
+            read by :meth:`resolved`; a value the program cannot take raises ``ValueError`` there.
 
     A field that does not apply to the chosen fidelity must keep its default (``ValueError`` otherwise).
     """
@@ -68,6 +74,7 @@ class Config:
     adjoint: str = "reverse"
     tangents: str = "auto"
     small_loops: bool | None = None
+    quick_compile: bool | None = None
 
     def __post_init__(self):
         if self.fidelity not in FIDELITIES:
@@ -108,13 +115,19 @@ class Config:
         return np.append(self.t0 + self.save_dt * np.arange(n), self.t1)
 
     def resolved(self) -> Config:
-        """This configuration with every option left to the environment made explicit (``small_loops`` from
-        ``XLA_FLAGS``): what a compiled program is keyed on. Call it outside any trace."""
-        if self.fidelity == "fast" and self.small_loops is None:
-            from growjax import xla_flags
+        """This configuration with every option left to the environment made explicit (``small_loops`` and
+        ``quick_compile`` from ``XLA_FLAGS``): what a compiled program is keyed on. Call it outside any trace."""
+        from growjax import xla_flags
 
-            return dataclasses.replace(self, small_loops=xla_flags.applied())
-        return self
+        quick = xla_flags.quick_compile_in_force()
+        if self.quick_compile is not None and self.quick_compile != quick:
+            raise ValueError(f"quick_compile={self.quick_compile}, but this program compiles with quick_compile={quick}: "
+                             "the emitters are the process's (XLA_FLAGS before JAX starts, "
+                             "growjax.xla_flags.apply_quick_compile); leave quick_compile None")
+        small_loops = xla_flags.applied() if self.fidelity == "fast" and self.small_loops is None else self.small_loops
+        if (small_loops, quick) == (self.small_loops, self.quick_compile):
+            return self
+        return dataclasses.replace(self, small_loops=small_loops, quick_compile=quick)
 
     def replace(self, **changes) -> Config:
         """A copy with the given fields changed."""

@@ -183,9 +183,9 @@ def make_members(base: gp.Parameters, names: Sequence[str], inputs, config, meas
     return members
 
 
-# Designs up to this many rows compile with XLA's quicker emitters (xla_flags.QUICK_COMPILE). On a 2-core CPU,
-# 500 sets of 10 s compile ~1.5 s sooner and sweep ~0.08 ms per set slower with them (``benchmarks/sweep.py``
-# measures both), so they pay up to ~17 000 sets.
+# Designs up to this many rows compile with XLA's quicker emitters (xla_flags.QUICK_COMPILE) where
+# Config.quick_compile is None. On a 2-core CPU, 500 sets of 10 s compile ~1.5 s sooner and sweep ~0.08 ms
+# per set slower with them (``benchmarks/sweep.py`` measures both), so they pay up to ~17 000 sets.
 QUICK_COMPILE_ROWS = 15_000
 
 # Compiled sweep programs of this process, keyed by everything they close over (at most 8 kept).
@@ -262,32 +262,11 @@ def evaluate(
     # compiled program serves every data set and base point of the same shapes.
     breaks = input_breaks(inputs, config)
     dynamic, static = eqx.partition((as_arrays(base), as_arrays(inputs), breaks, measured), eqx.is_array)
-    shapes = jax.tree_util.tree_map(lambda a: (a.shape, str(a.dtype)), dynamic)
-    quick = n <= QUICK_COMPILE_ROWS
-    key = (names, config.resolved(), chunk, quick, None if window is None else tuple(window), tuple(d.id for d in mesh.devices.flat),
-           str(jax.tree_util.tree_structure(dynamic)), str(jax.tree_util.tree_leaves(shapes)), content_key(static))
-    compiled = _COMPILED.get(key)
-    lower_s = 0.0
-    if compiled is None:
-        def members(thetas, dynamic):
-            p, i, b, m = eqx.combine(dynamic, static)
-            return make_members(p, names, i, config, m, window, breaks=b)(thetas)
-
-        replicated = NamedSharding(mesh, PartitionSpec())
-        # Each device steps its own members in its own loop (shard_map): a vmapped loop over the whole
-        # sharded batch would wait, at every attempt, for a cross-device "is any member still running?".
-        # check_vma=False: the solver's loop carries replicated constants beside per-device members.
-        local = jax.shard_map(members, mesh=mesh,
-                              in_specs=(PartitionSpec("batch"), PartitionSpec()), out_specs=PartitionSpec("batch"),
-                              check_vma=False)
-        batched = jax.jit(local, in_shardings=(sharding, replicated), out_shardings=sharding)
-        lowered = batched.lower(jax.ShapeDtypeStruct((chunk, len(names)), jnp.float64, sharding=sharding), dynamic)
-        lower_s = time.perf_counter() - start
-        # XLA's quicker emitters where the compile they save exceeds the slower run they give (QUICK_COMPILE_ROWS).
-        compiled = xla_flags.compile_quickly(lowered) if quick else lowered.compile()
-        if len(_COMPILED) >= 8:
-            _COMPILED.pop(next(iter(_COMPILED)))
-        _COMPILED[key] = compiled
+    # XLA's quicker emitters where the compile they save exceeds the slower run they give (QUICK_COMPILE_ROWS)
+    quick = config.quick_compile
+    if quick is None:
+        quick = n <= QUICK_COMPILE_ROWS or xla_flags.quick_compile_applied()
+    compiled, lower_s = _compiled(names, config.replace(quick_compile=quick), chunk, window, mesh, dynamic, static)
     dynamic = jax.device_put(dynamic, NamedSharding(mesh, PartitionSpec()))
     compile_s = time.perf_counter() - start
 
@@ -309,6 +288,39 @@ def evaluate(
     final = np.where(valid, final, np.nan)
     return SweepResult(names, values, np.asarray(rmse, float), np.asarray(final, float), status, wall_s, compile_s,
                        n_dev, lower_s)
+
+
+def _compiled(names, config: Config, chunk: int, window, mesh: Mesh, dynamic, static):
+    """(the compiled sweep program over chunks of ``chunk`` rows, seconds spent tracing and lowering it; 0 where
+    :data:`_COMPILED` has it), compiled with ``config.quick_compile``'s emitters."""
+    shapes = jax.tree_util.tree_map(lambda a: (a.shape, str(a.dtype)), dynamic)
+    with xla_flags.compiling(config.quick_compile):
+        key = (names, config.resolved(), chunk, None if window is None else tuple(window),
+               tuple(d.id for d in mesh.devices.flat), str(jax.tree_util.tree_structure(dynamic)),
+               str(jax.tree_util.tree_leaves(shapes)), content_key(static))
+        if key in _COMPILED:
+            return _COMPILED[key], 0.0
+        start = time.perf_counter()
+
+        def members(thetas, dynamic):
+            p, i, b, m = eqx.combine(dynamic, static)
+            return make_members(p, names, i, config, m, window, breaks=b)(thetas)
+
+        sharding, replicated = NamedSharding(mesh, PartitionSpec("batch")), NamedSharding(mesh, PartitionSpec())
+        # Each device steps its own members in its own loop (shard_map): a vmapped loop over the whole
+        # sharded batch would wait, at every attempt, for a cross-device "is any member still running?".
+        # check_vma=False: the solver's loop carries replicated constants beside per-device members.
+        local = jax.shard_map(members, mesh=mesh,
+                              in_specs=(PartitionSpec("batch"), PartitionSpec()), out_specs=PartitionSpec("batch"),
+                              check_vma=False)
+        batched = jax.jit(local, in_shardings=(sharding, replicated), out_shardings=sharding)
+        lowered = batched.lower(jax.ShapeDtypeStruct((chunk, len(names)), jnp.float64, sharding=sharding), dynamic)
+        lower_s = time.perf_counter() - start
+    compiled = xla_flags.compile_quickly(lowered, config.quick_compile)
+    if len(_COMPILED) >= 8:
+        _COMPILED.pop(next(iter(_COMPILED)))
+    _COMPILED[key] = compiled
+    return compiled, lower_s
 
 
 def lhs_sweep(

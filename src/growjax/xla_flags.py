@@ -23,11 +23,16 @@ instead of 14 ms (``benchmarks/simulate.py``), the 500-set sweep 5–7 % longer.
 ``growjax.sweep.QUICK_COMPILE_ROWS`` sets, which compiles once and runs once, takes them
 (:func:`compile_quickly`, its program only); so do the ``growjax simulate`` and ``growjax fit`` processes
 (:func:`apply_quick_compile`) and the test suite, made of compiles (``tests/conftest.py``). Everything else
-keeps XLA's default.
+keeps XLA's default. They round differently, so an adaptive step can move: the fast configuration's 10 s run
+of the published pulse differs by up to 0.3 µm in length (2 s: 9 nm), at nearly every sample. The choice is
+therefore :attr:`growjax.Config.quick_compile`, made explicit by :meth:`growjax.Config.resolved`
+(:func:`quick_compile_in_force`), and compiled programs are keyed on it.
 """
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import os
 import re
 import subprocess
@@ -77,14 +82,46 @@ def applied() -> bool:
     return found is not None and int(found.group(1)) >= 10**8
 
 
-def compile_quickly(lowered):
-    """``lowered.compile()`` under :data:`QUICK_COMPILE`; XLA's default where this jaxlib lacks the option."""
+def compile_quickly(lowered, quick: bool = True):
+    """``lowered.compile()`` under :data:`QUICK_COMPILE` (``quick``) or XLA's default emitters (not ``quick``),
+    whatever the process's flags (a plain compile where they give that already); XLA's default where this
+    jaxlib lacks the option."""
+    (name, value), = QUICK_COMPILE.items()
+    if bool(quick) == quick_compile_applied():
+        return lowered.compile()
     try:
-        return lowered.compile(compiler_options=QUICK_COMPILE)
+        return lowered.compile(compiler_options={name: value if quick else not value})
     except Exception as err:  # jaxlib raises its own runtime error type for an unknown option
         if "compile option" not in str(err):
             raise
         return lowered.compile()
+
+
+_COMPILING: contextvars.ContextVar = contextvars.ContextVar("growjax_quick_compile", default=None)
+
+
+@contextlib.contextmanager
+def compiling(quick: bool):
+    """Within it, the program being traced is compiled by :func:`compile_quickly` with ``quick``, not under the
+    process's flags (what :func:`quick_compile_in_force` answers)."""
+    token = _COMPILING.set(bool(quick))
+    try:
+        yield
+    finally:
+        _COMPILING.reset(token)
+
+
+def quick_compile_applied() -> bool:
+    """Whether ``XLA_FLAGS`` sets :data:`QUICK_COMPILE` for every program of this process."""
+    (name, value), = QUICK_COMPILE.items()
+    return f"--{name}={str(value).lower()}" in os.environ.get("XLA_FLAGS", "")
+
+
+def quick_compile_in_force() -> bool:
+    """Whether the program traced now is compiled with :data:`QUICK_COMPILE`: the choice of the
+    :func:`compiling` block around it, else the process's (:func:`quick_compile_applied`)."""
+    chosen = _COMPILING.get()
+    return quick_compile_applied() if chosen is None else chosen
 
 
 def quick_compile_flags(flags: str) -> str:
@@ -120,4 +157,4 @@ def apply_quick_compile() -> bool:
     flags = os.environ.get("XLA_FLAGS", "")
     if name not in flags and not _backend_started() and quick_compile_known():
         os.environ["XLA_FLAGS"] = quick_compile_flags(flags)
-    return f"--{name}=false" in os.environ.get("XLA_FLAGS", "")
+    return quick_compile_applied()

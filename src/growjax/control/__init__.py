@@ -14,7 +14,7 @@ What is here, in the order a design uses it:
 * :func:`run_closed_loop` — a sampled-data length controller around either configuration of the plant:
   :class:`LengthPID` (forward drive, outer loop over the pressure PID, with the optimised profile as
   feed-forward), :class:`StepController` (stepper: back-and-forth steps on the length error) and
-  :class:`MPC` (forward drive; nonlinear, Gauss–Newton on the fast model from the current state).
+  :class:`MPC` (forward drive; nonlinear least squares on the fast model from the current state).
 * :func:`tune_pid` — gains by gradient descent on the closed-loop tracking cost, optionally averaged over
   parameter draws (robust design, :func:`parameter_draws`).
 * :func:`design` — one design (drive × method) end to end, summarised for JSON (the ``growjax control`` command).

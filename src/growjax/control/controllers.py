@@ -15,6 +15,7 @@ from jaxtyping import Array, Float
 
 import growjax as gj
 from growjax import fast_model as fm
+from growjax._least_squares import levenberg_marquardt
 from growjax.control.plant import Plant, catheter_signal, segment_inputs
 from growjax.control.targets import Limits, Target, limits, rmse, step_length
 
@@ -171,13 +172,10 @@ class MPC(eqx.Module):
 
     Every ``dt`` s: from the current state estimate, choose the demand at the next ``horizon`` knots (first-order
     hold, in [0, max_demand]) minimising Σ (L − L_ref)²/(1 mm)² + ``w_move``·Σ(Δu/10 kPa)² + pressure excess over
-    the ceiling, by ``iterations`` Gauss–Newton steps (Jacobian: one batched forward-difference solve of the
-    fast model), warm-started from the last plan; apply the first knot. On a plant of another configuration the
-    state estimate is the fast model run alongside, with its length and pressure reset to the measured ones.
-
-    The Gauss–Newton steps are not :func:`growjax._least_squares.levenberg_marquardt`: a tick's plan is one
-    compiled program of a fixed number of steps (its time per tick is bounded and it runs without returning to
-    Python), where the engine is a Python loop that stops on convergence.
+    the ceiling, by at most ``iterations`` steps of :func:`growjax._least_squares.levenberg_marquardt`
+    (Jacobian: one batched forward-difference solve of the fast model), warm-started from the last plan;
+    apply the first knot. On a plant of another configuration the state estimate is the fast model run
+    alongside, with its length and pressure reset to the measured ones.
     """
 
     dt: float = 0.1
@@ -199,33 +197,41 @@ class MPC(eqx.Module):
 
         return predict
 
+    def _planner(self, model: Plant, cath, ceiling: float):
+        """``plan_step(y, t s, u_now Pa, plan (horizon,) Pa, ref (horizon·samples,) m) → plan (horizon,) Pa``: one tick's
+        least squares, the demand in units of 10 kPa inside [0, ``ceiling``] Pa."""
+        predict = self._predictor(model, cath)
+        n, scale, eps = self.horizon, 1e4, 0.05  # eps: 500 Pa
+
+        @jax.jit
+        def linearised(x, y, ta, u_now, ref):  # (r, J) from the plan and its n perturbations in one batched solve
+            def resid(x):
+                l, p = predict(y, ta, u_now, x * scale)
+                du = jnp.diff(jnp.concatenate([u_now[None] / scale, x]))
+                return jnp.concatenate([(l - ref) / 1e-3, jnp.sqrt(self.w_move) * du,
+                                        jax.nn.relu(p - ceiling) / 1e3])
+
+            rs = jax.vmap(resid)(jnp.concatenate([x[None], x[None] + eps * jnp.eye(n)]))
+            return rs[0], ((rs[1:] - rs[0]) / eps).T
+
+        bounds = (np.zeros(n), np.full(n, ceiling / scale))
+
+        def plan_step(y, ta, u_now, plan, ref):
+            # strong float64 arguments: one compiled program for every tick
+            args = tuple(jnp.asarray(a, float) for a in (y, ta, u_now, ref))
+            x = levenberg_marquardt(lambda x: linearised(x, *args), np.asarray(plan, float) / scale,
+                                    max_steps=self.iterations, bounds=bounds)[0]
+            return x * scale
+
+        return plan_step
+
     def run(self, plant: Plant, target: Target, t1: float, lim: Limits, cath) -> ClosedLoopResult:
         model = plant
         if plant.config.fidelity != "fast":  # the internal model: the fast configuration of the same parameters
             cfg = gj.Config(drive="forward", t1=t1)
             model = Plant.make(plant.params, cfg)
-        predict = self._predictor(model, cath)
-        n, m, scale = self.horizon, self.samples, 1e4
-        hi = lim.max_demand
-
-        @jax.jit
-        def plan_step(y, ta, u_now, plan, ref):
-            def resid(x):
-                l, p = predict(y, ta, u_now, x * scale)
-                du = jnp.diff(jnp.concatenate([u_now[None] / scale, x]))
-                return jnp.concatenate([(l - ref) / 1e-3, jnp.sqrt(self.w_move) * du,
-                                        jax.nn.relu(p - hi) / 1e3])
-
-            x = plan / scale
-            eps = 0.05  # 500 Pa
-            for _ in range(self.iterations):
-                pert = jnp.concatenate([x[None], x[None] + eps * jnp.eye(n)])
-                rs = jax.vmap(resid)(pert)
-                r0, j = rs[0], ((rs[1:] - rs[0]) / eps).T
-                step = jnp.linalg.solve(j.T @ j + 1e-3 * jnp.eye(n), -j.T @ r0)
-                x = jnp.clip(x + step, 0.0, hi / scale)
-            return x * scale
-
+        plan_step = self._planner(model, cath, lim.max_demand)
+        n, m = self.horizon, self.samples
         sub = max(1, int(round(self.dt / 0.01)))  # noqa: RUF046 (dt may be an array scalar)
 
         @jax.jit
@@ -244,7 +250,7 @@ class MPC(eqx.Module):
         y = plant.initial_state()
         y_hat = model.initial_state()
         u_now = 0.0
-        plan = jnp.full(n, 1.2e5)
+        plan = np.full(n, 1.2e5)
         out_t, out_l, out_p, us, step_s, status = [], [], [], [], [], 0
         meas = None
         for ta in ticks:
@@ -253,7 +259,7 @@ class MPC(eqx.Module):
             if observer and meas is not None:
                 est = _reset_estimate(model, y_hat, ta, meas)
             start = time.perf_counter()
-            plan = jax.block_until_ready(plan_step(est, jnp.asarray(ta), jnp.asarray(u_now), plan, jnp.asarray(ref)))
+            plan = plan_step(est, ta, u_now, plan, ref)
             step_s.append(time.perf_counter() - start)
             u_next = float(plan[0])
             y, (l, p, _), st = seg(y, jnp.asarray(ta), jnp.asarray(u_now), jnp.asarray(u_next))
@@ -266,7 +272,7 @@ class MPC(eqx.Module):
             out_p.append(np.asarray(p))
             us.append(u_next)
             u_now = u_next
-            plan = jnp.concatenate([plan[1:], plan[-1:]])
+            plan = np.concatenate([plan[1:], plan[-1:]])
         ts = np.concatenate(out_t)
         return score(ts, np.concatenate(out_l), np.concatenate(out_p), np.asarray(us), ticks, target, lim, status,
                       np.asarray(step_s))
