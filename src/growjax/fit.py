@@ -379,7 +379,7 @@ class Likelihood(eqx.Module):
         return (evecs * np.clip(evals, 0.0, None)) @ evecs.T
 
 
-HYPER_GRID = (np.geomspace(1e-3, 10.0, 11), np.geomspace(0.1, 10.0, 7), np.geomspace(0.5, 2.0, 3))  # × the mode
+HYPER_GRID = (np.geomspace(1e-3, 10.0, 13), np.geomspace(0.1, 10.0, 7), np.geomspace(0.5, 2.0, 3))  # × the mode (each holds it)
 
 
 def _hyper_grid(hyper) -> dc.Hyper:
