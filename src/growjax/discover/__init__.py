@@ -47,8 +47,10 @@ The workflow (:func:`discover`), on a measured length L(t):
 Under the default likelihood (``discrepancy="matern32"``, :mod:`growjax.discrepancy`) every 2ΔlogL above is a
 difference of profile log-likelihoods under a smooth discrepancy plus (possibly correlated) sensor noise,
 with the rig's tolerances marginalised (:mod:`growjax.tolerance`, sensitivities at the base fit); the misfit
-test becomes the discrepancy's significance against white noise, and the base-held trade of step 4 counts
-only where the misfit at the start is structured and material.
+test becomes the discrepancy's significance against white noise, the base-held trade of step 4 counts
+only where the misfit at the start is structured and material, and the allowance m·e²/σ² of step 4 becomes
+its counterpart under that likelihood, tr(K⁻¹K_e) (K the residuals' covariance, K_e the drift's): a
+discrepancy that already takes slow structure leaves the fitted configuration's drift less to buy.
 
 Effect parameters are moved in u with η = s·softplus(u) (η ≥ 0) or η = s·u for effects whose range
 allows both signs; s is a tenth of the range's upper end. Every fit is bounded to the physical ranges

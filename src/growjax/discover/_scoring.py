@@ -79,6 +79,25 @@ class Scorer:
             self._cache[key] = (float(value), hyper)
         return self._cache[key]
 
+    def allowance(self, residual, error: float, time_scale: float) -> float:
+        """The expected 2ΔlogL that a slow drift of RMS ``error`` (m; squared-exponential over ``time_scale`` s, the
+        fitted configuration's own error against the reference) buys a model that can follow it, under this
+        scorer's likelihood at the mode for ``residual``: tr(K⁻¹ K_e), K the residuals' covariance, K_e the drift's.
+        Under independent noise it is m·e²/σ²; a discrepancy that already takes slow structure leaves less."""
+        if error <= 0.0:
+            return 0.0
+        if self.kind == "none" and self.sensitivity is None:
+            return self.scored * error**2 / self.sigma**2
+        hyper = self.profile(residual)[1]
+        seen = slice(None) if self.observed is None else self.observed
+        t = self.times[seen]
+        cov = dc.kernel(t, hyper) + dc.noise_kernel(t, hyper)
+        if self.sensitivity is not None:
+            g = self.sensitivity[seen]
+            cov = cov + (g * self.tolerance**2) @ g.T
+        drift = error**2 * np.exp(-0.5 * ((t[:, None] - t[None, :]) / time_scale) ** 2)
+        return float(np.trace(np.linalg.solve(cov, drift)))
+
     def noise(self, residual) -> float:
         return float(self.profile(residual)[1].noise)
 

@@ -16,7 +16,7 @@ from growjax import effects as fx
 from growjax import params as gp
 from growjax import tolerance as tl
 from growjax.config import Config
-from growjax.fit import default_model_error
+from growjax.fit import MODEL_ERROR_TIME, default_model_error
 
 from ._candidates import CandidateFit, _held_start, candidate_parameter, make_candidates
 from ._decision import SEPARATING, choose, confounded_with_base, final_effect
@@ -85,7 +85,7 @@ def discover(
     held_lr, held_trades = _held_round(fitter, first, candidates, threshold)
     # 2ΔlogL the fitted configuration's own error (a slow drift, too small for the discrepancy to be estimated
     # from) can buy through a candidate that trades with a base parameter
-    allowance = first.scorer.scored * model_error**2 / first.sigma**2
+    allowance = first.scorer.allowance(first.base_fit.residual_m, model_error, MODEL_ERROR_TIME)
     misfit_before = first.scorer.misfit(first.base_fit.residual_m)
     # Residuals at the start within what the discrepancy term takes (unstructured, or not material): an effect
     # (or a confounding) needs the threshold cleared with the base refitted, never a trade with the base held.
