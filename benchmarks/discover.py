@@ -1,7 +1,7 @@
 """The discovery matrix: every catalogue effect × two magnitudes × seeds, plus clean seeds.
 
 Run: ``python benchmarks/discover.py [--seeds 10] [--clean 20] [--t-end 10] [--effects NAME ...] [--factors 1 2]
-[--first-seed 1000] [--first-clean-seed 2000] [--profile]``
+[--first-seed 1000] [--first-clean-seed 2000] [--profile] [--baseline N] [--merge FILE ...]``
 → ``benchmarks/results/discover.json``. Data come from :func:`growjax.synthetic.make_experiment`
 (the reference configuration; one noise-free trace per effect and magnitude, seeds add noise), and
 every run is :func:`growjax.discover.discover` over the whole catalogue on the fast configuration.
@@ -98,39 +98,13 @@ def one_run(effect, magnitude, seed, t_end, profile=False, discrepancy="matern32
             **({"profile": timer.summary()} if timer is not None else {})}
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, default=10)
-    parser.add_argument("--clean", type=int, default=20)
-    parser.add_argument("--t-end", type=float, default=10.0)
-    parser.add_argument("--effects", nargs="+", default=list(fx.CATALOGUE))
-    parser.add_argument("--factors", nargs="+", type=float, default=[1.0, 2.0],
-                        help="magnitudes as multiples of each effect's moderate magnitude (default 1 2)")
-    parser.add_argument("--first-seed", type=int, default=1000, help="seed of the first hidden-effect run")
-    parser.add_argument("--first-clean-seed", type=int, default=2000, help="seed of the first clean run")
-    parser.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "discover.json"))
-    parser.add_argument("--profile", action="store_true", help="time every linearisation, by the candidates on")
-    parser.add_argument("--baseline", type=int, default=0,
-                        help="run the first N clean seeds also under independent noise (the likelihood discovery "
-                             "had before the discrepancy), for the ratio of median wall times")
-    args = parser.parse_args()
-    runs = []
-    for effect in args.effects:
-        for factor in args.factors:
-            magnitude = factor * sy.moderate_magnitude(effect)
-            for seed in range(args.seeds):
-                runs.append(one_run(effect, magnitude, args.first_seed + seed, args.t_end, args.profile))
-                print(json.dumps(runs[-1]), flush=True)
-    for seed in range(args.clean):
-        runs.append(one_run(None, None, args.first_clean_seed + seed, args.t_end, args.profile))
-        print(json.dumps(runs[-1]), flush=True)
-    baseline = [one_run(None, None, args.first_clean_seed + seed, args.t_end, discrepancy="none")
-                for seed in range(min(args.baseline, args.clean))]
+def summarise(runs, baseline, args) -> dict:
+    """The matrix's figures from its runs (and the independent-noise baseline runs)."""
     hidden = [r for r in runs if r["effect"] is not None]
     clean = [r for r in runs if r["effect"] is None]
     covered = [r["covered"] for r in hidden if r["covered"] is not None]
     summary = {
-        "environment": environment(), "t_end_s": args.t_end, "seeds": args.seeds, "factors": args.factors,
+        "environment": environment(), "t_end_s": args.t_end, "factors": args.factors,
         "named_or_confounded_share": float(np.mean([r["named"] or r["confounded"] for r in hidden])) if hidden else None,
         "named_share_per_effect": {e: float(np.mean([r["named"] for r in hidden if r["effect"] == e]))
                                    for e in args.effects if hidden},
@@ -151,6 +125,49 @@ def main() -> None:
         "baseline_runs": baseline,
         "runs": runs,
     }
+    return summary
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, default=10)
+    parser.add_argument("--clean", type=int, default=20)
+    parser.add_argument("--t-end", type=float, default=10.0)
+    parser.add_argument("--effects", nargs="+", default=list(fx.CATALOGUE))
+    parser.add_argument("--factors", nargs="+", type=float, default=[1.0, 2.0],
+                        help="magnitudes as multiples of each effect's moderate magnitude (default 1 2)")
+    parser.add_argument("--first-seed", type=int, default=1000, help="seed of the first hidden-effect run")
+    parser.add_argument("--first-clean-seed", type=int, default=2000, help="seed of the first clean run")
+    parser.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "discover.json"))
+    parser.add_argument("--profile", action="store_true", help="time every linearisation, by the candidates on")
+    parser.add_argument("--baseline", type=int, default=0,
+                        help="run the first N clean seeds also under independent noise (the likelihood discovery "
+                             "had before the discrepancy), for the ratio of median wall times")
+    parser.add_argument("--merge", nargs="+", default=None, metavar="FILE",
+                        help="join matrices written by earlier runs (e.g. seeds split over two processes) into --out")
+    args = parser.parse_args()
+    if args.merge:
+        parts = [json.loads(Path(f).read_text()) for f in args.merge]
+        runs = [r for part in parts for r in part["runs"]]
+        baseline = [r for part in parts for r in part.get("baseline_runs", [])]
+        summary = summarise(runs, baseline, args)
+        summary["merged_from"] = [Path(f).name for f in args.merge]
+        Path(args.out).write_text(json.dumps(summary, indent=2, default=str) + "\n")
+        print(json.dumps({k: v for k, v in summary.items() if k not in ("runs", "baseline_runs")}, indent=2))
+        return
+    runs = []
+    for effect in args.effects:
+        for factor in args.factors:
+            magnitude = factor * sy.moderate_magnitude(effect)
+            for seed in range(args.seeds):
+                runs.append(one_run(effect, magnitude, args.first_seed + seed, args.t_end, args.profile))
+                print(json.dumps(runs[-1]), flush=True)
+    for seed in range(args.clean):
+        runs.append(one_run(None, None, args.first_clean_seed + seed, args.t_end, args.profile))
+        print(json.dumps(runs[-1]), flush=True)
+    baseline = [one_run(None, None, args.first_clean_seed + seed, args.t_end, discrepancy="none")
+                for seed in range(min(args.baseline, args.clean))]
+    summary = summarise(runs, baseline, args)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(summary, indent=2, default=str) + "\n")
     print(json.dumps({k: v for k, v in summary.items() if k != "runs"}, indent=2))
