@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 from concurrent.futures import ThreadPoolExecutor
 
-import jax
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
@@ -97,15 +97,20 @@ def sensitivity(length_of, base: gp.Parameters, tol: dict, reference=None) -> np
 def length_sensitivity(theta: dict, base: gp.Parameters, inputs, config, times, tol: dict) -> np.ndarray:
     """g (n, q): the model's length change (m) at ``times`` (n,) s per unit ln ψ of each toleranced parameter of
     ``tol``, the secant from ψ to ψ·e^u at the values ``theta`` {qualified name: value} (one compiled run of
-    the model, the rig as its argument)."""
-    from growjax.simulate import as_arrays, sample_times, simulate
-    from growjax.trajectory import OK
+    the model, the rig and θ as its arguments: compiled once per configuration and shapes)."""
+    from growjax.simulate import as_arrays, input_breaks, sample_times
 
     ts = sample_times(jnp.asarray(times, float), config)
+    values = {n: jnp.asarray(v, float) for n, v in theta.items()}
+    breaks = input_breaks(inputs, config)
+    return sensitivity(lambda rig: _length(rig, values, inputs, breaks, config, ts), as_arrays(base), tol)
 
-    def run(rig):
-        traj = simulate(gp.replace(rig, **theta), inputs, config, ts=ts)
-        return jnp.where(traj.status == OK, traj.length, jnp.nan)
 
-    return sensitivity(jax.jit(run), as_arrays(base), tol)
+@eqx.filter_jit
+def _length(rig, theta, inputs, breaks, config, ts):
+    """The model's length (m) at ``ts`` for the rig ``rig`` with ``theta`` set; NaN where the run failed."""
+    from growjax.simulate import simulate
+    from growjax.trajectory import OK
 
+    traj = simulate(gp.replace(rig, **theta), inputs, config, ts=ts, breaks=breaks)
+    return jnp.where(traj.status == OK, traj.length, jnp.nan)
