@@ -15,7 +15,6 @@ from jaxtyping import Array, Float
 
 import growjax as gj
 from growjax import fast_model as fm
-from growjax._least_squares import levenberg_marquardt
 from growjax.control.plant import Plant, catheter_signal, segment_inputs
 from growjax.control.targets import Limits, Target, limits, rmse, step_length
 
@@ -172,10 +171,14 @@ class MPC(eqx.Module):
 
     Every ``dt`` s: from the current state estimate, choose the demand at the next ``horizon`` knots (first-order
     hold, in [0, max_demand]) minimising Σ (L − L_ref)²/(1 mm)² + ``w_move``·Σ(Δu/10 kPa)² + pressure excess over
-    the ceiling, by at most ``iterations`` steps of :func:`growjax._least_squares.levenberg_marquardt`
-    (Jacobian: one batched forward-difference solve of the fast model), warm-started from the last plan;
-    apply the first knot. On a plant of another configuration the state estimate is the fast model run
-    alongside, with its length and pressure reset to the measured ones.
+    the ceiling, by ``iterations`` Gauss–Newton steps (Jacobian: one batched forward-difference solve of the
+    fast model), warm-started from the last plan; apply the first knot. On a plant of another configuration the
+    state estimate is the fast model run alongside, with its length and pressure reset to the measured ones.
+
+    The steps are not :func:`growjax._least_squares.levenberg_marquardt`: a tick's plan is one compiled program
+    of a fixed number of full steps, its time per tick bounded. Measured on the control benchmark (10 s of the
+    public length, reference plant), the engine's damped, rejectable steps within the same two iterations track
+    at 0.76 mm RMSE against 0.45 mm for the full steps.
     """
 
     dt: float = 0.1
@@ -204,24 +207,23 @@ class MPC(eqx.Module):
         n, scale, eps = self.horizon, 1e4, 0.05  # eps: 500 Pa
 
         @jax.jit
-        def linearised(x, y, ta, u_now, ref):  # (r, J) from the plan and its n perturbations in one batched solve
+        def steps(y, ta, u_now, plan, ref):
             def resid(x):
                 l, p = predict(y, ta, u_now, x * scale)
                 du = jnp.diff(jnp.concatenate([u_now[None] / scale, x]))
                 return jnp.concatenate([(l - ref) / 1e-3, jnp.sqrt(self.w_move) * du,
                                         jax.nn.relu(p - ceiling) / 1e3])
 
-            rs = jax.vmap(resid)(jnp.concatenate([x[None], x[None] + eps * jnp.eye(n)]))
-            return rs[0], ((rs[1:] - rs[0]) / eps).T
-
-        bounds = (np.zeros(n), np.full(n, ceiling / scale))
+            x = plan / scale
+            for _ in range(self.iterations):  # the plan and its n perturbations in one batched solve
+                rs = jax.vmap(resid)(jnp.concatenate([x[None], x[None] + eps * jnp.eye(n)]))
+                r0, j = rs[0], ((rs[1:] - rs[0]) / eps).T
+                x = jnp.clip(x + jnp.linalg.solve(j.T @ j + 1e-3 * jnp.eye(n), -j.T @ r0), 0.0, ceiling / scale)
+            return x * scale
 
         def plan_step(y, ta, u_now, plan, ref):
             # strong float64 arguments: one compiled program for every tick
-            args = tuple(jnp.asarray(a, float) for a in (y, ta, u_now, ref))
-            x = levenberg_marquardt(lambda x: linearised(x, *args), np.asarray(plan, float) / scale,
-                                    max_steps=self.iterations, bounds=bounds)[0]
-            return x * scale
+            return np.asarray(steps(*(jnp.asarray(a, float) for a in (y, ta, u_now, plan, ref))))
 
         return plan_step
 

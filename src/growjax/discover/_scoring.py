@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import math
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 from scipy import stats
 
@@ -16,6 +18,7 @@ from ._candidates import Z90, CandidateFit, candidate_parameter
 PINNED_FACTOR = 2.0  # a correlated effect whose 90 % interval lies within [η/2, 2η] is determined, not confounded
 MATERIAL_MISFIT = 5e-4  # m: a smooth misfit below this amplitude is left to the discrepancy term
 STRUCTURE_THRESHOLD = float(stats.chi2.isf(0.01, df=2))
+_log_likelihood = jax.jit(dc.log_likelihood)
 
 
 def noise_from_differences(residual) -> float:
@@ -75,7 +78,7 @@ class Scorer:
             seen = slice(None) if self.observed is None else self.observed  # the filter over the scored rows: exact
             t, g = self.times[seen], None if self.sensitivity is None else self.sensitivity[seen]
             hyper = dc.estimate(r[seen], t, kind, g, self.tolerance)
-            value = dc.log_likelihood(r[seen], t, hyper, g, self.tolerance)
+            value = _log_likelihood(jnp.asarray(r[seen]), jnp.asarray(t), hyper, g, self.tolerance)
             self._cache[key] = (float(value), hyper)
         return self._cache[key]
 
