@@ -55,15 +55,10 @@ def discover(
     from the first only, a third of the fits); ``workers``: fits run at a time (default one per CPU core; each
     fit is deterministic, so the result does not depend on it); ``model_error``: the fitted configuration's
     length error against the reference, m (default :data:`growjax.fit.FAST_MODEL_ERROR` for the fast
-    configuration, 0 for the reference), allowed for in the confounding test under independent noise.
-    ``discrepancy``: the likelihood every test uses (:mod:`growjax.discrepancy`): ``"matern32"`` (default) scores
-    each model by its profile log-likelihood under a smooth discrepancy plus noise (hyperparameters at their mode
-    for that model's residuals), and calls the misfit structured only where the discrepancy is significant and
-    larger than the noise, material where it also exceeds ``material_misfit`` (m); ``"none"``: independent
-    noise, σ from the residuals' differences. ``tolerances`` {parameter: relative sd}: the rig's fixed
-    parameters' uncertainty, marginalised in every score (:mod:`growjax.tolerance`; None: its default budget
-    with the discrepancy, none without), so that an effect must explain more than a fixed parameter held
-    within its tolerance could.
+    configuration, 0 for the reference), allowed for in the confounding test. ``discrepancy``: the likelihood
+    of every test (:mod:`growjax.discrepancy`; ``"none"``: independent noise); ``material_misfit`` (m): a smooth
+    misfit below it is left to the discrepancy; ``tolerances`` {parameter: relative sd}: the rig's uncertainty,
+    marginalised in every score (:mod:`growjax.tolerance`; None: its default budget with the discrepancy).
     See the module docstring for the procedure and its thresholds.
     """
     if discrepancy not in dc.KINDS:
