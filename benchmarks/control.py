@@ -29,6 +29,7 @@ from growjax import experiment as ex
 from growjax.cli import default_data_path
 
 HERE = Path(__file__).resolve().parent
+from _environment import environment  # the script's folder is on the path
 
 
 def main():
@@ -93,7 +94,7 @@ def main():
 
 def write(res, name):
     (HERE / "results").mkdir(exist_ok=True)
-    (HERE / "results" / name).write_text(json.dumps(res, indent=2, default=float) + "\n")
+    (HERE / "results" / name).write_text(json.dumps({"environment": environment(), **res}, indent=2, default=float) + "\n")
     print("wrote", HERE / "results" / name)
 
 

@@ -141,12 +141,21 @@ def rows_discover(r: dict) -> list[tuple[str, str, str]]:
     return out
 
 
+def rows_control(r: dict) -> list[tuple[str, str, str]]:
+    out = [(name, f"{1e3 * m['tracking_rmse_m']:.2f} mm", (f"peak {m['peak_pressure_Pa'] / 1e3:.0f} kPa, evaluated on the "
+            f"{r['evaluated_on']} configuration")) for name, m in r["methods"].items()]
+    out.append(("MPC time per tick, median", f"{1e3 * r['mpc_step_s_median']:.1f} ms", ""))
+    out.append(("profile optimisation", _s(r["profile_optimisation_s"]), ""))
+    return out
+
+
 EXTRACTORS = {"simulate": rows_simulate, "sweep": rows_sweep, "agreement": rows_agreement,
               "windows_public": rows_windows, "coverage_discrepancy": rows_coverage,
               "coverage_discrepancy_nominal": rows_coverage, "predict_public": rows_predict,
               "fit_speed": rows_fit_speed, "discover_discrepancy": rows_discover_discrepancy,
               "discover_discrepancy_3s": rows_discover_discrepancy, "coverage_discrepancy_rig": rows_coverage,
-              "discover": rows_discover}
+              "discover": rows_discover, "agreement_quick": rows_agreement,
+              "control": rows_control}
 
 
 def environment_line(r: dict, path: Path) -> str:
