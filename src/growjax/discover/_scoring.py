@@ -49,8 +49,8 @@ class Scorer:
 
     ``discrepancy="matern32"``: a model's score is its log-likelihood with the residual model's
     hyperparameters at their mode for that model's residuals, and the rig's tolerances marginalised (after
-    :meth:`with_tolerances`: every model is then scored against what the fixed parameters' errors could do); the misfit is structured where the discrepancy
-    is significant against white noise (2ΔlogL above the 1 % point of χ²₂) and larger than the noise, and
+    :meth:`with_tolerances`: every model is then scored against what the fixed parameters' errors could do);
+    the misfit is structured where the discrepancy is significant against white noise (2ΔlogL above the 1 % point of χ²₂) and larger than the noise, and
     material where its amplitude also exceeds ``material`` (m): only a material misfit that no candidate
     removes is reported ``unexplained``; a smaller one is left to the discrepancy term. ``"none"``: independent noise of sd ``sigma`` (m) and :func:`misfit_test`.
     A record interpolated between keyframes is scored at its keyframes.
@@ -69,13 +69,18 @@ class Scorer:
         self.sensitivity, self.tolerance = np.asarray(sensitivity, float), np.asarray(tolerance, float)
         self._cache = {}
 
+    @property
+    def _seen(self):
+        """The rows scored: a boolean mask, or every row."""
+        return slice(None) if self.observed is None else self.observed
+
     def profile(self, residual, kind: str | None = None) -> tuple[float, dc.Hyper]:
         """(log-likelihood, nats, at the hyperparameters' mode for ``residual``; that mode)."""
         kind = kind or self.kind
         r = np.asarray(residual, float)
         key = (kind, r.tobytes())
         if key not in self._cache:
-            seen = slice(None) if self.observed is None else self.observed  # the filter over the scored rows: exact
+            seen = self._seen  # the filter over the scored rows: exact
             t, g = self.times[seen], None if self.sensitivity is None else self.sensitivity[seen]
             hyper = dc.estimate(r[seen], t, kind, g, self.tolerance)
             value = _log_likelihood(jnp.asarray(r[seen]), jnp.asarray(t), hyper, g, self.tolerance)
@@ -92,7 +97,7 @@ class Scorer:
         if self.kind == "none" and self.sensitivity is None:
             return self.scored * error**2 / self.sigma**2
         hyper = self.profile(residual)[1]
-        seen = slice(None) if self.observed is None else self.observed
+        seen = self._seen
         t = self.times[seen]
         cov = dc.kernel(t, hyper) + dc.noise_kernel(t, hyper)
         if self.sensitivity is not None:
