@@ -226,3 +226,20 @@ def test_discovery_leaves_a_small_smooth_discrepancy_to_the_discrepancy_term(per
                                                                  "retraction_folding"))
     assert res.effect == "none" and not res.confounded_with, gd.summary_text(res)
     assert json.dumps(res.report(), default=float)  # the report stays serialisable with the discrepancy's fields
+
+
+def test_the_drift_allowance_is_the_independent_noise_one_without_a_discrepancy_and_smaller_with_one():
+    """Discovery's allowance for the fitted configuration's drift, tr(K⁻¹K_e): m·e²/σ² under white noise; a slow
+    discrepancy that already takes slow structure leaves the drift much less to buy."""
+    from growjax import discover as gd
+
+    t = np.arange(1, 501) * 0.02
+    rng = np.random.default_rng(0)
+    white = rng.normal(0.0, 2e-4, t.size)
+    slow = white + _smooth(rng, t, 4e-4, 3.0)
+    iid = gd.Scorer(t, np.sin(t), 2e-4, "none")  # a smooth record: every sample is scored
+    assert iid.allowance(white, 1.5e-5, 5.0) == pytest.approx(t.size * 1.5e-5**2 / 2e-4**2)
+    scorer = gd.Scorer(t, np.sin(t), 2e-4, "matern32")
+    on_white = scorer.allowance(white, 1.5e-5, 5.0)
+    assert 0.4 < on_white / (t.size * 1.5e-5**2 / float(scorer.noise(white)) ** 2) <= 1.0
+    assert scorer.allowance(slow, 1.5e-5, 5.0) < 0.2 * on_white

@@ -188,6 +188,13 @@ def kernel(times, hyper: Hyper) -> np.ndarray:
     return float(hyper.amplitude) ** 2 * (1.0 + x) * np.exp(-x)
 
 
+def drift_kernel(times, sd: float, time_scale: float) -> np.ndarray:
+    """Dense covariance (n, n) m² of a slow drift at ``times``: sd² exp(−½(Δt/``time_scale``)²) (squared
+    exponential), the fitted configuration's own error against the reference."""
+    t = np.asarray(times, float)
+    return sd**2 * np.exp(-0.5 * ((t[:, None] - t[None, :]) / time_scale) ** 2)
+
+
 def noise_kernel(times, hyper: Hyper) -> np.ndarray:
     """Dense covariance (n, n) m² of the sensor noise at ``times``: σ² exp(−|Δt|/τ) (σ² I for τ = 0)."""
     t = np.asarray(times, float)

@@ -344,7 +344,7 @@ class Likelihood(eqx.Module):
         a = cov @ np.linalg.solve(sum(kernels.values()), j_len).T  # (p, n): ln θ per metre of residual
         parts = {k: a @ kern @ a.T for k, kern in kernels.items()}
         if model_error > 0:
-            solver = model_error**2 * np.exp(-0.5 * ((t[:, None] - t[None, :]) / MODEL_ERROR_TIME) ** 2)
+            solver = dc.drift_kernel(t, model_error, MODEL_ERROR_TIME)
             parts["fast_model_error"] = a @ solver @ a.T
         if jac.shape[0] > self.n_len:
             j_p = jac[self.n_len:]

@@ -103,8 +103,7 @@ class Scorer:
         if self.sensitivity is not None:
             g = self.sensitivity[seen]
             cov = cov + (g * self.tolerance**2) @ g.T
-        drift = error**2 * np.exp(-0.5 * ((t[:, None] - t[None, :]) / time_scale) ** 2)
-        return float(np.trace(np.linalg.solve(cov, drift)))
+        return float(np.trace(np.linalg.solve(cov, dc.drift_kernel(t, error, time_scale))))
 
     def noise(self, residual) -> float:
         return float(self.profile(residual)[1].noise)
