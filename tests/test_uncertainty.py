@@ -44,6 +44,10 @@ def test_kalman_likelihood_whitening_and_forecast_equal_the_dense_gaussian(noise
     w = np.asarray(dc.whiten(r, t, hyper, g, u))
     np.testing.assert_allclose(w, np.linalg.solve(np.linalg.cholesky(k), r), atol=1e-8)
     seen = t < 6.0
+    # the total (three-state filter + Woodbury) and the one-step-ahead terms (the augmented filter), on a subset
+    part = multivariate_normal(np.zeros(seen.sum()), k[np.ix_(seen, seen)]).logpdf(r[seen])
+    assert float(dc.log_likelihood(r, t, hyper, g, u, seen)) == pytest.approx(part, rel=1e-10)
+    assert float(jnp.sum(dc.log_likelihood(r, t, hyper, g, u, seen, pointwise=True))) == pytest.approx(part, rel=1e-10)
     mean, var = (np.asarray(a) for a in dc.forecast(r, t, seen, hyper))
     k0, ko = _dense(t, hyper), _dense(t, hyper)[np.ix_(seen, seen)]
     kf = k0[np.ix_(~seen, seen)]

@@ -99,10 +99,12 @@ def kalman_filter(residuals, times, hyper: Hyper, sensitivity=None, tolerance=No
     p0 = jax.scipy.linalg.block_diag(stationary, jnp.diag(u2)) if q else stationary
     dts = jnp.diff(t, prepend=t[0])
 
+    # the transitions of every step at once (vectorised outside the loop: the scan body stays small)
+    a_all, q_all, _ = jax.vmap(lambda dt: _transition(dt, hyper))(dts)
+
     def step(carry, inp):
         m, p = carry
-        dt, y, gk, ok = inp
-        a_d, q_d, _ = _transition(dt, hyper)
+        a_d, q_d, y, gk, ok = inp
         a = jax.scipy.linalg.block_diag(a_d, jnp.eye(q)) if q else a_d
         qn = jax.scipy.linalg.block_diag(q_d, jnp.zeros((q, q))) if q else q_d
         m = a @ m
@@ -120,7 +122,7 @@ def kalman_filter(residuals, times, hyper: Hyper, sensitivity=None, tolerance=No
         return (m, p), (v, s, pred, pred_var)
 
     init = (jnp.zeros((3 + q, k)), p0)
-    _, (v, s, pred, pred_var) = jax.lax.scan(step, init, (dts, r, g, obs))
+    _, (v, s, pred, pred_var) = jax.lax.scan(step, init, (a_all, q_all, r, g, obs))
     if vector:
         v, pred = v[:, 0], pred[:, 0]
     return v, s, pred, pred_var
@@ -131,11 +133,35 @@ def log_likelihood(residuals: Float[ArrayLike, " n"], times: Float[ArrayLike, " 
     """Exact log-likelihood (nats) of ``residuals`` (n,) m at the ``observed`` samples (default all) under the
     residual model; ``pointwise``: the (n,) one-step-ahead terms log p(yᵢ | earlier observed y), whose sum is
     the total (0 where not observed)."""
+    if sensitivity is not None and not pointwise:
+        return _log_likelihood_static(residuals, times, hyper, sensitivity, tolerance, observed)
     v, s, _, _ = kalman_filter(residuals, times, hyper, sensitivity, tolerance, observed)
     terms = -0.5 * (jnp.log(2.0 * jnp.pi * s) + v**2 / s)
     if observed is not None:
         terms = jnp.where(jnp.asarray(observed, bool), terms, 0.0)
     return terms if pointwise else jnp.sum(terms)
+
+
+def _log_likelihood_static(residuals, times, hyper: Hyper, sensitivity, tolerance, observed):
+    """The total of :func:`log_likelihood` with the rig terms, by the three-state filter and a q × q correction
+    instead of the (3 + q)-state filter (the same number to rounding; 3–4× cheaper with the default budget).
+
+    With K the covariance of δ + ε and W = K^{-1/2} G U (the filter's whitened sensitivity columns, each scaled by
+    its tolerance), Woodbury's identity and the determinant lemma give
+    rᵀC⁻¹r = |w|² − bᵀM⁻¹b and log det C = log det K + log det M, with w = K^{-1/2} r, b = Wᵀw, M = I + WᵀW.
+    """
+    r = jnp.asarray(residuals, float)
+    g = jnp.asarray(sensitivity, float) * jnp.asarray(tolerance, float)
+    v, s, _, _ = kalman_filter(jnp.concatenate([r[:, None], g], axis=1), times, hyper, observed=observed)
+    w = v / jnp.sqrt(s)[:, None]
+    log_s = jnp.log(2.0 * jnp.pi * s)
+    if observed is not None:
+        ok = jnp.asarray(observed, bool)
+        w, log_s = jnp.where(ok[:, None], w, 0.0), jnp.where(ok, log_s, 0.0)
+    wr, wg = w[:, 0], w[:, 1:]
+    chol = jnp.linalg.cholesky(jnp.eye(g.shape[1]) + wg.T @ wg)
+    c = jax.scipy.linalg.solve_triangular(chol, wg.T @ wr, lower=True)
+    return -0.5 * (jnp.sum(log_s) + wr @ wr - c @ c) - jnp.sum(jnp.log(jnp.diag(chol)))
 
 
 def whiten(residuals: Float[ArrayLike, " n"] | Float[ArrayLike, " n k"], times: Float[ArrayLike, " n"], hyper: Hyper,

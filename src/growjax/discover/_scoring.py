@@ -61,13 +61,20 @@ class Scorer:
         self.observed = experiment.informative_samples(length) if discrepancy != "none" else None
         self.scored = int(np.sum(self.observed)) if self.observed is not None else len(self.times)
         self.sensitivity = self.tolerance = None
-        self._cache = {}
+        self._cache, self._start = {}, None
 
     def with_tolerances(self, sensitivity, tolerance) -> None:
         """Marginalise the rig's tolerances in every score from now on: ``sensitivity`` (n, q) m per unit ln ψ
         (the length's, at the base fit), ``tolerance`` (q,) relative sds."""
         self.sensitivity, self.tolerance = np.asarray(sensitivity, float), np.asarray(tolerance, float)
-        self._cache = {}
+        self._cache, self._start = {}, None
+
+    def anchor(self, residual) -> None:
+        """Start every later model's hyperparameter search at the mode for ``residual`` (m; the base model's), from
+        one start instead of a spread: a nested model's residuals differ from the base's by one effect, and its
+        mode lies near the base's (on the discovery matrix the scores are the same to 0.1 nats, in a third of
+        the time)."""
+        self._start = self.profile(residual)[1]
 
     @property
     def _seen(self):
@@ -82,7 +89,7 @@ class Scorer:
         if key not in self._cache:
             seen = self._seen  # the filter over the scored rows: exact
             t, g = self.times[seen], None if self.sensitivity is None else self.sensitivity[seen]
-            hyper = dc.estimate(r[seen], t, kind, g, self.tolerance)
+            hyper = dc.estimate(r[seen], t, kind, g, self.tolerance, start=self._start if kind == self.kind else None)
             value = _log_likelihood(jnp.asarray(r[seen]), jnp.asarray(t), hyper, g, self.tolerance)
             self._cache[key] = (float(value), hyper)
         return self._cache[key]

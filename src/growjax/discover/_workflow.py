@@ -140,6 +140,7 @@ def _first_round(fitter: Fitter, candidates, times, length, discrepancy: str, ma
         theta = {n: base_fit.estimate[n] for n in fitter.problem.base_names}
         scorer.with_tolerances(tl.length_sensitivity(theta, base, inputs, config, times, tol), list(tol.values()))
     if discrepancy != "none":
+        scorer.anchor(base_fit.residual_m)
         sigma = scorer.noise(base_fit.residual_m)
     return _FirstRound(outs, base_fit, fits, sigma, scorer, outs[0][5])
 
