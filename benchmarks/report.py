@@ -125,14 +125,18 @@ def rows_discover_discrepancy(r: dict) -> list[tuple[str, str, str]]:
 def rows_discover(r: dict) -> list[tuple[str, str, str]]:
     hidden = [x for x in r["runs"] if x["effect"] is not None]
     clean = [x for x in r["runs"] if x["effect"] is None]
-    out = []
+    factors = ", ".join(f"{f:g}×" for f in r.get("factors", []))
+    out = [("rig's tolerances", r.get("rig", "default tolerance budget"), f"magnitude {factors} moderate")]
     for effect in r["named_share_per_effect"]:
         mine = [x for x in hidden if x["effect"] == effect]
+        if not mine:
+            continue
         confounded = sum(x["confounded"] for x in mine)
         out.append((f"`{effect}` named", f"{sum(x['named'] for x in mine)} of {len(mine)}",
                     f"{confounded} confounded" if confounded else ""))
-    out.append(("false positives on clean data", f"{sum(x['found'] != 'none' for x in clean)} of {len(clean)}",
-                "target ≤ 1 of 20"))
+    if clean:
+        out.append(("false positives on clean data", f"{sum(x['found'] != 'none' for x in clean)} of {len(clean)}",
+                    "target ≤ 1 of 20"))
     out.append(("a wrong effect claimed", f"{r['wrong_effect_share']:.2f}", "share of hidden-effect runs"))
     out.append(("median wall time of a run", _s(r["median_wall_s"]), ""))
     if r.get("wall_ratio_to_independent"):
@@ -154,7 +158,8 @@ EXTRACTORS = {"simulate": rows_simulate, "sweep": rows_sweep, "agreement": rows_
               "coverage_discrepancy_nominal": rows_coverage, "predict_public": rows_predict,
               "fit_speed": rows_fit_speed, "discover_discrepancy": rows_discover_discrepancy,
               "discover_discrepancy_3s": rows_discover_discrepancy, "coverage_discrepancy_rig": rows_coverage,
-              "discover": rows_discover, "agreement_quick": rows_agreement,
+              "discover": rows_discover, "discover_rig_known": rows_discover, "discover_folding_twofold": rows_discover,
+              "agreement_quick": rows_agreement,
               "control": rows_control}
 
 

@@ -22,6 +22,7 @@ Jacobian's columns are whitened together); ``sensitivity`` (n, q) m, or None.
 from __future__ import annotations
 
 import math
+from concurrent.futures import ThreadPoolExecutor
 
 import equinox as eqx
 import jax
@@ -77,12 +78,15 @@ def _transition(dt, hyper: Hyper):
     return trans, stationary - trans @ stationary @ trans.T, stationary
 
 
-def kalman_filter(residuals, times, hyper: Hyper, sensitivity=None, tolerance=None, observed=None):
+def kalman_filter(residuals, times, hyper: Hyper, sensitivity=None, tolerance=None, observed=None,
+                  hoist: bool = True):
     """Kalman filter of the residual model over ``residuals`` (n,) or (n, k).
 
     ``sensitivity`` (n, q) and ``tolerance`` (q,) add the rig terms Σⱼ gⱼ(t) bⱼ, bⱼ ~ N(0, uⱼ²); ``observed``
     (n,) bool marks the samples that update the filter (default all): at the others the filter only
-    predicts. Returns (innovations (n,) or (n, k) m, their variances (n,) m², the predicted residual
+    predicts. ``hoist``: compute every step's transition before the loop (quicker for one filter; under ``vmap``
+    over many hyperparameters, False keeps them inside the loop and the memory small). Returns (innovations
+    (n,) or (n, k) m, their variances (n,) m², the predicted residual
     δ + rig term + ε (n,) or (n, k) m and its variance (n,) m² before each update; the innovation is the
     residual less that prediction, so the two variances are one).
     """
@@ -99,12 +103,16 @@ def kalman_filter(residuals, times, hyper: Hyper, sensitivity=None, tolerance=No
     p0 = jax.scipy.linalg.block_diag(stationary, jnp.diag(u2)) if q else stationary
     dts = jnp.diff(t, prepend=t[0])
 
-    # the transitions of every step at once (vectorised outside the loop: the scan body stays small)
-    a_all, q_all, _ = jax.vmap(lambda dt: _transition(dt, hyper))(dts)
+    if hoist:  # every step's transition at once, outside the loop: the loop's body stays small
+        a_all, q_all, _ = jax.vmap(lambda dt: _transition(dt, hyper))(dts)
+        steps = (a_all, q_all)
+    else:
+        steps = (dts,)
 
     def step(carry, inp):
         m, p = carry
-        a_d, q_d, y, gk, ok = inp
+        *how, y, gk, ok = inp
+        a_d, q_d = how if hoist else _transition(how[0], hyper)[:2]
         a = jax.scipy.linalg.block_diag(a_d, jnp.eye(q)) if q else a_d
         qn = jax.scipy.linalg.block_diag(q_d, jnp.zeros((q, q))) if q else q_d
         m = a @ m
@@ -122,7 +130,7 @@ def kalman_filter(residuals, times, hyper: Hyper, sensitivity=None, tolerance=No
         return (m, p), (v, s, pred, pred_var)
 
     init = (jnp.zeros((3 + q, k)), p0)
-    _, (v, s, pred, pred_var) = jax.lax.scan(step, init, (a_all, q_all, r, g, obs))
+    _, (v, s, pred, pred_var) = jax.lax.scan(step, init, (*steps, r, g, obs))
     if vector:
         v, pred = v[:, 0], pred[:, 0]
     return v, s, pred, pred_var
@@ -287,10 +295,12 @@ def estimate(residuals, times, kind: str = "matern32", sensitivity=None, toleran
 
     bounds = [(np.log(1e-9), np.log(1.0)), (np.log(1e-3), np.log(1e3)), (np.log(1e-9), np.log(1.0)),
               tuple(np.log(NOISE_TIME_BOUNDS))]
-    # stop at a projected gradient of 1e-3 nats per unit of ln h: the mode to well within its own spread
-    best = min((minimize(fun, x0, jac=True, method="L-BFGS-B", bounds=bounds, options={"gtol": 1e-3})
-                for x0 in starts),
-               key=lambda res: res.fun)
+    def search(x0):  # stop at a projected gradient of 1e-3 nats per unit of ln h: well within the mode's spread
+        return minimize(fun, x0, jac=True, method="L-BFGS-B", bounds=bounds, options={"gtol": 1e-3})
+
+    # the starts are independent: one thread each (a compiled evaluation releases the GIL; the result is the same)
+    with ThreadPoolExecutor(max_workers=len(starts)) as pool:
+        best = min(pool.map(search, starts), key=lambda res: res.fun)
     a, ell, s, tau = np.exp(best.x)
     return Hyper.of(0.0, ell, s, 0.0) if kind == "none" else Hyper.of(a, ell, s, tau)
 

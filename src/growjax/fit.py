@@ -277,10 +277,12 @@ def _solve(model, likelihood, z0s, bounds, max_steps: int, problem, tol: dict, d
     raw = model(jnp.asarray(z))
     hyper = None
     # the rig's sensitivities (at the least-squares optimum) run beside the GLS fit, which does not use them
+    z_ls, r_ls, rig = z, raw[0], None
     with ThreadPoolExecutor(max_workers=1) as pool:
-        rig = pool.submit(_tolerance_sensitivity, problem, z, raw[0], tol) if tol else None
         for _ in range(OUTER_STEPS):
             hyper = likelihood.estimate(raw[0], discrepancy, hyper)
+            if tol and rig is None:  # after the first mode, whose starts take a core each
+                rig = pool.submit(_tolerance_sensitivity, problem, z_ls, r_ls, tol)
             z_new, _, converged, _, jac_w = levenberg_marquardt(lambda w, h=hyper: likelihood.whitened(*model(w), h),
                                                                z, max_steps, LM_TOLERANCE, bounds=bounds,
                                                                cost_resolution=COST_RESOLUTION)
@@ -401,7 +403,7 @@ def _hyper_scan(likelihood: Likelihood, r, jac, grid: dc.Hyper):
     t = likelihood.times[likelihood.index]
 
     def one(h):
-        v, s, _, _ = dc.kalman_filter(cols, t, h)
+        v, s, _, _ = dc.kalman_filter(cols, t, h, hoist=False)
         w = v / jnp.sqrt(s)[:, None]
         wr, wj = jnp.concatenate([w[:, 0], r[n:]]), jnp.concatenate([w[:, 1:], jac[n:]], axis=0)
         info = wj.T @ wj
