@@ -1,7 +1,7 @@
 """The discovery matrix: every catalogue effect × two magnitudes × seeds, plus clean seeds.
 
 Run: ``python benchmarks/discover.py [--seeds 10] [--clean 20] [--t-end 10] [--effects NAME ...] [--factors 1 2]
-[--first-seed 1000] [--first-clean-seed 2000] [--profile] [--rig-known] [--baseline N] [--merge FILE ...]``
+[--first-seed 1000] [--first-clean-seed 2000] [--profile] [--tolerance NAME=REL ...] [--baseline N] [--merge FILE ...]``
 → ``benchmarks/results/discover.json``. Data come from :func:`growjax.synthetic.make_experiment`
 (the reference configuration; one noise-free trace per effect and magnitude, seeds add noise), and
 every run is :func:`growjax.discover.discover` over the whole catalogue on the fast configuration.
@@ -31,7 +31,9 @@ import growjax as gj
 from growjax import discover as gd
 from growjax import effects as fx
 from growjax import experiment as ex
+from growjax import params as gp
 from growjax import synthetic as sy
+from growjax import tolerance as tl
 from growjax.discover import _candidates as gd_fits
 
 REPO = Path(__file__).resolve().parents[1]
@@ -95,8 +97,29 @@ def one_run(effect, magnitude, seed, t_end, profile=False, discrepancy="matern32
             "confounded_with": {n: {"parameter": c["parameter"], "correlation": c["correlation"],
                                     "rival_effects": c.get("rival_effects", [])}
                                 for n, c in res.confounded_with.items()},
-            "threshold": res.threshold, "misfit_before": res.misfit_before,
+            "threshold": res.threshold, "misfit_before": res.misfit_before, "tolerances": tolerances,
             **({"profile": timer.summary()} if timer is not None else {})}
+
+
+def tolerances_of(options: list) -> dict | None:
+    """discover's ``tolerances`` from ``--tolerance`` options: None (the default budget), {} for ``none``, or the
+    default budget with the options over it."""
+    if not options:
+        return None
+    if [o.strip().lower() for o in options] == ["none"]:
+        return {}
+    base = gj.reference()
+    return {**tl.default_budget(base), **{gp.resolve_name(base, n): u for n, u in map(tl.parse, options)}}
+
+
+def rig_label(runs) -> str:
+    """How the runs scored the rig: the default budget, known exactly, or the budget with overrides."""
+    labels, default = set(), tl.default_budget(gj.reference())
+    for r in runs:
+        tol = r.get("tolerances")
+        labels.add("default tolerance budget" if tol is None else "known (tolerances 0)" if not tol else
+                   "default budget, " + ", ".join(f"{n} {u:g}" for n, u in tol.items() if default.get(n) != u))
+    return "; ".join(sorted(labels))
 
 
 def summarise(runs, baseline, args) -> dict:
@@ -106,7 +129,7 @@ def summarise(runs, baseline, args) -> dict:
     covered = [r["covered"] for r in hidden if r["covered"] is not None]
     summary = {
         "environment": environment(), "t_end_s": args.t_end, "factors": args.factors,
-        "rig": "known (tolerances 0)" if getattr(args, "rig_known", False) else "default tolerance budget",
+        "rig": rig_label(runs),
         "named_or_confounded_share": float(np.mean([r["named"] or r["confounded"] for r in hidden])) if hidden else None,
         "named_share_per_effect": {e: float(np.mean([r["named"] for r in hidden if r["effect"] == e]))
                                    for e in args.effects if hidden},
@@ -142,8 +165,9 @@ def main() -> None:
     parser.add_argument("--first-clean-seed", type=int, default=2000, help="seed of the first clean run")
     parser.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "discover.json"))
     parser.add_argument("--profile", action="store_true", help="time every linearisation, by the candidates on")
-    parser.add_argument("--rig-known", action="store_true",
-                        help="score with the rig's tolerances at zero (a rig known exactly) instead of the default budget")
+    parser.add_argument("--tolerance", action="append", default=[], metavar="NAME=REL",
+                        help="a rig tolerance over the default budget, as for `growjax discover` (repeat; 'none': "
+                             "the rig known exactly)")
     parser.add_argument("--baseline", type=int, default=0,
                         help="run the first N clean seeds also under independent noise (the likelihood discovery "
                              "had before the discrepancy), for the ratio of median wall times")
@@ -159,17 +183,17 @@ def main() -> None:
         Path(args.out).write_text(json.dumps(summary, indent=2, default=str) + "\n")
         print(json.dumps({k: v for k, v in summary.items() if k not in ("runs", "baseline_runs")}, indent=2))
         return
+    rig = tolerances_of(args.tolerance)
     runs = []
     for effect in args.effects:
         for factor in args.factors:
             magnitude = factor * sy.moderate_magnitude(effect)
             for seed in range(args.seeds):
                 runs.append(one_run(effect, magnitude, args.first_seed + seed, args.t_end, args.profile,
-                                    tolerances={} if args.rig_known else None))
+                                    tolerances=rig))
                 print(json.dumps(runs[-1]), flush=True)
     for seed in range(args.clean):
-        runs.append(one_run(None, None, args.first_clean_seed + seed, args.t_end, args.profile,
-                            tolerances={} if args.rig_known else None))
+        runs.append(one_run(None, None, args.first_clean_seed + seed, args.t_end, args.profile, tolerances=rig))
         print(json.dumps(runs[-1]), flush=True)
     baseline = [one_run(None, None, args.first_clean_seed + seed, args.t_end, discrepancy="none")
                 for seed in range(min(args.baseline, args.clean))]

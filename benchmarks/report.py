@@ -159,6 +159,7 @@ EXTRACTORS = {"simulate": rows_simulate, "sweep": rows_sweep, "agreement": rows_
               "fit_speed": rows_fit_speed, "discover_discrepancy": rows_discover_discrepancy,
               "discover_discrepancy_3s": rows_discover_discrepancy, "coverage_discrepancy_rig": rows_coverage,
               "discover": rows_discover, "discover_rig_known": rows_discover, "discover_folding_twofold": rows_discover,
+              "discover_folding_no_catheter_tolerance": rows_discover,
               "agreement_quick": rows_agreement,
               "control": rows_control}
 

@@ -229,7 +229,6 @@ def test_levenberg_marquardt_never_evaluates_a_rejected_point_twice():
     assert len(points) == len(set(points))
 
 
-
 def test_levenberg_marquardt_linearises_only_the_points_it_accepts():
     """With ``residuals`` a trial point is scored by the residuals alone and linearised once accepted: the same
     minimum as without, one linearisation at the start and per accepted step, ``max_steps`` accepted steps."""
@@ -254,6 +253,7 @@ def test_levenberg_marquardt_linearises_only_the_points_it_accepts():
     linearised_at.clear()
     gf.levenberg_marquardt(linearised, np.array([-1.0]), max_steps=2, max_move=3.0, residuals=residuals)
     assert len(linearised_at) == 3
+
 
 def test_physical_bounds_are_the_ranges_in_log_coordinates():
     base = gj.reference()
