@@ -435,7 +435,9 @@ def test_observation_draws_equal_numpyros_log_likelihood_and_predictive():
     draws = {"a": rng.uniform(0.5, 2.0, (2, 40)), "sigma": rng.uniform(1e-3, 2e-3, (2, 40))}
     draws["length_model"] = draws["a"][..., None] * 1e-2 * t
     observed = 1.2e-2 * t + rng.normal(0.0, 1.5e-3, t.size)
-    loglik, predicted = gpost.observation_draws(draws["length_model"], draws["sigma"], model_error, observed, seed=1)
+    loglik, predicted, new = gpost.observation_draws(draws["length_model"], draws["sigma"], model_error, observed,
+                                                     seed=1)
+    np.testing.assert_array_equal(predicted, new)  # independent noise: nothing of this experiment to keep
     flat = {k: v.reshape(80, *v.shape[2:]) for k, v in draws.items()}
     expected = np.asarray(log_likelihood(model, flat, observed)["length"]).reshape(2, 40, -1)
     np.testing.assert_allclose(loglik, expected, rtol=1e-12)

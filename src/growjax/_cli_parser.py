@@ -116,6 +116,10 @@ def build_parser():
                      help="parameter to fit (repeat; none: Y)")
     fit.add_argument("--starts", type=int, default=3, help="starts, from the best sets of a Latin hypercube")
     _likelihood(fit)
+    fit.add_argument("--rig", choices=["inferred", "fixed"], default="inferred",
+                     help="inferred: the toleranced rig parameters fitted beside the free ones, their tolerances "
+                          "as priors (the posterior's treatment); fixed: held nominal, each tolerance propagated "
+                          "as if the data said nothing of the rig (conservative)")
 
     post = sub.add_parser("posterior", formatter_class=fmt,
                           help="NUTS posterior of Y, ext, n (or Y, phi_L, n_L) and the noise")

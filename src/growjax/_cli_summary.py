@@ -77,6 +77,11 @@ def _fit(s: dict, name: str) -> list[str]:
                      f"{s['samples_used']} samples scored")
     elif d:
         lines.append(f"  independent noise {_mm(d['noise_m'])}")
+    if s.get("rig") == "inferred" and s.get("rig_offset"):
+        shown = ", ".join(f"{k} {100 * v:+.1f} %" for k, v in s["rig_offset"].items())
+        lines.append(f"  rig inferred from the data (its tolerances as priors): {shown}")
+    elif s.get("rig") == "fixed":
+        lines.append("  rig fixed at its nominal values, its tolerances propagated (--rig fixed)")
     lines.append(f"  length RMSE {_mm(s['rmse_length_m'])}; {s['wall_s']:.1f} s")
     lines.append(f"  wrote {s['figure']}")
     return lines

@@ -265,9 +265,9 @@ def fit_command(args) -> dict:
     pressure = exp["pressure_Pa"] if "pressure_Pa" in exp else None  # noqa: SIM401 (Experiment is not a dict)
     result = gf.fit(exp.time, exp["robot_length_m"], inputs, free=args.free or ["Y"], base=base, config=config,
                     pressure=pressure, n_starts=args.starts, seed=args.seed, window=scored_window(args, config),
-                    discrepancy=args.discrepancy, tolerances=tolerances_of(args))
+                    discrepancy=args.discrepancy, tolerances=tolerances_of(args), rig=args.rig)
     out = _out(args)
-    fitted = gj.replace(base, **result.estimate)
+    fitted = gj.replace(base, **result.rig_estimate, **result.estimate)
     traj = gj.simulate(fitted, inputs, config)
     fig = trajectory_figure(traj, out / "fit.png", measured=(exp.time, exp["robot_length_m"]),
                             title=f"fit of {', '.join(result.names)}: RMSE {1e3 * result.rmse_length_m:.2f} mm")

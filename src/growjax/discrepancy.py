@@ -195,6 +195,55 @@ def forecast(residuals, times, observed, hyper: Hyper, sensitivity=None, toleran
     return pred, pred_var
 
 
+def smooth(residuals: Float[ArrayLike, " n"], times: Float[ArrayLike, " n"], hyper: Hyper, sensitivity=None,
+           tolerance=None, observed=None):
+    """Mean (n,) m and variance (n,) m² of the model's error δ(tᵢ) + Σⱼ gⱼ(tᵢ) bⱼ at every sample, given the
+    residuals (n,) m at the ``observed`` (n,) samples (default all), before and after each one: the
+    Rauch–Tung–Striebel smoother over the filter's states, the sensor noise left out. What a replication of the
+    same experiment (same discrepancy, same rig, fresh noise) keeps of the error.
+    """
+    r = jnp.asarray(residuals, float)
+    n, t = r.shape[0], jnp.asarray(times, float)
+    q = 0 if sensitivity is None else sensitivity.shape[1]
+    g = jnp.zeros((n, 0)) if q == 0 else jnp.asarray(sensitivity, float)
+    u2 = jnp.zeros((0,)) if q == 0 else jnp.asarray(tolerance, float) ** 2
+    obs = jnp.ones(n, bool) if observed is None else jnp.asarray(observed, bool)
+    _, _, stationary = _transition(0.0, hyper)
+    a_d, q_d, _ = jax.vmap(lambda dt: _transition(dt, hyper))(jnp.diff(t, prepend=t[0]))
+    eye, zero = jnp.eye(q), jnp.zeros((q, q))
+    a_all = jax.vmap(lambda a: jax.scipy.linalg.block_diag(a, eye))(a_d)
+    q_all = jax.vmap(lambda x: jax.scipy.linalg.block_diag(x, zero))(q_d)
+
+    def forward(carry, inp):
+        m, p = carry
+        a, qn, y, gk, ok = inp
+        m_pred, p_pred = a @ m, a @ p @ a.T + qn
+        h = jnp.concatenate([jnp.array([1.0, 0.0, 1.0]), gk])
+        ph = p_pred @ h
+        gain = jnp.where(ok, ph / (h @ ph + _JITTER), 0.0)
+        m = m_pred + gain * (y - h @ m_pred)
+        p = p_pred - jnp.outer(gain, ph)
+        return (m, 0.5 * (p + p.T)), (m_pred, p_pred, m, 0.5 * (p + p.T))
+
+    p0 = jax.scipy.linalg.block_diag(stationary, jnp.diag(u2))
+    _, (m_pred, p_pred, m_f, p_f) = jax.lax.scan(forward, (jnp.zeros(3 + q), p0), (a_all, q_all, r, g, obs))
+
+    def backward(carry, inp):
+        m_s, p_s = carry
+        m_fk, p_fk, a_next, m_pred_next, p_pred_next = inp
+        c = jnp.linalg.solve(p_pred_next, a_next @ p_fk).T  # P_f Aᵀ P_pred⁻¹ (P_pred symmetric)
+        m_s = m_fk + c @ (m_s - m_pred_next)
+        p_s = p_fk + c @ (p_s - p_pred_next) @ c.T
+        return (m_s, 0.5 * (p_s + p_s.T)), (m_s, p_s)
+
+    last = (m_f[-1], p_f[-1])
+    _, (m_s, p_s) = jax.lax.scan(backward, last, (m_f[:-1], p_f[:-1], a_all[1:], m_pred[1:], p_pred[1:]),
+                                 reverse=True)
+    m_s, p_s = jnp.concatenate([m_s, last[0][None]]), jnp.concatenate([p_s, last[1][None]])
+    h = jnp.concatenate([jnp.broadcast_to(jnp.array([1.0, 0.0, 0.0]), (n, 3)), g], axis=1)
+    return jnp.einsum("ni,ni->n", h, m_s), jnp.einsum("ni,nij,nj->n", h, p_s, h)
+
+
 def sample(key, times, hyper: Hyper, shape=(), noise: bool = False):
     """Draws of δ at ``times`` (n,) from the Matérn-3/2 prior, plus the sensor noise ε if ``noise``: shape
     ``shape + (n,)`` m."""

@@ -5,7 +5,8 @@ holds. Levenberg–Marquardt (:mod:`growjax._least_squares`, forward-mode Jacobi
 Latin-hypercube sweep; least squares from every start, then generalised least squares under the residual model
 of :mod:`growjax.discrepancy` (a smooth discrepancy plus sensor noise). The intervals are Gauss–Newton's under
 that model, plus the spread over its hyperparameters, the fast configuration's own error and the rig's
-tolerances (:mod:`growjax.tolerance`), reported term by term; the eigen-directions of the whitened J̃ᵀJ̃ show
+tolerances (:mod:`growjax.tolerance`: by default the rig's errors are fitted beside θ under their tolerances as
+priors, so the data inform them), reported term by term; the eigen-directions of the information on θ show
 what the data cannot pin down.
 """
 
@@ -33,6 +34,7 @@ from growjax.config import Config
 from growjax.simulate import as_arrays, input_breaks, sample_times, simulate
 from growjax.trajectory import OK
 
+RIG_TREATMENTS = ("inferred", "fixed")
 # Multi-start boxes: the paper's investigation where it has one, else [θ/2, 2θ] around the reference.
 PAPER_RANGES = {d.name: (d.low, d.high) for d in sw.paper_box()}
 Z90 = float(stats.norm.ppf(0.95))
@@ -87,6 +89,9 @@ class FitResult:
     tolerances: dict = dataclasses.field(default_factory=dict)  # {parameter: relative sd} carried
     samples_used: int = 0  # length samples the likelihood scored (an interpolated record: its keyframes)
     tolerance_gain: dict = dataclasses.field(default_factory=dict)  # {name: {tolerance: dθ/d ln ψ, SI}}, signed
+    rig: str = "none"  # how the tolerances entered: "inferred", "fixed", or "none" (no tolerances)
+    rig_offset: dict = dataclasses.field(default_factory=dict)  # {tolerance: fitted ln(ψ/ψ₀)} when inferred
+    rig_estimate: dict = dataclasses.field(default_factory=dict)  # {tolerance: fitted ψ, SI} when inferred
 
     def summary(self) -> dict:
         return {
@@ -99,6 +104,9 @@ class FitResult:
             },
             "discrepancy": self.discrepancy,
             "tolerances": self.tolerances,
+            "rig": self.rig,
+            "rig_offset": self.rig_offset,
+            "rig_estimate": self.rig_estimate,
             "samples_used": self.samples_used,
             "undetermined_directions": self.undetermined,
             "at_physical_bound": list(self.at_bound),
@@ -183,6 +191,7 @@ def fit(
     model_error: float | None = None,
     discrepancy: str = "matern32",
     tolerances: dict | None = None,
+    rig: str = "inferred",
 ) -> FitResult:
     """Fit ``free`` parameters to a measured length (m) at ``times`` (s) (and ``pressure``, Pa, if given).
 
@@ -199,11 +208,19 @@ def fit(
     ``tolerances`` {parameter: relative sd}: the rig's fixed parameters' uncertainty (:mod:`growjax.tolerance`;
     None: its default budget with the discrepancy, none without). The estimate is the generalised
     least-squares optimum under the discrepancy and noise, found by Gauss–Newton on the whitened residuals
-    (Levenberg–Marquardt) from the least-squares optimum, alternating with the hyperparameters' mode; its
-    covariance is Gauss–Newton's, (J̃ᵀJ̃)⁻¹ with J̃ the whitened Jacobian, plus each tolerance propagated
-    through the estimator's gain (the GUM's sensitivity coefficients; the posterior marginalises them
-    instead). :attr:`FitResult.budget` splits each variance into noise, discrepancy and each tolerance.
+    (Levenberg–Marquardt) from the least-squares optimum, alternating with the hyperparameters' mode.
+
+    ``rig`` says how the tolerances enter. ``"inferred"`` (default; the posterior's treatment): each
+    toleranced parameter's relative error b = ln(ψ/ψ₀) is a nuisance parameter with the prior N(0, u²), fitted
+    beside θ (its effect on the length linearised, g = ∂L/∂ln ψ), so the data inform the rig; the covariance
+    is the (θ, b) block of Gauss–Newton's (J̃ᵀJ̃ + prior)⁻¹ restricted to θ. ``"fixed"``: the rig held at its
+    nominal values and each tolerance propagated through the estimator's gain as if the data said nothing of
+    the rig (the GUM's treatment of an input quantity not estimated from the measurement): the conservative
+    choice, wider where the data do inform the rig. :attr:`FitResult.budget` splits each variance into
+    noise, discrepancy and each tolerance (under ``"inferred"``: what is left of each after the data).
     """
+    if rig not in RIG_TREATMENTS:
+        raise ValueError(f"rig must be one of {RIG_TREATMENTS}, got {rig!r}")
     if discrepancy not in dc.KINDS:
         raise ValueError(f"discrepancy must be one of {dc.KINDS}, got {discrepancy!r}")
     base = base if base is not None else gp.reference()
@@ -227,21 +244,28 @@ def fit(
     def model(z):
         return _linearised(z, problem)
 
-    zs, costs, oks, z, raw, hyper, converged, likelihood = _solve(model, likelihood, z0s, bounds, max_steps, problem,
-                                                                  tol, discrepancy)
-    _r_w, jac_w = (np.asarray(a) for a in likelihood.whitened(*raw, hyper))
+    zs, costs, oks, z, b, raw, hyper, converged, likelihood = _solve(model, likelihood, z0s, bounds, max_steps,
+                                                                     problem, tol, discrepancy, rig)
     starts = [{"start": dict(zip(names, map(float, start_values[i]))),
                "estimate": dict(zip(names, map(float, refs * np.exp(zs[k])))),
                "cost": float(costs[k]), "converged": bool(oks[k])} for k, i in enumerate(order)]
     theta = refs * np.exp(z)
     if model_error is None:
         model_error = default_model_error(config)
-    cov, parts, gain = likelihood.covariance(np.asarray(raw[1]), jac_w, hyper, model_error)
+    info = likelihood.information(raw, hyper, b)
+    cov, parts, gain = likelihood.covariance(raw, hyper, b, model_error)
     if discrepancy != "none":  # the hyperparameters are estimated, not known: average over them
-        spread = likelihood.hyperparameter_spread(raw, hyper, cov)
+        spread = likelihood.hyperparameter_spread(raw, hyper, cov, b)
         parts["hyperparameters"], cov = spread, cov + spread
-    result = _result(names, theta, z, cov, parts, jac_w, hyper, likelihood, raw, starts, converged, bounds,
+    result = _result(names, theta, z, cov, parts, info, hyper, likelihood, raw, starts, converged, bounds,
                      start_clock, int(np.sum(used)), discrepancy)
+    result.rig = rig if likelihood.tolerance is not None else "none"
+    if likelihood.inferred:  # the rig as fitted: its values, and the length residual with its linearised effect
+        result.rig_offset = {t: float(b[j]) for j, t in enumerate(likelihood.tolerance_names)}
+        result.rig_estimate = {t: float(gp.get(base, t)) * float(np.exp(b[j]))
+                               for j, t in enumerate(likelihood.tolerance_names)}
+        r_len = np.asarray(raw[0])[:n_len] * sigma_length + np.asarray(likelihood.sensitivity) @ b
+        result.rmse_length_m = float(np.sqrt(np.mean(r_len**2)))
     result.tolerance_gain = {n: {t: float(theta[i] * gain[i, j]) for j, t in enumerate(likelihood.tolerance_names)}
                              for i, n in enumerate(names)}
     return result
@@ -263,37 +287,43 @@ def _starts(base, names, refs, inputs, config, times, length, window, n_starts: 
     return scout.values, order
 
 
-def _solve(model, likelihood, z0s, bounds, max_steps: int, problem, tol: dict, discrepancy: str):
+def _solve(model, likelihood, z0s, bounds, max_steps: int, problem, tol: dict, discrepancy: str, rig: str):
     """Least squares from every start (one after another through one compiled solver: consistent under any
     correlation of the residuals, and a start that a discrepancy absorbing the misfit cannot trap); the rig's
-    sensitivities at the best; then generalised least squares alternating with the hyperparameters' mode.
-    Returns (z per start, cost per start, converged per start, z, the linearisation at z, the hyperparameters,
-    converged, the likelihood with its tolerances)."""
+    sensitivities at the best; then generalised least squares alternating with the hyperparameters' mode, from
+    the second alternation on with the rig's errors b fitted beside z (``rig="inferred"``).
+    Returns (z per start, cost per start, converged per start, z, b (q,) the rig's relative errors (empty unless
+    inferred), the linearisation at z, the hyperparameters, converged, the likelihood with its tolerances)."""
     solved = [levenberg_marquardt(lambda w: likelihood.weighted(*model(w)), z0, max_steps, LM_TOLERANCE,
                                   bounds=bounds) for z0 in z0s]
     zs, costs, oks = (np.asarray([s[k] for s in solved]) for k in range(3))
     k_best = int(np.argmin(costs))
     z, converged = np.asarray(zs[k_best]), bool(oks[k_best])
+    p = z.size
     raw = model(jnp.asarray(z))
-    hyper = None
-    # the rig's sensitivities (at the least-squares optimum) run beside the GLS fit, which does not use them
-    z_ls, r_ls, rig = z, raw[0], None
+    hyper, b = None, np.zeros(0)
+    # the rig's sensitivities (at the least-squares optimum) run beside the first GLS fit, which does not use them
+    z_ls, r_ls, secants = z, raw[0], None
     with ThreadPoolExecutor(max_workers=1) as pool:
         for _ in range(OUTER_STEPS):
+            if secants is not None and rig == "inferred" and not likelihood.inferred:
+                likelihood, b = likelihood.with_tolerances(secants.result(), tol, inferred=True), np.zeros(len(tol))
             hyper = likelihood.estimate(raw[0], discrepancy, hyper)
-            if tol and rig is None:  # after the first mode, whose starts take a core each
-                rig = pool.submit(_tolerance_sensitivity, problem, z_ls, r_ls, tol)
-            z_new, _, converged, _, jac_w = levenberg_marquardt(lambda w, h=hyper: likelihood.whitened(*model(w), h),
-                                                               z, max_steps, LM_TOLERANCE, bounds=bounds,
-                                                               cost_resolution=COST_RESOLUTION)
+            if tol and secants is None:  # after the first mode, whose starts take a core each
+                secants = pool.submit(_tolerance_sensitivity, problem, z_ls, r_ls, tol)
+            w_new, _, converged, _, jac_w = levenberg_marquardt(
+                lambda w, h=hyper: likelihood.augmented(*model(w[:p]), h, w[p:]), np.concatenate([z, b]), max_steps,
+                LM_TOLERANCE, bounds=likelihood.bounds(bounds), cost_resolution=COST_RESOLUTION)
             sd = np.sqrt(np.diag(np.linalg.pinv(jac_w.T @ jac_w, rcond=1e-10, hermitian=True)))
-            moved = np.abs(z_new - z)
-            z, raw = np.asarray(z_new), model(jnp.asarray(z_new))
-            if np.all(moved <= OUTER_TOLERANCE * sd):
+            moved = np.abs(w_new - np.concatenate([z, b]))
+            z, b = np.asarray(w_new[:p]), np.asarray(w_new[p:])
+            raw = model(jnp.asarray(z))
+            rig_done = not tol or rig == "fixed" or likelihood.inferred
+            if rig_done and np.all(moved <= OUTER_TOLERANCE * sd):
                 break
-        if rig is not None:
-            likelihood = likelihood.with_tolerances(rig.result(), tol)
-    return zs, costs, oks, z, raw, hyper, converged, likelihood
+        if secants is not None and not likelihood.inferred:  # fixed: propagated after the fit
+            likelihood = likelihood.with_tolerances(secants.result(), tol)
+    return zs, costs, oks, z, b, raw, hyper, converged, likelihood
 
 
 # The smallest change of the whitened cost (nats) that matters: a 90 % interval spans 1.35 nats, and the
@@ -315,70 +345,116 @@ class Likelihood(eqx.Module):
     sensitivity: jax.Array | None = None  # (n, q) m per unit ln ψ
     tolerance: jax.Array | None = None  # (q,) relative sd
     tolerance_names: tuple = eqx.field(static=True, default=())
+    inferred: bool = eqx.field(static=True, default=False)  # the rig's errors b fitted beside z (prior N(0, u²))
 
-    def with_tolerances(self, sensitivity, tol: dict):
+    def with_tolerances(self, sensitivity, tol: dict, inferred: bool = False):
         return Likelihood(self.times, self.used, self.index, self.sigma_length, self.n_len, jnp.asarray(sensitivity),
-                          jnp.asarray(list(tol.values())), tuple(tol))
+                          jnp.asarray(list(tol.values())), tuple(tol), inferred)
+
+    def bounds(self, bounds):
+        """The box on w = (z, b): ``bounds`` on z, none on the rig's errors b."""
+        q = len(self.tolerance_names) if self.inferred else 0
+        return tuple(np.concatenate([np.asarray(x, float), np.full(q, v)]) for x, v in zip(bounds, (-np.inf, np.inf)))
+
+    def augmented(self, r, jac, hyper, b):
+        """Whitened residuals and Jacobian of w = (z, b) under the discrepancy and noise: z alone with the rig at
+        its nominal values, or, when the rig is inferred, with its linearised effect g·b on the length and
+        its prior residuals b/u as q more rows."""
+        return _augmented(self, r, jac, hyper, jnp.asarray(b if self.inferred else np.zeros(0)))
+
+    def length_columns(self, r, jac, b):
+        """The scored length rows, m: [residual (with the rig's g·b when inferred), Jacobian, (g when inferred)]
+        (n_used, 1 + p (+ q)), and their times (n_used,) s: the columns one filter whitens together."""
+        n, scale = self.n_len, self.sigma_length
+        cols = [r[:n, None] * scale, jac[:n] * scale]
+        if self.inferred:
+            g = self.sensitivity
+            cols = [cols[0] + g @ b[:, None], cols[1], g]
+        return jnp.concatenate(cols, axis=1)[self.index], self.times[self.index]
 
     def weighted(self, r, jac):
         """Residuals and Jacobian with the unused length samples zeroed (independent noise of sd σ_L)."""
         keep = jnp.concatenate([self.used, jnp.ones(r.shape[0] - self.n_len, bool)])
         return jnp.where(keep, r, 0.0), jnp.where(keep[:, None], jac, 0.0)
 
-    def whitened(self, r, jac, hyper):
-        return _whitened(self, r, jac, hyper)
-
     def estimate(self, r, kind, start=None):
+        """The hyperparameters' mode for the residuals ``r`` (units of σ_L), the rig marginalised when inferred."""
         index = np.asarray(self.index)
+        g, u = (np.asarray(self.sensitivity)[index], np.asarray(self.tolerance)) if self.inferred else (None, None)
         return dc.estimate(np.asarray(r)[: self.n_len][index] * self.sigma_length, np.asarray(self.times)[index], kind,
-                           start=start)
+                           g, u, start=start)
 
-    def covariance(self, jac, jac_w, hyper, model_error: float = 0.0):
-        """Covariance (p, p) of z = ln θ and its parts {source: (p, p)}, which add up to it: the noise and the
-        discrepancy, (J̃ᵀJ̃)⁻¹ split by their kernels; each tolerance propagated through the estimator (the GUM's
-        sensitivity coefficients), u² (A g)(A g)ᵀ with A the estimator's gain and g the length's sensitivity;
-        the fitted configuration's own error against the reference (sd ``model_error`` m, squared-exponential
-        over :data:`MODEL_ERROR_TIME`: too small for the data to measure, known from the agreement benchmark)
+    def information(self, raw, hyper, b) -> np.ndarray:
+        """The information (p, p) the data hold on z: J̃ᵀJ̃, or with the rig inferred its Schur complement
+        (the inverse of the z block of the joint covariance)."""
+        _, jac_w = (np.asarray(a) for a in self.augmented(*raw, hyper, b))
+        info = jac_w.T @ jac_w
+        p = np.asarray(raw[1]).shape[1]
+        if not self.inferred:
+            return info
+        return info[:p, :p] - info[:p, p:] @ np.linalg.solve(info[p:, p:], info[p:, :p])
+
+    def covariance(self, raw, hyper, b, model_error: float = 0.0):
+        """Covariance (p, p) of z = ln θ, its parts {source: (p, p)}, which add up to it, and the estimator's gain
+        (p, q) on the rig's errors (ln θ per unit ln ψ).
+
+        The joint covariance C of w = (z, b) is Gauss–Newton's, (J̃ᵀJ̃)⁻¹ (b only when the rig is inferred);
+        the estimator is linear in the data, w = A·r, and its covariance splits by the residual's sources: the
+        noise and the discrepancy, A K_k Aᵀ; each tolerance, inferred, through its prior residual
+        (C_{z,b_j} C_{z,b_j}ᵀ / u_j²: what of its prior the data left), fixed, propagated through the estimator
+        (the GUM's sensitivity coefficients), u² (A g)(A g)ᵀ with g the length's sensitivity; the fitted
+        configuration's own error against the reference (sd ``model_error`` m, squared-exponential over
+        :data:`MODEL_ERROR_TIME`: too small for the data to measure, known from the agreement benchmark)
         through the same gain; the pressure noise."""
-        cov = np.linalg.pinv(jac_w.T @ jac_w, rcond=1e-10, hermitian=True)
+        jac = np.asarray(raw[1])
+        p = jac.shape[1]
+        _, jac_w = (np.asarray(a) for a in self.augmented(*raw, hyper, b))
+        full = np.linalg.pinv(jac_w.T @ jac_w, rcond=1e-10, hermitian=True)
         used = np.asarray(self.used)
         t = np.asarray(self.times)[used]
-        j_len = jac[: self.n_len][used] * self.sigma_length  # m per unit z
+        h = jac[: self.n_len][used] * self.sigma_length  # m per unit z
+        g = None if self.sensitivity is None else np.asarray(self.sensitivity)[used]  # m per unit ln ψ
+        if self.inferred:
+            h = np.concatenate([h, g], axis=1)
         kernels = {"noise": dc.noise_kernel(t, hyper)}
         if float(hyper.amplitude) > 0:
             kernels["discrepancy"] = dc.kernel(t, hyper)
-        a = cov @ np.linalg.solve(sum(kernels.values()), j_len).T  # (p, n): ln θ per metre of residual
-        parts = {k: a @ kern @ a.T for k, kern in kernels.items()}
+        a = full @ np.linalg.solve(sum(kernels.values()), h).T  # (p[+q], n): w per metre of residual
+        parts = {k: (a @ kern @ a.T)[:p, :p] for k, kern in kernels.items()}
         if model_error > 0:
             solver = dc.drift_kernel(t, model_error, MODEL_ERROR_TIME)
-            parts["fast_model_error"] = a @ solver @ a.T
+            parts["fast_model_error"] = (a @ solver @ a.T)[:p, :p]
         if jac.shape[0] > self.n_len:
             j_p = jac[self.n_len:]
-            parts["pressure_noise"] = cov @ j_p.T @ j_p @ cov
-        gain = np.zeros((len(cov), 0))
-        if self.sensitivity is not None:
-            gain = a @ np.asarray(self.sensitivity)[used]  # (p, q): ln θ per unit ln ψ
+            j_p = np.concatenate([j_p, np.zeros((j_p.shape[0], full.shape[0] - p))], axis=1)
+            a_p = full @ j_p.T
+            parts["pressure_noise"] = (a_p @ a_p.T)[:p, :p]
+        gain = np.zeros((p, 0))
+        if g is not None:
+            gain = a[:p] @ g  # (p, q): the estimate's response to a rig error
             for j, name in enumerate(self.tolerance_names):
-                c = gain[:, j] * float(self.tolerance[j])
+                u = float(self.tolerance[j])
+                c = full[:p, p + j] / u if self.inferred else gain[:, j] * u
                 parts[name] = np.outer(c, c)
         return sum(parts.values()), parts, gain
 
-    def hyperparameter_spread(self, raw, hyper, cov) -> np.ndarray:
+    def hyperparameter_spread(self, raw, hyper, cov, b) -> np.ndarray:
         """The covariance (p, p) of z that the hyperparameters' own uncertainty adds.
 
         On a grid around their mode (amplitude, time scale and noise, log-spaced; the noise's correlation time
         held at its mode, a nuisance the data pin down where it matters), each point h is weighted by
         its posterior given the data, θ integrated out by Laplace at the linearisation ``raw``: the
         log-likelihood at the Gauss–Newton optimum ẑ(h), −½ log det J̃ᵀJ̃ and the hyperparameters' prior. The
-        spread is the weighted Σ_h [C(h) + (ẑ(h) − ẑ)(ẑ(h) − ẑ)ᵀ] minus the covariance ``cov`` at the mode
+        spread is the weighted Σ_h [C(h) + (ẑ(h) − z̄)(ẑ(h) − z̄)ᵀ], z̄ the weighted mean, minus the covariance ``cov`` at the mode
         (floored at zero): a discrepancy whose amplitude the data leave open widens the interval as sampling
-        over it would.
+        over it would. With the rig inferred (``b`` its errors at the estimate) each point integrates b out too.
         """
         grid = _hyper_grid(hyper)
-        logw, shift, c_h = (np.asarray(a) for a in _hyper_scan(self, *raw, grid))
+        logw, shift, c_h = (np.asarray(a) for a in _hyper_scan(self, *raw, grid, jnp.asarray(b)))
         logw = np.where(np.isfinite(logw), logw, -np.inf)
         w = np.exp(logw - np.max(logw))
         w /= w.sum()
+        shift = shift - w @ shift  # about the mixture's mean: the point linearised at need not be the mode's optimum
         total = np.einsum("g,gij->ij", w, c_h + shift[:, :, None] * shift[:, None, :])
         spread = total - cov
         evals, evecs = np.linalg.eigh(0.5 * (spread + spread.T))
@@ -396,33 +472,42 @@ def _hyper_grid(hyper) -> dc.Hyper:
 
 
 @eqx.filter_jit
-def _hyper_scan(likelihood: Likelihood, r, jac, grid: dc.Hyper):
+def _hyper_scan(likelihood: Likelihood, r, jac, grid: dc.Hyper, b):
     """Per grid point: log weight, the Gauss–Newton shift of z, its covariance (p, p)."""
-    n, scale = likelihood.n_len, likelihood.sigma_length
-    cols = (jnp.concatenate([r[:n, None], jac[:n]], axis=1) * scale)[likelihood.index]
-    t = likelihood.times[likelihood.index]
+    n, scale, p = likelihood.n_len, likelihood.sigma_length, jac.shape[1]
+    cols, t = likelihood.length_columns(r, jac, b)
 
     def one(h):
         v, s, _, _ = dc.kalman_filter(cols, t, h, hoist=False)
-        w = v / jnp.sqrt(s)[:, None]
-        wr, wj = jnp.concatenate([w[:, 0], r[n:]]), jnp.concatenate([w[:, 1:], jac[n:]], axis=0)
+        wr, wj = _stacked(likelihood, v / jnp.sqrt(s)[:, None], r, jac, b)
         info = wj.T @ wj
         c = jnp.linalg.pinv(info, hermitian=True)
         step = -c @ (wj.T @ wr)
         cost = 0.5 * (wr @ wr) - 0.5 * (wj.T @ wr) @ c @ (wj.T @ wr)
-        logdet = jnp.linalg.slogdet(info)[1]
+        logdet = jnp.linalg.slogdet(info)[1]  # b's prior normalisation is the same at every h
         loglik = -cost - 0.5 * jnp.sum(jnp.log(2.0 * jnp.pi * s)) - 0.5 * logdet
-        return loglik + dc.log_prior(h), step, c
+        return loglik + dc.log_prior(h), step[:p], c[:p, :p]
 
     return jax.vmap(one)(grid)
 
 
+def _stacked(likelihood: Likelihood, w, r, jac, b):
+    """Whitened residuals and Jacobian of w = (z[, b]) from the whitened length columns ``w``, the pressure rows
+    after them and, when inferred, the rig's prior rows b/u."""
+    n, p = likelihood.n_len, jac.shape[1]
+    if not likelihood.inferred:
+        return jnp.concatenate([w[:, 0], r[n:]]), jnp.concatenate([w[:, 1:], jac[n:]], axis=0)
+    u = likelihood.tolerance
+    q = u.shape[0]
+    prior = jnp.concatenate([jnp.zeros((q, p)), jnp.diag(1.0 / u)], axis=1)
+    pressure = jnp.concatenate([jac[n:], jnp.zeros((jac.shape[0] - n, q))], axis=1)
+    return jnp.concatenate([w[:, 0], b / u, r[n:]]), jnp.concatenate([w[:, 1:], prior, pressure], axis=0)
+
+
 @eqx.filter_jit
-def _whitened(likelihood: Likelihood, r, jac, hyper):
-    n, scale = likelihood.n_len, likelihood.sigma_length
-    cols = (jnp.concatenate([r[:n, None], jac[:n]], axis=1) * scale)[likelihood.index]
-    w = dc.whiten(cols, likelihood.times[likelihood.index], hyper)
-    return jnp.concatenate([w[:, 0], r[n:]]), jnp.concatenate([w[:, 1:], jac[n:]], axis=0)
+def _augmented(likelihood: Likelihood, r, jac, hyper, b):
+    cols, t = likelihood.length_columns(r, jac, b)
+    return _stacked(likelihood, dc.whiten(cols, t, hyper), r, jac, b)
 
 
 def _tolerance_sensitivity(problem: Problem, z, r0, tol: dict) -> np.ndarray:
@@ -450,10 +535,10 @@ def _check_window(window, config: Config):
     return t0, t1
 
 
-def _result(names, theta, z, cov, parts, jac_w, hyper, likelihood, raw, starts, converged, bounds, start_clock,
+def _result(names, theta, z, cov, parts, info, hyper, likelihood, raw, starts, converged, bounds, start_clock,
             samples_used, kind) -> FitResult:
     p = len(names)
-    evals, evecs = np.linalg.eigh(jac_w.T @ jac_w)
+    evals, evecs = np.linalg.eigh(info)
     tol = 1e-10 * max(float(evals[-1]), 1e-300)
     undetermined = [{"eigenvalue": float(evals[k]), "direction": dict(zip(names, map(float, evecs[:, k])))}
                     for k in range(p) if evals[k] < tol]

@@ -183,10 +183,16 @@ class CandidateFit:
     converged: bool
     z: np.ndarray
     mask: np.ndarray
+    jacobian: np.ndarray | None = None  # (n, k) mm per unit of each fitted coordinate
+    slopes: np.ndarray | None = None  # (k,) each parameter's change (SI) per unit of its coordinate
+    log_coordinate: np.ndarray | None = None  # (k,) bool: the coordinate is ln(θ/θ_ref)
+    ranges: tuple = ()  # (k,) (low, high) SI of each parameter
 
 
 def _summarise(problem: Candidates, z, r, jac, mask, select, sigma_m, converged, effects) -> CandidateFit:
-    """Estimates, delta-method intervals and correlations of one fit at noise ``sigma_m`` (m)."""
+    """Estimates, delta-method intervals and correlations of one fit at noise ``sigma_m`` (m) (independent noise:
+    what the rounds' confounding test reads; the final model's reported intervals are the shared likelihood's,
+    :func:`growjax.discover._scoring.shared_intervals`)."""
     z, r, jac, select = np.asarray(z), np.asarray(r), np.asarray(jac), np.asarray(select)
     p = len(problem.base_names)
     moved = np.flatnonzero(select.sum(axis=1) > 0)  # coordinates of z that were fitted
@@ -218,7 +224,7 @@ def _summarise(problem: Candidates, z, r, jac, mask, select, sigma_m, converged,
                 if b in problem.base_names}
             for i, n in enumerate(names) if n not in problem.base_names}
     return CandidateFit(effects, estimate, interval, corr, float(np.sum(r**2)), r * 1e-3, bool(converged), z,
-                        np.asarray(mask))
+                        np.asarray(mask), j, d, np.arange(len(names)) < sum(i < p for i in moved), tuple(ranges))
 
 
 def _held_start(problem: Candidates, joint, k: int, u_floor: float) -> float:

@@ -12,6 +12,7 @@ from scipy import stats
 
 from growjax import discrepancy as dc
 from growjax import experiment
+from growjax import fit as gf
 
 from ._candidates import Z90, CandidateFit, candidate_parameter
 
@@ -19,6 +20,41 @@ PINNED_FACTOR = 2.0  # a correlated effect whose 90 % interval lies within [η/2
 MATERIAL_MISFIT = 5e-4  # m: a smooth misfit below this amplitude is left to the discrepancy term
 STRUCTURE_THRESHOLD = float(stats.chi2.isf(0.01, df=2))
 _log_likelihood = jax.jit(dc.log_likelihood)
+
+
+def shared_intervals(fit: CandidateFit, scorer: Scorer, model_error: float) -> dict:
+    """{name: (low, high)} SI: the 90 % intervals of ``fit``'s parameters under the scorer's likelihood, treated as
+    :func:`growjax.fit.fit` treats them: the generalised least-squares covariance under the discrepancy and
+    noise at their mode, the rig's tolerances inferred (marginalised under their priors), the fitted
+    configuration's own error ``model_error`` (m) propagated, and the spread over the hyperparameters. A
+    parameter fitted in ln θ gets θ·exp(±z σ), an effect's θ ± z σ within its range."""
+    if fit.jacobian is None or (scorer.kind == "none" and scorer.sensitivity is None):
+        return dict(fit.interval_90)
+    hyper = scorer.profile(fit.residual_m)[1]
+    n = len(scorer.times)
+    used = np.ones(n, bool) if scorer.observed is None else np.asarray(scorer.observed, bool)
+    likelihood = gf.Likelihood(jnp.asarray(scorer.times), jnp.asarray(used), jnp.asarray(np.flatnonzero(used)),
+                               1e-3, n)
+    q = 0
+    if scorer.sensitivity is not None:
+        q = len(scorer.tolerance)
+        likelihood = likelihood.with_tolerances(scorer.sensitivity, {f"rig_{j}": u for j, u in
+                                                                     enumerate(scorer.tolerance)}, inferred=True)
+    raw = (jnp.asarray(np.asarray(fit.residual_m) / 1e-3), jnp.asarray(fit.jacobian))
+    b = np.zeros(q)
+    cov, _, _ = likelihood.covariance(raw, hyper, b, model_error)
+    if scorer.kind != "none":
+        cov = cov + likelihood.hyperparameter_spread(raw, hyper, cov, b)
+    sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    out = {}
+    for i, (name, value) in enumerate(fit.estimate.items()):
+        if fit.log_coordinate[i]:
+            out[name] = (float(value * math.exp(-Z90 * sd[i])), float(value * math.exp(Z90 * sd[i])))
+        else:
+            lo, hi = fit.ranges[i]
+            half = Z90 * sd[i] * abs(float(fit.slopes[i]))
+            out[name] = (float(max(value - half, lo)), float(min(value + half, hi)))
+    return out
 
 
 def noise_from_differences(residual) -> float:

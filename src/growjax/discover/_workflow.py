@@ -22,7 +22,7 @@ from ._candidates import CandidateFit, _held_start, candidate_parameter, make_ca
 from ._decision import SEPARATING, choose, confounded_with_base, final_effect
 from ._fitting import Fitter, _cores
 from ._report import DiscoveryResult, _unit, locate
-from ._scoring import MATERIAL_MISFIT, Scorer, noise_from_differences, score_round
+from ._scoring import MATERIAL_MISFIT, Scorer, noise_from_differences, score_round, shared_intervals
 
 
 def discover(
@@ -92,7 +92,8 @@ def discover(
     # The model's traces at the data's times: the length is the data plus the residual, the pressure comes with the fit.
     before_trace, after_trace = length + first.base_fit.residual_m, length + current.residual_m
     units = {candidate_parameter(n)[0]: candidate_parameter(n)[1] for n in candidates}
-    parameters = {n: {"estimate": v, "interval_90": current.interval_90[n], "unit": units.get(n, _unit(n))}
+    intervals = shared_intervals(current, first.scorer, model_error)
+    parameters = {n: {"estimate": v, "interval_90": intervals[n], "unit": units.get(n, _unit(n))}
                   for n, v in current.estimate.items()}
     return DiscoveryResult(
         effect=final_effect(added, misfit_after, confounded), effects=added, parameters=parameters,

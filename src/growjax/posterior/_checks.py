@@ -26,8 +26,9 @@ def predictive_band(draws, level: float = 0.9):
 
 
 def diagnostics(idata, priors, observed, mcmc=None, residuals: Residuals | None = None) -> dict:
-    """Posterior means and 90 % intervals, R-hat, ESS, divergences, BFMI and predictive coverage (the share of
-    the measured samples inside the pointwise 90 % band of replicated data)."""
+    """Posterior means and 90 % intervals, R-hat, ESS, divergences, BFMI and predictive coverage: the share of
+    the measured samples inside the pointwise 90 % band of this experiment replicated (``coverage_90``) and of a
+    new experiment (``coverage_90_new_experiment``, a fresh discrepancy and rig error: wider)."""
     import arviz as az
 
     sites = [p.site for p in priors] + ["sigma"]
@@ -43,10 +44,16 @@ def diagnostics(idata, priors, observed, mcmc=None, residuals: Residuals | None 
                      "interval_90": [float(np.quantile(x, 0.05)), float(np.quantile(x, 0.95))],
                      "rhat": float(rhat[s]), "ess_bulk": float(ess_bulk[s]), "ess_tail": float(ess_tail[s])}
     div = int(np.asarray(idata.sample_stats["diverging"]).sum()) if "diverging" in idata.sample_stats else 0
-    pp = np.asarray(idata.posterior_predictive["length"])
-    lo, hi = predictive_band(pp.reshape(-1, pp.shape[-1]))
     observed = np.asarray(observed)
-    coverage = float(np.mean((observed >= lo) & (observed <= hi)))
+
+    def coverage_of(name):
+        pp = np.asarray(idata.posterior_predictive[name])
+        lo, hi = predictive_band(pp.reshape(-1, pp.shape[-1]))
+        return float(np.mean((observed >= lo) & (observed <= hi)))
+
+    coverage = coverage_of("length")
+    coverage_new = coverage_of("length_new_experiment") if "length_new_experiment" in idata.posterior_predictive \
+        else coverage
     return {
         "parameters": params,
         "rhat_max": float(max(p["rhat"] for p in params.values())),
@@ -55,6 +62,7 @@ def diagnostics(idata, priors, observed, mcmc=None, residuals: Residuals | None 
         "divergences": div,
         "bfmi_min": float(np.min(az.bfmi(idata))),
         "coverage_90": coverage,
+        "coverage_90_new_experiment": coverage_new,
     }
 
 

@@ -97,6 +97,12 @@ class Residuals:
         t, g, u = self._terms(np.arange(len(self.times)))
         return dc.distribution(mu, t, hyper, g, u)
 
+    def conditional(self, y, mu, hyper):
+        """Mean (n,) m and variance (n,) m² of the discrepancy and rig term at every sample given the data ``y``
+        (n,) at the scored samples (:func:`growjax.discrepancy.smooth`)."""
+        t, g, u = self._terms(np.arange(len(self.times)))
+        return dc.smooth(jnp.asarray(y) - mu, t, hyper, g, u, jnp.asarray(self.observed))
+
     def pointwise(self, y, mu, hyper):
         """(n,) one-step-ahead log-densities of ``y`` at the scored samples, 0 elsewhere."""
         index = self.index

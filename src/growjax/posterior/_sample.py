@@ -117,10 +117,11 @@ def sample(
             "chain_method": chain_method or _chain_method(chains, emulate is not False)}
     mcmc = _run_nuts(make_model(mean, sampled), init_values, inverse_mass, y, seed, emulate is False, **nuts)
     post = mcmc.get_samples(group_by_chain=True)
-    loglik, predicted = observation_draws(post["length_model"], post["sigma"], model_error, y, seed + 1, residuals,
-                                          post.get("delta_amplitude"), post.get("delta_time_scale"),
-                                          post.get("noise_time"))
-    idata = az.from_numpyro(mcmc, log_likelihood=False, posterior_predictive={"length": predicted})
+    loglik, predicted, new = observation_draws(post["length_model"], post["sigma"], model_error, y, seed + 1,
+                                               residuals, post.get("delta_amplitude"), post.get("delta_time_scale"),
+                                               post.get("noise_time"))
+    idata = az.from_numpyro(mcmc, log_likelihood=False,
+                            posterior_predictive={"length": predicted, "length_new_experiment": new})
     idata.add_groups(log_likelihood={"length": loglik})
     wall = time.perf_counter() - start
     summary = diagnostics(idata, priors, y, mcmc, residuals)
@@ -211,15 +212,18 @@ def build_residuals(discrepancy: str, times, length, mean_length, priors, base, 
 
 def observation_draws(mean_length, sigma, model_error: float, observed, seed: int, residuals: Residuals | None = None,
                       amplitude=None, time_scale=None, noise_time=None):
-    """Pointwise log-likelihood and posterior predictive length (m), both (C, S, T), of every draw.
+    """Pointwise log-likelihood and two posterior predictives of the length (m), all (C, S, T), of every draw.
 
     ``mean_length`` (C, S, T): the model's length (m) at each draw, which :func:`growth_model` records as
     ``length_model`` while NUTS samples; ``sigma`` (C, S): the noise scale (m); ``model_error`` (m) joins it as in
     the model; ``residuals``, ``amplitude``, ``time_scale`` and ``noise_time`` (C, S): the discrepancy, the noise's
     correlation time and the tolerances, if any. The
-    pointwise terms are then the one-step-ahead log-densities log p(yᵢ | earlier y) (0 at samples not scored),
-    and a predictive draw carries a fresh discrepancy and rig error. Nothing is simulated again: NumPyro's
-    ``Predictive`` and ArviZ's log-likelihood would each run the model once more per draw. Seeded by ``seed``.
+    pointwise terms are then the one-step-ahead log-densities log p(yᵢ | earlier y) (0 at samples not scored).
+    Returns (log-likelihood, this experiment replicated, a new experiment): a replication keeps this experiment's
+    discrepancy and rig error as the data determine them (:func:`growjax.discrepancy.smooth`, each sample drawn
+    from its marginal) with fresh sensor noise; a new experiment draws a fresh discrepancy and rig error (the
+    band for running the rig again). Nothing is simulated again: NumPyro's ``Predictive`` and ArviZ's
+    log-likelihood would each run the model once more per draw. Seeded by ``seed``.
     """
     from scipy.stats import norm
 
@@ -230,7 +234,8 @@ def observation_draws(mean_length, sigma, model_error: float, observed, seed: in
         loglik = np.where(finite, norm.logpdf(np.asarray(observed, float), np.where(finite, mean_length, 0.0),
                                               scale[..., None]), -np.inf)
         noise = np.random.default_rng(seed).standard_normal(mean_length.shape)
-        return loglik, mean_length + scale[..., None] * noise
+        predicted = mean_length + scale[..., None] * noise
+        return loglik, predicted, predicted
     shape = mean_length.shape
     mu = np.where(finite, mean_length, 0.0).reshape(-1, shape[-1])
     ones = np.ones(shape[:-1])
@@ -241,13 +246,18 @@ def observation_draws(mean_length, sigma, model_error: float, observed, seed: in
                      jnp.asarray(tau.ravel()))
     y = jnp.asarray(observed, float)
 
-    def one(m, h, key):
-        return residuals.pointwise(y, m, h), residuals.replicate(m, h).sample(key)
+    def one(args):
+        m, h, key = args
+        k_same, k_new = jax.random.split(key)
+        mean, var = residuals.conditional(y, m, h)
+        same = m + mean + jnp.sqrt(var + h.noise**2) * jax.random.normal(k_same, m.shape)
+        return residuals.pointwise(y, m, h), same, residuals.replicate(m, h).sample(k_new)
 
     keys = jax.random.split(jax.random.PRNGKey(seed), mu.shape[0])
-    loglik, predicted = jax.jit(jax.vmap(one))(jnp.asarray(mu), hyper, keys)
+    # in batches: the smoother keeps every step's states, (T, 3 + q, 3 + q) a draw
+    loglik, predicted, new = jax.jit(lambda *a: jax.lax.map(one, a, batch_size=64))(jnp.asarray(mu), hyper, keys)
     loglik = np.where(np.all(finite, axis=-1, keepdims=True), np.asarray(loglik).reshape(shape), -np.inf)
-    return loglik, np.asarray(predicted).reshape(shape)
+    return loglik, np.asarray(predicted).reshape(shape), np.asarray(new).reshape(shape)
 
 
 def _chain_method(chains: int, emulated: bool) -> str:

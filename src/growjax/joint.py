@@ -1,0 +1,437 @@
+"""Joint fits of an experiment set: free parameters scoped per robot, rig, run or shared, one set of rig errors
+per rig, each run with its own discrepancy.
+
+The likelihood of a set is that of :func:`growjax.fit.fit` run by run, the runs independent given the
+parameters and the rig: each run's length is its model plus its own smooth discrepancy plus sensor noise
+(hyperparameters per run: the inputs excite different model errors, and the sensors differ), and the rig's
+relative errors b (one vector per rig, prior N(0, u²) from the tolerance budget) enter every run on that rig
+through its linearised sensitivity g = ∂L/∂ln ψ. Shared errors do not average out over runs; with
+``rig_errors="experiment"`` each run draws its own, the treatment that takes repeated runs for independent
+evidence about the rig's effect (and under-covers where they share one rig).
+
+The runs' simulations and Jacobians run batched: runs with the same drive, sample count and input structure are
+stacked (breaks padded to a common length) and solved by one ``vmap``-ed program; the Jacobian of each run is
+taken in its own parameters and scattered into the set's columns.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Sequence
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from growjax import discrepancy as dc
+from growjax import experiment as ex
+from growjax import fit as gf
+from growjax import params as gp
+from growjax import tolerance as tl
+from growjax._least_squares import levenberg_marquardt, linearise
+from growjax.config import Config
+from growjax.experiments import ExperimentSet, Scope
+
+RIG_ERRORS = ("shared", "experiment")
+
+
+@dataclasses.dataclass
+class SetFitResult:
+    """Outcome of a joint fit. A coordinate is labelled ``NAME`` (shared) or ``NAME@KEY`` (its robot's, rig's or
+    run's copy); values SI; ``interval_90`` None where the data do not determine it."""
+
+    labels: tuple
+    estimate: dict
+    interval_90: dict
+    standard_error: dict
+    budget: dict  # {label: {source: sd, SI}}
+    covariance_log: np.ndarray  # (P, P) in z = ln θ
+    runs: list  # per run: name, robot, rig, rmse_length_m, discrepancy, samples_used
+    rig: str  # "inferred", "fixed" or "none"
+    rig_errors: str
+    rig_offset: dict  # {rig key: {tolerance: fitted ln(ψ/ψ₀)}} when inferred
+    tolerances: dict
+    cost: float
+    status: str
+    wall_s: float
+    simulate_s: float  # of which in the batched simulations and Jacobians
+
+    def summary(self) -> dict:
+        return {"status": self.status, "rig": self.rig, "rig_errors": self.rig_errors,
+                "parameters": {k: {"estimate": self.estimate[k], "standard_error": self.standard_error[k],
+                                   "interval_90": self.interval_90[k], "budget_sd": self.budget.get(k)}
+                               for k in self.labels},
+                "runs": self.runs, "rig_offset": self.rig_offset, "tolerances": self.tolerances,
+                "cost": self.cost, "wall_s": self.wall_s, "simulate_s": self.simulate_s}
+
+
+@dataclasses.dataclass(frozen=True)
+class _Layout:
+    """Where each run's parameters and rig errors sit among the set's coordinates."""
+
+    index: np.ndarray  # (E, p) int: run e's parameter i is coordinate index[e, i]
+    offset: np.ndarray  # (E, p): run e's z_i = z[index] + offset (its own reference)
+    rig_index: np.ndarray  # (E, q) int: run e's rig error j is b[rig_index[e, j]]
+    labels: tuple  # (P,)
+    refs: np.ndarray  # (P,) SI
+    rig_labels: tuple  # (Q,) (rig key, tolerance name)
+
+
+def fit_set(
+    experiments: ExperimentSet,
+    free: Sequence[str] = ("Y@robot",),
+    config: Config | None = None,
+    n_starts: int = 1,
+    sweep_n: int = 16,
+    seed: int = 0,
+    max_steps: int = 100,
+    sigma_length: float = 1e-3,
+    sigma_pressure: float = 5e3,
+    model_error: float | None = None,
+    discrepancy: str = "matern32",
+    tolerances: dict | None = None,
+    rig: str = "inferred",
+    rig_errors: str = "shared",
+) -> SetFitResult:
+    """Fit the ``free`` parameters (``NAME`` shared, ``NAME@robot|rig|experiment`` one per robot, rig or run) to
+    every run of ``experiments`` at once.
+
+    ``config``: the simulation's settings (its drive is taken from each run). Starts: the ``n_starts`` best of a
+    ``sweep_n``-point Latin hypercube over the free names (every copy at the same value; 0: the runs' values).
+    ``discrepancy``, ``tolerances``, ``rig``, ``model_error``: as in :func:`growjax.fit.fit`, run by run;
+    ``rig_errors``: ``"shared"`` (one error vector per rig) or ``"experiment"`` (one per run).
+    """
+    if discrepancy not in dc.KINDS:
+        raise ValueError(f"discrepancy must be one of {dc.KINDS}, got {discrepancy!r}")
+    if rig not in gf.RIG_TREATMENTS:
+        raise ValueError(f"rig must be one of {gf.RIG_TREATMENTS}, got {rig!r}")
+    if rig_errors not in RIG_ERRORS:
+        raise ValueError(f"rig_errors must be one of {RIG_ERRORS}, got {rig_errors!r}")
+    clock = time.perf_counter()
+    config = (config if config is not None else Config()).replace(adjoint="forward")
+    runs = list(experiments)
+    bases = [r.base() for r in runs]
+    scopes = [s if isinstance(s, Scope) else Scope.parse(s, bases[0]) for s in free]
+    names = tuple(s.name for s in scopes)
+    if len(set(names)) != len(names):
+        raise ValueError(f"a parameter is freed twice: {list(free)}")
+    tol = tl.budget(bases[0], tolerances, names, use_default=tolerances is None and discrepancy != "none")
+    problems, likelihoods, configs = [], [], []
+    for run, base in zip(runs, bases):
+        cfg = config.replace(drive=run.drive)
+        inputs = ex.to_inputs(run.experiment, run.drive, base, cfg.t0, cfg.t1)
+        pr = gf.make_problem(base, names, inputs, cfg, run.times, run.length, run.pressure, run.window,
+                             sigma_length, sigma_pressure)
+        if pr.times.size < 2:
+            raise ValueError(f"experiment {run.name!r}: fewer than two samples inside the window")
+        n = int(pr.times.size)
+        used = ex.informative_samples(np.asarray(pr.length)) if discrepancy != "none" else np.ones(n, bool)
+        problems.append(pr)
+        configs.append(cfg)
+        likelihoods.append(gf.Likelihood(pr.times, jnp.asarray(used), jnp.asarray(np.flatnonzero(used)),
+                                         sigma_length, n))
+    layout = _layout(experiments, scopes, bases, problems, tol, rig_errors)
+    batch = _Batch(problems)
+    bounds = _bounds(bases[0], layout)
+    z0s = _starts(batch, layout, likelihoods, bases[0], names, n_starts, sweep_n, seed)
+    solved = [levenberg_marquardt(lambda z: _weighted(batch.linearised(z, layout), likelihoods, layout), z0,
+                                  max_steps, gf.LM_TOLERANCE, bounds=bounds) for z0 in z0s]
+    k_best = int(np.argmin([s[1] for s in solved]))
+    z, converged = np.asarray(solved[k_best][0]), bool(solved[k_best][2])
+    q_all = len(layout.rig_labels)
+    b = np.zeros(0)
+    hypers = [None] * len(runs)
+    model_error = gf.default_model_error(config) if model_error is None else model_error
+    sensitivities = None
+    for step in range(gf.OUTER_STEPS):
+        outs = batch.linearised(z, layout)
+        hypers = [lik.estimate(r, discrepancy, h) for lik, (r, _), h in zip(likelihoods, outs, hypers)]
+        if step == 0 and tol:
+            sensitivities = batch.sensitivities(z, layout, tol)
+            if rig == "inferred":
+                likelihoods = [lik.with_tolerances(g, tol, inferred=True) for lik, g in zip(likelihoods, sensitivities)]
+                b = np.zeros(q_all)
+                hypers = [lik.estimate(r, discrepancy, h) for lik, (r, _), h in zip(likelihoods, outs, hypers)]
+        p_all = z.size
+        w_new, cost, converged, _, jac_w = levenberg_marquardt(
+            lambda w, hs=tuple(hypers): _whitened(batch.linearised(w[:p_all], layout), likelihoods, layout, hs,
+                                                 w[p_all:]),
+            np.concatenate([z, b]), max_steps, gf.LM_TOLERANCE, bounds=_with_rig(bounds, b.size),
+            cost_resolution=gf.COST_RESOLUTION)
+        sd = np.sqrt(np.diag(np.linalg.pinv(jac_w.T @ jac_w, rcond=1e-10, hermitian=True)))
+        moved = np.abs(w_new - np.concatenate([z, b]))
+        z, b = np.asarray(w_new[:p_all]), np.asarray(w_new[p_all:])
+        if step > 0 and np.all(moved <= gf.OUTER_TOLERANCE * sd):
+            break
+    outs = batch.linearised(z, layout)
+    if tol and rig == "fixed":
+        likelihoods = [lik.with_tolerances(g, tol) for lik, g in zip(likelihoods, sensitivities)]
+    cov, parts, info = _covariance(outs, likelihoods, layout, hypers, b, model_error, tol, rig)
+    return _result(z, b, cov, parts, info, outs, likelihoods, layout, hypers, runs, tol, rig, rig_errors, cost,
+                   converged, clock, batch.simulate_s)
+
+
+def _layout(experiments: ExperimentSet, scopes, bases, problems, tol: dict, rig_errors: str) -> _Layout:
+    runs, p = list(experiments), len(scopes)
+    labels, refs, index = [], [], np.zeros((len(runs), p), int)
+    for i, s in enumerate(scopes):
+        keys = experiments.group_of(s.scope)
+        for key in dict.fromkeys(keys):
+            first = keys.index(key)
+            labels.append(s.name if s.scope == "shared" else f"{s.name}@{key}")
+            refs.append(float(gp.get(bases[first], s.name)))
+            for e, k in enumerate(keys):
+                if k == key:
+                    index[e, i] = len(labels) - 1
+    refs = np.asarray(refs)
+    if np.any(refs <= 0):
+        raise ValueError(f"fitted parameters must be positive, got {dict(zip(labels, refs))}")
+    offset = np.log(refs[index] / np.stack([np.asarray(pr.refs) for pr in problems]))
+    rig_keys = experiments.group_of("rig" if rig_errors == "shared" else "experiment")
+    rig_labels, rig_index = [], np.zeros((len(runs), len(tol)), int)
+    for key in dict.fromkeys(rig_keys):
+        for j, t in enumerate(tol):
+            rig_labels.append((key, t))
+            for e, k in enumerate(rig_keys):
+                if k == key:
+                    rig_index[e, j] = len(rig_labels) - 1
+    return _Layout(index, offset, rig_index, tuple(labels), refs, tuple(rig_labels))
+
+
+class _Batch:
+    """The runs' problems stacked in groups that one compiled program solves (same configuration, shapes and input
+    structure; the inputs' break lists padded to a common length)."""
+
+    def __init__(self, problems):
+        self.size = len(problems)
+        self.sigma_length = float(problems[0].sigma_length)
+        self.n_len = [int(pr.times.size) for pr in problems]
+        problems = _pad_breaks(problems)
+        groups: dict = {}
+        for e, pr in enumerate(problems):
+            leaves, tree = jax.tree_util.tree_flatten(pr)
+            key = (tree, tuple(np.shape(x) for x in leaves))
+            groups.setdefault(key, []).append(e)
+        self.groups = [(members, _stack([problems[e] for e in members])) for members in groups.values()]
+        self.simulate_s = 0.0
+
+    def linearised(self, z, layout: _Layout, stacked=None):
+        """[(r (m_e,), J (m_e, p))] per run at the set's coordinates z (P,)."""
+        clock = time.perf_counter()
+        z_local = np.asarray(z)[layout.index] + layout.offset
+        out = [None] * self.size
+        for k, (members, problem) in enumerate(self.groups):
+            pr = problem if stacked is None else stacked[k]
+            r, jac = _batched(jnp.asarray(z_local[members]), pr)
+            r, jac = np.asarray(r), np.asarray(jac)
+            for i, e in enumerate(members):
+                out[e] = (r[i], jac[i])
+        self.simulate_s += time.perf_counter() - clock
+        return out
+
+    def sensitivities(self, z, layout: _Layout, tol: dict) -> list:
+        """Per run g (n_e, q): the length's change, m, per unit ln ψ of each toleranced parameter (the secant from
+        ψ to ψ·e^u, every run of a group in one batched solve)."""
+        r0 = self.linearised(z, layout)
+        cols = [[] for _ in range(self.size)]
+        for name, u in tol.items():
+            shifted = [eqx.tree_at(lambda pr: pr.base, problem,
+                                   gp.replace(problem.base, **{name: gp.get(problem.base, name) * np.exp(u)}))
+                       for _, problem in self.groups]
+            out = self.linearised(z, layout, shifted)
+            for e in range(self.size):
+                n = self.n_len[e]
+                cols[e].append((out[e][0][:n] - r0[e][0][:n]) * self.sigma_length / u)
+        g = [np.stack(c, axis=1) for c in cols]
+        if not all(np.all(np.isfinite(x)) for x in g):
+            raise RuntimeError("the model failed while measuring the rig's tolerance sensitivities")
+        return g
+
+
+@eqx.filter_jit
+def _batched(z_local, problems: gf.Problem):
+    """Residuals (E, m) and Jacobians (E, m, p) of stacked problems: one vmapped forward-mode linearisation."""
+    return jax.vmap(lambda z, pr: linearise(pr.residuals, z))(z_local, problems)
+
+
+def _stack(problems):
+    return jax.tree_util.tree_map(lambda *xs: jnp.stack([jnp.asarray(x) for x in xs]), *problems)
+
+
+def _pad_breaks(problems):
+    """Problems of one configuration with their break lists padded to the longest (beyond t1: never reached)."""
+    out = list(problems)
+    by_config: dict = {}
+    for e, pr in enumerate(problems):
+        by_config.setdefault(pr.config, []).append(e)
+    for cfg, members in by_config.items():
+        sizes = [max(problems[e].breaks[k].size for e in members) for k in range(2)]
+        for e in members:
+            pr = problems[e]
+            padded = tuple(jnp.concatenate([b, jnp.full(s - b.size, cfg.t1 + 1.0)]) for b, s in zip(pr.breaks, sizes))
+            out[e] = eqx.tree_at(lambda p: p.breaks, pr, padded)
+    return out
+
+
+def _bounds(base, layout: _Layout):
+    names = [lab.split("@")[0] for lab in layout.labels]
+    lo, hi = np.full(len(names), -np.inf), np.full(len(names), np.inf)
+    for i, n in enumerate(names):
+        a, b_ = gf.physical_bounds(base, [n], layout.refs[i:i + 1])
+        lo[i], hi[i] = a[0], b_[0]
+    return lo, hi
+
+
+def _with_rig(bounds, q: int):
+    return tuple(np.concatenate([x, np.full(q, v)]) for x, v in zip(bounds, (-np.inf, np.inf)))
+
+
+def _starts(batch: _Batch, layout: _Layout, likelihoods, base, names, n_starts: int, sweep_n: int, seed: int):
+    """Start points z (P,): the ``n_starts`` best of a Latin hypercube over the free names (every copy at the same
+    value) by the set's independent-noise cost, or the runs' own values (``sweep_n=0``)."""
+    if sweep_n < 0 or n_starts < 1:
+        raise ValueError(f"sweep_n must be >= 0 and n_starts >= 1, got {sweep_n} and {n_starts}")
+    if sweep_n == 0:
+        return [np.zeros(len(layout.labels))]
+    from scipy.stats import qmc
+
+    boxes = np.log(np.array([gf.default_range(base, n) for n in names]))
+    unit = qmc.LatinHypercube(d=len(names), seed=seed).random(sweep_n)
+    values = np.exp(boxes[:, 0] + unit * (boxes[:, 1] - boxes[:, 0]))  # (k, p) SI
+    per_name = np.array([[names.index(lab.split("@")[0])] for lab in layout.labels])[:, 0]
+    costs, zs = [], []
+    for v in values:
+        z = np.log(v[per_name] / layout.refs)
+        r, _ = _weighted(batch.linearised(z, layout), likelihoods, layout)
+        costs.append(float(r @ r) if np.all(np.isfinite(r)) else np.inf)
+        zs.append(z)
+    order = np.argsort(costs)[:n_starts]
+    return [zs[k] for k in order if np.isfinite(costs[k])] or [np.zeros(len(layout.labels))]
+
+
+def _weighted(outs, likelihoods, layout: _Layout):
+    """The set's residuals and Jacobian (P columns) under independent noise, unscored samples zeroed."""
+    p_all = len(layout.labels)
+    rs, js = [], []
+    for e, ((r, jac), lik) in enumerate(zip(outs, likelihoods)):
+        wr, wj = (np.asarray(a) for a in lik.weighted(jnp.asarray(r), jnp.asarray(jac)))
+        full = np.zeros((wr.size, p_all))
+        np.add.at(full.T, layout.index[e], wj.T)
+        rs.append(wr)
+        js.append(full)
+    return np.concatenate(rs), np.concatenate(js)
+
+
+def _whitened(outs, likelihoods, layout: _Layout, hypers, b):
+    """The set's whitened residuals and Jacobian of w = (z (P,), b (Q,)): every run whitened under its own
+    hyperparameters, its rig columns (when inferred) those of its rig's errors, then the rig's prior rows b/u."""
+    p_all, q_all = len(layout.labels), np.asarray(b).size
+    rs, js = [], []
+    for e, ((r, jac), lik, h) in enumerate(zip(outs, likelihoods, hypers)):
+        b_e = np.asarray(b)[layout.rig_index[e]] if lik.inferred else np.zeros(0)
+        wr, wl, wg, rp, jp = (np.asarray(a) for a in _run_rows(lik, jnp.asarray(r), jnp.asarray(jac), h,
+                                                                 jnp.asarray(b_e)))
+        full = np.zeros((wr.size + rp.size, p_all + q_all))
+        np.add.at(full.T, layout.index[e], np.concatenate([wl, jp]).T)
+        if lik.inferred:
+            np.add.at(full[: wr.size].T, p_all + layout.rig_index[e], wg.T)
+        rs.append(np.concatenate([wr, rp]))
+        js.append(full)
+    if q_all:
+        u = _rig_sd(likelihoods, layout)
+        rs.append(np.asarray(b) / u)
+        js.append(np.concatenate([np.zeros((q_all, p_all)), np.diag(1.0 / u)], axis=1))
+    return np.concatenate(rs), np.concatenate(js)
+
+
+def _rig_sd(likelihoods, layout: _Layout) -> np.ndarray:
+    tol = dict(zip(likelihoods[0].tolerance_names, np.asarray(likelihoods[0].tolerance)))
+    return np.array([tol[name] for _, name in layout.rig_labels])
+
+
+@eqx.filter_jit
+def _run_rows(likelihood: gf.Likelihood, r, jac, hyper, b):
+    """One run's whitened length rows (residual (n,), Jacobian (n, p), rig columns (n, q)) and its pressure rows."""
+    cols, t = likelihood.length_columns(r, jac, b)
+    w = dc.whiten(cols, t, hyper)
+    p, n = jac.shape[1], likelihood.n_len
+    return w[:, 0], w[:, 1:1 + p], w[:, 1 + p:], r[n:], jac[n:]
+
+
+def _covariance(outs, likelihoods, layout: _Layout, hypers, b, model_error: float, tol: dict, rig: str):
+    """(covariance (P, P) of z, its parts {source: (P, P)}, the information on z (P, P)): as
+    :meth:`growjax.fit.Likelihood.covariance`, summed over the runs, a shared rig error counted once."""
+    _, jac_w = _whitened(outs, likelihoods, layout, hypers, b)
+    full = np.linalg.pinv(jac_w.T @ jac_w, rcond=1e-10, hermitian=True)
+    p_all, size = len(layout.labels), full.shape[0]
+    parts: dict = {}
+    fixed_gain = np.zeros((p_all, len(layout.rig_labels)))
+
+    def add(name, part):
+        parts[name] = parts.get(name, 0.0) + part
+
+    for e, ((r, jac), lik, hyper) in enumerate(zip(outs, likelihoods, hypers)):
+        used = np.asarray(lik.used)
+        t = np.asarray(lik.times)[used]
+        h = np.zeros((int(used.sum()), size))
+        np.add.at(h.T, layout.index[e], (jac[: lik.n_len][used] * lik.sigma_length).T)
+        g = None if lik.sensitivity is None else np.asarray(lik.sensitivity)[used]
+        if lik.inferred:
+            np.add.at(h.T, p_all + layout.rig_index[e], g.T)
+        kernels = {"noise": dc.noise_kernel(t, hyper)}
+        if float(hyper.amplitude) > 0:
+            kernels["discrepancy"] = dc.kernel(t, hyper)
+        a = full @ np.linalg.solve(sum(kernels.values()), h).T
+        for k, kern in kernels.items():
+            add(k, (a @ kern @ a.T)[:p_all, :p_all])
+        if model_error > 0:
+            add("fast_model_error", (a @ dc.drift_kernel(t, model_error, gf.MODEL_ERROR_TIME) @ a.T)[:p_all, :p_all])
+        if jac.shape[0] > lik.n_len:
+            hp = np.zeros((jac.shape[0] - lik.n_len, size))
+            np.add.at(hp.T, layout.index[e], jac[lik.n_len:].T)
+            a_p = full @ hp.T
+            add("pressure_noise", (a_p @ a_p.T)[:p_all, :p_all])
+        if g is not None and rig == "fixed":
+            np.add.at(fixed_gain.T, layout.rig_index[e], (a[:p_all] @ g).T)
+    if tol:
+        u = _rig_sd(likelihoods, layout)
+        for j, (_, name) in enumerate(layout.rig_labels):
+            c = full[:p_all, p_all + j] / u[j] if rig == "inferred" else fixed_gain[:, j] * u[j]
+            add(name, np.outer(c, c))
+    info = np.linalg.pinv(full[:p_all, :p_all], rcond=1e-12, hermitian=True)
+    return sum(parts.values()), parts, info
+
+
+def _result(z, b, cov, parts, info, outs, likelihoods, layout: _Layout, hypers, runs, tol, rig, rig_errors, cost,
+            converged, clock, simulate_s) -> SetFitResult:
+    theta = layout.refs * np.exp(z)
+    evals, evecs = np.linalg.eigh(info)
+    blind = np.zeros(theta.size, bool)
+    for k in range(theta.size):
+        if evals[k] < 1e-10 * max(float(evals[-1]), 1e-300):
+            blind |= np.abs(evecs[:, k]) > 0.1
+    sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    labels = layout.labels
+    estimate = dict(zip(labels, map(float, theta)))
+    interval = {k: None if blind[i] else (float(theta[i] * np.exp(-gf.Z90 * sd[i])),
+                                          float(theta[i] * np.exp(gf.Z90 * sd[i]))) for i, k in enumerate(labels)}
+    se = {k: None if blind[i] else float(theta[i] * sd[i]) for i, k in enumerate(labels)}
+    budget = {k: {s: float(theta[i] * np.sqrt(max(part[i, i], 0.0))) for s, part in parts.items()}
+              for i, k in enumerate(labels)}
+    rig_offset: dict = {}
+    if rig == "inferred" and tol:
+        for j, (key, name) in enumerate(layout.rig_labels):
+            rig_offset.setdefault(key, {})[name] = float(b[j])
+    per_run = []
+    for e, ((r, _), lik, hyper, run) in enumerate(zip(outs, likelihoods, hypers, runs)):
+        r_len = np.asarray(r)[: lik.n_len] * lik.sigma_length
+        if lik.inferred:
+            r_len = r_len + np.asarray(lik.sensitivity) @ np.asarray(b)[layout.rig_index[e]]
+        per_run.append({"name": run.name, "robot": run.robot, "rig": run.rig, "drive": run.drive,
+                        "rmse_length_m": float(np.sqrt(np.mean(r_len**2))), "discrepancy": hyper.as_dict(),
+                        "samples_used": int(np.sum(np.asarray(lik.used)))})
+    return SetFitResult(labels, estimate, interval, se, budget, cov, per_run, rig if tol else "none", rig_errors,
+                        rig_offset, dict(tol), float(cost), "converged" if converged else "max_steps",
+                        time.perf_counter() - clock, simulate_s)

@@ -1,0 +1,79 @@
+"""The rig's tolerances in the fit: inferred from the data (the default, the posterior's treatment) or held
+nominal and propagated (``rig="fixed"``)."""
+
+import sys
+from pathlib import Path
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import growjax as gj
+from growjax import discrepancy as dc
+from growjax import fit as gf
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "data"))
+import make_synthetic as mk
+
+Y = "robot.yield_pressure"
+RIG_OFF = "published_Y9000_screw_friction_low"  # reference-made, the lead screw's friction 10 % below nominal
+
+
+def _likelihood(inferred: bool, n=120):
+    rng = np.random.default_rng(3)
+    t = np.sort(rng.uniform(0.0, 10.0, n))
+    used = np.ones(n, bool)
+    used[::7] = False  # samples the likelihood does not score
+    g = rng.normal(0.0, 1e-4, (n, 3))  # m per unit ln ψ
+    u = np.array([0.2, 0.05, 0.1])
+    lik = gf.Likelihood(jnp.asarray(t), jnp.asarray(used), jnp.asarray(np.flatnonzero(used)), 1e-3, n)
+    raw = (jnp.asarray(rng.normal(0.0, 0.2, n)), jnp.asarray(rng.normal(0.0, 5.0, (n, 2))))  # σ_L, σ_L per unit z
+    return lik.with_tolerances(g, dict(zip(("a", "b", "c"), u)), inferred=inferred), raw, t, used, g, u
+
+
+def test_inferred_rig_covariance_is_the_marginal_gls_and_its_budget_adds_up():
+    """With the rig inferred the covariance of z is (Jᵀ(K + G U Gᵀ)⁻¹J)⁻¹ (the rig's errors marginalised under
+    their priors, as the posterior does), its parts add up to it, and the fixed propagation (the GLS estimator
+    that ignores the rig, under the same residual covariance) is nowhere narrower."""
+    hyper = dc.Hyper.of(3e-4, 1.2, 2e-4, 0.02)
+    lik, raw, t, used, g, u = _likelihood(inferred=True)
+    cov, parts, _ = lik.covariance(raw, hyper, np.array([0.05, -0.01, 0.02]))
+    k = dc.kernel(t[used], hyper) + dc.noise_kernel(t[used], hyper) + (g[used] * u**2) @ g[used].T
+    j = np.asarray(raw[1])[used] * 1e-3
+    np.testing.assert_allclose(cov, np.linalg.inv(j.T @ np.linalg.solve(k, j)), rtol=1e-8)
+    np.testing.assert_allclose(sum(parts.values()), cov, rtol=1e-10)
+    assert set(parts) == {"noise", "discrepancy", "a", "b", "c"}
+    lik_fixed, raw, *_ = _likelihood(inferred=False)
+    fixed, fixed_parts, _ = lik_fixed.covariance(raw, hyper, np.zeros(0))
+    assert np.all(np.linalg.eigvalsh(fixed - cov) > -1e-12 * np.max(np.diag(cov)))
+    assert fixed_parts["a"][0, 0] > parts["a"][0, 0]  # the data inform the rig: less is left of its prior
+
+
+@pytest.fixture(scope="module")
+def rig_off():
+    t, lengths, cases, = mk.read_reference_lengths()
+    data = lengths[RIG_OFF] + np.random.default_rng(5).normal(0.0, 2e-4, t.size)
+    fit = lambda rig: gf.fit(t, data, mk.reference_inputs("published"), free=["Y"], config=gj.Config(t1=10.0),
+                             n_starts=1, sweep_n=0, rig=rig)
+    return cases[RIG_OFF]["parameters"]["Y"], fit("inferred"), fit("fixed")
+
+
+def test_the_data_inform_the_rig_on_reference_made_data(rig_off):
+    """Reference-made data with the screw friction 10 % low: with the rig inferred Y's interval covers the truth
+    and is under half as wide as the fixed propagation's (which also covers), and the friction's fitted error
+    points the right way."""
+    truth, inferred, fixed = rig_off
+    for res in (inferred, fixed):
+        assert res.interval_90[Y][0] <= truth <= res.interval_90[Y][1], (res.rig, res.estimate, res.interval_90)
+    width = lambda res: res.interval_90[Y][1] - res.interval_90[Y][0]
+    assert width(inferred) < 0.5 * width(fixed)
+    assert inferred.rig == "inferred" and fixed.rig == "fixed" and fixed.rig_offset == {}
+    assert inferred.rig_offset["pump.screw_viscous_friction"] < 0.0
+    budget = inferred.budget[Y]
+    assert sum(v**2 for v in budget.values()) == pytest.approx(inferred.standard_error[Y] ** 2, rel=1e-6)
+
+
+def test_an_unknown_rig_treatment_is_refused():
+    with pytest.raises(ValueError, match="rig must be one of"):
+        gf.fit(np.linspace(0, 1, 5), np.zeros(5), None, rig="known")
