@@ -7,6 +7,7 @@ import sys
 import numpy as np
 import pytest
 
+import growjax as gj
 from growjax import experiment as ex
 
 
@@ -90,6 +91,102 @@ def test_simulate_command_reports_bad_input(tmp_path):
     done = subprocess.run([sys.executable, "-m", "growjax.cli", "simulate", str(bad), "--out", str(tmp_path)],
                           capture_output=True, text=True, check=False, timeout=600)
     assert done.returncode == 2 and "millimetres" in done.stderr
+
+
+@pytest.mark.parametrize("argv, named", [
+    (["posterior", "--chains", "0"], "--chains: must be at least 1, got 0"),
+    (["posterior", "--samples", "-5"], "--samples: must be at least 1, got -5"),
+    (["posterior", "--warmup", "-1"], "--warmup: must be at least 0, got -1"),
+    (["sweep", "--n", "0"], "--n: must be at least 1"),
+    (["sweep", "--sobol-n", "100"], "--sobol-n: must be a power of 2"),
+    (["sweep", "--chunk-size", "0"], "--chunk-size: must be at least 1"),
+    (["fit", "--starts", "0"], "--starts: must be at least 1"),
+    (["discover", "--workers", "-2"], "--workers: must be at least 1"),
+    (["control", "--draws", "0"], "--draws: must be at least 1"),
+    (["control", "--iterations", "two"], "--iterations: 'two' is not an integer"),
+    (["control", "--microsteps", "0"], "--microsteps: must be at least 1"),
+    (["simulate", "--seed", "-1"], "--seed: must be at least 0"),
+    (["simulate", "--t-end", "0"], "--t-end: must be a positive number"),
+    (["fit", "--rtol=-1e-6"], "--rtol: must be a positive number"),
+])
+def test_counts_and_spans_are_checked_by_the_parser(argv, named, capsys):
+    from growjax import cli
+
+    with pytest.raises(SystemExit) as stop:
+        cli.main(argv)
+    err = capsys.readouterr().err.strip()
+    assert stop.value.code == 2 and len(err.splitlines()) == 1 and named in err, err
+
+
+def _rows(path, header, times):
+    cols = header.split(",")
+    values = {"time_s": None, "robot_length_m": 0.010, "catheter_length_m": 0.004}
+    path.write_text(header + "\n" + "".join(
+        ",".join(str(t) if c == "time_s" else str(values[c]) for c in cols) + "\n" for t in times))
+    return path
+
+
+def test_bad_experiments_exit_2_with_one_line_naming_the_file(tmp_path, capsys):
+    from growjax import cli
+
+    binary = tmp_path / "binary.csv"
+    binary.write_bytes(bytes(range(128, 256)))
+    no_catheter = _rows(tmp_path / "no_catheter.csv", "time_s,robot_length_m", [0.01, 0.1, 0.2])
+    late = _rows(tmp_path / "late.csv", "time_s,robot_length_m,catheter_length_m", [20.0, 21.0, 22.0])
+    both = _rows(tmp_path / "both.csv", "time_s,robot_length_m,catheter_length_m", [0.01, 0.1, 0.2])
+    cases = [
+        (["simulate", str(binary)], "binary.csv is not a text CSV"),
+        (["simulate", str(no_catheter)], "no_catheter.csv has no catheter_length_m column"),
+        (["fit", str(no_catheter)], "--no-catheter"),
+        (["control", str(no_catheter)], "no_catheter.csv has no catheter_length_m column"),
+        (["simulate", str(late)], "late.csv holds data over 20–22 s and the simulated window is 0.001–10 s"),
+        (["simulate", str(both), "--no-catheter"], "both.csv gives the catheter length"),
+    ]
+    for argv, named in cases:
+        assert cli.main([*argv, "--out", str(tmp_path / "out")]) == 2, argv
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and named in err, (argv, err)
+        assert "codec" not in err and "Traceback" not in err
+
+
+def test_a_window_longer_than_the_data_is_shrunk_to_them_with_a_note(tmp_path, capsys):
+    from growjax import cli
+
+    short = _rows(tmp_path / "short.csv", "time_s,robot_length_m", [0.01, 0.1, 0.2])
+    args = cli.build_parser().parse_args(["simulate", str(short), "--no-catheter"])
+    _, exp, _, _ = cli._setup(args, "forward")
+    assert args.t_end == pytest.approx(0.2) and cli.make_config(args).t1 == pytest.approx(0.2)
+    assert "catheter_length_m" not in exp and exp.time.size == 3
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "note" in err and "0.01–0.2 s" in err and "0.001–10 s" in err, err
+    args = cli.build_parser().parse_args(["simulate", str(short), "--no-catheter", "--t-end", "0.15"])
+    _, exp, _, _ = cli._setup(args, "forward")  # a window inside the data: kept, silently
+    assert args.t_end == 0.15 and exp.time.size == 2 and capsys.readouterr().err == ""
+
+
+class _Designed(Exception):
+    """Raised by a stand-in for the design once it has seen its arguments."""
+
+
+def test_control_gives_the_design_the_fixed_parameters_and_tolerances(tmp_path, monkeypatch):
+    from growjax import cli
+    from growjax import control as gc
+
+    seen = {}
+
+    def design(*args, **kw):
+        seen.update(kw)
+        raise _Designed
+
+    monkeypatch.setattr(gc, "design", design)
+    with pytest.raises(_Designed):
+        cli.main(["control", "--param", "ext=2e-6", "--tolerance", "Kp=0.1", "--out", str(tmp_path)])
+    assert float(gj.get(seen["base"], "ext")) == 2e-6
+    assert float(gj.get(seen["base"], "Y")) == 9000.0  # recorded beside the shipped data
+    assert seen["tolerances"]["Kp"] == 0.1 and seen["tolerances"]["tank.length"] == 0.05  # on the default budget
+    with pytest.raises(_Designed):
+        cli.main(["control", "--out", str(tmp_path)])
+    assert seen["tolerances"] is None and float(gj.get(seen["base"], "ext")) == float(gj.get(gj.reference(), "ext"))
 
 
 @pytest.mark.slow

@@ -18,7 +18,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def test_regular_install_runs_simulate_elsewhere(tmp_path):
-    pytest.importorskip("setuptools")
+    pytest.importorskip("setuptools", minversion="77")  # an SPDX licence string in pyproject.toml
     pytest.importorskip("wheel")  # the build backend's bdist_wheel, without build isolation (the test extra has it)
     env_dir = tmp_path / "venv"
     subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(env_dir)], check=True)

@@ -34,10 +34,47 @@ def _effect_name(text: str) -> str:
     return text
 
 
+def _count(minimum: int = 1):
+    """An argparse type: an integer ≥ ``minimum``, else a one-line error naming the value."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"must be at least {minimum}, got {value}")
+        return value
+
+    parse.__name__ = f"integer ≥ {minimum}"
+    return parse
+
+
+def _power_of_two(text: str) -> int:
+    value = _count(1)(text)
+    if value & (value - 1):
+        raise argparse.ArgumentTypeError(f"must be a power of 2 (128, 256, 512, ...), got {value}")
+    return value
+
+
+def _positive(text: str) -> float:
+    """An argparse type: a finite number > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not 0.0 < value < float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
+    return value
+
+
 def _shared(p: argparse.ArgumentParser, command: str, fidelity_default: str = "fast", fidelity_help: str = ""):
     p.add_argument("data", nargs="?", default=None,
                    help="experiment CSV, or a folder with kings_ts.mat and lin_c_ts.mat (default: the synthetic "
                         "experiment shipped with growjax)")
+    p.add_argument("--no-catheter", dest="catheter", action="store_false",
+                   help="the experiment had no catheter in contact: its catheter length is taken as zero (without "
+                        "this, the data must have a catheter_length_m column) (default: off)")
     p.add_argument("--drive", choices=DRIVES, default="forward",
                    help="forward: PID on the pressure with ideal torque sources; inverse: stepper motor and its step "
                         "controller")
@@ -46,10 +83,10 @@ def _shared(p: argparse.ArgumentParser, command: str, fidelity_default: str = "f
                         "beside the data")
     p.add_argument("--fidelity", choices=FIDELITIES, default=fidelity_default,
                    help=fidelity_help or "configuration that solves the model: fast, or the reference network (slow)")
-    p.add_argument("--rtol", type=float, default=None,
+    p.add_argument("--rtol", type=_positive, default=None,
                    help="solver tolerance on the scaled states (None: 1e-4 fast, 1e-6 reference)")
-    p.add_argument("--seed", type=int, default=0, help="seed of every random choice")
-    p.add_argument("--t-end", type=float, default=10.0, metavar="S", help="end of the simulated window, s")
+    p.add_argument("--seed", type=_count(0), default=0, help="seed of every random choice")
+    p.add_argument("--t-end", type=_positive, default=10.0, metavar="S", help="end of the simulated window, s")
     p.add_argument("--out", default=str(Path("out") / command), metavar="DIR", help="folder for the files the command writes")
     p.add_argument("--json", metavar="FILE", default=None, help="write the full summary as JSON to FILE ('-': stdout)")
 
@@ -61,14 +98,18 @@ def _likelihood(p: argparse.ArgumentParser):
     p.add_argument("--discrepancy", choices=["matern32", "none"], default="matern32",
                    help="matern32: the model plus a smooth Matérn-3/2 discrepancy plus sensor noise; none: "
                         "independent noise around an exact model")
+    _tolerance(p, "(repeat; overrides the default budget of `growjax params`; 'none' drops the budget)")
+
+
+def _tolerance(p: argparse.ArgumentParser, which: str):
     p.add_argument("--tolerance", action="append", default=[], metavar="NAME=REL",
-                   help="relative standard uncertainty of a fixed parameter, e.g. Kp=0.1 (repeat; overrides "
-                        "the default budget of `growjax params`; 'none' drops the budget)")
+                   help=f"relative standard uncertainty of a fixed parameter, e.g. Kp=0.1 {which}")
 
 
 
 def tolerances_of(args):
-    """The ``tolerances`` argument of fit, posterior and discover from ``--tolerance`` (None: the default budget)."""
+    """The ``tolerances`` argument of fit, posterior, discover and control from ``--tolerance`` (None where it is
+    not given: the default budget for the likelihood's commands, the rig as it is for control)."""
     from growjax import tolerance as tl
 
     if not args.tolerance:
@@ -103,18 +144,19 @@ def build_parser():
 
     swp = sub.add_parser("sweep", formatter_class=fmt, help="Latin-hypercube sweep scored against the measured length")
     _shared(swp, "sweep")
-    swp.add_argument("--n", type=int, default=500, help="number of parameter sets")
+    swp.add_argument("--n", type=_count(), default=500, help="number of parameter sets")
     swp.add_argument("--range", action="append", default=[], metavar="NAME=LOW:HIGH[:log]",
                      help="swept parameter and its range, SI units (repeat); none: the paper's n, Y, ext box")
     swp.add_argument("--sobol", action="store_true", help="also compute Sobol indices of RMSE and final length")
-    swp.add_argument("--sobol-n", type=int, default=256, help="Saltelli base points (a power of 2; runs = N·(d+2))")
-    swp.add_argument("--chunk-size", type=int, default=None, help="sets per compiled call (None: sized to memory)")
+    swp.add_argument("--sobol-n", type=_power_of_two, default=256,
+                     help="Saltelli base points (a power of 2; runs = N·(d+2))")
+    swp.add_argument("--chunk-size", type=_count(), default=None, help="sets per compiled call (None: sized to memory)")
 
     fit = sub.add_parser("fit", formatter_class=fmt, help="least-squares fit to the measured length (and pressure)")
     _shared(fit, "fit")
     fit.add_argument("--free", action="append", default=[], metavar="NAME",
                      help="parameter to fit (repeat; none: Y)")
-    fit.add_argument("--starts", type=int, default=3, help="starts, from the best sets of a Latin hypercube")
+    fit.add_argument("--starts", type=_count(), default=3, help="starts, from the best sets of a Latin hypercube")
     _likelihood(fit)
     fit.add_argument("--rig", choices=["inferred", "fixed"], default="inferred",
                      help="inferred: the toleranced rig parameters fitted beside the free ones, their tolerances "
@@ -129,9 +171,9 @@ def build_parser():
     post.add_argument("--emulate", action="store_true",
                       help="sample through a validated emulator of the model (fast; worth it where the data leave "
                            "directions flat, as ext and n of the published law)")
-    post.add_argument("--chains", type=int, default=4, help="NUTS chains")
-    post.add_argument("--warmup", type=int, default=500, help="warm-up draws per chain")
-    post.add_argument("--samples", type=int, default=500, help="kept draws per chain")
+    post.add_argument("--chains", type=_count(), default=4, help="NUTS chains")
+    post.add_argument("--warmup", type=_count(0), default=500, help="warm-up draws per chain")
+    post.add_argument("--samples", type=_count(), default=500, help="kept draws per chain")
     _likelihood(post)
 
     dis = sub.add_parser("discover", formatter_class=fmt,
@@ -139,7 +181,7 @@ def build_parser():
     _shared(dis, "discover")
     dis.add_argument("--candidates", nargs="+", metavar="EFFECT", type=_effect_name, default=None,
                      help="catalogue effects to test (None: all of `growjax effects`)")
-    dis.add_argument("--workers", type=int, default=None, help="fits run at a time (None: one per CPU core)")
+    dis.add_argument("--workers", type=_count(), default=None, help="fits run at a time (None: one per CPU core)")
     _likelihood(dis)
 
     ctl = sub.add_parser("control", formatter_class=fmt,
@@ -150,9 +192,12 @@ def build_parser():
                      help="open-loop demand profile (or step schedule), tuned feedback, or MPC (forward drive)")
     ctl.add_argument("--robust", metavar="POSTERIOR.nc", default=None,
                      help="tune on the cost averaged over draws of this posterior")
-    ctl.add_argument("--draws", type=int, default=8, help="posterior draws to tune on (with --robust)")
-    ctl.add_argument("--iterations", type=int, default=10, help="optimiser and tuning iterations")
-    ctl.add_argument("--microsteps", type=int, default=1, help="stepper driver microsteps (1: the full-step driver)")
+    ctl.add_argument("--draws", type=_count(), default=8, help="draws to tune on: of the posterior (--robust), of the rig (--tolerance)")
+    ctl.add_argument("--iterations", type=_count(), default=10, help="optimiser and tuning iterations")
+    ctl.add_argument("--microsteps", type=_count(), default=1,
+                     help="stepper driver microsteps (1: the full-step driver)")
+    _tolerance(ctl, "(repeat; the feedback design is then tuned on the cost averaged over --draws draws of the "
+                    "rig within the default budget of `growjax params` and these; none given: the rig as it is)")
 
     par = sub.add_parser("params", formatter_class=fmt,
                          help="list the parameters: names, symbols, defaults, units, physical ranges")

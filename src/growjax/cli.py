@@ -7,7 +7,6 @@ its runs succeeded, 1 when a run failed (the reason on stderr) and 2 for a bad o
 
 from __future__ import annotations
 
-import contextlib
 import json
 import math
 import os
@@ -93,7 +92,7 @@ def _setup(args, drive: str, growth_law: str = "reference"):
     from growjax import experiment as ex
 
     data = Path(args.data) if args.data else default_data_path()
-    exp = ex.read(data).window(args.t_end + 1e-9)
+    exp = _in_window(args, ex.read(data, catheter=args.catheter), data)
     params = gj.reference(drive, growth_law=growth_law)
     recorded = recorded_parameters(data)
     fixed = dict(parse_param(p) for p in args.param)
@@ -103,6 +102,27 @@ def _setup(args, drive: str, growth_law: str = "reference"):
     gj.validate(params)
     origin = {"recorded_beside_data": {k: v for k, v in recorded.items() if k not in fixed}, "fixed": fixed}
     return data, exp, params, origin
+
+
+def _in_window(args, exp, data: Path):
+    """The samples of ``exp`` in the simulated window [t0, --t-end]. A window that runs past the data's end is
+    shrunk to it (``args.t_end`` set, a one-line note on stderr); ExperimentError naming both spans where the
+    data and the window do not overlap."""
+    import growjax as gj
+    from growjax.experiment import ExperimentError
+
+    t0, t1 = gj.Config().t0, args.t_end
+    first, last = float(exp.time[0]), float(exp.time[-1])
+    spans = f"{data} holds data over {first:g}–{last:g} s and the simulated window is {t0:g}–{t1:g} s (--t-end)"
+    inside = exp.window(t1 + 1e-9)
+    if first > t1 or last <= t0:
+        raise ExperimentError(f"{spans}: they do not overlap")
+    if inside.time.size < 2:
+        raise ExperimentError(f"{spans}: only one sample lies in the window")
+    if last < t1 - 1e-9:
+        print(f"growjax {args.command}: note: {spans}: the window is shrunk to {t0:g}–{last:g} s", file=sys.stderr)
+        args.t_end = last
+    return inside
 
 
 def make_config(args, drive: str = "forward", **extra):
@@ -328,32 +348,16 @@ def discover_command(args) -> dict:
 
 def control_command(args) -> dict:
     """Design on the fast model, evaluate on ``--fidelity``, write a figure."""
-    import importlib
-
-    from growjax import experiment as ex
-
-    design_module = importlib.import_module("growjax.control.design")  # the module (the package re-exports design())
-    targets_module = importlib.import_module("growjax.control.targets")
+    from growjax import control as gc
 
     if args.rtol is not None:
         raise ValueError("growjax control does not take --rtol: designs use each configuration's default tolerance")
-    data, _, _, origin = _setup(args, args.drive)
-    target = targets_module.target_from_experiment(ex.read(data), args.t_end)
-    fixed = {**origin["recorded_beside_data"], **origin["fixed"]}
+    data, exp, base, origin = _setup(args, args.drive)
+    target = gc.target_from_experiment(exp, args.t_end)
     out = _out(args)
-    with contextlib.ExitStack() as stack:
-        if fixed:  # the designs start from the published parameters: give them the fixed ones instead
-            from unittest import mock
-
-            import growjax as gj
-
-            def plant_params(drive, target=None, base=None):
-                return targets_module.plant_params(drive, target, base=gj.replace(gj.reference(drive), **fixed))
-
-            stack.enter_context(mock.patch.object(design_module, "plant_params", plant_params))
-        summary = design_module.design(target, args.drive, args.method, args.t_end, robust=args.robust,
-                                       n_draws=args.draws, iterations=args.iterations, microsteps=args.microsteps,
-                                       evaluate_on=args.fidelity, seed=args.seed, figure=out / "control.png")
+    summary = gc.design(target, args.drive, args.method, args.t_end, robust=args.robust, n_draws=args.draws,
+                        iterations=args.iterations, microsteps=args.microsteps, evaluate_on=args.fidelity,
+                        seed=args.seed, figure=out / "control.png", base=base, tolerances=tolerances_of(args))
     summary = {"command": "control", "data": str(data), "fixed_parameters": origin, **summary}
     if summary.get("pressure_limit_crossed"):
         raise RunFailed(f"the design crossed the membrane pressure limit ({summary['pressure_limit_Pa'] / 1e3:.1f} kPa; "

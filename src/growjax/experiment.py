@@ -1,9 +1,10 @@
 """Experiments as data: reading, validating and writing time series, and turning them into model inputs.
 
-CSV format: a ``time_s`` column (strictly increasing) and any of ``robot_length_m``
-(measured), ``pressure_Pa`` (measured), ``catheter_length_m`` (input),
-``pressure_demand_Pa`` (input, forward drive), ``desired_length_m`` (input, inverse
-drive). The lab's MATLAB ``timeseries`` files are read with mat-io.
+CSV format (UTF-8 text): a ``time_s`` column (strictly increasing), a ``catheter_length_m`` column (input;
+required unless the experiment had no catheter in contact: ``catheter=False``) and any of
+``robot_length_m`` (measured), ``pressure_Pa`` (measured), ``pressure_demand_Pa`` (input, forward
+drive), ``desired_length_m`` (input, inverse drive). The lab's MATLAB ``timeseries`` files are read
+with mat-io.
 """
 
 from __future__ import annotations
@@ -79,18 +80,27 @@ def validate_series(time, series: dict, source: str = "") -> None:
                 )
 
 
-def read_csv(path) -> Experiment:
-    """Read an experiment CSV (see module docstring); unknown columns are ignored, with units checked."""
+def read_csv(path, catheter: bool = True) -> Experiment:
+    """Read an experiment CSV (see module docstring); unknown columns are ignored, with units checked.
+
+    ``catheter``: True, the file must have a ``catheter_length_m`` column; False, the experiment had no
+    catheter in contact (its length is taken as zero) and the file must not have one.
+    """
     path = Path(path)
     if not path.exists():
         raise ExperimentError(f"no experiment file at {path}")
-    with path.open(newline="") as fh:
-        reader = csv.reader(fh)
-        try:
-            header = [h.strip() for h in next(reader)]
-        except StopIteration:
-            raise ExperimentError(f"{path} is empty") from None
-        rows = [r for r in reader if r and any(c.strip() for c in r)]
+    try:
+        with path.open(newline="", encoding="utf-8-sig") as fh:
+            reader = csv.reader(fh)
+            try:
+                header = [h.strip() for h in next(reader)]
+            except StopIteration:
+                raise ExperimentError(f"{path} is empty") from None
+            rows = [r for r in reader if r and any(c.strip() for c in r)]
+    except (UnicodeDecodeError, csv.Error):
+        hint = (": give the folder holding kings_ts.mat and lin_c_ts.mat" if path.suffix.lower() == ".mat"
+                else "")
+        raise ExperimentError(f"{path} is not a text CSV (it holds binary data){hint}") from None
     if "time_s" not in header:
         hint = " (found 'time': give the column as time_s, in seconds)" if "time" in header else ""
         raise ExperimentError(f"{path} has no time_s column{hint}; columns: {header}")
@@ -109,7 +119,18 @@ def read_csv(path) -> Experiment:
     time = data[:, header.index("time_s")]
     series = {h: data[:, header.index(h)] for h in known}
     validate_series(time, series, str(path))
+    _check_catheter("catheter_length_m" in series, catheter, str(path), "catheter_length_m column")
     return Experiment(time, series, str(path))
+
+
+def _check_catheter(has: bool, catheter: bool, source: str, what: str) -> None:
+    """ExperimentError unless ``source`` gives a catheter length (its ``what``, ``has``) exactly when ``catheter``."""
+    said = "the experiment had no catheter in contact (--no-catheter; Python: catheter=False)"
+    if catheter and not has:
+        raise ExperimentError(f"{source} has no {what} (the catheter length, m): add it, or say {said}")
+    if not catheter and has:
+        raise ExperimentError(f"{source} gives the catheter length ({what}), but --no-catheter (Python: "
+                              "catheter=False) says the experiment had none: drop one or the other")
 
 
 def write_csv(path, time, series: dict) -> None:
@@ -144,23 +165,34 @@ def read_mat_timeseries(path, name: str | None = None):
     return time, values
 
 
-def read_mat_experiment(length_file, catheter_file) -> Experiment:
-    """An experiment from the lab's ``kings_ts.mat`` (robot length) and ``lin_c_ts.mat`` (catheter length)."""
+def read_mat_experiment(length_file, catheter_file=None) -> Experiment:
+    """An experiment from the lab's ``kings_ts.mat`` (robot length) and ``lin_c_ts.mat`` (catheter length;
+    None: no catheter in contact)."""
     t, length = read_mat_timeseries(length_file)
-    tc, cath = read_mat_timeseries(catheter_file)
-    if tc.shape != t.shape or not np.allclose(tc, t):
-        cath = np.interp(t, tc, cath)
-    series = {"robot_length_m": length, "catheter_length_m": cath}
+    series = {"robot_length_m": length}
+    if catheter_file is not None:
+        tc, cath = read_mat_timeseries(catheter_file)
+        if tc.shape != t.shape or not np.allclose(tc, t):
+            cath = np.interp(t, tc, cath)
+        series["catheter_length_m"] = cath
     validate_series(t, series, str(length_file))
     return Experiment(t, series, str(length_file))
 
 
-def read(path) -> Experiment:
-    """Read an experiment from a CSV, or from a folder holding kings_ts.mat and lin_c_ts.mat."""
+def read(path, catheter: bool = True) -> Experiment:
+    """Read an experiment from a CSV, or from a folder holding kings_ts.mat and lin_c_ts.mat.
+
+    ``catheter``: True, the experiment must give the catheter length (a ``catheter_length_m`` column, or
+    lin_c_ts.mat in the folder); False, it had no catheter in contact (taken as zero) and must not give one.
+    """
     path = Path(path)
     if path.is_dir():
-        return read_mat_experiment(path / "kings_ts.mat", path / "lin_c_ts.mat")
-    return read_csv(path)
+        length_file, catheter_file = path / "kings_ts.mat", path / "lin_c_ts.mat"
+        if not length_file.is_file():
+            raise ExperimentError(f"{path} has no {length_file.name} (the robot length)")
+        _check_catheter(catheter_file.is_file(), catheter, str(path), catheter_file.name)
+        return read_mat_experiment(length_file, catheter_file if catheter else None)
+    return read_csv(path, catheter)
 
 
 def demand_steps(params: Parameters, desired_length, steps_per_metre: float | None = None):
@@ -178,7 +210,7 @@ def to_inputs(exp: Experiment, drive: str, params: Parameters, t0: float = 0.001
     Forward drive: ``pressure_demand_Pa`` if present, else the published 0/150 kPa pulse.
     Inverse drive: ``desired_length_m`` if present, else the measured ``robot_length_m``
     (as in the shipped model), converted to steps and run through the position controller.
-    A missing catheter length is taken as zero.
+    An experiment without ``catheter_length_m`` (read with ``catheter=False``) has the catheter at zero.
     """
     t = jnp.asarray(exp.time)
     catheter = Sampled(t, jnp.asarray(exp["catheter_length_m"])) if "catheter_length_m" in exp else Constant(0.0)

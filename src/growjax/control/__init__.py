@@ -16,7 +16,8 @@ What is here, in the order a design uses it:
   feed-forward), :class:`StepController` (stepper: back-and-forth steps on the length error) and
   :class:`MPC` (forward drive; nonlinear least squares on the fast model from the current state).
 * :func:`tune_pid` — gains by gradient descent on the closed-loop tracking cost, optionally averaged over
-  parameter draws (robust design, :func:`parameter_draws`).
+  parameter draws (robust design: a posterior's, :func:`parameter_draws`, and the rig's within its
+  tolerances, :func:`rig_draws`).
 * :func:`design` — one design (drive × method) end to end, summarised for JSON (the ``growjax control`` command).
 
 The plant of a closed loop (:class:`Plant`) is stepped tick by tick from its state through
@@ -69,6 +70,7 @@ from growjax.control.tuning import (
     parameter_draws,
     pid_cost_fn,
     plan_steps,
+    rig_draws,
     tune_pid,
     tune_stepper,
 )
@@ -87,7 +89,7 @@ __all__ = [
     "DEFAULT_LOG_GAINS", "MPC", "PRESSURE_MARGIN", "ClosedLoopResult", "KnotProfile", "LengthPID", "Limits", "Plant",
     "ProfileResult", "StepController", "Target", "TuneResult", "catheter_signal", "design", "limits", "linearize",
     "operating_point", "optimize_profile", "optimize_steps", "parameter_draws", "pid_cost_fn", "pid_loop",
-    "plan_steps", "plant_params", "ramp_with_pauses", "rmse", "run_closed_loop", "score", "segment_inputs",
+    "plan_steps", "plant_params", "ramp_with_pauses", "rig_draws", "rmse", "run_closed_loop", "score", "segment_inputs",
     "simulate_profile", "simulate_steps", "step_commands", "step_length", "step_sequence", "target_from_experiment",
     "tune_pid", "tune_stepper", "with_microstepping",
 ]

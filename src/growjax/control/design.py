@@ -10,6 +10,8 @@ import jax.numpy as jnp
 import numpy as np
 
 import growjax as gj
+from growjax import params as gp
+from growjax import tolerance as tl
 from growjax.control.controllers import MPC, LengthPID, run_closed_loop, score
 from growjax.control.plant import Plant, with_microstepping
 from growjax.control.profile import (
@@ -24,6 +26,7 @@ from growjax.control.tuning import (
     parameter_draws,
     pid_cost_fn,
     plan_steps,
+    rig_draws,
     tune_pid,
     tune_stepper,
 )
@@ -31,9 +34,24 @@ from growjax.control.tuning import (
 
 def design(target: Target, drive: str, method: str, t1: float, robust: str | None = None, n_draws: int = 8,
            iterations: int = 10, microsteps: int = 1, evaluate_on: str = "reference", seed: int = 0,
-           figure=None, knot_dt: float = 0.2) -> dict:
-    """One design (drive × method) for ``target`` over [0, t1] s, evaluated on ``evaluate_on``. → JSON-ready dict."""
-    params = plant_params(drive, target)
+           figure=None, knot_dt: float = 0.2, base: gj.Parameters | None = None,
+           tolerances: dict | None = None) -> dict:
+    """One design (drive × method) for ``target`` over [0, t1] s, evaluated on ``evaluate_on``. → JSON-ready dict.
+
+    ``base``: the plant's parameters (default :func:`growjax.reference` of ``drive``), started at the target's
+    first length (:func:`plant_params`); the design and its evaluation both use them.
+    ``robust``: an ArviZ posterior file; the feedback gains are then tuned on the cost averaged over
+    ``n_draws`` of its draws (:func:`parameter_draws`). ``tolerances`` {parameter: relative sd}
+    (:mod:`growjax.tolerance`; None or {}: the rig as ``base`` gives it): the feedback gains are tuned on
+    the cost averaged over ``n_draws`` draws of the rig, each toleranced parameter ψ·exp(u z), z ~ N(0, 1)
+    (:func:`rig_draws`), jointly with the posterior's draws where ``robust`` is given. Only the forward
+    drive's feedback design is tuned on draws; ValueError for tolerances with any other design.
+    """
+    params = plant_params(drive, target, base=base)
+    tol = tl.budget(params, tolerances or {}, use_default=False)
+    if tol and (drive, method) != ("forward", "feedback"):
+        raise ValueError(f"rig tolerances enter the forward drive's feedback design only (its gains are tuned on "
+                         f"draws of the rig); the {drive} drive's {method} design takes none")
     lim = limits(params)
     evaluate_cfg = gj.Config(fidelity=evaluate_on, drive=drive, t1=t1)
     summary: dict = {"drive": drive, "method": method, "t_end_s": t1, "evaluated_on": evaluate_on,
@@ -80,13 +98,16 @@ def design(target: Target, drive: str, method: str, t1: float, robust: str | Non
                          prof.knots, target, lim, int(tr.status))
         elif method == "feedback":
             pid = LengthPID(jnp.asarray(DEFAULT_LOG_GAINS), jnp.asarray(prof.knots), jnp.asarray(prof.demand))
-            draws = parameter_draws(n_draws, seed, robust, params) if robust else None
-            cost = pid_cost_fn(params, target, t1, pid, draws, lim)
+            draws = parameter_draws(n_draws, seed, robust, params) if robust else {}
+            posterior_names = {gp.resolve_name(params, k) for k in draws}
+            draws |= {k: v for k, v in rig_draws(n_draws, params, tol, seed).items() if k not in posterior_names}
+            cost = pid_cost_fn(params, target, t1, pid, draws or None, lim)
             tuned = tune_pid(cost, pid.log_gains, iterations)
             summary["tuning_s"] = tuned.wall_s
             summary["gains"] = tuned.gains
             summary["tuning_cost_history"] = tuned.cost_history
-            summary["robust_draws"] = None if not robust else {"source": robust, "n": n_draws, "seed": seed}
+            summary["robust_draws"] = None if not draws else {"source": robust, "n": n_draws, "seed": seed,
+                                                              "rig_tolerances": tol}
             pid = eqx.tree_at(lambda c: c.log_gains, pid, jnp.asarray(tuned.log_gains))
             summary["design_s"] = time.perf_counter() - start
             res = run_closed_loop(Plant.make(params, evaluate_cfg), pid, target, t1, lim)

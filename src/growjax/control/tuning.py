@@ -13,6 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import growjax as gj
+from growjax import tolerance as tl
 from growjax.control.controllers import (
     LengthPID,
     StepController,
@@ -48,6 +49,15 @@ def parameter_draws(n: int, seed: int = 0, posterior: str | None = None, base=No
         idx = rng.choice(size, size=n, replace=n > size)
         return {k: v[idx] for k, v in flat.items()}
     return {k: float(gj.get(base, k)) * (1.0 + rel_sd * rng.standard_normal(n)) for k in (names or ("Y",))}
+
+
+def rig_draws(n: int, base, tolerances: dict, seed: int = 0) -> dict:
+    """Draws of the rig within its tolerances as {qualified name: (n,) array}: each toleranced parameter ψ·exp(u z),
+    z ~ N(0, 1) independent (seeded), u its relative standard uncertainty in ``tolerances`` {name: u}
+    (:mod:`growjax.tolerance`; aliases allowed, zeros dropped). {} for no tolerances."""
+    tol = tl.budget(base, tolerances, use_default=False)
+    rng = np.random.default_rng([seed, 1])  # a stream apart from the posterior's draws
+    return {k: float(gj.get(base, k)) * np.exp(u * rng.standard_normal(n)) for k, u in tol.items()}
 
 
 def _is_parameter(base, name: str) -> bool:
