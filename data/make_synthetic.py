@@ -14,6 +14,12 @@ Latin-hypercube Y under the published pulse; other demands (pulse trains of othe
 amplitude, a step and a ramp given as data); the Lockhart growth law; and a rig parameter held wrong (the lead
 screw's friction 10 % low), for a discrepancy of the rig rather than of the model.
 Cases and their parameters are listed in reference_lengths.json.
+
+set/ — an experiment set: one robot (Y = 9000 Pa) on one rig whose toleranced parameters are off their nominal
+values (drawn once from the default budget, recorded in set/truth.json), run under three pressure demands
+(the published pulse train, a slower train and a 100 kPa train), made by the reference configuration, the
+demand recorded as a sampled column; noise as above. set/set.toml is its manifest (the pressure sensor named
+for the first experiment).
 """
 
 from __future__ import annotations
@@ -161,6 +167,59 @@ def read_reference_lengths(path: Path = DATASETS / "reference_lengths.csv"):
     return np.asarray(table["time_s"]), {n: np.asarray(table[n]) for n in names}, cases
 
 
+SET_DEMANDS = {
+    "pulse_published": gj.published_pulse(),
+    "pulse_slow": gj.PulseTrain(150e3, 1.6, 0.8, 0.3),
+    "pulse_100kPa": gj.PulseTrain(100e3, 2.0, 0.6, 0.2),
+}
+
+
+def make_set(folder: Path = DATASETS / "set") -> Path:
+    """The experiment set: three demands on one robot and one rig drawn from the default tolerance budget."""
+    from growjax import tolerance as tl
+
+    folder.mkdir(parents=True, exist_ok=True)
+    time = np.round(np.arange(1, 1001) * 0.01, 10)
+    catheter = 0.004 + 0.004 * time
+    base = gj.replace(gj.reference("forward"), **TRUTH)
+    rng = np.random.default_rng(SEED + 1)
+    offsets = {k: float(rng.normal(0.0, u)) for k, u in tl.default_budget(base).items()}
+    rig = gj.replace(base, **{k: gj.get(base, k) * np.exp(b) for k, b in offsets.items()})
+    config = gj.Config(fidelity="reference", t1=float(time[-1]), rtol=TRUTH_RTOL, atol=TRUTH_RTOL)
+    ts = np.concatenate([[config.t0], time])
+    for name, demand_signal in SET_DEMANDS.items():
+        inputs = gj.Inputs(catheter_length=gj.Sampled(jnp.asarray(time), jnp.asarray(catheter)),
+                           pressure_demand=demand_signal)
+        traj = gj.simulate(rig, inputs, config, ts=ts)
+        assert int(traj.status) == gj.OK, (name, gj.status_name(traj.status))
+        length = np.asarray(traj.length)[1:] + rng.normal(0.0, NOISE["robot_length_m"], time.size)
+        pressure = np.asarray(traj.pressure)[1:] + rng.normal(0.0, NOISE["pressure_Pa"], time.size)
+        ex.write_csv(folder / f"{name}.csv", time, {
+            "robot_length_m": length, "pressure_Pa": pressure, "catheter_length_m": catheter,
+            "pressure_demand_Pa": np.asarray(demand_signal(jnp.asarray(time)))})
+        print(name, f"{float(length[-1]) * 1e3:.3f} mm", flush=True)
+    manifest = ['# One robot, one rig, three pressure demands (made by data/make_synthetic.py).',
+                '[defaults]', 'drive = "forward"', 'robot = "membrane-1"', 'rig = "bench"', '']
+    for k, name in enumerate(SET_DEMANDS):
+        manifest += ['[[experiment]]', f'file = "{name}.csv"']
+        if k == 0:
+            manifest.append('sensors = ["length", "pressure"]')
+        manifest.append('')
+    (folder / "set.toml").write_text("\n".join(manifest))
+    meta = {"seed": SEED + 1, "truth": TRUTH, "rig_offsets_ln": offsets, "noise_sd": NOISE,
+            "demands": {k: repr(v) for k, v in SET_DEMANDS.items()}, "catheter_length_m": "0.004 + 0.004 t",
+            "solver": {"fidelity": "reference", "rtol": TRUTH_RTOL}}
+    (folder / "truth.json").write_text(json.dumps(meta, indent=2) + "\n")
+    return folder
+
+
 if __name__ == "__main__":
-    print(make_forward())
-    print(make_reference_lengths())
+    import sys
+
+    wanted = sys.argv[1:] or ["forward", "reference", "set"]
+    if "forward" in wanted:
+        print(make_forward())
+    if "reference" in wanted:
+        print(make_reference_lengths())
+    if "set" in wanted:
+        print(make_set())

@@ -68,10 +68,16 @@ def _positive(text: str) -> float:
     return value
 
 
-def _shared(p: argparse.ArgumentParser, command: str, fidelity_default: str = "fast", fidelity_help: str = ""):
-    p.add_argument("data", nargs="?", default=None,
-                   help="experiment CSV, or a folder with kings_ts.mat and lin_c_ts.mat (default: the synthetic "
-                        "experiment shipped with growjax)")
+def _shared(p: argparse.ArgumentParser, command: str, fidelity_default: str = "fast", fidelity_help: str = "",
+            many: bool = False):
+    if many:
+        p.add_argument("data", nargs="*", default=None,
+                       help="experiment CSV, or a folder with kings_ts.mat and lin_c_ts.mat (default: the synthetic "
+                            "experiment shipped with growjax); several, or a TOML manifest, are fitted jointly")
+    else:
+        p.add_argument("data", nargs="?", default=None,
+                       help="experiment CSV, or a folder with kings_ts.mat and lin_c_ts.mat (default: the synthetic "
+                            "experiment shipped with growjax)")
     p.add_argument("--no-catheter", dest="catheter", action="store_false",
                    help="the experiment had no catheter in contact: its catheter length is taken as zero (without "
                         "this, the data must have a catheter_length_m column) (default: off)")
@@ -153,15 +159,19 @@ def build_parser():
     swp.add_argument("--chunk-size", type=_count(), default=None, help="sets per compiled call (None: sized to memory)")
 
     fit = sub.add_parser("fit", formatter_class=fmt, help="least-squares fit to the measured length (and pressure)")
-    _shared(fit, "fit")
-    fit.add_argument("--free", action="append", default=[], metavar="NAME",
-                     help="parameter to fit (repeat; none: Y)")
+    _shared(fit, "fit", many=True)
+    fit.add_argument("--free", action="append", default=[], metavar="NAME[@SCOPE]",
+                     help="parameter to fit (repeat; none: Y). With several experiments, @robot, @rig or "
+                          "@experiment fits one per robot, rig or experiment, none one for all (none given: Y@robot)")
     fit.add_argument("--starts", type=_count(), default=3, help="starts, from the best sets of a Latin hypercube")
     _likelihood(fit)
     fit.add_argument("--rig", choices=["inferred", "fixed"], default="inferred",
                      help="inferred: the toleranced rig parameters fitted beside the free ones, their tolerances "
                           "as priors (the posterior's treatment); fixed: held nominal, each tolerance propagated "
                           "as if the data said nothing of the rig (conservative)")
+    fit.add_argument("--rig-errors", choices=["shared", "experiment"], default="shared",
+                     help="with several experiments: one set of rig errors per rig, shared by its experiments, or "
+                          "one per experiment (treats them as independent: over-confident on one rig)")
 
     post = sub.add_parser("posterior", formatter_class=fmt,
                           help="NUTS posterior of Y, ext, n (or Y, phi_L, n_L) and the noise")

@@ -60,7 +60,36 @@ def _sweep(s: dict, name: str) -> list[str]:
     return lines
 
 
+def _fit_set(s: dict) -> list[str]:
+    runs = s["runs"]
+    robots = len({r["robot"] for r in runs})
+    rigs = len({r["rig"] for r in runs})
+    lines = [f"fit: {len(runs)} experiments ({robots} robot{'s' * (robots > 1)}, {rigs} rig{'s' * (rigs > 1)}), "
+             f"fitted jointly: {s['status']}"]
+    for p, v in s["parameters"].items():
+        interval = v["interval_90"]
+        shown = "undetermined" if interval is None else f"90 % {_value(p, interval[0])} – {_value(p, interval[1])}"
+        lines.append(f"  {p} = {_value(p.split('@')[0], v['estimate'])} ({shown})")
+        if v.get("budget_sd"):
+            parts = sorted(v["budget_sd"].items(), key=lambda kv: -kv[1])[:5]
+            lines.append("    sd from " + ", ".join(f"{k} {_value(p.split('@')[0], x)}" for k, x in parts if x > 0))
+    if s.get("rig") == "inferred":
+        for key, offsets in s.get("rig_offset", {}).items():
+            shown = ", ".join(f"{k.split('.')[-1]} {100 * v:+.1f} %" for k, v in offsets.items())
+            lines.append(f"  rig {key} inferred (its tolerances as priors): {shown}")
+    elif s.get("rig") == "fixed":
+        lines.append("  rig fixed at its nominal values, its tolerances propagated (--rig fixed)")
+    for r in runs:
+        lines.append(f"  {r['name']}: robot {r['robot']}, rig {r['rig']}, length RMSE {_mm(r['rmse_length_m'])}, "
+                     f"{r['samples_used']} samples scored")
+    lines.append(f"  {s['wall_s']:.1f} s ({s['simulate_s']:.1f} s in the batched simulations)")
+    lines.append(f"  wrote {s['figure']}")
+    return lines
+
+
 def _fit(s: dict, name: str) -> list[str]:
+    if "runs" in s:
+        return _fit_set(s)
     lines = [f"fit: {name}, {s['drive']} drive, {s.get('t_start_s', 0.0):g}–{s['t_end_s']:g} s scored: {s['status']}",
              *_origin_lines(s["fixed_parameters"])]
     for p, v in s["parameters"].items():
@@ -152,4 +181,6 @@ def summary_lines(s: dict) -> list[str]:
     command_lines = SUMMARIES.get(s.get("command"))
     if command_lines is None:
         return [json.dumps(s, default=str)]
-    return command_lines(s, Path(s["data"]).name if s.get("data") else "")
+    data = s.get("data")
+    name = ", ".join(Path(d).name for d in data) if isinstance(data, list) else Path(data).name if data else ""
+    return command_lines(s, name)

@@ -104,6 +104,56 @@ def _setup(args, drive: str, growth_law: str = "reference"):
     return data, exp, params, origin
 
 
+def _fit_set(args, paths) -> dict:
+    """``growjax fit A.csv B.csv …`` or ``growjax fit SET.toml``: the experiments fitted jointly."""
+    import dataclasses
+
+    import growjax as gj
+    from growjax import experiment as ex
+    from growjax import experiments as xs
+    from growjax import joint
+    from growjax.plotting import set_figure
+
+    config = make_config(args, args.drive, adjoint="forward")
+    fixed = dict(parse_param(p) for p in args.param)
+    if len(paths) == 1:
+        exps = xs.ExperimentSet.from_manifest(paths[0], catheter=args.catheter)
+    else:
+        window = (args.t_start if args.t_start is not None else config.t0, config.t1)
+        exps = xs.ExperimentSet.from_files(paths, drive=args.drive, window=window, catheter=args.catheter)
+        exps = xs.ExperimentSet(tuple(dataclasses.replace(r, parameters={**recorded_parameters(Path(p)),
+                                                                          **r.parameters})
+                                      for r, p in zip(exps, paths)))
+    if fixed:
+        exps = xs.ExperimentSet(tuple(dataclasses.replace(r, parameters={**r.parameters, **fixed}) for r in exps))
+    for run in exps:
+        gj.validate(run.base())
+    free = args.free or ["Y@robot"]
+    result = joint.fit_set(exps, free=free, config=config, n_starts=args.starts, seed=args.seed,
+                           discrepancy=args.discrepancy, tolerances=tolerances_of(args), rig=args.rig,
+                           rig_errors=args.rig_errors)
+    traces = []
+    for run, rec in zip(exps, result.runs):
+        values = {lab.split("@")[0]: v for lab, v in result.estimate.items()
+                  if "@" not in lab or lab.split("@", 1)[1] in (run.robot, run.rig, run.name)}
+        rig_values = {k: gj.get(run.base(), k) * math.exp(b) for k, b in result.rig_offset.get(
+            run.rig if args.rig_errors == "shared" else run.name, {}).items()}
+        base = gj.replace(run.base(), **rig_values, **values)
+        cfg = config.replace(drive=run.drive)
+        traj = gj.simulate(base, ex.to_inputs(run.experiment, run.drive, base, cfg.t0, cfg.t1), cfg)
+        traces.append((run.name, traj, (run.times, run.length)))
+    out = _out(args)
+    fig = set_figure(traces, out / "fit.png")
+    summary = {"command": "fit", "data": [str(p) for p in paths], "drive": args.drive, "t_end_s": args.t_end,
+               "fidelity": config.fidelity, "free": list(free), "fixed_parameters": {"fixed": fixed},
+               "experiments": [{"name": r.name, "robot": r.robot, "rig": r.rig, "drive": r.drive,
+                                "window": r.window, "sensors": list(r.sensors)} for r in exps],
+               **result.summary(), "figure": str(fig)}
+    if result.status != "converged":
+        raise RunFailed(f"the joint fit did not converge ({result.status})", summary)
+    return summary
+
+
 def _in_window(args, exp, data: Path):
     """The samples of ``exp`` in the simulated window [t0, --t-end]. A window that runs past the data's end is
     shrunk to it (``args.t_end`` set, a one-line note on stderr); ExperimentError naming both spans where the
@@ -276,6 +326,11 @@ def fit_command(args) -> dict:
     from growjax import experiment as ex
     from growjax import fit as gf
     from growjax.plotting import trajectory_figure
+
+    paths = list(args.data or [])
+    if len(paths) > 1 or (paths and Path(paths[0]).suffix.lower() == ".toml"):
+        return _fit_set(args, paths)
+    args.data = paths[0] if paths else None
 
     data, exp, base, origin = _setup(args, args.drive)
     if "robot_length_m" not in exp:

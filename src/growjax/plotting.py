@@ -45,6 +45,27 @@ def trajectory_figure(traj, path, measured=None, desired=None, title: str = "", 
     return _save(fig, path)
 
 
+def set_figure(traces, path, title: str = ""):
+    """One panel per experiment of a set: measured and fitted length (mm). ``traces``: [(name, trajectory,
+    (time s, measured length m))]."""
+    n = len(traces)
+    cols = min(n, 3)
+    rows = -(-n // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(4 * cols, 2.8 * rows), squeeze=False, constrained_layout=True)
+    for ax, (name, traj, (t, y)) in zip(axes.ravel(), traces):
+        ax.plot(t, 1e3 * np.asarray(y), color="k", lw=1, label="measured")
+        ax.plot(np.asarray(traj.time), 1e3 * np.asarray(traj.length), color="C1", lw=1.3, label="fitted")
+        ax.set_title(name, fontsize=9)
+        ax.set_xlabel("time (s)")
+        ax.set_ylabel("length (mm)")
+    for ax in axes.ravel()[n:]:
+        ax.set_visible(False)
+    axes[0, 0].legend(loc="upper left", fontsize=8)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    return _save(fig, path)
+
+
 _LABELS = {
     "robot.yield_pressure": ("Y (kPa)", 1e-3),
     "robot.extensibility": ("ext φ", 1.0),
