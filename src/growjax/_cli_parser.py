@@ -36,8 +36,12 @@ def _effect_name(text: str) -> str:
 
 def _shared(p: argparse.ArgumentParser, command: str, fidelity_default: str = "fast", fidelity_help: str = ""):
     p.add_argument("data", nargs="?", default=None,
-                   help="experiment CSV, or a folder with kings_ts.mat and lin_c_ts.mat (default: the synthetic "
+                   help="experiment CSV, a folder with kings_ts.mat and lin_c_ts.mat, or 'mammobot': the public "
+                        "experiment, downloaded once and cached (growjax.datasets.fetch) (default: the synthetic "
                         "experiment shipped with growjax)")
+    p.add_argument("--data-dir", default=None, metavar="DIR",
+                   help="a local copy of a named data set's files, hash-checked and used instead of downloading "
+                        "(default: $GROWJAX_DATA_DIR)")
     p.add_argument("--drive", choices=DRIVES, default="forward",
                    help="forward: PID on the pressure with ideal torque sources; inverse: stepper motor and its step "
                         "controller")
