@@ -1,0 +1,59 @@
+"""A NUTS run as ArviZ InferenceData, its groups laid out for ArviZ's standard calls.
+
+==========================  =======================================================================================
+group                       variables
+==========================  =======================================================================================
+``posterior``               the sampled sites (chain, draw): the parameters, ``sigma``, the discrepancy's
+                            hyperparameters, and a bounded prior's sampling coordinate (``u_<site>``, ``v_<site>``)
+``posterior_predictive``    ``length`` (chain, draw, time), m: replicated data; ``length_model`` (chain, draw, time),
+                            m: the model's length at each draw, without noise or discrepancy
+``log_likelihood``          ``length`` (chain, draw, time): pointwise log-likelihood (0 at samples not scored)
+``sample_stats``            NUTS's ``diverging``, ``energy``, ``n_steps``, ``tree_depth``, and ``solver_ok``: the
+                            model's solve succeeded at the draw (a failed solve has zero likelihood, so NUTS keeps
+                            none)
+``observed_data``           ``length`` (time,), m: the measured length
+``constant_data``           ``scored`` (time,) bool: the samples the likelihood scores
+==========================  =======================================================================================
+
+Every ``time`` coordinate is the sample time in s. ``az.summary`` lists the posterior's sites alone,
+``az.plot_ppc`` pairs the observed with the replicated length, ``az.loo`` reads the log-likelihood, and
+``to_netcdf`` / ``az.from_netcdf`` keep all of it (``idata.to_datatree()`` gives the xarray DataTree).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+MODEL_SITE = "length_model"  # the deterministic site growth_model records the model's length in
+NUTS_STATS = {"diverging": "diverging", "energy": "energy", "num_steps": "n_steps"}  # NumPyro's → ArviZ's names
+
+
+def inference_data(samples: dict, extra_fields: dict, times, observed, scored, loglik, predicted):
+    """ArviZ InferenceData of one NUTS run (layout: module docstring).
+
+    ``samples`` {site: (C, S, ...)}: NumPyro's draws by chain, with the deterministic ``length_model``
+    (C, S, T) m; ``extra_fields`` {name: (C, S)}: NumPyro's extra fields by chain (``diverging``, ``energy``,
+    ``num_steps``); ``times`` (T,) s; ``observed`` (T,) m; ``scored`` (T,) bool; ``loglik`` and ``predicted``
+    (C, S, T): pointwise log-likelihood and replicated length (m).
+    """
+    import arviz as az
+    import numpyro
+
+    samples = {k: np.asarray(v) for k, v in samples.items()}
+    model = samples.pop(MODEL_SITE)
+    stats = {NUTS_STATS[k]: np.asarray(v) for k, v in extra_fields.items() if k in NUTS_STATS}
+    if "n_steps" in stats:
+        stats["tree_depth"] = np.log2(stats["n_steps"]).astype(int) + 1  # as ArviZ's from_numpyro
+    stats["solver_ok"] = np.all(np.isfinite(model), axis=-1)
+    dims = {"length": ["time"], MODEL_SITE: ["time"], "scored": ["time"]}
+    return az.from_dict(
+        posterior=samples,
+        posterior_predictive={"length": np.asarray(predicted), MODEL_SITE: model},
+        log_likelihood={"length": np.asarray(loglik)},
+        sample_stats=stats,
+        observed_data={"length": np.asarray(observed, float)},
+        constant_data={"scored": np.asarray(scored, bool)},
+        coords={"time": np.asarray(times, float)},
+        dims=dims,
+        attrs={"inference_library": "numpyro", "inference_library_version": numpyro.__version__},
+    )
