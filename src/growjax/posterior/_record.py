@@ -1,19 +1,14 @@
 """A NUTS run as ArviZ InferenceData, its groups laid out for ArviZ's standard calls.
 
-==========================  =======================================================================================
-group                       variables
-==========================  =======================================================================================
-``posterior``               the sampled sites (chain, draw): the parameters, ``sigma``, the discrepancy's
-                            hyperparameters, and a bounded prior's sampling coordinate (``u_<site>``, ``v_<site>``)
-``posterior_predictive``    ``length`` (chain, draw, time), m: replicated data; ``length_model`` (chain, draw, time),
-                            m: the model's length at each draw, without noise or discrepancy
-``log_likelihood``          ``length`` (chain, draw, time): pointwise log-likelihood (0 at samples not scored)
-``sample_stats``            NUTS's ``diverging``, ``energy``, ``n_steps``, ``tree_depth``, and ``solver_ok``: the
-                            model's solve succeeded at the draw (a failed solve has zero likelihood, so NUTS keeps
-                            none)
-``observed_data``           ``length`` (time,), m: the measured length
-``constant_data``           ``scored`` (time,) bool: the samples the likelihood scores
-==========================  =======================================================================================
+- ``posterior``: the sampled sites (chain, draw): the parameters, ``sigma``, the discrepancy's hyperparameters,
+  and a bounded prior's sampling coordinate (``u_<site>``, ``v_<site>``);
+- ``posterior_predictive``: ``length`` (chain, draw, time), m, the replicated data; ``length_model`` (chain, draw,
+  time), m, the model's length at each draw, without noise or discrepancy;
+- ``log_likelihood``: ``length`` (chain, draw, time), the pointwise log-likelihood (0 at samples not scored);
+- ``sample_stats``: NUTS's ``diverging``, ``energy``, ``n_steps``, ``tree_depth``, and ``solver_ok``, the model's
+  solve succeeded at the draw (a failed solve has zero likelihood, so NUTS keeps none);
+- ``observed_data``: ``length`` (time,), m, the measured length;
+- ``constant_data``: ``scored`` (time,) bool, the samples the likelihood scores.
 
 Every ``time`` coordinate is the sample time in s. ``az.summary`` lists the posterior's sites alone,
 ``az.plot_ppc`` pairs the observed with the replicated length, ``az.loo`` reads the log-likelihood, and
@@ -22,14 +17,29 @@ Every ``time`` coordinate is the sample time in s. ``az.summary`` lists the post
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
+from jaxtyping import ArrayLike, Bool, Float
+
+if TYPE_CHECKING:
+    import arviz as az
 
 MODEL_SITE = "length_model"  # the deterministic site growth_model records the model's length in
 NUTS_STATS = {"diverging": "diverging", "energy": "energy", "num_steps": "n_steps"}  # NumPyro's → ArviZ's names
 
 
-def inference_data(samples: dict, extra_fields: dict, times, observed, scored, loglik, predicted):
-    """ArviZ InferenceData of one NUTS run (layout: module docstring).
+def inference_data(samples: dict, extra_fields: dict, times: Float[ArrayLike, " T"], observed: Float[ArrayLike, " T"],
+                   scored: Bool[ArrayLike, " T"], loglik: Float[ArrayLike, "C S T"],
+                   predicted: Float[ArrayLike, "C S T"]) -> az.InferenceData:
+    """ArviZ InferenceData of one NUTS run, laid out for ArviZ's standard calls.
+
+    ``posterior``: the sampled sites; ``posterior_predictive``: ``length`` (replicated data) and ``length_model``
+    (the model's length at each draw, no noise or discrepancy), m; ``log_likelihood``: ``length``, pointwise;
+    ``sample_stats``: NUTS's statistics and ``solver_ok`` per draw; ``observed_data``: ``length``, m;
+    ``constant_data``: ``scored``. Lengths and log-likelihoods have a ``time`` coordinate (s). So ``az.summary``
+    lists the sampled sites alone, ``az.plot_ppc`` pairs the measured with the replicated length and ``az.loo``
+    reads the pointwise terms.
 
     ``samples`` {site: (C, S, ...)}: NumPyro's draws by chain, with the deterministic ``length_model``
     (C, S, T) m; ``extra_fields`` {name: (C, S)}: NumPyro's extra fields by chain (``diverging``, ``energy``,
