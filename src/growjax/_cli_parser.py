@@ -37,8 +37,8 @@ def _effect_name(text: str) -> str:
 def _shared(p: argparse.ArgumentParser, command: str, fidelity_default: str = "fast", fidelity_help: str = ""):
     p.add_argument("data", nargs="?", default=None,
                    help="experiment CSV, a folder with kings_ts.mat and lin_c_ts.mat, or 'mammobot': the public "
-                        "experiment, downloaded once and cached (growjax.datasets.fetch) (default: the synthetic "
-                        "experiment shipped with growjax)")
+                        "experiment, downloaded once, hash-checked and cached (default: the synthetic experiment "
+                        "shipped with growjax)")
     p.add_argument("--data-dir", default=None, metavar="DIR",
                    help="a local copy of a named data set's files, hash-checked and used instead of downloading "
                         "(default: $GROWJAX_DATA_DIR)")
