@@ -53,7 +53,7 @@ def _band(result, observed_times):
     pp = np.asarray(result.idata.posterior_predictive["length"])
     pp = pp.reshape(-1, pp.shape[-1])
     lo, hi = gpost.predictive_band(pp)
-    mu = np.asarray(result.idata.posterior["length_model"]).reshape(-1, pp.shape[-1])
+    mu = np.asarray(result.idata.posterior_predictive["length_model"]).reshape(-1, pp.shape[-1])
     return lo, hi, np.median(mu, axis=0)
 
 

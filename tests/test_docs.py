@@ -1,6 +1,8 @@
-"""The documentation site builds with ``mkdocs build --strict``, executing every tutorial in quick mode."""
+"""The documentation site builds with ``mkdocs build --strict``, executing every tutorial in quick mode; its
+tutorials are the notebooks in the top-level ``notebooks/`` folder, kept there alone."""
 
 import os
+import re
 import subprocess
 import sys
 import time
@@ -9,6 +11,18 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
+NOTEBOOKS = REPO / "notebooks"
+
+
+def test_the_sites_tutorials_are_the_notebooks_folder():
+    """docs/tutorials is a relative link to notebooks/ (no second copy), and the site's navigation lists every
+    notebook there and nothing else."""
+    link = REPO / "docs" / "tutorials"
+    assert link.is_symlink() and str(link.readlink()) == "../notebooks", link
+    assert link.resolve() == NOTEBOOKS.resolve()
+    assert not any(p.suffix == ".ipynb" for p in (REPO / "docs").rglob("*") if not p.is_relative_to(link))
+    nav = re.findall(r"tutorials/(\w+\.ipynb)", (REPO / "mkdocs.yml").read_text())
+    assert sorted(nav) == sorted(p.name for p in NOTEBOOKS.glob("*.ipynb")) and len(nav) == 5
 
 
 @pytest.mark.docs
@@ -27,6 +41,8 @@ def test_docs_build_strict_with_executed_tutorials(tmp_path):
                  "tutorials/simulate", "tutorials/sweep", "tutorials/fit_posterior", "tutorials/discover",
                  "tutorials/control"):
         assert (site / page / "index.html").is_file(), page
+    assert sorted(p.name for p in (site / "tutorials").rglob("*") if p.is_file() and p.suffix != ".html") == sorted(
+        p.name for p in NOTEBOOKS.glob("*.ipynb"))  # the notebooks, not what running them may leave beside them
     simulate = (site / "tutorials" / "simulate" / "index.html").read_text()
     assert "length RMSE against the data" in simulate and "data:image/png" in simulate  # executed, with figures
     print(f"mkdocs build --strict: {wall:.1f} s")

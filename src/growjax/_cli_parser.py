@@ -72,15 +72,20 @@ def _shared(p: argparse.ArgumentParser, command: str, fidelity_default: str = "f
             many: bool = False):
     if many:
         p.add_argument("data", nargs="*", default=None,
-                       help="experiment CSV, or a folder with kings_ts.mat and lin_c_ts.mat (default: the synthetic "
-                            "experiment shipped with growjax); several, or a TOML manifest, are fitted jointly")
+                       help="experiment CSV, a folder with kings_ts.mat and lin_c_ts.mat, or 'mammobot': the public "
+                            "experiment, downloaded once, hash-checked and cached (default: the synthetic experiment "
+                            "shipped with growjax); several, or a TOML manifest, are fitted jointly")
     else:
         p.add_argument("data", nargs="?", default=None,
-                       help="experiment CSV, or a folder with kings_ts.mat and lin_c_ts.mat (default: the synthetic "
-                            "experiment shipped with growjax)")
+                       help="experiment CSV, a folder with kings_ts.mat and lin_c_ts.mat, or 'mammobot': the public "
+                            "experiment, downloaded once, hash-checked and cached (default: the synthetic experiment "
+                            "shipped with growjax)")
     p.add_argument("--no-catheter", dest="catheter", action="store_false",
                    help="the experiment had no catheter in contact: its catheter length is taken as zero (without "
                         "this, the data must have a catheter_length_m column) (default: off)")
+    p.add_argument("--data-dir", default=None, metavar="DIR",
+                   help="a local copy of a named data set's files, hash-checked and used instead of downloading "
+                        "(default: $GROWJAX_DATA_DIR)")
     p.add_argument("--drive", choices=DRIVES, default="forward",
                    help="forward: PID on the pressure with ideal torque sources; inverse: stepper motor and its step "
                         "controller")

@@ -86,12 +86,28 @@ def recorded_parameters(data: Path) -> dict:
     return {k: float(v) for k, v in values.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
 
 
+def data_path(data: str | None, data_dir: str | None = None) -> Path:
+    """The experiment a command reads: a path, a named public data set (``mammobot``: :func:`growjax.datasets.fetch`,
+    from ``data_dir`` where given), or the shipped synthetic experiment."""
+    from growjax import datasets
+
+    if data is not None and (Path(data).exists() or data not in datasets.NAMES):
+        if data_dir is not None:
+            raise ValueError(f"--data-dir applies to a named data set ({', '.join(datasets.NAMES)}), not to {data}")
+        return Path(data)
+    if data is None:
+        if data_dir is not None:
+            raise ValueError(f"--data-dir applies to a named data set: name it ({', '.join(datasets.NAMES)})")
+        return default_data_path()
+    return datasets.fetch(data, data_dir=data_dir)
+
+
 def _setup(args, drive: str, growth_law: str = "reference"):
     """(data path, experiment, parameters, what they came from) for a workflow command."""
     import growjax as gj
     from growjax import experiment as ex
 
-    data = Path(args.data) if args.data else default_data_path()
+    data = data_path(args.data, args.data_dir)
     exp = _in_window(args, ex.read(data, catheter=args.catheter), data)
     params = gj.reference(drive, growth_law=growth_law)
     recorded = recorded_parameters(data)
@@ -522,12 +538,13 @@ def main(argv=None) -> int:
         _use_all_cpu_cores(at_least=args.chains)  # chains in parallel, one per device
         if not args.emulate:  # thousands of gradients through the solver: its loop compiled whole
             xla_flags.apply()
+    from growjax.datasets import DatasetError
     from growjax.experiment import ExperimentError
 
     status, failure = OK, None
     try:
         summary = COMMANDS[args.command](args)
-    except (ExperimentError, ValueError, FileNotFoundError) as err:
+    except (ExperimentError, ValueError, FileNotFoundError, DatasetError) as err:
         print(f"growjax {args.command}: error: {err}", file=sys.stderr)
         return BAD_INPUT
     except RunFailed as failed:

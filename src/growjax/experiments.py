@@ -186,10 +186,7 @@ def read(paths: Sequence, **options) -> ExperimentSet:
 def _read(path: Path, catheter: bool) -> Experiment:
     if not path.exists():
         raise ExperimentError(f"{path} not found")
-    try:
-        return ex.read(path, catheter=catheter)
-    except TypeError:  # a reader without the catheter switch
-        return ex.read(path)
+    return ex.read(path, catheter=catheter)
 
 
 def _run(name, exp: Experiment, drive, robot, rig, window, sensors, parameters, label) -> Run:

@@ -19,7 +19,7 @@ others across the ridge they form with it (:class:`RidgePrior`). A failed solve 
 (−∞ log density, rejected by NUTS), never an exception.
 
 The model, its priors and its mean length (``_priors``, ``_model``), NUTS's start (``_laplace``), the sampler
-(``_sample``) and the checks on its output (``_checks``).
+(``_sample``), its record as ArviZ InferenceData (``_record``) and the checks on its output (``_checks``).
 """
 
 from ._checks import (
@@ -65,14 +65,15 @@ from ._priors import (
     lockhart_priors,
     paper_priors,
 )
+from ._record import inference_data
 from ._sample import PosteriorResult, build_residuals, observation_draws, sample
 
 __all__ = [
     "BOUND_FRACTION", "LAPLACE_DECREMENT", "LAPLACE_MAX_STEPS", "LAPLACE_STALL", "PRIOR_CURVATURE_FLOOR",
     "DirectMean", "PosteriorResult", "Prior", "Residuals", "RidgePrior", "SoftplusPrior",
     "bound_coordinates", "bound_start", "build_emulator", "build_residuals", "compare_loo", "coordinate",
-    "diagnostics", "direct_mean", "emulated_mean", "forecast", "fraction", "growth_model", "laplace",
-    "laplace_unconstrained", "lockhart_priors", "observation_draws", "paper_priors", "precondition", "predict",
+    "diagnostics", "direct_mean", "emulated_mean", "forecast", "fraction", "growth_model", "inference_data",
+    "laplace", "laplace_unconstrained", "lockhart_priors", "observation_draws", "paper_priors", "precondition", "predict",
     "predictive_band", "ridge_coordinates", "sample", "sbc", "value_and_jacobian",
     "with_model_tangents",
 ]

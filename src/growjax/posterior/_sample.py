@@ -31,6 +31,7 @@ from ._model import (
     with_model_tangents,
 )
 from ._priors import Prior, coordinate, paper_priors
+from ._record import inference_data
 
 
 @dataclasses.dataclass
@@ -87,16 +88,15 @@ def sample(
     discrepancy's amplitude and time scale are sampled with the parameters; the rig's tolerances enter through
     the length's sensitivities at the start point (linearised), marginalised exactly.
 
-    Returns InferenceData with posterior, pointwise log-likelihood (for LOO), posterior
-    predictive of the length, observed data and sample stats, and a summary: per-parameter
+    Returns InferenceData (:func:`inference_data`: the sampled sites in the posterior, the replicated and the
+    model's length in the posterior predictive, the pointwise log-likelihood for LOO, the measured length as
+    observed data, NUTS's sample stats) and a summary: per-parameter
     mean and 90 % interval, ``rhat_max``, ``ess_bulk_min``, ``ess_tail_min``,
     ``divergences``, ``bfmi_min``, ``coverage_90`` (share of measured points inside the 90 %
     predictive band), ``emulator`` (its error and build time), ``chain_method``, ``coordinates`` (each prior's:
     ``"numpyro"``, ``"softplus"`` or ``"ridge"``, :func:`bound_start`), ``laplace_s`` (the start and
     mass matrix through the model, :func:`laplace_unconstrained`, compilation included) and ``wall_s`` (everything).
     """
-    import arviz as az
-
     base = base if base is not None else gp.reference()
     config = (config if config is not None else Config()).replace(adjoint="forward")
     priors = tuple(priors) if priors is not None else paper_priors()
@@ -120,9 +120,8 @@ def sample(
     loglik, predicted, new = observation_draws(post["length_model"], post["sigma"], model_error, y, seed + 1,
                                                residuals, post.get("delta_amplitude"), post.get("delta_time_scale"),
                                                post.get("noise_time"))
-    idata = az.from_numpyro(mcmc, log_likelihood=False,
-                            posterior_predictive={"length": predicted, "length_new_experiment": new})
-    idata.add_groups(log_likelihood={"length": loglik})
+    scored = residuals.observed if residuals is not None else np.ones(len(y), bool)
+    idata = inference_data(post, mcmc.get_extra_fields(group_by_chain=True), t, y, scored, loglik, predicted, new)
     wall = time.perf_counter() - start
     summary = diagnostics(idata, priors, y, mcmc, residuals)
     summary.update({"wall_s": wall, "emulator": emu_info, "laplace_s": precondition_s if emulate is False else None,
