@@ -47,7 +47,7 @@ class Lines(Silent):
     def __init__(self, total: int, desc: str, unit: str = "", stream=None, step: float = STEP):
         self.total, self.desc, self.unit, self.step = max(int(total), 0), desc, unit, step
         self.stream = stream if stream is not None else sys.stderr
-        self.done, self._shown, self._closed = 0, 0, False
+        self.done, self._shown, self._written, self._closed = 0, 0, -1, False
         self._start = time.perf_counter()
 
     def update(self, n: int = 1) -> None:
@@ -57,11 +57,12 @@ class Lines(Silent):
             self._write()
 
     def close(self) -> None:
-        if not self._closed and self.total:
+        if not self._closed and self.total and self._written != self.done:
             self._write()
         self._closed = True
 
     def _write(self) -> None:
+        self._written = self.done
         unit = f" {self.unit}s" if self.unit else ""
         pct = 100.0 * self.done / self.total
         print(f"{self.desc}: {self.done}/{self.total}{unit} ({pct:.0f} %), {time.perf_counter() - self._start:.1f} s",

@@ -2,7 +2,10 @@
 
 Every workflow command takes the same shared options (``--drive``, ``--param``, ``--fidelity``, ``--rtol``,
 ``--seed``, ``--t-end``, ``--out``, ``--json``), prints a short summary in mm and kPa, and exits with status 0 when
-its runs succeeded, 1 when a run failed (the reason on stderr) and 2 for a bad option or file.
+its runs succeeded, 1 when a run failed (the reason on stderr) and 2 for a bad option or file. A sweep
+stopped before its end (its chunks kept for ``growjax sweep --resume DIR``) exits with 128 + the signal's
+number (130 for SIGINT, 143 for SIGTERM), or 3 where ``--max-chunks`` stopped it. Progress goes to stderr:
+bars on a terminal, a line every ~10 % elsewhere, none with ``--quiet``.
 """
 
 from __future__ import annotations
@@ -195,17 +198,33 @@ def simulate_command(args) -> dict:
 def sweep_command(args) -> dict:
     import jax
 
+    from growjax import _cli_sweep as cs
     from growjax import experiment as ex
     from growjax import sweep as sw
     from growjax.plotting import sobol_figure, sweep_figure
 
+    if args.resume:
+        cs.restore(args)
     data, exp, base, origin = _setup(args, args.drive)
     dims = tuple(sw.parse_dimension(p, base) for p in args.range) if args.range else sw.paper_box()
     config = make_config(args, args.drive)
     inputs = ex.to_inputs(exp, args.drive, base, config.t0, config.t1)
     measured = (exp.time, exp["robot_length_m"]) if "robot_length_m" in exp else None
-    result = sw.lhs_sweep(args.n, base, inputs, config, dims, seed=args.seed, measured=measured,
-                          chunk_size=args.chunk_size, progress=True)
+    leader = jax.process_index() == 0
+    progress = not args.quiet and leader
+    try:
+        if args.resume:
+            result = sw.resume(cs.store_path(args.out), base, inputs, measured, progress=progress,
+                               max_chunks=args.max_chunks)
+        else:
+            store = cs.prepare_new(args.out) if leader else cs.store_path(args.out)
+            result = sw.lhs_sweep(args.n, base, inputs, config, dims, seed=args.seed, measured=measured,
+                                  chunk_size=args.chunk_size, progress=progress, store=store,
+                                  max_chunks=args.max_chunks, metadata={"cli": cs.record(args)})
+    except (sw.SweepInterrupted, KeyboardInterrupt) as err:
+        raise cs.stopped(err, args.out, jax.process_count() > 1) from None
+    if not leader:  # process 0 writes the files and reports
+        return {"command": "sweep", "process_index": jax.process_index()}
     out = _out(args)
     result.write_csv(out / "sweep.csv")
     best = result.best()
@@ -236,11 +255,14 @@ def sweep_command(args) -> dict:
         "n_devices": result.n_devices,
         "device": str(jax.devices()[0].platform),
         "table_csv": str(out / "sweep.csv"),
+        "store": str(cs.store_path(out)),
         "figure": str(fig),
     }
+    if jax.process_count() > 1:
+        summary["n_processes"] = jax.process_count()
     if args.sobol:
         sob = sw.sobol_indices(dims, base, inputs, config, n_base=args.sobol_n, seed=args.seed, measured=measured,
-                               chunk_size=args.chunk_size, progress=True)
+                               chunk_size=args.chunk_size, progress=not args.quiet)
         summary["sobol"] = {"names": sob["names"], "n_runs": sob["n_runs"], "indices": sob["indices"],
                             "wall_s": sob["sweep"].wall_s}
         summary["sobol_figure"] = str(sobol_figure(sob, out / "sobol.png", title=f"Sobol indices ({sob['n_runs']} runs)"))
@@ -463,10 +485,13 @@ def main(argv=None) -> int:
         _use_all_cpu_cores(at_least=args.chains)  # chains in parallel, one per device
         if not args.emulate:  # thousands of gradients through the solver: its loop compiled whole
             xla_flags.apply()
+    from growjax._cli_sweep import Stopped, start_distributed
     from growjax.experiment import ExperimentError
 
     status, failure = OK, None
     try:
+        if args.command == "sweep":
+            start_distributed(args)
         summary = COMMANDS[args.command](args)
     except (ExperimentError, ValueError, FileNotFoundError) as err:
         print(f"growjax {args.command}: error: {err}", file=sys.stderr)
@@ -474,6 +499,11 @@ def main(argv=None) -> int:
     except RunFailed as failed:
         summary, status, failure = failed.summary, RUN_FAILED, str(failed)
         summary["failure"] = failure
+    except Stopped as stop:
+        print(f"growjax {args.command}: {stop}", file=sys.stderr)
+        return stop.status
+    if summary.get("process_index", 0):  # a worker of a distributed sweep: process 0 reports
+        return status
     _write_json(summary, args.json)
     print("\n".join(summary_lines(summary)), file=human)
     if failure:

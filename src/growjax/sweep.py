@@ -466,37 +466,38 @@ def _stored(path, group, definition: dict, values, base, inputs, config, *, meas
             raise _store.StoreError(f"{path} holds a sweep of other {', '.join(what[k] for k in wrong)} than these")
         chunk_size = int(definition["chunk"])
         config = config.replace(quick_compile=definition.get("quick_compile"))
-    plan = _plan(values, names, base, inputs, config, measured, window, chunk_size, devices, memory_budget_bytes)
-    if group is None:
-        definition = {**definition, "names": list(plan.names), "chunk": plan.chunk, "quick_compile": plan.quick,
-                      "n_devices": int(plan.mesh.devices.size), "identity": identity, "growjax": _version()}
-        if _leader():
-            group = _store.create(path, definition, plan.values, plan.chunk)
-        done = np.zeros(plan.n_chunks, bool)
-    else:
-        if plan.chunk != int(definition["chunk"]):
-            raise _store.StoreError(f"{path} holds chunks of {definition['chunk']} rows, which "
-                                    f"{plan.mesh.devices.size} devices cannot split evenly; resume on a device "
-                                    "count that divides it")
-        done = _store.done_chunks(_store.read(group, "status"), plan.chunk)
-    done = _from_leader(done)
-    todo = [c for c in range(plan.n_chunks) if not done[c]]
-    start, ran, stopped = time.perf_counter(), 0, None
-    with _stopping.Stopper(announce=_leader()) as stop, \
-            _progress.bar(len(todo), "sweep", "chunk", progress and len(todo) > 1 and _leader()) as shown:
-        for c in todo:
-            if max_chunks is not None and ran >= max_chunks:
-                stopped = 0
-                break
-            out = _run_chunk(plan, c)
+    # A signal from here on stops the sweep between chunks (one during compilation: before the first).
+    with _stopping.Stopper(announce=_leader()) as stop:
+        _progress.note(f"sweep: {values.shape[0]} sets, kept in {path} as they finish; compiling",
+                       progress and _leader())
+        plan = _plan(values, names, base, inputs, config, measured, window, chunk_size, devices, memory_budget_bytes)
+        if group is None:
+            definition = {**definition, "names": list(plan.names), "chunk": plan.chunk, "quick_compile": plan.quick,
+                          "n_devices": int(plan.mesh.devices.size), "identity": identity, "growjax": _version()}
             if _leader():
                 with stop.writing():
-                    _store.write_chunk(group, c, plan.chunk, *out)
-            ran += 1
-            shown.update(1)
-            if _any_process(stop.signal is not None) and ran < len(todo):
-                stopped = stop.signal or 0
-                break
+                    group = _store.create(path, definition, plan.values, plan.chunk)
+            done = np.zeros(plan.n_chunks, bool)
+        else:
+            if plan.chunk != int(definition["chunk"]):
+                raise _store.StoreError(f"{path} holds chunks of {definition['chunk']} rows, which "
+                                        f"{plan.mesh.devices.size} devices cannot split evenly; resume on a device "
+                                        "count that divides it")
+            done = _store.done_chunks(_store.read(group, "status"), plan.chunk)
+        done = _from_leader(done)
+        todo = [c for c in range(plan.n_chunks) if not done[c]]
+        start, ran, stopped = time.perf_counter(), 0, None
+        with _progress.bar(len(todo), "sweep", "chunk", progress and len(todo) > 1 and _leader()) as shown:
+            for c in todo:
+                if _any_process(stop.signal is not None) or (max_chunks is not None and ran >= max_chunks):
+                    stopped = stop.signal or 0
+                    break
+                out = _run_chunk(plan, c)
+                if _leader():
+                    with stop.writing():
+                        _store.write_chunk(group, c, plan.chunk, *out)
+                ran += 1
+                shown.update(1)
     wall_s = time.perf_counter() - start
     if stopped is not None:
         raise SweepInterrupted(path, plan.n_chunks - len(todo) + ran, plan.n_chunks, stopped or None)
