@@ -1,6 +1,10 @@
 """Batched sweeps: design, equality with single runs, chunking, sharding, failures, Sobol, CLI."""
 
 import json
+import os
+import shutil
+import signal
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -128,7 +132,7 @@ def test_sobol_indices_find_that_yield_pressure_dominates(setup):
 def test_sweep_command_writes_table_figures_and_summary(tmp_path):
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "growjax.cli", "sweep", str(REPO / "src" / "growjax" / "datasets" / "synthetic_forward.csv"), "--n", "16",
-           "--t-end", "2", "--seed", "5", "--out", str(out), "--json", str(out / "s.json")]
+           "--t-end", "2", "--seed", "5", "--chunk-size", "4", "--out", str(out), "--json", str(out / "s.json")]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, check=False)
     assert proc.returncode == 0, proc.stderr[-2000:]
     summary = json.loads((out / "s.json").read_text())
@@ -140,6 +144,107 @@ def test_sweep_command_writes_table_figures_and_summary(tmp_path):
     assert (out / "sweep.png").stat().st_size > 10_000  # (--sobol: test_sobol_indices_find_that_yield_pressure_dominates)
     bad = subprocess.run([sys.executable, "-m", "growjax.cli", "sweep", "--range", "Y=9:1"], capture_output=True, text=True, check=False)
     assert bad.returncode == 2 and "LOW < HIGH" in bad.stderr
+    assert summary["store"] == str(out / "sweep.zarr") and sw.load(out / "sweep.zarr").reasons == summary_reasons(rows)
+
+    # SIGINT while it compiles (a cache of its own: seconds of compiling): a clean stop with the store kept and
+    # a line saying how to resume; --resume completes it to the same table, bit for bit.
+    stopped = tmp_path / "stopped"
+    argv = [a if a != str(out) else str(stopped) for a in cmd[:-2]]
+    env = {**os.environ, "GROWJAX_CACHE_DIR": str(tmp_path / "cache")}
+    run = subprocess.Popen(argv, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, env=env)
+    for line in run.stderr:
+        if "compiling" in line:
+            break
+    run.send_signal(signal.SIGINT)
+    err = run.stderr.read()
+    assert run.wait(timeout=600) == 130, err[-2000:]
+    assert f"0 of 4 chunks kept in {stopped / 'sweep.zarr'}; complete it with: growjax sweep --resume {stopped}" in err
+    assert not (stopped / "sweep.csv").exists()
+    resumed = subprocess.run([*cmd[:4], "--resume", str(stopped), "--quiet"], capture_output=True, text=True,
+                             timeout=600, check=False)
+    assert resumed.returncode == 0, resumed.stderr[-2000:]
+    assert resumed.stderr == ""  # --quiet
+    assert (stopped / "sweep.csv").read_bytes() == (out / "sweep.csv").read_bytes()
+
+
+def summary_reasons(rows):
+    return [r.rsplit(",", 1)[1] for r in rows[1:]]
+
+
+def test_stored_sweep_stopped_and_resumed_equals_an_uninterrupted_one(setup, tmp_path):
+    base, inputs, measured = setup
+    whole = sw.lhs_sweep(6, base, inputs, CFG, seed=7, measured=measured, chunk_size=2)
+    store = tmp_path / "store"
+    with pytest.raises(sw.SweepInterrupted, match="2 of 3 chunks") as stop:
+        sw.lhs_sweep(6, base, inputs, CFG, seed=7, measured=measured, chunk_size=2, store=store, max_chunks=2)
+    assert (stop.value.done, stop.value.total, stop.value.signal) == (2, 3, None)
+    part = sw.load(store)
+    assert part.reasons == ["ok"] * 4 + ["not_run"] * 2
+    np.testing.assert_array_equal(part.rmse[:4], whole.rmse[:4])
+    assert np.all(np.isnan(part.rmse[4:]))
+    resumed = sw.resume(store, base, inputs, measured)
+    for field in ("values", "rmse", "final_length", "status"):  # bit for bit
+        np.testing.assert_array_equal(getattr(resumed, field), getattr(whole, field), strict=True)
+    assert resumed.names == whole.names
+    again = sw.resume(store, base, inputs, measured)  # a finished store: read, nothing run
+    np.testing.assert_array_equal(again.rmse, whole.rmse)
+    with pytest.raises(ValueError, match="needs a store|give a store"):
+        sw.lhs_sweep(6, base, inputs, CFG, measured=measured, max_chunks=1)
+
+
+def _snapshot(folder: Path) -> dict:
+    return {p: p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def test_resume_refuses_a_missing_corrupt_or_other_store_and_writes_nothing(setup, tmp_path):
+    base, inputs, measured = setup
+    store = tmp_path / "store"
+    with pytest.raises(sw.SweepInterrupted):
+        sw.lhs_sweep(4, base, inputs, CFG, seed=1, measured=measured, chunk_size=2, store=store, max_chunks=1)
+    before = _snapshot(store)
+    with pytest.raises(sw.StoreError, match="no such folder"):
+        sw.resume(tmp_path / "absent", base, inputs, measured)
+    with pytest.raises(sw.StoreError, match="already exists"):
+        sw.lhs_sweep(4, base, inputs, CFG, seed=1, measured=measured, store=store)
+    times, length = measured
+    with pytest.raises(sw.StoreError, match="other measured data"):
+        sw.resume(store, base, inputs, (times, length * 1.01))
+    with pytest.raises(sw.StoreError, match="other base parameters"):
+        sw.resume(store, gj.replace(base, Y=9100.0), inputs, measured)
+    assert _snapshot(store) == before
+    broken = tmp_path / "broken"
+    shutil.copytree(store, broken)
+    (broken / "status" / "c" / "0").write_bytes(b"not a chunk")
+    with pytest.raises(sw.StoreError, match="corrupt sweep store"):
+        sw.resume(broken, base, inputs, measured)
+    (broken / "zarr.json").write_text("{")
+    with pytest.raises(sw.StoreError, match="not a readable sweep store"):
+        sw.resume(broken, base, inputs, measured)
+    assert sw.resume(store, base, inputs, measured).reasons == ["ok"] * 4
+
+
+def test_sweep_resume_errors_are_one_line_with_exit_2_and_change_nothing(tmp_path, capsys):
+    from growjax import cli
+
+    data = str(REPO / "src" / "growjax" / "datasets" / "synthetic_forward.csv")
+    folder = tmp_path / "run"
+    argv = ["sweep", data, "--n", "4", "--t-end", "2", "--seed", "5", "--chunk-size", "2", "--quiet"]
+    assert cli.main([*argv, "--out", str(folder), "--max-chunks", "1"]) == 3
+    assert f"growjax sweep --resume {folder}" in capsys.readouterr().err
+    before = _snapshot(folder)
+    broken = tmp_path / "broken"
+    shutil.copytree(folder, broken)
+    (broken / "sweep.zarr" / "zarr.json").write_text("{")
+    cases = [(["--resume", str(tmp_path / "absent")], "no such folder"),
+             (["--resume", str(folder), "--seed", "0"], "holds another sweep: --seed 0 here, 5 there"),
+             (["--resume", str(folder), "--range", "Y=5000:9000"], "holds another sweep: --range"),
+             (["--resume", str(broken)], "not a readable sweep store"),
+             ([*argv[1:], "--out", str(folder)], "holds an unfinished sweep")]
+    for extra, message in cases:
+        assert cli.main(["sweep", *extra]) == 2, extra
+        err = capsys.readouterr().err
+        assert message in err and err.count("\n") == 1, err
+    assert _snapshot(folder) == before
 
 
 @pytest.mark.parametrize("n_sets", [48, pytest.param(500, marks=pytest.mark.slow)])
