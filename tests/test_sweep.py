@@ -146,12 +146,12 @@ def test_sweep_command_writes_table_figures_and_summary(tmp_path):
     assert bad.returncode == 2 and "LOW < HIGH" in bad.stderr
     assert summary["store"] == str(out / "sweep.zarr") and sw.load(out / "sweep.zarr").reasons == summary_reasons(rows)
 
-    # SIGINT while it compiles (a cache of its own: seconds of compiling): a clean stop with the store kept and
-    # a line saying how to resume; --resume completes it to the same table, bit for bit.
+    # SIGINT while it compiles (tracing and lowering alone take a second; the signal follows the line by
+    # milliseconds): a clean stop with the store kept and a line saying how to resume; --resume completes it to
+    # the same table, bit for bit.
     stopped = tmp_path / "stopped"
     argv = [a if a != str(out) else str(stopped) for a in cmd[:-2]]
-    env = {**os.environ, "GROWJAX_CACHE_DIR": str(tmp_path / "cache")}
-    run = subprocess.Popen(argv, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, env=env)
+    run = subprocess.Popen(argv, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
     for line in run.stderr:
         if "compiling" in line:
             break
@@ -159,6 +159,7 @@ def test_sweep_command_writes_table_figures_and_summary(tmp_path):
     err = run.stderr.read()
     assert run.wait(timeout=600) == 130, err[-2000:]
     assert f"0 of 4 chunks kept in {stopped / 'sweep.zarr'}; complete it with: growjax sweep --resume {stopped}" in err
+    assert "SIGINT received: stopping after the chunk in flight" in err
     assert not (stopped / "sweep.csv").exists()
     resumed = subprocess.run([*cmd[:4], "--resume", str(stopped), "--quiet"], capture_output=True, text=True,
                              timeout=600, check=False)
@@ -260,3 +261,26 @@ def test_paper_sweep_finds_the_published_yield_pressure_and_rmse(shared_experime
     # RMSE is a function of Y alone: sets with Y within 100 Pa of the best agree to 0.1 mm.
     near = np.abs(res.values[:, 1] - best["parameters"]["robot.yield_pressure"]) < 100.0
     assert np.ptp(res.rmse[near]) < 1e-4
+
+
+@pytest.mark.slow  # two processes compiling on two cores: ~25 s
+def test_sweep_command_as_two_processes_gives_the_single_process_result(tmp_path):
+    """``--coordinator`` on 127.0.0.1: two processes of one device each split every chunk; process 0 writes the
+    same table, bit for bit, as one process with two devices (the same rows per device)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    argv = [sys.executable, "-m", "growjax.cli", "sweep", "--n", "8", "--chunk-size", "4", "--t-end", "1", "--seed", "2",
+            "--quiet"]
+    env = {**os.environ, "GROWJAX_CPU_DEVICES": "1"}
+    procs = [subprocess.Popen([*argv, "--out", str(tmp_path / "two"), "--coordinator", f"127.0.0.1:{port}",
+                               "--num-processes", "2", "--process-id", str(i), "--json", str(tmp_path / f"{i}.json")],
+                              env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for i in (0, 1)]
+    outs = [p.communicate(timeout=600) for p in procs]
+    assert [p.returncode for p in procs] == [0, 0], [o[1][-2000:] for o in outs]
+    assert "wrote" in outs[0][0] and "sweep" not in outs[1][0]  # process 0 reports (Gloo prints its own lines)
+    assert json.loads((tmp_path / "0.json").read_text())["n_processes"] == 2 and not (tmp_path / "1.json").exists()
+    one = subprocess.run([*argv, "--out", str(tmp_path / "one")], env={**env, "GROWJAX_CPU_DEVICES": "2"},
+                         capture_output=True, text=True, timeout=600, check=False)
+    assert one.returncode == 0, one.stderr[-2000:]
+    assert (tmp_path / "two" / "sweep.csv").read_bytes() == (tmp_path / "one" / "sweep.csv").read_bytes()
