@@ -135,6 +135,8 @@ def test_sweep_command_writes_table_figures_and_summary(tmp_path):
            "--t-end", "2", "--seed", "5", "--chunk-size", "4", "--out", str(out), "--json", str(out / "s.json")]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, check=False)
     assert proc.returncode == 0, proc.stderr[-2000:]
+    # progress on a pipe: plain lines, one per chunk here (4 chunks: every 25 %)
+    assert "\r" not in proc.stderr and "sweep: 4/4 chunks (100 %)" in proc.stderr and len(proc.stderr) < 1000
     summary = json.loads((out / "s.json").read_text())
     assert summary["n_failed"] == 0 and summary["best"]["rmse_length_m"] > 0
     assert set(summary["best"]["parameters"]) == {"robot.growth_exponent", "robot.yield_pressure", "robot.extensibility"}

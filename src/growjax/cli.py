@@ -121,6 +121,14 @@ def _out(args) -> Path:
     return out
 
 
+def _progress_note(args, text: str) -> float:
+    """One line of progress on stderr (none with ``--quiet``); the time, s (``time.perf_counter``)."""
+    from growjax import _progress
+
+    _progress.note(text, not args.quiet)
+    return time.perf_counter()
+
+
 # -- commands ---------------------------------------------------------------------------------------------------
 
 
@@ -285,9 +293,11 @@ def fit_command(args) -> dict:
     config = make_config(args, args.drive, adjoint="forward")
     inputs = ex.to_inputs(exp, args.drive, base, config.t0, config.t1)
     pressure = exp["pressure_Pa"] if "pressure_Pa" in exp else None  # noqa: SIM401 (Experiment is not a dict)
+    started = _progress_note(args, f"fit: {', '.join(args.free or ['Y'])} from {args.starts} starts")
     result = gf.fit(exp.time, exp["robot_length_m"], inputs, free=args.free or ["Y"], base=base, config=config,
                     pressure=pressure, n_starts=args.starts, seed=args.seed, window=scored_window(args, config),
                     discrepancy=args.discrepancy, tolerances=tolerances_of(args))
+    _progress_note(args, f"fit: done in {time.perf_counter() - started:.1f} s")
     out = _out(args)
     fitted = gj.replace(base, **result.estimate)
     traj = gj.simulate(fitted, inputs, config)
@@ -313,7 +323,7 @@ def posterior_command(args) -> dict:
     inputs = ex.to_inputs(exp, args.drive, base, config.t0, config.t1)
     priors = gpost.paper_priors() if args.law == "reference" else gpost.lockhart_priors()
     res = gpost.sample(exp.time, exp["robot_length_m"], inputs, base, config, priors=priors, chains=args.chains,
-                       warmup=args.warmup, samples=args.samples, seed=args.seed, progress=True,
+                       warmup=args.warmup, samples=args.samples, seed=args.seed, progress=not args.quiet,
                        emulate=args.emulate, window=scored_window(args, config), discrepancy=args.discrepancy,
                        tolerances=tolerances_of(args))
     out = _out(args)
@@ -340,7 +350,7 @@ def discover_command(args) -> dict:
     t0, t1 = scored_window(args, config)
     keep = (exp.time >= t0) & (exp.time <= t1)
     res = gd.discover(exp.time[keep], exp["robot_length_m"][keep], inputs, base=base, config=config,
-                      candidates=args.candidates or None, progress=True, workers=args.workers,
+                      candidates=args.candidates or None, progress=not args.quiet, workers=args.workers,
                       discrepancy=args.discrepancy, tolerances=tolerances_of(args))
     out = _out(args)
     figure = discovery_figure(res, out / "discover.png", title=f"{data.name}: {res.effect}")
@@ -373,9 +383,11 @@ def control_command(args) -> dict:
                 return targets_module.plant_params(drive, target, base=gj.replace(gj.reference(drive), **fixed))
 
             stack.enter_context(mock.patch.object(design_module, "plant_params", plant_params))
+        started = _progress_note(args, f"control: {args.method} design on the fast model, evaluated on {args.fidelity}")
         summary = design_module.design(target, args.drive, args.method, args.t_end, robust=args.robust,
                                        n_draws=args.draws, iterations=args.iterations, microsteps=args.microsteps,
                                        evaluate_on=args.fidelity, seed=args.seed, figure=out / "control.png")
+    _progress_note(args, f"control: done in {time.perf_counter() - started:.1f} s")
     summary = {"command": "control", "data": str(data), "fixed_parameters": origin, **summary}
     if summary.get("pressure_limit_crossed"):
         raise RunFailed(f"the design crossed the membrane pressure limit ({summary['pressure_limit_Pa'] / 1e3:.1f} kPa; "

@@ -13,6 +13,7 @@ import numpy as np
 import numpyro
 from jaxtyping import ArrayLike, Float
 
+from growjax import _progress
 from growjax import discrepancy as dc
 from growjax import emulator as em
 from growjax import experiment
@@ -83,6 +84,9 @@ def sample(
     (members stepped together) costs what the chains cost one after another, and the chains' trees, built
     in lockstep, would wait for the deepest (`benchmarks/nuts_direct.py` measures both).
 
+    ``progress``: NumPyro's bars where stderr is a terminal; elsewhere (a log) one line per phase (emulator,
+    start point, NUTS's start and end), the draws unchanged either way.
+
     ``discrepancy`` and ``tolerances``: the likelihood, as in :func:`growjax.fit.fit` (:func:`growth_model`): the
     discrepancy's amplitude and time scale are sampled with the parameters; the rig's tolerances enter through
     the length's sensitivities at the start point (linearised), marginalised exactly.
@@ -102,7 +106,10 @@ def sample(
     priors = tuple(priors) if priors is not None else paper_priors()
     t, y = _window(times, length, config, window)
     start = time.perf_counter()
+    if emulate is True:
+        _progress.note("posterior: building the emulator", progress)
     mean, model_error, emu_info = _mean_length(emulate, priors, base, inputs, config, t, seed, start)
+    _progress.note(f"posterior: the likelihood ({discrepancy} discrepancy)", progress)
     residuals, extra_init = _likelihood_terms(discrepancy, tolerances, t, y, mean, priors, base, inputs, config, seed)
 
     def make_model(mean_length, priors=priors):
@@ -110,12 +117,19 @@ def sample(
                                  residuals=residuals)
 
     start_precondition = time.perf_counter()
+    _progress.note("posterior: start point and mass matrix", progress)
     sampled, init_values, inverse_mass = _nuts_start(make_model, priors, mean, y, seed, emulate, extra_init)
     precondition_s = time.perf_counter() - start_precondition
+    # NumPyro's bars on a terminal; elsewhere (a log) a line as NUTS starts and one as it ends
+    bars = progress and _progress.terminal()
     nuts = {"dense_mass": dense_mass, "target_accept": target_accept, "max_tree_depth": max_tree_depth,
-            "chains": chains, "warmup": warmup, "samples": samples, "progress": progress,
+            "chains": chains, "warmup": warmup, "samples": samples, "progress": bars,
             "chain_method": chain_method or _chain_method(chains, emulate is not False)}
+    _progress.note(f"posterior: NUTS, {chains} chains of {warmup} warm-up and {samples} kept draws "
+                   f"({nuts['chain_method']})", progress and not bars)
+    start_nuts = time.perf_counter()
     mcmc = _run_nuts(make_model(mean, sampled), init_values, inverse_mass, y, seed, emulate is False, **nuts)
+    _progress.note(f"posterior: NUTS done in {time.perf_counter() - start_nuts:.1f} s", progress and not bars)
     post = mcmc.get_samples(group_by_chain=True)
     loglik, predicted = observation_draws(post["length_model"], post["sigma"], model_error, y, seed + 1, residuals,
                                           post.get("delta_amplitude"), post.get("delta_time_scale"),
