@@ -195,6 +195,39 @@ def test_stored_sweep_stopped_and_resumed_equals_an_uninterrupted_one(setup, tmp
         sw.lhs_sweep(6, base, inputs, CFG, measured=measured, max_chunks=1)
 
 
+def test_a_signal_stops_a_stored_sweep_after_the_chunk_in_flight(setup, tmp_path, monkeypatch):
+    """SIGTERM raised while the first chunk runs: that chunk is kept, the sweep stops before the next."""
+    base, inputs, measured = setup
+    run_chunk = sw._run_chunk
+
+    def signalled(plan, c):
+        if c == 0:
+            os.kill(os.getpid(), signal.SIGTERM)
+        return run_chunk(plan, c)
+
+    monkeypatch.setattr(sw, "_run_chunk", signalled)
+    with pytest.raises(sw.SweepInterrupted, match="1 of 3 chunks") as stop:
+        sw.lhs_sweep(6, base, inputs, CFG, seed=7, measured=measured, chunk_size=2, store=tmp_path / "s")
+    assert stop.value.signal == signal.SIGTERM
+    assert sw.load(tmp_path / "s").reasons == ["ok"] * 2 + ["not_run"] * 4
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # the handlers are put back
+
+
+def test_a_second_signal_stops_at_once_but_not_inside_a_write():
+    from growjax._stopping import Stopper
+
+    with Stopper(announce=False) as stop:
+        os.kill(os.getpid(), signal.SIGINT)
+        assert stop.signal == signal.SIGINT  # the first only asks
+        with pytest.raises(KeyboardInterrupt):
+            with stop.writing():
+                os.kill(os.getpid(), signal.SIGTERM)
+                written = True  # the write goes on to its end
+        assert written
+        with pytest.raises(KeyboardInterrupt):
+            os.kill(os.getpid(), signal.SIGINT)
+
+
 def _snapshot(folder: Path) -> dict:
     return {p: p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
 
