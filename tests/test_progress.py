@@ -55,3 +55,40 @@ def test_quiet_prints_nothing_and_a_terminal_gets_a_bar():
     shown.close()
     assert "\r" in terminal.getvalue() and "5/5" in terminal.getvalue()
     assert _progress.terminal(terminal) and not _progress.terminal(io.StringIO())
+
+
+def test_numpyro_progress_in_a_log_is_plain_lines_with_the_same_draws(monkeypatch, capsys):
+    """Where stderr is not a terminal, NumPyro's bars become ~10 % lines; the sampler runs the same loop as with
+    its bars, so the draws are equal bit for bit."""
+    import jax
+    import numpy as np
+    import numpyro
+    import numpyro.distributions as dist
+    from numpyro.infer import MCMC, NUTS
+
+    from growjax.posterior._sample import _numpyro_progress
+
+    for name in ("CI", "PYTEST_XDIST_WORKER"):  # NumPyro turns its bars off under these
+        monkeypatch.delenv(name, raising=False)
+    data = np.random.default_rng(0).normal(1.0, 0.5, 30)
+
+    def model(y):
+        m = numpyro.sample("m", dist.Normal(0.0, 10.0))
+        numpyro.sample("y", dist.Normal(m, 0.5), obs=y)
+
+    def draws(patched: bool):
+        mcmc = MCMC(NUTS(model), num_warmup=60, num_samples=60, num_chains=2, chain_method="vectorized")
+        if patched:
+            with _numpyro_progress(True):
+                mcmc.run(jax.random.PRNGKey(3), data)
+        else:
+            mcmc.run(jax.random.PRNGKey(3), data)
+        return np.asarray(mcmc.get_samples()["m"])
+
+    bars = draws(False)
+    capsys.readouterr()
+    lines = draws(True)
+    err = capsys.readouterr().err
+    np.testing.assert_array_equal(lines, bars)
+    assert "\r" not in err and len(err.splitlines()) == 10
+    assert err.splitlines()[0].startswith("posterior: NUTS: 12/120 draws (10 %)") and err.endswith("sample\n")

@@ -11,6 +11,7 @@ batch job: at most ~11 lines of ~60 characters per bar); :class:`Silent` when no
 from __future__ import annotations
 
 import sys
+import threading
 import time
 
 STEP = 0.1  # a line each time this share of the total is passed (non-terminal streams)
@@ -42,31 +43,59 @@ class Silent:
 
 
 class Lines(Silent):
-    """One line ``desc: k/total unit (p %), t s`` each time another ``step`` of ``total`` is done, and at the end."""
+    """One line ``desc: k/total unit (p %), t s[, phase]`` each time another ``step`` of ``total`` is done, and at
+    the end. Also stands in for the part of tqdm's interface that NumPyro uses (iteration over ``iterable``,
+    ``set_description``: the phase shown where ``phases``, ``set_postfix_str``: ignored); thread-safe."""
 
-    def __init__(self, total: int, desc: str, unit: str = "", stream=None, step: float = STEP):
-        self.total, self.desc, self.unit, self.step = max(int(total), 0), desc, unit, step
+    def __init__(self, total: int, desc: str, unit: str = "", stream=None, step: float = STEP, iterable=None,
+                 phases: bool = True):
+        self.total, self.desc, self.unit, self.step, self.phases = max(int(total), 0), desc, unit, step, phases
         self.stream = stream if stream is not None else sys.stderr
+        self.iterable, self.phase = iterable, ""
         self.done, self._shown, self._written, self._closed = 0, 0, -1, False
         self._start = time.perf_counter()
+        self._lock = threading.Lock()
 
     def update(self, n: int = 1) -> None:
-        self.done += n
-        if self.total and self.done < self.total and self.done / self.total >= (self._shown + 1) * self.step - 1e-12:
-            self._shown = int(self.done / self.total / self.step + 1e-9)
-            self._write()
+        with self._lock:
+            self.done += n
+            if self.total and self.done < self.total and self.done / self.total >= (self._shown + 1) * self.step - 1e-12:
+                self._shown = int(self.done / self.total / self.step + 1e-9)
+                self._write()
 
     def close(self) -> None:
-        if not self._closed and self.total and self._written != self.done:
-            self._write()
-        self._closed = True
+        with self._lock:
+            if not self._closed and self.total and self._written != self.done:
+                self._write()
+            self._closed = True
+
+    def __iter__(self):
+        for item in self.iterable if self.iterable is not None else range(self.total):
+            yield item
+            self.update(1)
+
+    def set_description(self, desc: str = "", refresh: bool = True) -> None:
+        self.phase = str(desc).strip()
+
+    def set_postfix_str(self, s: str = "", refresh: bool = True) -> None:
+        pass
 
     def _write(self) -> None:
         self._written = self.done
         unit = f" {self.unit}s" if self.unit else ""
         pct = 100.0 * self.done / self.total
-        print(f"{self.desc}: {self.done}/{self.total}{unit} ({pct:.0f} %), {time.perf_counter() - self._start:.1f} s",
-              file=self.stream, flush=True)
+        phase = f", {self.phase}" if self.phase and self.phases else ""
+        _write_line(f"{self.desc}: {self.done}/{self.total}{unit} ({pct:.0f} %), "
+                    f"{time.perf_counter() - self._start:.1f} s{phase}", self.stream)
+
+
+_WRITING = threading.Lock()  # one line at a time, whole, from any thread
+
+
+def _write_line(text: str, stream) -> None:
+    with _WRITING:
+        stream.write(text + "\n")
+        stream.flush()
 
 
 def bar(total: int, desc: str, unit: str = "", enabled: bool = True, stream=None):
@@ -85,7 +114,7 @@ def bar(total: int, desc: str, unit: str = "", enabled: bool = True, stream=None
 def note(text: str, enabled: bool = True, stream=None) -> None:
     """One line of progress (a phase starting or ending), unless not ``enabled``."""
     if enabled:
-        print(text, file=stream if stream is not None else sys.stderr, flush=True)
+        _write_line(text, stream if stream is not None else sys.stderr)
 
 
 def terminal(stream=None) -> bool:
