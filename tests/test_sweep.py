@@ -275,6 +275,7 @@ def test_sweep_resume_errors_are_one_line_with_exit_2_and_change_nothing(tmp_pat
              (["--resume", str(folder), "--seed", "0"], "holds another sweep: --seed 0 here, 5 there"),
              (["--resume", str(folder), "--range", "Y=5000:9000"], "holds another sweep: --range"),
              (["--resume", str(broken)], "not a readable sweep store"),
+             (["--resume", str(folder), "--out", str(tmp_path / "elsewhere")], "writes its results there"),
              ([*argv[1:], "--out", str(folder)], "holds an unfinished sweep")]
     for extra, message in cases:
         assert cli.main(["sweep", *extra]) == 2, extra

@@ -49,6 +49,8 @@ def restore(args) -> None:
     recorded = definition.get("metadata", {}).get("cli")
     if not isinstance(recorded, dict) or set(recorded) != set(DEFINING):
         raise sw.StoreError(f"--resume {folder}: its store was not written by `growjax sweep` (no options recorded)")
+    if "out" in getattr(args, "given", ()) and Path(args.out).resolve() != folder.resolve():
+        raise ValueError(f"--resume {folder} writes its results there; drop --out {args.out}")
     given = record(args)
     for key in DEFINING:
         if key in getattr(args, "given", ()) and given[key] != recorded[key]:
