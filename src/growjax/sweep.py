@@ -399,7 +399,8 @@ def lhs_sweep(
     on the same device count. ``metadata``: JSON-ready notes kept in the store's definition.
     """
     dims = tuple(dims) if dims is not None else paper_box()
-    if store is not None and Path(store).exists() and (not Path(store).is_dir() or any(Path(store).iterdir())):
+    taken = store is not None and Path(store).exists() and (not Path(store).is_dir() or any(Path(store).iterdir()))
+    if taken and _leader():  # (under jax.distributed the first process makes it: the others may see it made)
         raise _store.StoreError(f"{store} already exists; a new sweep needs a new folder (or resume the one there)")
     values = latin_hypercube(dims, n, seed)
     names = [d.name for d in dims]
