@@ -490,8 +490,9 @@ def _stored(path, group, definition: dict, values, base, inputs, config, *, meas
         start, ran, stopped = time.perf_counter(), 0, None
         with _progress.bar(len(todo), "sweep", "chunk", progress and len(todo) > 1 and _leader()) as shown:
             for c in todo:
-                if _any_process(stop.signal is not None) or (max_chunks is not None and ran >= max_chunks):
-                    stopped = stop.signal or 0
+                signalled = _signal_anywhere(stop.signal)
+                if signalled or (max_chunks is not None and ran >= max_chunks):
+                    stopped = signalled
                     break
                 out = _run_chunk(plan, c)
                 if _leader():
@@ -517,13 +518,14 @@ def _leader() -> bool:
     return jax.process_index() == 0
 
 
-def _any_process(flag: bool) -> bool:
-    """Whether ``flag`` is set in any process (every process must call it at the same point)."""
+def _signal_anywhere(number: int | None) -> int:
+    """The number of a stopping signal received by this or any process (0: none); every process must call it at
+    the same point, so that all stop at the same chunk."""
     if jax.process_count() == 1:
-        return bool(flag)
+        return int(number or 0)
     from jax.experimental import multihost_utils
 
-    return bool(np.any(multihost_utils.process_allgather(np.array([flag], np.int32))))
+    return int(np.max(multihost_utils.process_allgather(np.array([number or 0], np.int32))))
 
 
 def _from_leader(tree):
