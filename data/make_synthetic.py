@@ -17,8 +17,8 @@ Cases and their parameters are listed in reference_lengths.json.
 
 set/ — an experiment set: one robot (Y = 9000 Pa) on one rig whose toleranced parameters are off their nominal
 values (drawn once from the default budget, recorded in set/truth.json), run under three pressure demands
-(the published pulse train, a slower train and a 100 kPa train), made by the reference configuration, the
-demand recorded as a sampled column; noise as above. set/set.toml is its manifest (the pressure sensor named
+(the published pulse train, a slower train and a 100 kPa train) given to the controller as sampled every 10 ms
+(the CSV's demand column), made by the reference configuration; noise as above. set/set.toml is its manifest (the pressure sensor named
 for the first experiment).
 """
 
@@ -188,15 +188,17 @@ def make_set(folder: Path = DATASETS / "set") -> Path:
     config = gj.Config(fidelity="reference", t1=float(time[-1]), rtol=TRUTH_RTOL, atol=TRUTH_RTOL)
     ts = np.concatenate([[config.t0], time])
     for name, demand_signal in SET_DEMANDS.items():
+        demand_column = np.asarray(demand_signal(jnp.asarray(time)))
+        # the rig's controller reads the demand as recorded: sampled every 10 ms, as the CSV gives it back
         inputs = gj.Inputs(catheter_length=gj.Sampled(jnp.asarray(time), jnp.asarray(catheter)),
-                           pressure_demand=demand_signal)
+                           pressure_demand=gj.Sampled(jnp.asarray(time), jnp.asarray(demand_column)))
         traj = gj.simulate(rig, inputs, config, ts=ts)
         assert int(traj.status) == gj.OK, (name, gj.status_name(traj.status))
         length = np.asarray(traj.length)[1:] + rng.normal(0.0, NOISE["robot_length_m"], time.size)
         pressure = np.asarray(traj.pressure)[1:] + rng.normal(0.0, NOISE["pressure_Pa"], time.size)
         ex.write_csv(folder / f"{name}.csv", time, {
             "robot_length_m": length, "pressure_Pa": pressure, "catheter_length_m": catheter,
-            "pressure_demand_Pa": np.asarray(demand_signal(jnp.asarray(time)))})
+            "pressure_demand_Pa": demand_column})
         print(name, f"{float(length[-1]) * 1e3:.3f} mm", flush=True)
     manifest = ['# One robot, one rig, three pressure demands (made by data/make_synthetic.py).',
                 '[defaults]', 'drive = "forward"', 'robot = "membrane-1"', 'rig = "bench"', '']

@@ -83,6 +83,8 @@ def test_every_command_shares_the_options_and_shows_defaults():
         assert all(a.help for a in sub._actions), name
         assert "(default: out/" in " ".join(helptext.split()), name
     assert "--range" in {o for a in commands["sweep"]._actions for o in a.option_strings}
+    for name in ("sweep", "fit", "posterior", "discover", "control"):  # progress on stderr, or none
+        assert commands[name].parse_args(["--quiet"]).quiet and not commands[name].parse_args([]).quiet
 
 
 def test_simulate_command_reports_bad_input(tmp_path):
@@ -195,6 +197,9 @@ def test_posterior_command_writes_inference_data_and_the_issue_keys(tmp_path):
            "--samples", "40", "--emulate", "--out", str(tmp_path), "--json", str(tmp_path / "p.json")]
     done = subprocess.run(cmd, capture_output=True, text=True, check=False, timeout=900)
     assert done.returncode == 0, done.stderr
+    # stderr is a pipe: a line per phase, no bars (NumPyro's redraw with carriage returns)
+    assert "\r" not in done.stderr and len(done.stderr.encode()) < 5000, done.stderr[-2000:]
+    assert "posterior: building the emulator" in done.stderr and "posterior: NUTS done in" in done.stderr
     summary = json.loads((tmp_path / "p.json").read_text())
     for key in ("parameters", "rhat_max", "ess_bulk_min", "divergences", "wall_s", "coverage_90"):
         assert key in summary

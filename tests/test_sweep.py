@@ -1,6 +1,10 @@
 """Batched sweeps: design, equality with single runs, chunking, sharding, failures, Sobol, CLI."""
 
 import json
+import os
+import shutil
+import signal
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -128,9 +132,11 @@ def test_sobol_indices_find_that_yield_pressure_dominates(setup):
 def test_sweep_command_writes_table_figures_and_summary(tmp_path):
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "growjax.cli", "sweep", str(REPO / "src" / "growjax" / "datasets" / "synthetic_forward.csv"), "--n", "16",
-           "--t-end", "2", "--seed", "5", "--out", str(out), "--json", str(out / "s.json")]
+           "--t-end", "2", "--seed", "5", "--chunk-size", "4", "--out", str(out), "--json", str(out / "s.json")]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, check=False)
     assert proc.returncode == 0, proc.stderr[-2000:]
+    # progress on a pipe: plain lines, one per chunk here (4 chunks: every 25 %)
+    assert "\r" not in proc.stderr and "sweep: 4/4 chunks (100 %)" in proc.stderr and len(proc.stderr) < 1000
     summary = json.loads((out / "s.json").read_text())
     assert summary["n_failed"] == 0 and summary["best"]["rmse_length_m"] > 0
     assert set(summary["best"]["parameters"]) == {"robot.growth_exponent", "robot.yield_pressure", "robot.extensibility"}
@@ -140,6 +146,142 @@ def test_sweep_command_writes_table_figures_and_summary(tmp_path):
     assert (out / "sweep.png").stat().st_size > 10_000  # (--sobol: test_sobol_indices_find_that_yield_pressure_dominates)
     bad = subprocess.run([sys.executable, "-m", "growjax.cli", "sweep", "--range", "Y=9:1"], capture_output=True, text=True, check=False)
     assert bad.returncode == 2 and "LOW < HIGH" in bad.stderr
+    assert summary["store"] == str(out / "sweep.zarr") and sw.load(out / "sweep.zarr").reasons == summary_reasons(rows)
+
+    # SIGINT while it compiles (tracing and lowering alone take a second; the signal follows the line by
+    # milliseconds): a clean stop with the store kept and a line saying how to resume; --resume completes it to
+    # the same table, bit for bit.
+    stopped = tmp_path / "stopped"
+    argv = [a if a != str(out) else str(stopped) for a in cmd[:-2]]
+    run = subprocess.Popen(argv, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
+    for line in run.stderr:
+        if "compiling" in line:
+            break
+    run.send_signal(signal.SIGINT)
+    err = run.stderr.read()
+    assert run.wait(timeout=600) == 130, err[-2000:]
+    assert f"0 of 4 chunks kept in {stopped / 'sweep.zarr'}; complete it with: growjax sweep --resume {stopped}" in err
+    assert "SIGINT received: stopping after the chunk in flight" in err
+    assert not (stopped / "sweep.csv").exists()
+    resumed = subprocess.run([*cmd[:4], "--resume", str(stopped), "--quiet"], capture_output=True, text=True,
+                             timeout=600, check=False)
+    assert resumed.returncode == 0, resumed.stderr[-2000:]
+    assert resumed.stderr == ""  # --quiet
+    assert (stopped / "sweep.csv").read_bytes() == (out / "sweep.csv").read_bytes()
+
+
+def summary_reasons(rows):
+    return [r.rsplit(",", 1)[1] for r in rows[1:]]
+
+
+def test_stored_sweep_stopped_and_resumed_equals_an_uninterrupted_one(setup, tmp_path):
+    base, inputs, measured = setup
+    whole = sw.lhs_sweep(6, base, inputs, CFG, seed=7, measured=measured, chunk_size=2)
+    store = tmp_path / "store"
+    with pytest.raises(sw.SweepInterrupted, match="2 of 3 chunks") as stop:
+        sw.lhs_sweep(6, base, inputs, CFG, seed=7, measured=measured, chunk_size=2, store=store, max_chunks=2)
+    assert (stop.value.done, stop.value.total, stop.value.signal) == (2, 3, None)
+    part = sw.load(store)
+    assert part.reasons == ["ok"] * 4 + ["not_run"] * 2
+    np.testing.assert_array_equal(part.rmse[:4], whole.rmse[:4])
+    assert np.all(np.isnan(part.rmse[4:]))
+    resumed = sw.resume(store, base, inputs, measured)
+    for field in ("values", "rmse", "final_length", "status"):  # bit for bit
+        np.testing.assert_array_equal(getattr(resumed, field), getattr(whole, field), strict=True)
+    assert resumed.names == whole.names
+    again = sw.resume(store, base, inputs, measured)  # a finished store: read, nothing run
+    np.testing.assert_array_equal(again.rmse, whole.rmse)
+    with pytest.raises(ValueError, match="needs a store|give a store"):
+        sw.lhs_sweep(6, base, inputs, CFG, measured=measured, max_chunks=1)
+
+
+def test_a_signal_stops_a_stored_sweep_after_the_chunk_in_flight(setup, tmp_path, monkeypatch):
+    """SIGTERM raised while the first chunk runs: that chunk is kept, the sweep stops before the next."""
+    base, inputs, measured = setup
+    run_chunk = sw._run_chunk
+
+    def signalled(plan, c):
+        if c == 0:
+            os.kill(os.getpid(), signal.SIGTERM)
+        return run_chunk(plan, c)
+
+    monkeypatch.setattr(sw, "_run_chunk", signalled)
+    with pytest.raises(sw.SweepInterrupted, match="1 of 3 chunks") as stop:
+        sw.lhs_sweep(6, base, inputs, CFG, seed=7, measured=measured, chunk_size=2, store=tmp_path / "s")
+    assert stop.value.signal == signal.SIGTERM
+    assert sw.load(tmp_path / "s").reasons == ["ok"] * 2 + ["not_run"] * 4
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # the handlers are put back
+
+
+def test_a_second_signal_stops_at_once_but_not_inside_a_write():
+    from growjax._stopping import Stopper
+
+    with Stopper(announce=False) as stop:
+        os.kill(os.getpid(), signal.SIGINT)
+        assert stop.signal == signal.SIGINT  # the first only asks
+        with pytest.raises(KeyboardInterrupt):
+            with stop.writing():
+                os.kill(os.getpid(), signal.SIGTERM)
+                written = True  # the write goes on to its end
+        assert written
+        with pytest.raises(KeyboardInterrupt):
+            os.kill(os.getpid(), signal.SIGINT)
+
+
+def _snapshot(folder: Path) -> dict:
+    return {p: p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def test_resume_refuses_a_missing_corrupt_or_other_store_and_writes_nothing(setup, tmp_path):
+    base, inputs, measured = setup
+    store = tmp_path / "store"
+    with pytest.raises(sw.SweepInterrupted):
+        sw.lhs_sweep(4, base, inputs, CFG, seed=1, measured=measured, chunk_size=2, store=store, max_chunks=1)
+    before = _snapshot(store)
+    with pytest.raises(sw.StoreError, match="no such folder"):
+        sw.resume(tmp_path / "absent", base, inputs, measured)
+    with pytest.raises(sw.StoreError, match="already exists"):
+        sw.lhs_sweep(4, base, inputs, CFG, seed=1, measured=measured, store=store)
+    times, length = measured
+    with pytest.raises(sw.StoreError, match="other measured data"):
+        sw.resume(store, base, inputs, (times, length * 1.01))
+    with pytest.raises(sw.StoreError, match="other base parameters"):
+        sw.resume(store, gj.replace(base, Y=9100.0), inputs, measured)
+    assert _snapshot(store) == before
+    broken = tmp_path / "broken"
+    shutil.copytree(store, broken)
+    (broken / "status" / "c" / "0").write_bytes(b"not a chunk")
+    with pytest.raises(sw.StoreError, match="corrupt sweep store"):
+        sw.resume(broken, base, inputs, measured)
+    (broken / "zarr.json").write_text("{")
+    with pytest.raises(sw.StoreError, match="not a readable sweep store"):
+        sw.resume(broken, base, inputs, measured)
+    assert sw.resume(store, base, inputs, measured).reasons == ["ok"] * 4
+
+
+def test_sweep_resume_errors_are_one_line_with_exit_2_and_change_nothing(tmp_path, capsys):
+    from growjax import cli
+
+    data = str(REPO / "src" / "growjax" / "datasets" / "synthetic_forward.csv")
+    folder = tmp_path / "run"
+    argv = ["sweep", data, "--n", "4", "--t-end", "2", "--seed", "5", "--chunk-size", "2", "--quiet"]
+    assert cli.main([*argv, "--out", str(folder), "--max-chunks", "1"]) == 3
+    assert f"growjax sweep --resume {folder}" in capsys.readouterr().err
+    before = _snapshot(folder)
+    broken = tmp_path / "broken"
+    shutil.copytree(folder, broken)
+    (broken / "sweep.zarr" / "zarr.json").write_text("{")
+    cases = [(["--resume", str(tmp_path / "absent")], "no such folder"),
+             (["--resume", str(folder), "--seed", "0"], "holds another sweep: --seed 0 here, 5 there"),
+             (["--resume", str(folder), "--range", "Y=5000:9000"], "holds another sweep: --range"),
+             (["--resume", str(broken)], "not a readable sweep store"),
+             (["--resume", str(folder), "--out", str(tmp_path / "elsewhere")], "writes its results there"),
+             ([*argv[1:], "--out", str(folder)], "holds an unfinished sweep")]
+    for extra, message in cases:
+        assert cli.main(["sweep", *extra]) == 2, extra
+        err = capsys.readouterr().err
+        assert message in err and err.count("\n") == 1, err
+    assert _snapshot(folder) == before
 
 
 @pytest.mark.parametrize("n_sets", [48, pytest.param(500, marks=pytest.mark.slow)])
@@ -155,3 +297,26 @@ def test_paper_sweep_finds_the_published_yield_pressure_and_rmse(shared_experime
     # RMSE is a function of Y alone: sets with Y within 100 Pa of the best agree to 0.1 mm.
     near = np.abs(res.values[:, 1] - best["parameters"]["robot.yield_pressure"]) < 100.0
     assert np.ptp(res.rmse[near]) < 1e-4
+
+
+@pytest.mark.slow  # two processes compiling on two cores: ~25 s
+def test_sweep_command_as_two_processes_gives_the_single_process_result(tmp_path):
+    """``--coordinator`` on 127.0.0.1: two processes of one device each split every chunk; process 0 writes the
+    same table, bit for bit, as one process with two devices (the same rows per device)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    argv = [sys.executable, "-m", "growjax.cli", "sweep", "--n", "8", "--chunk-size", "4", "--t-end", "1", "--seed", "2",
+            "--quiet"]
+    env = {**os.environ, "GROWJAX_CPU_DEVICES": "1"}
+    procs = [subprocess.Popen([*argv, "--out", str(tmp_path / "two"), "--coordinator", f"127.0.0.1:{port}",
+                               "--num-processes", "2", "--process-id", str(i), "--json", str(tmp_path / f"{i}.json")],
+                              env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for i in (0, 1)]
+    outs = [p.communicate(timeout=600) for p in procs]
+    assert [p.returncode for p in procs] == [0, 0], [o[1][-2000:] for o in outs]
+    assert "wrote" in outs[0][0] and "sweep" not in outs[1][0]  # process 0 reports (Gloo prints its own lines)
+    assert json.loads((tmp_path / "0.json").read_text())["n_processes"] == 2 and not (tmp_path / "1.json").exists()
+    one = subprocess.run([*argv, "--out", str(tmp_path / "one")], env={**env, "GROWJAX_CPU_DEVICES": "2"},
+                         capture_output=True, text=True, timeout=600, check=False)
+    assert one.returncode == 0, one.stderr[-2000:]
+    assert (tmp_path / "two" / "sweep.csv").read_bytes() == (tmp_path / "one" / "sweep.csv").read_bytes()

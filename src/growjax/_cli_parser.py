@@ -20,10 +20,38 @@ class _Formatter(argparse.ArgumentDefaultsHelpFormatter):
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse with a one-line error (no usage block) naming the problem and the valid values."""
+    """argparse with a one-line error (no usage block) naming the problem and the valid values; ``given``: the
+    options the command line spelled out (a value equal to the default included)."""
 
     def error(self, message):
         self.exit(BAD_INPUT, f"{self.prog}: error: {message}\n")
+
+    def parse_args(self, args=None, namespace=None):
+        parsed = super().parse_args(args, namespace)
+        if namespace is None:
+            parsed.given = _given(self, args)
+        return parsed
+
+
+def _given(parser: argparse.ArgumentParser, args) -> set:
+    """Destinations set on the command line ``args``: the parse again with every default suppressed."""
+    actions = [a for p in _parsers(parser) for a in p._actions]
+    saved = [a.default for a in actions]
+    try:
+        for a in actions:
+            a.default = argparse.SUPPRESS
+        return set(vars(argparse.ArgumentParser.parse_args(parser, args, argparse.Namespace())))
+    finally:
+        for a, d in zip(actions, saved):
+            a.default = d
+
+
+def _parsers(parser):
+    yield parser
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                yield from _parsers(sub)
 
 
 def _effect_name(text: str) -> str:
@@ -102,6 +130,11 @@ def _shared(p: argparse.ArgumentParser, command: str, fidelity_default: str = "f
     p.add_argument("--json", metavar="FILE", default=None, help="write the full summary as JSON to FILE ('-': stdout)")
 
 
+def _quiet(p: argparse.ArgumentParser):
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress output (otherwise a bar on a terminal, a line every ~10 %% elsewhere, on stderr)")
+
+
 def _likelihood(p: argparse.ArgumentParser):
     """The options of the likelihood that fit, posterior and discover share."""
     p.add_argument("--t-start", type=float, default=None, metavar="S",
@@ -163,12 +196,27 @@ def build_parser():
                      help="Saltelli base points (a power of 2; runs = N·(d+2))")
     swp.add_argument("--chunk-size", type=_count(), default=None, help="sets per compiled call (None: sized to memory)")
 
+    swp.add_argument("--resume", metavar="DIR", default=None,
+                     help="complete the interrupted sweep kept in DIR (its --out); its options are the recorded ones")
+    swp.add_argument("--max-chunks", type=int, default=None, metavar="K",
+                     help="stop after K chunks, as an interrupt would (exit 3; complete with --resume)")
+    swp.add_argument("--distributed", action="store_true",
+                     help="one process of several (jax.distributed, the cluster detected: SLURM, ...); process 0 "
+                          "writes the results")
+    swp.add_argument("--coordinator", metavar="HOST:PORT", default=None,
+                     help="jax.distributed without a detected cluster: process 0's address (with --num-processes, "
+                          "--process-id)")
+    swp.add_argument("--num-processes", type=int, default=None, metavar="N", help="processes in all (--coordinator)")
+    swp.add_argument("--process-id", type=int, default=None, metavar="I", help="this process, 0..N-1 (--coordinator)")
+    _quiet(swp)
+
     fit = sub.add_parser("fit", formatter_class=fmt, help="least-squares fit to the measured length (and pressure)")
     _shared(fit, "fit", many=True)
     fit.add_argument("--free", action="append", default=[], metavar="NAME[@SCOPE]",
                      help="parameter to fit (repeat; none: Y). With several experiments, @robot, @rig or "
                           "@experiment fits one per robot, rig or experiment, none one for all (none given: Y@robot)")
     fit.add_argument("--starts", type=_count(), default=3, help="starts, from the best sets of a Latin hypercube")
+    _quiet(fit)
     _likelihood(fit)
     fit.add_argument("--rig", choices=["inferred", "fixed"], default="inferred",
                      help="inferred: the toleranced rig parameters fitted beside the free ones, their tolerances "
@@ -189,6 +237,7 @@ def build_parser():
     post.add_argument("--chains", type=_count(), default=4, help="NUTS chains")
     post.add_argument("--warmup", type=_count(0), default=500, help="warm-up draws per chain")
     post.add_argument("--samples", type=_count(), default=500, help="kept draws per chain")
+    _quiet(post)
     _likelihood(post)
 
     dis = sub.add_parser("discover", formatter_class=fmt,
@@ -197,6 +246,7 @@ def build_parser():
     dis.add_argument("--candidates", nargs="+", metavar="EFFECT", type=_effect_name, default=None,
                      help="catalogue effects to test (None: all of `growjax effects`)")
     dis.add_argument("--workers", type=_count(), default=None, help="fits run at a time (None: one per CPU core)")
+    _quiet(dis)
     _likelihood(dis)
 
     ctl = sub.add_parser("control", formatter_class=fmt,
@@ -213,6 +263,7 @@ def build_parser():
                      help="stepper driver microsteps (1: the full-step driver)")
     _tolerance(ctl, "(repeat; the feedback design is then tuned on the cost averaged over --draws draws of the "
                     "rig within the default budget of `growjax params` and these; none given: the rig as it is)")
+    _quiet(ctl)
 
     par = sub.add_parser("params", formatter_class=fmt,
                          help="list the parameters: names, symbols, defaults, units, physical ranges")

@@ -2,7 +2,10 @@
 
 Every workflow command takes the same shared options (``--drive``, ``--param``, ``--fidelity``, ``--rtol``,
 ``--seed``, ``--t-end``, ``--out``, ``--json``), prints a short summary in mm and kPa, and exits with status 0 when
-its runs succeeded, 1 when a run failed (the reason on stderr) and 2 for a bad option or file.
+its runs succeeded, 1 when a run failed (the reason on stderr) and 2 for a bad option or file. A sweep
+stopped before its end (its chunks kept for ``growjax sweep --resume DIR``) exits with 128 + the signal's
+number (130 for SIGINT, 143 for SIGTERM), or 3 where ``--max-chunks`` stopped it. Progress goes to stderr:
+bars on a terminal, a line every ~10 % elsewhere, none with ``--quiet``.
 """
 
 from __future__ import annotations
@@ -204,6 +207,14 @@ def _out(args) -> Path:
     return out
 
 
+def _progress_note(args, text: str) -> float:
+    """One line of progress on stderr (none with ``--quiet``); the time, s (``time.perf_counter``)."""
+    from growjax import _progress
+
+    _progress.note(text, not args.quiet)
+    return time.perf_counter()
+
+
 # -- commands ---------------------------------------------------------------------------------------------------
 
 
@@ -281,17 +292,33 @@ def simulate_command(args) -> dict:
 def sweep_command(args) -> dict:
     import jax
 
+    from growjax import _cli_sweep as cs
     from growjax import experiment as ex
     from growjax import sweep as sw
     from growjax.plotting import sobol_figure, sweep_figure
 
+    if args.resume:
+        cs.restore(args)
     data, exp, base, origin = _setup(args, args.drive)
     dims = tuple(sw.parse_dimension(p, base) for p in args.range) if args.range else sw.paper_box()
     config = make_config(args, args.drive)
     inputs = ex.to_inputs(exp, args.drive, base, config.t0, config.t1)
     measured = (exp.time, exp["robot_length_m"]) if "robot_length_m" in exp else None
-    result = sw.lhs_sweep(args.n, base, inputs, config, dims, seed=args.seed, measured=measured,
-                          chunk_size=args.chunk_size, progress=True)
+    leader = jax.process_index() == 0
+    progress = not args.quiet and leader
+    try:
+        if args.resume:
+            result = sw.resume(cs.store_path(args.out), base, inputs, measured, progress=progress,
+                               max_chunks=args.max_chunks)
+        else:
+            store = cs.prepare_new(args.out) if leader else cs.store_path(args.out)
+            result = sw.lhs_sweep(args.n, base, inputs, config, dims, seed=args.seed, measured=measured,
+                                  chunk_size=args.chunk_size, progress=progress, store=store,
+                                  max_chunks=args.max_chunks, metadata={"cli": cs.record(args)})
+    except (sw.SweepInterrupted, KeyboardInterrupt) as err:
+        raise cs.stopped(err, args.out, jax.process_count() > 1) from None
+    if not leader:  # process 0 writes the files and reports
+        return {"command": "sweep", "process_index": jax.process_index()}
     out = _out(args)
     result.write_csv(out / "sweep.csv")
     best = result.best()
@@ -322,11 +349,14 @@ def sweep_command(args) -> dict:
         "n_devices": result.n_devices,
         "device": str(jax.devices()[0].platform),
         "table_csv": str(out / "sweep.csv"),
+        "store": str(cs.store_path(out)),
         "figure": str(fig),
     }
+    if jax.process_count() > 1:
+        summary["n_processes"] = jax.process_count()
     if args.sobol:
         sob = sw.sobol_indices(dims, base, inputs, config, n_base=args.sobol_n, seed=args.seed, measured=measured,
-                               chunk_size=args.chunk_size, progress=True)
+                               chunk_size=args.chunk_size, progress=not args.quiet)
         summary["sobol"] = {"names": sob["names"], "n_runs": sob["n_runs"], "indices": sob["indices"],
                             "wall_s": sob["sweep"].wall_s}
         summary["sobol_figure"] = str(sobol_figure(sob, out / "sobol.png", title=f"Sobol indices ({sob['n_runs']} runs)"))
@@ -354,9 +384,11 @@ def fit_command(args) -> dict:
     config = make_config(args, args.drive, adjoint="forward")
     inputs = ex.to_inputs(exp, args.drive, base, config.t0, config.t1)
     pressure = exp["pressure_Pa"] if "pressure_Pa" in exp else None  # noqa: SIM401 (Experiment is not a dict)
+    started = _progress_note(args, f"fit: {', '.join(args.free or ['Y'])} from {args.starts} starts")
     result = gf.fit(exp.time, exp["robot_length_m"], inputs, free=args.free or ["Y"], base=base, config=config,
                     pressure=pressure, n_starts=args.starts, seed=args.seed, window=scored_window(args, config),
                     discrepancy=args.discrepancy, tolerances=tolerances_of(args), rig=args.rig)
+    _progress_note(args, f"fit: done in {time.perf_counter() - started:.1f} s")
     out = _out(args)
     fitted = gj.replace(base, **result.rig_estimate, **result.estimate)
     traj = gj.simulate(fitted, inputs, config)
@@ -382,7 +414,7 @@ def posterior_command(args) -> dict:
     inputs = ex.to_inputs(exp, args.drive, base, config.t0, config.t1)
     priors = gpost.paper_priors() if args.law == "reference" else gpost.lockhart_priors()
     res = gpost.sample(exp.time, exp["robot_length_m"], inputs, base, config, priors=priors, chains=args.chains,
-                       warmup=args.warmup, samples=args.samples, seed=args.seed, progress=True,
+                       warmup=args.warmup, samples=args.samples, seed=args.seed, progress=not args.quiet,
                        emulate=args.emulate, window=scored_window(args, config), discrepancy=args.discrepancy,
                        tolerances=tolerances_of(args))
     out = _out(args)
@@ -409,7 +441,7 @@ def discover_command(args) -> dict:
     t0, t1 = scored_window(args, config)
     keep = (exp.time >= t0) & (exp.time <= t1)
     res = gd.discover(exp.time[keep], exp["robot_length_m"][keep], inputs, base=base, config=config,
-                      candidates=args.candidates or None, progress=True, workers=args.workers,
+                      candidates=args.candidates or None, progress=not args.quiet, workers=args.workers,
                       discrepancy=args.discrepancy, tolerances=tolerances_of(args))
     out = _out(args)
     figure = discovery_figure(res, out / "discover.png", title=f"{data.name}: {res.effect}")
@@ -426,9 +458,11 @@ def control_command(args) -> dict:
     data, exp, base, origin = _setup(args, args.drive)
     target = gc.target_from_experiment(exp, args.t_end)
     out = _out(args)
+    started = _progress_note(args, f"control: {args.method} design on the fast model, evaluated on {args.fidelity}")
     summary = gc.design(target, args.drive, args.method, args.t_end, robust=args.robust, n_draws=args.draws,
                         iterations=args.iterations, microsteps=args.microsteps, evaluate_on=args.fidelity,
                         seed=args.seed, figure=out / "control.png", base=base, tolerances=tolerances_of(args))
+    _progress_note(args, f"control: done in {time.perf_counter() - started:.1f} s")
     summary = {"command": "control", "data": str(data), "fixed_parameters": origin, **summary}
     if summary.get("pressure_limit_crossed"):
         raise RunFailed(f"the design crossed the membrane pressure limit ({summary['pressure_limit_Pa'] / 1e3:.1f} kPa; "
@@ -539,10 +573,13 @@ def main(argv=None) -> int:
         if not args.emulate:  # thousands of gradients through the solver: its loop compiled whole
             xla_flags.apply()
     from growjax.datasets import DatasetError
+    from growjax._cli_sweep import Stopped, start_distributed
     from growjax.experiment import ExperimentError
 
     status, failure = OK, None
     try:
+        if args.command == "sweep":
+            start_distributed(args)
         summary = COMMANDS[args.command](args)
     except (ExperimentError, ValueError, FileNotFoundError, DatasetError) as err:
         print(f"growjax {args.command}: error: {err}", file=sys.stderr)
@@ -550,6 +587,11 @@ def main(argv=None) -> int:
     except RunFailed as failed:
         summary, status, failure = failed.summary, RUN_FAILED, str(failed)
         summary["failure"] = failure
+    except Stopped as stop:
+        print(f"growjax {args.command}: {stop}", file=sys.stderr)
+        return stop.status
+    if summary.get("process_index", 0):  # a worker of a distributed sweep: process 0 reports
+        return status
     _write_json(summary, args.json)
     print("\n".join(summary_lines(summary)), file=human)
     if failure:

@@ -142,18 +142,8 @@ def _cores() -> int:
         return os.cpu_count() or 1
 
 
-class _NoBar:
-    def update(self, n=1):
-        pass
-
-    def close(self):
-        pass
-
-
 def _bar(enabled: bool, desc: str, total: int):
-    """A progress bar of ``total`` fits on the terminal when ``enabled`` (else one that shows nothing)."""
-    if not enabled:
-        return _NoBar()
-    from tqdm.auto import tqdm
+    """Progress of ``total`` fits when ``enabled``: a bar on a terminal, a line every ~10 % elsewhere."""
+    from growjax import _progress
 
-    return tqdm(desc=desc, unit="fit", leave=True, total=total)
+    return _progress.bar(total, desc, "fit", enabled)

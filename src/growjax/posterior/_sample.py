@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import time
+import types
 from collections.abc import Sequence
+from unittest import mock
 
 import jax
 import jax.numpy as jnp
@@ -13,6 +16,7 @@ import numpy as np
 import numpyro
 from jaxtyping import ArrayLike, Float
 
+from growjax import _progress
 from growjax import discrepancy as dc
 from growjax import emulator as em
 from growjax import experiment
@@ -84,6 +88,10 @@ def sample(
     (members stepped together) costs what the chains cost one after another, and the chains' trees, built
     in lockstep, would wait for the deepest (`benchmarks/nuts_direct.py` measures both).
 
+    ``progress``: a line per phase (emulator, likelihood, start point, NUTS's start and end) and NumPyro's bars
+    on stderr where it is a terminal; elsewhere (a log) the bars' progress as a plain line every ~10 % of each
+    chain's draws. The draws do not depend on where stderr goes.
+
     ``discrepancy`` and ``tolerances``: the likelihood, as in :func:`growjax.fit.fit` (:func:`growth_model`): the
     discrepancy's amplitude and time scale are sampled with the parameters; the rig's tolerances enter through
     the length's sensitivities at the start point (linearised), marginalised exactly.
@@ -102,7 +110,10 @@ def sample(
     priors = tuple(priors) if priors is not None else paper_priors()
     t, y = _window(times, length, config, window)
     start = time.perf_counter()
+    if emulate is True:
+        _progress.note("posterior: building the emulator", progress)
     mean, model_error, emu_info = _mean_length(emulate, priors, base, inputs, config, t, seed, start)
+    _progress.note(f"posterior: the likelihood ({discrepancy} discrepancy)", progress)
     residuals, extra_init = _likelihood_terms(discrepancy, tolerances, t, y, mean, priors, base, inputs, config, seed)
 
     def make_model(mean_length, priors=priors):
@@ -110,12 +121,18 @@ def sample(
                                  residuals=residuals)
 
     start_precondition = time.perf_counter()
+    _progress.note("posterior: start point and mass matrix", progress)
     sampled, init_values, inverse_mass = _nuts_start(make_model, priors, mean, y, seed, emulate, extra_init)
     precondition_s = time.perf_counter() - start_precondition
     nuts = {"dense_mass": dense_mass, "target_accept": target_accept, "max_tree_depth": max_tree_depth,
             "chains": chains, "warmup": warmup, "samples": samples, "progress": progress,
             "chain_method": chain_method or _chain_method(chains, emulate is not False)}
-    mcmc = _run_nuts(make_model(mean, sampled), init_values, inverse_mass, y, seed, emulate is False, **nuts)
+    _progress.note(f"posterior: NUTS, {chains} chains of {warmup} warm-up and {samples} kept draws "
+                   f"({nuts['chain_method']})", progress)
+    start_nuts = time.perf_counter()
+    with _numpyro_progress(progress):
+        mcmc = _run_nuts(make_model(mean, sampled), init_values, inverse_mass, y, seed, emulate is False, **nuts)
+    _progress.note(f"posterior: NUTS done in {time.perf_counter() - start_nuts:.1f} s", progress)
     post = mcmc.get_samples(group_by_chain=True)
     loglik, predicted, new = observation_draws(post["length_model"], post["sigma"], model_error, y, seed + 1,
                                                residuals, post.get("delta_amplitude"), post.get("delta_time_scale"),
@@ -166,6 +183,28 @@ def _nuts_start(make_model, priors, mean, y, seed: int, emulate, extra_init: dic
     if emulate is not False:
         return priors, init_values, inverse_mass
     return bound_start(make_model, priors, mean, y, init_values, inverse_mass)
+
+
+@contextlib.contextmanager
+def _numpyro_progress(progress: bool):
+    """NumPyro's progress bars where stderr is a terminal; elsewhere its bars' updates as plain lines every ~10 %
+    (:class:`growjax._progress.Lines`, standing in for tqdm in ``numpyro.util``). Either way NumPyro runs the
+    loop it runs with ``progress_bar=True``, so the draws do not depend on where stderr goes."""
+    import numpyro.util as nu
+
+    if not progress or _progress.terminal() or not (hasattr(nu, "tqdm") and hasattr(nu, "tqdm_auto")):
+        yield
+        return
+
+    def trange(n, **_):
+        return _progress.Lines(n, "posterior: NUTS", "draw", iterable=range(n))
+
+    def auto(iterable, position=0, **_):
+        return _progress.Lines(len(iterable), f"posterior: NUTS chain {position}", "draw", iterable=iterable,
+                               phases=False)  # NumPyro's descriptions there name the chain again
+
+    with mock.patch.object(nu, "tqdm", types.SimpleNamespace(trange=trange)), mock.patch.object(nu, "tqdm_auto", auto):
+        yield
 
 
 def _run_nuts(model, init_values, inverse_mass, y, seed: int, forward_mode: bool, *, dense_mass: bool,
