@@ -67,9 +67,9 @@ def _fit_set(s: dict) -> list[str]:
     lines = [f"fit: {len(runs)} experiments ({robots} robot{'s' * (robots > 1)}, {rigs} rig{'s' * (rigs > 1)}), "
              f"fitted jointly: {s['status']}"]
     for p, v in s["parameters"].items():
-        interval = v["interval_90"]
-        shown = "undetermined" if interval is None else f"90 % {_value(p, interval[0])} – {_value(p, interval[1])}"
-        lines.append(f"  {p} = {_value(p.split('@')[0], v['estimate'])} ({shown})")
+        interval, name = v["interval_90"], p.split("@")[0]
+        shown = "undetermined" if interval is None else f"90 % {_value(name, interval[0])} – {_value(name, interval[1])}"
+        lines.append(f"  {p} = {_value(name, v['estimate'])} ({shown})")
         if v.get("budget_sd"):
             parts = sorted(v["budget_sd"].items(), key=lambda kv: -kv[1])[:5]
             lines.append("    sd from " + ", ".join(f"{k} {_value(p.split('@')[0], x)}" for k, x in parts if x > 0))

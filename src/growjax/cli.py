@@ -148,9 +148,12 @@ def _fit_set(args, paths) -> dict:
     for run in exps:
         gj.validate(run.base())
     free = args.free or ["Y@robot"]
-    result = joint.fit_set(exps, free=free, config=config, n_starts=args.starts, seed=args.seed,
+    scopes = [xs.Scope.parse(f, exps.runs[0].base()) for f in free]  # a bad scope is refused before any work
+    started = _progress_note(args, f"fit: {', '.join(free)} over {len(exps)} experiments from {args.starts} starts")
+    result = joint.fit_set(exps, free=scopes, config=config, n_starts=args.starts, seed=args.seed,
                            discrepancy=args.discrepancy, tolerances=tolerances_of(args), rig=args.rig,
                            rig_errors=args.rig_errors)
+    _progress_note(args, f"fit: done in {time.perf_counter() - started:.1f} s")
     traces = []
     for run, rec in zip(exps, result.runs):
         values = {lab.split("@")[0]: v for lab, v in result.estimate.items()

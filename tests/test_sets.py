@@ -1,0 +1,72 @@
+"""Experiment sets: the manifest, the scopes of free parameters, and the batched joint fit."""
+
+import json
+import sys
+from importlib.resources import files
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import growjax as gj
+from growjax import cli
+from growjax import experiments as xs
+from growjax import joint
+from growjax.experiment import Experiment, ExperimentError
+
+REPO = Path(__file__).resolve().parents[1]
+SET = Path(str(files("growjax") / "datasets" / "set"))
+Y = "robot.yield_pressure"
+
+
+def _write(tmp_path, text, csvs=("a.csv",)):
+    t = np.arange(1, 101) * 0.01
+    for name in csvs:
+        rows = "\n".join(f"{x:.2f},{0.01 + 0.002 * x:.6f},{0.004:.6f}" for x in t)
+        (tmp_path / name).write_text("time_s,robot_length_m,catheter_length_m\n" + rows + "\n")
+    path = tmp_path / "set.toml"
+    path.write_text(text)
+    return path
+
+
+def test_the_shipped_manifest_reads_as_one_robot_on_one_rig():
+    exps = xs.read([SET / "set.toml"])
+    assert len(exps) == 3 and exps.robots == ("membrane-1",) and exps.rigs == ("bench",)
+    assert [r.sensors for r in exps] == [("length", "pressure"), ("length",), ("length",)]
+    assert exps.group_of("robot") == ["membrane-1"] * 3 and exps.group_of("experiment") == [r.name for r in exps]
+
+
+@pytest.mark.parametrize("text, message", [
+    ('[[experiment]]\nfile = "missing.csv"\n', "file missing.csv not found"),
+    ('[[experiment]]\nfile = "a.csv"\nwindow = [20.0, 30.0]\n', "holds no data"),
+    ('[[experiment]]\nfile = "a.csv"\nrig = "other"\n[rig.bench]\nparameters = {}\n', "unknown rig 'other'"),
+    ('[[experiment]]\nfile = "a.csv"\nrobot = "r9"\n[robot.r1]\n', "unknown robot 'r9'"),
+    ('[[experiment]]\nfile = "a.csv"\nsensors = ["length", "pressure"]\n', "no pressure_Pa column"),
+    ('[[experiment]]\nfile = "a.csv"\ncolour = "red"\n', "unknown key"),
+    ('[[experiment]]\nfile = "a.csv"\nparameters = { Q = 1.0 }\n', "unknown parameter 'Q'"),
+    ("experiment = 3\n", "no [[experiment]] entries"),
+])
+def test_a_bad_manifest_is_one_error_naming_the_experiment_and_the_problem(tmp_path, text, message):
+    path = _write(tmp_path, text)
+    with pytest.raises(ExperimentError, match=message.replace("[", r"\[").replace("]", r"\]")):
+        xs.ExperimentSet.from_manifest(path)
+
+
+def test_the_command_line_gives_bad_sets_and_scopes_exit_2_with_one_line(tmp_path, capsys):
+    path = _write(tmp_path, '[[experiment]]\nfile = "a.csv"\nwindow = [20.0, 30.0]\n')
+    assert cli.main(["fit", str(path), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "experiment 'a.csv'" in err[0] and "holds no data" in err[0]
+    good = _write(tmp_path, '[[experiment]]\nfile = "a.csv"\n[[experiment]]\nfile = "b.csv"\n', ("a.csv", "b.csv"))
+    for free, message in (("Q@robot", "unknown parameter 'Q'"), ("Y@membrane", "unknown scope 'membrane'")):
+        assert cli.main(["fit", str(good), "--free", free, "--out", str(tmp_path / "out")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and message in err[0], err
+
+
+def test_scopes_parse_and_default():
+    base = gj.reference()
+    assert xs.Scope.parse("Y@robot", base) == xs.Scope(Y, "robot")
+    assert xs.Scope.parse("ext", base) == xs.Scope("robot.extensibility", "shared")
+    with pytest.raises(ValueError, match="unknown scope"):
+        xs.Scope.parse("Y@lab", base)
