@@ -77,3 +77,27 @@ def test_the_data_inform_the_rig_on_reference_made_data(rig_off):
 def test_an_unknown_rig_treatment_is_refused():
     with pytest.raises(ValueError, match="rig must be one of"):
         gf.fit(np.linspace(0, 1, 5), np.zeros(5), None, rig="known")
+
+
+@pytest.mark.slow
+def test_fit_and_posterior_agree_on_the_shipped_data(synthetic_experiment):
+    """The shipped synthetic experiment: the fit's and the posterior's 90 % intervals of Y agree within 25 % in
+    width (both infer the rig), the fixed propagation is far wider, and the posterior's band of this experiment
+    replicated holds 0.85–0.95 of the measured points while a new experiment's is wider."""
+    from growjax import experiment as ex
+    from growjax import posterior as gpost
+
+    exp = synthetic_experiment
+    base = gj.replace(gj.reference("forward"), Y=9000.0)
+    config = gj.Config(t1=10.0)
+    inputs = ex.to_inputs(exp, "forward", base, config.t0, config.t1)
+    width = lambda iv: iv[1] - iv[0]
+    fit = gf.fit(exp.time, exp["robot_length_m"], inputs, base=base, config=config, pressure=exp["pressure_Pa"])
+    fixed = gf.fit(exp.time, exp["robot_length_m"], inputs, base=base, config=config, pressure=exp["pressure_Pa"],
+                   rig="fixed")
+    post = gpost.sample(exp.time, exp["robot_length_m"], inputs, base, config, emulate=True, progress=False)
+    posterior_width = width(post.summary["parameters"]["Y"]["interval_90"])
+    assert abs(width(fit.interval_90[Y]) / posterior_width - 1.0) < 0.25
+    assert width(fixed.interval_90[Y]) > 2.0 * width(fit.interval_90[Y])
+    assert 0.85 <= post.summary["coverage_90"] <= 0.95
+    assert post.summary["coverage_90_new_experiment"] >= post.summary["coverage_90"]

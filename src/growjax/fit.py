@@ -15,7 +15,6 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Sequence
-from concurrent.futures import ThreadPoolExecutor
 
 import equinox as eqx
 import jax
@@ -290,10 +289,11 @@ def _starts(base, names, refs, inputs, config, times, length, window, n_starts: 
 def _solve(model, likelihood, z0s, bounds, max_steps: int, problem, tol: dict, discrepancy: str, rig: str):
     """Least squares from every start (one after another through one compiled solver: consistent under any
     correlation of the residuals, and a start that a discrepancy absorbing the misfit cannot trap); the rig's
-    sensitivities at the best; then generalised least squares alternating with the hyperparameters' mode, from
-    the second alternation on with the rig's errors b fitted beside z (``rig="inferred"``).
-    Returns (z per start, cost per start, converged per start, z, b (q,) the rig's relative errors (empty unless
-    inferred), the linearisation at z, the hyperparameters, converged, the likelihood with its tolerances)."""
+    sensitivities at the best; then generalised least squares alternating with the hyperparameters' mode, the
+    rig's errors b fitted beside z (``rig="inferred"``) or the rig held nominal (``"fixed"``: its tolerances
+    propagated afterwards). Returns (z per start, cost per start, converged per start, z, b (q,) the rig's
+    relative errors (empty unless inferred), the linearisation at z, the hyperparameters, converged, the
+    likelihood with its tolerances)."""
     solved = [levenberg_marquardt(lambda w: likelihood.weighted(*model(w)), z0, max_steps, LM_TOLERANCE,
                                   bounds=bounds) for z0 in z0s]
     zs, costs, oks = (np.asarray([s[k] for s in solved]) for k in range(3))
@@ -301,28 +301,25 @@ def _solve(model, likelihood, z0s, bounds, max_steps: int, problem, tol: dict, d
     z, converged = np.asarray(zs[k_best]), bool(oks[k_best])
     p = z.size
     raw = model(jnp.asarray(z))
-    hyper, b = None, np.zeros(0)
-    # the rig's sensitivities (at the least-squares optimum) run beside the first GLS fit, which does not use them
-    z_ls, r_ls, secants = z, raw[0], None
-    with ThreadPoolExecutor(max_workers=1) as pool:
-        for _ in range(OUTER_STEPS):
-            if secants is not None and rig == "inferred" and not likelihood.inferred:
-                likelihood, b = likelihood.with_tolerances(secants.result(), tol, inferred=True), np.zeros(len(tol))
-            hyper = likelihood.estimate(raw[0], discrepancy, hyper)
-            if tol and secants is None:  # after the first mode, whose starts take a core each
-                secants = pool.submit(_tolerance_sensitivity, problem, z_ls, r_ls, tol)
-            w_new, _, converged, _, jac_w = levenberg_marquardt(
-                lambda w, h=hyper: likelihood.augmented(*model(w[:p]), h, w[p:]), np.concatenate([z, b]), max_steps,
-                LM_TOLERANCE, bounds=likelihood.bounds(bounds), cost_resolution=COST_RESOLUTION)
-            sd = np.sqrt(np.diag(np.linalg.pinv(jac_w.T @ jac_w, rcond=1e-10, hermitian=True)))
-            moved = np.abs(w_new - np.concatenate([z, b]))
-            z, b = np.asarray(w_new[:p]), np.asarray(w_new[p:])
-            raw = model(jnp.asarray(z))
-            rig_done = not tol or rig == "fixed" or likelihood.inferred
-            if rig_done and np.all(moved <= OUTER_TOLERANCE * sd):
-                break
-        if secants is not None and not likelihood.inferred:  # fixed: propagated after the fit
-            likelihood = likelihood.with_tolerances(secants.result(), tol)
+    g = _tolerance_sensitivity(problem, z, raw[0], tol) if tol else None
+    if g is not None and rig == "inferred":
+        likelihood = likelihood.with_tolerances(g, tol, inferred=True)
+    b = np.zeros(len(tol) if likelihood.inferred else 0)
+    hyper = None
+    for _ in range(OUTER_STEPS):
+        hyper = likelihood.estimate(raw[0], discrepancy, hyper)
+        w_new, _, converged, _, jac_w = levenberg_marquardt(lambda w, h=hyper: likelihood.augmented(*model(w[:p]), h, w[p:]),
+                                                           np.concatenate([z, b]), max_steps, LM_TOLERANCE,
+                                                           bounds=likelihood.bounds(bounds),
+                                                           cost_resolution=COST_RESOLUTION)
+        sd = np.sqrt(np.diag(np.linalg.pinv(jac_w.T @ jac_w, rcond=1e-10, hermitian=True)))
+        moved = np.abs(w_new - np.concatenate([z, b]))
+        z, b = np.asarray(w_new[:p]), np.asarray(w_new[p:])
+        raw = model(jnp.asarray(z))
+        if np.all(moved <= OUTER_TOLERANCE * sd):
+            break
+    if g is not None and not likelihood.inferred:  # fixed: propagated after the fit
+        likelihood = likelihood.with_tolerances(g, tol)
     return zs, costs, oks, z, b, raw, hyper, converged, likelihood
 
 

@@ -57,6 +57,7 @@ class SetFitResult:
     status: str
     wall_s: float
     simulate_s: float  # of which in the batched simulations and Jacobians
+    programs: int = 1  # batched groups of runs: one compiled program each
 
     def summary(self) -> dict:
         return {"status": self.status, "rig": self.rig, "rig_errors": self.rig_errors,
@@ -64,7 +65,7 @@ class SetFitResult:
                                    "interval_90": self.interval_90[k], "budget_sd": self.budget.get(k)}
                                for k in self.labels},
                 "runs": self.runs, "rig_offset": self.rig_offset, "tolerances": self.tolerances,
-                "cost": self.cost, "wall_s": self.wall_s, "simulate_s": self.simulate_s}
+                "cost": self.cost, "wall_s": self.wall_s, "simulate_s": self.simulate_s, "programs": self.programs}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -118,7 +119,7 @@ def fit_set(
     if len(set(names)) != len(names):
         raise ValueError(f"a parameter is freed twice: {list(free)}")
     tol = tl.budget(bases[0], tolerances, names, use_default=tolerances is None and discrepancy != "none")
-    problems, likelihoods, configs = [], [], []
+    problems, likelihoods = [], []
     for run, base in zip(runs, bases):
         cfg = config.replace(drive=run.drive)
         inputs = ex.to_inputs(run.experiment, run.drive, base, cfg.t0, cfg.t1)
@@ -129,7 +130,6 @@ def fit_set(
         n = int(pr.times.size)
         used = ex.informative_samples(np.asarray(pr.length)) if discrepancy != "none" else np.ones(n, bool)
         problems.append(pr)
-        configs.append(cfg)
         likelihoods.append(gf.Likelihood(pr.times, jnp.asarray(used), jnp.asarray(np.flatnonzero(used)),
                                          sigma_length, n))
     layout = _layout(experiments, scopes, bases, problems, tol, rig_errors)
@@ -140,21 +140,16 @@ def fit_set(
                                   max_steps, gf.LM_TOLERANCE, bounds=bounds) for z0 in z0s]
     k_best = int(np.argmin([s[1] for s in solved]))
     z, converged = np.asarray(solved[k_best][0]), bool(solved[k_best][2])
-    q_all = len(layout.rig_labels)
-    b = np.zeros(0)
+    sensitivities = batch.sensitivities(z, layout, tol) if tol else None  # at the least-squares optimum
+    if sensitivities is not None and rig == "inferred":
+        likelihoods = [lik.with_tolerances(g, tol, inferred=True) for lik, g in zip(likelihoods, sensitivities)]
+    b = np.zeros(len(layout.rig_labels) if likelihoods[0].inferred else 0)
     hypers = [None] * len(runs)
     model_error = gf.default_model_error(config) if model_error is None else model_error
-    sensitivities = None
-    for step in range(gf.OUTER_STEPS):
+    p_all = z.size
+    for _ in range(gf.OUTER_STEPS):
         outs = batch.linearised(z, layout)
         hypers = [lik.estimate(r, discrepancy, h) for lik, (r, _), h in zip(likelihoods, outs, hypers)]
-        if step == 0 and tol:
-            sensitivities = batch.sensitivities(z, layout, tol)
-            if rig == "inferred":
-                likelihoods = [lik.with_tolerances(g, tol, inferred=True) for lik, g in zip(likelihoods, sensitivities)]
-                b = np.zeros(q_all)
-                hypers = [lik.estimate(r, discrepancy, h) for lik, (r, _), h in zip(likelihoods, outs, hypers)]
-        p_all = z.size
         w_new, cost, converged, _, jac_w = levenberg_marquardt(
             lambda w, hs=tuple(hypers): _whitened(batch.linearised(w[:p_all], layout), likelihoods, layout, hs,
                                                  w[p_all:]),
@@ -163,14 +158,16 @@ def fit_set(
         sd = np.sqrt(np.diag(np.linalg.pinv(jac_w.T @ jac_w, rcond=1e-10, hermitian=True)))
         moved = np.abs(w_new - np.concatenate([z, b]))
         z, b = np.asarray(w_new[:p_all]), np.asarray(w_new[p_all:])
-        if step > 0 and np.all(moved <= gf.OUTER_TOLERANCE * sd):
+        if np.all(moved <= gf.OUTER_TOLERANCE * sd):
             break
     outs = batch.linearised(z, layout)
     if tol and rig == "fixed":
         likelihoods = [lik.with_tolerances(g, tol) for lik, g in zip(likelihoods, sensitivities)]
     cov, parts, info = _covariance(outs, likelihoods, layout, hypers, b, model_error, tol, rig)
-    return _result(z, b, cov, parts, info, outs, likelihoods, layout, hypers, runs, tol, rig, rig_errors, cost,
-                   converged, clock, batch.simulate_s)
+    result = _result(z, b, cov, parts, info, outs, likelihoods, layout, hypers, runs, tol, rig, rig_errors, cost,
+                     converged, clock, batch.simulate_s)
+    result.programs = len(batch.groups)
+    return result
 
 
 def _layout(experiments: ExperimentSet, scopes, bases, problems, tol: dict, rig_errors: str) -> _Layout:

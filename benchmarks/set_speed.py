@@ -1,0 +1,68 @@
+"""The cost of a joint fit against one experiment's, in one process.
+
+Run: ``python benchmarks/set_speed.py [--experiments 8] [--repeat 3] [--out benchmarks/results/set_speed.json]``.
+
+A set of ``--experiments`` reference-made experiments of one robot on one drawn rig (``benchmarks/sets.py``'s
+sets), 10 s each: ``growjax.joint.fit_set`` of the whole set, of its first experiment alone, and
+``growjax.fit.fit`` of that experiment, each ``--repeat`` times, interleaved. Printed: the median warm wall
+times and the ratio of the set's to one experiment's (target ≤ 3), with the share spent in the batched
+simulations.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+import growjax as gj
+from growjax import experiments as xs
+from growjax import fit as gf
+from growjax import joint
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "benchmarks"))
+from _environment import environment
+from sets import CATHETER, TIME, make_set
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--experiments", type=int, default=8)
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "set_speed.json"))
+    args = ap.parse_args()
+    _, _, exps, status = make_set(np.random.default_rng(args.seed), args.experiments, 1e-6)
+    runs = xs.ExperimentSet(tuple(xs.Run(e.source, e) for e in exps))
+    first = xs.ExperimentSet(runs.runs[:1])
+    config = gj.Config(t1=10.0)
+    inputs = gj.Inputs(catheter_length=gj.Sampled(TIME, CATHETER),
+                       pressure_demand=gj.Sampled(TIME, exps[0]["pressure_demand_Pa"]))
+    jobs = {"set": lambda: joint.fit_set(runs, config=config),
+            "one_experiment_as_a_set": lambda: joint.fit_set(first, config=config),
+            "one_experiment_fit": lambda: gf.fit(TIME, exps[0]["robot_length_m"], inputs, config=config)}
+    walls = {k: [] for k in jobs}
+    simulate = []
+    for _ in range(args.repeat):
+        for k, job in jobs.items():
+            clock = time.perf_counter()
+            res = job()
+            walls[k].append(time.perf_counter() - clock)
+            if k == "set":
+                simulate.append(res.simulate_s)
+    row = {k: {"first_s": w[0], "warm_s": float(np.median(w[1:] or w))} for k, w in walls.items()}
+    row["ratio_set_over_one_fit"] = row["set"]["warm_s"] / row["one_experiment_fit"]["warm_s"]
+    row["set_simulate_share"] = float(np.median(simulate) / row["set"]["warm_s"])
+    print(json.dumps(row, indent=1))
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps({"environment": environment(), "arguments": vars(args), **row}, indent=1))
+
+
+if __name__ == "__main__":
+    main()
