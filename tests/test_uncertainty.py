@@ -295,3 +295,32 @@ def test_discovery_reads_a_rig_parameter_off_within_reason_as_no_effect(referenc
     assert res.effect == "none" and not res.confounded_with, gd.summary_text(res)
     known = gd.discover(t[keep], data, inputs, config=config, tolerances={})
     assert known.effect != "none", gd.summary_text(known)
+
+
+def test_the_likelihood_of_runs_sharing_a_rig_is_the_dense_gaussian():
+    """discrepancy.log_likelihood_runs: three runs, two of them on one rig, each with its own discrepancy and
+    unscored samples: the stacked residuals' dense Gaussian log-density, the rig terms correlated across the
+    runs of a rig and independent across rigs."""
+    rng = np.random.default_rng(6)
+    e, n, q = 3, 40, 2
+    t = np.sort(rng.uniform(0.0, 4.0, (e, n)), axis=1)
+    g = rng.normal(0.0, 2e-4, (e, n, q))
+    u = np.array([0.2, 0.05])
+    observed = rng.random((e, n)) > 0.2
+    hypers = [dc.Hyper.of(3e-4, 0.7, 2e-4, 0.0), dc.Hyper.of(1e-4, 1.5, 3e-4, 0.02), dc.Hyper.of(0.0, 1.0, 2e-4, 0.0)]
+    r = rng.normal(0.0, 4e-4, (e, n))
+    rigs = np.array([0, 0, 1])
+    batched = jax.tree_util.tree_map(lambda *x: jnp.stack(x), *hypers)
+    value = float(dc.log_likelihood_runs(r, t, batched, g, u, observed, jnp.asarray(rigs), n_rigs=2))
+    blocks = [_dense(t[k], hypers[k])[np.ix_(observed[k], observed[k])] for k in range(e)]
+    cov = np.zeros((sum(b.shape[0] for b in blocks),) * 2)
+    at = np.cumsum([0] + [b.shape[0] for b in blocks])
+    for k, b in enumerate(blocks):
+        cov[at[k]:at[k + 1], at[k]:at[k + 1]] = b
+    gs = [g[k][observed[k]] for k in range(e)]
+    for a in range(e):
+        for b in range(e):
+            if rigs[a] == rigs[b]:
+                cov[at[a]:at[a + 1], at[b]:at[b + 1]] += (gs[a] * u**2) @ gs[b].T
+    y = np.concatenate([r[k][observed[k]] for k in range(e)])
+    assert value == pytest.approx(float(multivariate_normal(np.zeros(y.size), cov).logpdf(y)), rel=1e-9)

@@ -174,6 +174,36 @@ def _log_likelihood_static(residuals, times, hyper: Hyper, sensitivity, toleranc
     return -0.5 * (jnp.sum(log_s) + wr @ wr - c @ c) - jnp.sum(jnp.log(jnp.diag(chol)))
 
 
+def log_likelihood_runs(residuals, times, hyper: Hyper, sensitivity, tolerance, observed, rig_index,
+                        n_rigs: int = 1):
+    """Exact log-likelihood (nats) of several runs' residuals whose rig terms are shared: run e's residual is its
+    own discrepancy and noise (hyperparameters ``hyper``, batched over runs) plus Σⱼ g_ej b_kj with b_k ~ N(0, U)
+    one vector per rig k = ``rig_index[e]``, the same for every run on that rig.
+
+    Shapes: ``residuals``, ``times``, ``observed`` (E, n) (pad short runs with unobserved samples);
+    ``sensitivity`` (E, n, q) m; ``tolerance`` (q,); ``rig_index`` (E,) int in [0, ``n_rigs``). Each run is
+    whitened by its own three-state filter; the rig's q × q correction (Woodbury's identity, the determinant
+    lemma) sums the runs of each rig, so a shared error counts once however many runs see it.
+    """
+    r = jnp.asarray(residuals, float)
+    g = jnp.asarray(sensitivity, float) * jnp.asarray(tolerance, float)
+    obs = jnp.asarray(observed, bool)
+
+    def run(r_e, g_e, t_e, h_e, o_e):
+        v, s, _, _ = kalman_filter(jnp.concatenate([r_e[:, None], g_e], axis=1), t_e, h_e, observed=o_e)
+        w = jnp.where(o_e[:, None], v / jnp.sqrt(s)[:, None], 0.0)
+        return w[:, 0], w[:, 1:], jnp.sum(jnp.where(o_e, jnp.log(2.0 * jnp.pi * s), 0.0))
+
+    wr, wg, log_s = jax.vmap(run)(r, g, jnp.asarray(times, float), hyper, obs)
+    q = g.shape[-1]
+    gram = jax.ops.segment_sum(jnp.einsum("eni,enj->eij", wg, wg), rig_index, n_rigs) + jnp.eye(q)
+    cross = jax.ops.segment_sum(jnp.einsum("eni,en->ei", wg, wr), rig_index, n_rigs)
+    chol = jnp.linalg.cholesky(gram)
+    c = jax.vmap(lambda l_k, b_k: jax.scipy.linalg.solve_triangular(l_k, b_k, lower=True))(chol, cross)
+    logdet = jnp.sum(jnp.log(jnp.diagonal(chol, axis1=-2, axis2=-1)))
+    return -0.5 * (jnp.sum(log_s) + jnp.sum(wr**2) - jnp.sum(c**2)) - logdet
+
+
 def whiten(residuals: Float[ArrayLike, " n"] | Float[ArrayLike, " n k"], times: Float[ArrayLike, " n"], hyper: Hyper,
            sensitivity=None, tolerance=None, observed=None):
     """Whitened residuals (n,) or (n, k): v/√S, independent N(0, 1) under the model (0 at samples not
