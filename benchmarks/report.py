@@ -31,6 +31,7 @@ machine named in each row, after compilation unless a row says otherwise.
 | `benchmarks/predict_public.py` | prediction of a held-out window of the public experiment from a posterior |
 | `benchmarks/fit_speed.py` | the fit's cost under the discrepancy likelihood against independent noise |
 | `benchmarks/discover_discrepancy.py` | discovery's answer on data with a discrepancy but no catalogue effect |
+| `benchmarks/least_squares.py` | growjax's Levenberg–Marquardt engine against optimistix's solvers on the fit's and the control profile's problems; `least_squares_linearize`: `--cases fit_Y --solvers lm_linearize --out benchmarks/results/least_squares_linearize.json` (optimistix linearising the model itself) |
 """
 
 
@@ -153,6 +154,33 @@ def rows_control(r: dict) -> list[tuple[str, str, str]]:
     return out
 
 
+def rows_least_squares(r: dict) -> list[tuple[str, str, str]]:
+    out = []
+    for label, problem in r["problems"].items():
+        out.append((f"**{label}**", "median warm", f"{problem['description']}; cost ½‖r‖² of the point reached; "
+                    "first calls in one process in this order (a later one may reuse traces of the model an "
+                    "earlier one made)"))
+        for name, s in problem["solvers"].items():
+            steps = f"{s['steps']} steps" + (f" ({s['evaluations']} evaluations)" if name == "engine" else "")
+            note = [f"first {_s(s['first_s'])}", steps, f"cost {s['cost']:.6g}",
+                    "converged" if s["converged"] else "not converged"]
+            if "warm_over_engine" in s:
+                note.insert(0, f"{s['warm_over_engine']:.1f}× the engine")
+                note.insert(4, f"{s['cost_over_engine']:+.1e} relative")
+            if "distance_se" in s:
+                note.append(f"{s['distance_se']:.2g} standard errors from the engine's point")
+            if s["outside_box"]:
+                note.append(f"{s['outside_box']} outside the box")
+            elif s["on_bound"]:
+                note.append(f"{s['on_bound']} on a bound")
+            out.append((f"{label}, {name}", _s(s["warm_s"]), ", ".join(note)))
+        out.append((f"{label}, verdict", problem["verdict"],
+                    f"an optimistix solver would replace the engine converged, within {r['within_warm_ratio']:g}× its "
+                    f"warm time, at a cost at most {r['same_cost_relative']:g} relative above its, inside the box; "
+                    f"the solve carrying sensitivities moves the cost by {problem['cost_noise_relative']:.0e} relative"))
+    return out
+
+
 EXTRACTORS = {"simulate": rows_simulate, "sweep": rows_sweep, "agreement": rows_agreement,
               "windows_public": rows_windows, "coverage_discrepancy": rows_coverage,
               "coverage_discrepancy_nominal": rows_coverage, "predict_public": rows_predict,
@@ -161,7 +189,8 @@ EXTRACTORS = {"simulate": rows_simulate, "sweep": rows_sweep, "agreement": rows_
               "discover": rows_discover, "discover_rig_known": rows_discover, "discover_folding_twofold": rows_discover,
               "discover_folding_no_catheter_tolerance": rows_discover,
               "agreement_quick": rows_agreement,
-              "control": rows_control}
+              "control": rows_control, "least_squares": rows_least_squares,
+              "least_squares_linearize": rows_least_squares}
 
 
 def environment_line(r: dict, path: Path) -> str:

@@ -5,9 +5,14 @@ discovery's nested fits, the control profile (residuals linearised by :func:`lin
 forward-difference Jacobian from one batched solve). The posterior's Laplace step does not: its potential is
 not a sum of squares (:func:`growjax.posterior.laplace_unconstrained`).
 
-The loop is driven from Python around one compiled linearisation: optimistix's Levenberg–Marquardt compiles the
-model's primal and tangent solves several times into one program and needs tens of iterations on residuals
-that carry the solver's tolerance-level noise.
+The loop is driven from Python around one compiled linearisation, not by ``optimistix.least_squares``;
+``python benchmarks/least_squares.py`` compares the two on the fit's and the control profile's problems (the
+Benchmarks page). On the fits, optimistix's Levenberg–Marquardt and Dogleg, bare or wrapped in
+``BestSoFarLeastSquares``, end where the engine does (within the cost's own noise: the adaptive solver's steps
+move with the parameters) but take tens of steps at that noise where the engine's gain test stops after a
+few, and are several times slower warm. On the profile they are slower still, and their optimum leaves the
+demand's range, which optimistix cannot bound and the engine keeps. Dogleg also needs the model's tangents
+transposed, which the fast solver's are not (the benchmark gives it J·v from :func:`linearise`).
 """
 
 from __future__ import annotations
