@@ -29,7 +29,9 @@ machine named in each row, after compilation unless a row says otherwise.
 | `benchmarks/windows_public.py` | Y on disjoint windows of the public experiment under each likelihood |
 | `benchmarks/coverage_discrepancy.py` | coverage of the fit's intervals on reference-made data with a discrepancy |
 | `benchmarks/predict_public.py` | prediction of a held-out window of the public experiment from a posterior |
-| `benchmarks/fit_speed.py` | the fit's cost under the discrepancy likelihood against independent noise |
+| `benchmarks/fit_speed.py` | the fit's cost under the discrepancy likelihood against independent noise, and with the rig inferred against it fixed |
+| `benchmarks/rig_agreement.py` | Y's interval from the fit (rig inferred; rig fixed) beside the posterior's, coverage and the posterior's band, rig nominal and drawn |
+| `benchmarks/set_speed.py` | a joint fit of eight experiments against one experiment's fit |
 | `benchmarks/discover_discrepancy.py` | discovery's answer on data with a discrepancy but no catalogue effect |
 | `benchmarks/least_squares.py` | growjax's Levenberg–Marquardt engine against optimistix's solvers on the fit's and the control profile's problems; `least_squares_linearize`: `--cases fit_Y --solvers lm_linearize --out benchmarks/results/least_squares_linearize.json` (optimistix linearising the model itself) |
 """
@@ -113,9 +115,36 @@ def rows_predict(r: dict) -> list[tuple[str, str, str]]:
 
 
 def rows_fit_speed(r: dict) -> list[tuple[str, str, str]]:
-    return [(f"fit, {k}: discrepancy ÷ independent noise", f"{v['ratio_warm']:.2f}",
-             f"{v['discrepancy']['warm_s']:.2f} s against {v['independent']['warm_s']:.2f} s, target ≤ 1.5")
-            for k, v in r.items() if isinstance(v, dict) and "ratio_warm" in v]
+    out = [(f"fit, {k}: discrepancy ÷ independent noise", f"{v['ratio_warm']:.2f}",
+            f"{v['discrepancy']['warm_s']:.2f} s against {v['independent']['warm_s']:.2f} s, target ≤ 1.5")
+           for k, v in r.items() if isinstance(v, dict) and "ratio_warm" in v]
+    out += [(f"fit, {k}: rig inferred ÷ rig fixed", f"{v['ratio_warm_inferred_over_fixed']:.2f}",
+             f"{v['discrepancy']['warm_s']:.2f} s against {v['rig_fixed']['warm_s']:.2f} s")
+            for k, v in r.items() if isinstance(v, dict) and "ratio_warm_inferred_over_fixed" in v]
+    return out
+
+
+def rows_rig_agreement(r: dict) -> list[tuple[str, str, str]]:
+    out = []
+    for group, g in r["summary"].items():
+        out.append((f"{group}: coverage of Y's 90 %, fit with the rig inferred / fixed",
+                    f"{g['fit_inferred']['coverage_90']:.2f} / {g['fit_fixed']['coverage_90']:.2f}",
+                    f"{g['sets']} sets; median widths {g['fit_inferred']['median_width_Pa']:.0f} / "
+                    f"{g['fit_fixed']['median_width_Pa']:.0f} Pa; target 0.80–0.97"))
+        if "posterior" in g:
+            ratio = g["width_ratio_fit_over_posterior"]
+            out.append((f"{group}: width of the fit's interval ÷ the posterior's", f"{ratio['median']:.2f}",
+                        f"{ratio['min']:.2f}–{ratio['max']:.2f} over {g['posterior']['sets']} NUTS sets; target "
+                        f"within 25 %"))
+            out.append((f"{group}: the posterior's replicated 90 % band", f"{g['posterior']['band_coverage_90']:.3f}",
+                        "share of the measured points inside it; target 0.85–0.95"))
+    return out
+
+
+def rows_set_speed(r: dict) -> list[tuple[str, str, str]]:
+    return [("joint fit of the set ÷ one experiment's fit", f"{r['ratio_set_over_one_fit']:.1f}",
+             f"{r['set']['warm_s']:.1f} s against {r['one_experiment_fit']['warm_s']:.1f} s warm; "
+             f"{100 * r['set_simulate_share']:.0f} % in the batched simulations; target ≤ 3")]
 
 
 def rows_discover_discrepancy(r: dict) -> list[tuple[str, str, str]]:
@@ -190,7 +219,8 @@ EXTRACTORS = {"simulate": rows_simulate, "sweep": rows_sweep, "agreement": rows_
               "discover_folding_no_catheter_tolerance": rows_discover,
               "agreement_quick": rows_agreement,
               "control": rows_control, "least_squares": rows_least_squares,
-              "least_squares_linearize": rows_least_squares}
+              "least_squares_linearize": rows_least_squares, "rig_agreement": rows_rig_agreement,
+              "set_speed": rows_set_speed}
 
 
 def environment_line(r: dict, path: Path) -> str:
