@@ -297,7 +297,7 @@ def _starts(batch: _Batch, layout: _Layout, likelihoods, base, names, n_starts: 
     boxes = np.log(np.array([gf.default_range(base, n) for n in names]))
     unit = qmc.LatinHypercube(d=len(names), seed=seed).random(sweep_n)
     values = np.exp(boxes[:, 0] + unit * (boxes[:, 1] - boxes[:, 0]))  # (k, p) SI
-    per_name = np.array([[names.index(lab.split("@")[0])] for lab in layout.labels])[:, 0]
+    per_name = [names.index(lab.split("@")[0]) for lab in layout.labels]  # each coordinate's free name
     costs, zs = [], []
     for v in values:
         z = np.log(v[per_name] / layout.refs)
