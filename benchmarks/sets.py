@@ -1,7 +1,7 @@
 """Joint fits of experiment sets: coverage of Y and the gain over single experiments, with the rig's errors shared
 by the set's experiments (the default) and, for contrast, taken as independent per experiment.
 
-Run: ``python benchmarks/sets.py [--sets 30] [--experiments 4] [--out benchmarks/results/sets.json]``.
+Run: ``python benchmarks/sets.py [--sets 30] [--experiments 4] [--workers 1] [--out benchmarks/results/sets.json]``.
 
 Each set: one robot (Y uniform on 6–12 kPa) on one rig drawn from the default tolerance budget, run under
 ``--experiments`` seeded random pulse trains (amplitude 80–180 kPa, period 1–2.5 s, duty 40–90 %, delay
@@ -85,43 +85,62 @@ def row_of(lo, hi, truth, estimate):
     return {"estimate_Pa": estimate, "interval_90_Pa": [lo, hi], "width_Pa": hi - lo, "covered": bool(lo <= truth <= hi)}
 
 
+def one_set(task):
+    """One set's row (None where a reference run failed): the set drawn from its own seeded stream."""
+    seed, s, experiments, rtol = task
+    rng = np.random.default_rng([seed, s])
+    config = gj.Config(t1=10.0)
+    y, offsets, exps, status = make_set(rng, experiments, rtol)
+    if np.any(status != gj.OK):
+        return None
+    runs = xs.ExperimentSet(tuple(xs.Run(e.source, e) for e in exps))
+    row = {"truth_Pa": y, "rig_offsets": offsets}
+    for label, options in (("joint", {}), ("joint_independent_rig", {"rig_errors": "experiment"})):
+        t0 = time.perf_counter()
+        res = joint.fit_set(runs, free=["Y@robot"], config=config, **options)
+        lab = f"{Y}@robot"
+        row[label] = {**row_of(*res.interval_90[lab], y, res.estimate[lab]), "wall_s": time.perf_counter() - t0,
+                      "simulate_s": res.simulate_s}
+    singles = []
+    for run in runs:
+        t0 = time.perf_counter()
+        inputs = gj.Inputs(catheter_length=gj.Sampled(TIME, CATHETER),
+                           pressure_demand=gj.Sampled(TIME, run.experiment["pressure_demand_Pa"]))
+        res = gf.fit(TIME, run.length, inputs, free=["Y"], config=config, n_starts=1, sweep_n=16)
+        singles.append({**row_of(*res.interval_90[Y], y, res.estimate[Y]), "wall_s": time.perf_counter() - t0})
+    row["single"] = singles
+    row["joint_narrower_than_best_single"] = bool(row["joint"]["width_Pa"] < min(x["width_Pa"] for x in singles))
+    return row
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sets", type=int, default=30)
     ap.add_argument("--experiments", type=int, default=4)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--rtol", type=float, default=1e-6, help="the reference configuration's tolerance")
+    ap.add_argument("--workers", type=int, default=1, help="sets run at a time, one process each")
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "sets.json"))
     args = ap.parse_args()
     clock = time.perf_counter()
-    rng = np.random.default_rng(args.seed)
-    config = gj.Config(t1=10.0)
+    tasks = [(args.seed, s, args.experiments, args.rtol) for s in range(args.sets)]
+    if args.workers > 1:
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(args.workers, mp_context=mp.get_context("spawn")) as pool:
+            done = list(pool.map(one_set, tasks))
+    else:
+        done = [one_set(t) for t in tasks]
     rows = []
-    for s in range(args.sets):
-        y, offsets, exps, status = make_set(rng, args.experiments, args.rtol)
-        if np.any(status != gj.OK):
-            print(f"set {s}: a reference run failed ({status}); skipped", flush=True)
+    for s, row in enumerate(done):
+        if row is None:
+            print(f"set {s}: a reference run failed; skipped", flush=True)
             continue
-        runs = xs.ExperimentSet(tuple(xs.Run(e.source, e) for e in exps))
-        row = {"truth_Pa": y, "rig_offsets": offsets}
-        for label, options in (("joint", {}), ("joint_independent_rig", {"rig_errors": "experiment"})):
-            t0 = time.perf_counter()
-            res = joint.fit_set(runs, free=["Y@robot"], config=config, **options)
-            lab = f"{Y}@robot"
-            row[label] = {**row_of(*res.interval_90[lab], y, res.estimate[lab]), "wall_s": time.perf_counter() - t0,
-                          "simulate_s": res.simulate_s}
-        singles = []
-        for run in runs:
-            t0 = time.perf_counter()
-            inputs = gj.Inputs(catheter_length=gj.Sampled(TIME, CATHETER),
-                               pressure_demand=gj.Sampled(TIME, run.experiment["pressure_demand_Pa"]))
-            res = gf.fit(TIME, run.length, inputs, free=["Y"], config=config, n_starts=1, sweep_n=16)
-            singles.append({**row_of(*res.interval_90[Y], y, res.estimate[Y]), "wall_s": time.perf_counter() - t0})
-        row["single"] = singles
-        row["joint_narrower_than_best_single"] = bool(row["joint"]["width_Pa"] < min(x["width_Pa"] for x in singles))
         rows.append(row)
         j, i = row["joint"], row["joint_independent_rig"]
-        print(f"set {s:2d} Y {y:7.0f}: joint [{j['interval_90_Pa'][0]:.0f}, {j['interval_90_Pa'][1]:.0f}] "
+        singles = row["single"]
+        print(f"set {s:2d} Y {row['truth_Pa']:7.0f}: joint [{j['interval_90_Pa'][0]:.0f}, {j['interval_90_Pa'][1]:.0f}] "
               f"{j['wall_s']:.0f} s; independent rig [{i['interval_90_Pa'][0]:.0f}, {i['interval_90_Pa'][1]:.0f}]; "
               f"best single width {min(x['width_Pa'] for x in singles):.0f} Pa "
               f"(single fits {sum(x['wall_s'] for x in singles):.0f} s)", flush=True)

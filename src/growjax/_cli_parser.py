@@ -227,8 +227,16 @@ def build_parser():
                           "one per experiment (treats them as independent: over-confident on one rig)")
 
     post = sub.add_parser("posterior", formatter_class=fmt,
-                          help="NUTS posterior of Y, ext, n (or Y, phi_L, n_L) and the noise")
-    _shared(post, "posterior")
+                          help="NUTS posterior of Y, ext, n (or Y, phi_L, n_L) and the noise; of a population of "
+                               "robots with --hierarchical")
+    _shared(post, "posterior", many=True)
+    post.add_argument("--hierarchical", default=None, metavar="NAME",
+                      help="a TOML manifest of several robots (or several files): each robot's NAME drawn from a "
+                           "log-normal population whose median and spread are sampled, the data entering through "
+                           "the set's joint fit; with the predictive for a new robot (default: off)")
+    post.add_argument("--predict", default=None, metavar="CSV",
+                      help="with --hierarchical: the input (demand, catheter) of the new robot's experiment "
+                           "(default: the set's first experiment's)")
     post.add_argument("--law", choices=["reference", "lockhart"], default="reference",
                       help="growth law: the published velocity term, or Lockhart's")
     post.add_argument("--emulate", action="store_true",

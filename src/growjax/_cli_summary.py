@@ -117,6 +117,8 @@ def _fit(s: dict, name: str) -> list[str]:
 
 
 def _posterior(s: dict, name: str) -> list[str]:
+    if s.get("hierarchical"):
+        return _population(s, name)
     lines = [(f"posterior: {name}, {s['growth_law']} growth law, {s['chains']} chains × "
              f"({s['warmup']} + {s['samples']})"), *_origin_lines(s["fixed_parameters"])]
     for p, v in s["parameters"].items():
@@ -133,6 +135,29 @@ def _posterior(s: dict, name: str) -> list[str]:
     lines.append(f"  R-hat max {s['rhat_max']:.3f}, bulk ESS min {s['ess_bulk_min']:.0f}, divergences "
                  f"{s['divergences']}, measured points in the 90 % band {s['coverage_90']:.2f}; {s['wall_s']:.0f} s")
     lines.append(f"  wrote {s['inference_data']}")
+    return lines
+
+
+def _population(s: dict, name: str) -> list[str]:
+    p = s["parameter"]
+    med, sd = s["population_median"], s["population_sd_log"]
+    fit = s["joint_fit"]
+    lines = [f"posterior: {name}, population of {len(s['robots'])} robots' {p}, {s['chains']} chains × "
+             f"({s['warmup']} + {s['samples']}); the data through the joint fit ({fit['status']}, rig {fit['rig']})",
+             f"  population median = {_value(p, med['median'])} (90 % {_value(p, med['interval_90'][0])} – "
+             f"{_value(p, med['interval_90'][1])}); spread (sd of ln) = {sd['median']:.3f} "
+             f"(90 % {sd['interval_90'][0]:.3f} – {sd['interval_90'][1]:.3f})"]
+    for robot, v in s["robot_posterior"].items():
+        lines.append(f"  {robot}: {_value(p, v['median'])} (90 % {_value(p, v['lower_90'])} – {_value(p, v['upper_90'])})")
+    new = s["new_robot"]
+    lo, hi = new["band_90_final_length_m"]
+    lines.append(f"  a new robot under {new['input']}: final length {_mm(new['median_final_length_m'])} "
+                 f"(90 % {_mm(lo)} – {_mm(hi)}); median band width {_mm(new['median_band_width_m'])}")
+    d = s["diagnostics"]
+    lines.append(f"  R-hat of mu {d['mu']['r_hat'] or float('nan'):.3f}, of s {d['s']['r_hat'] or float('nan'):.3f}; "
+                 f"ESS min {min(d[k]['ess'] for k in ('mu', 's', 'ln_theta')):.0f}; divergences {d['divergences']}; "
+                 f"{s['wall_s']:.0f} s")
+    lines.append(f"  wrote {s['posterior_file']}, {s['figure']}")
     return lines
 
 

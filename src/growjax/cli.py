@@ -134,19 +134,8 @@ def _fit_set(args, paths) -> dict:
     from growjax.plotting import set_figure
 
     config = make_config(args, args.drive, adjoint="forward")
+    exps = _read_set(args, paths, config)
     fixed = dict(parse_param(p) for p in args.param)
-    if len(paths) == 1:
-        exps = xs.ExperimentSet.from_manifest(paths[0], catheter=args.catheter)
-    else:
-        window = (args.t_start if args.t_start is not None else config.t0, config.t1)
-        exps = xs.ExperimentSet.from_files(paths, drive=args.drive, window=window, catheter=args.catheter)
-        exps = xs.ExperimentSet(tuple(dataclasses.replace(r, parameters={**recorded_parameters(Path(p)),
-                                                                          **r.parameters})
-                                      for r, p in zip(exps, paths)))
-    if fixed:
-        exps = xs.ExperimentSet(tuple(dataclasses.replace(r, parameters={**r.parameters, **fixed}) for r in exps))
-    for run in exps:
-        gj.validate(run.base())
     free = args.free or ["Y@robot"]
     scopes = [xs.Scope.parse(f, exps.runs[0].base()) for f in free]  # a bad scope is refused before any work
     started = _progress_note(args, f"fit: {', '.join(free)} over {len(exps)} experiments from {args.starts} starts")
@@ -173,6 +162,80 @@ def _fit_set(args, paths) -> dict:
                **result.summary(), "figure": str(fig)}
     if result.status != "converged":
         raise RunFailed(f"the joint fit did not converge ({result.status})", summary)
+    return summary
+
+
+def _read_set(args, paths, config):
+    """The experiment set of ``paths`` (one TOML manifest, or several files: one robot on one rig), with the
+    values recorded beside each file and ``--param`` fixed."""
+    import dataclasses
+
+    import growjax as gj
+    from growjax import experiments as xs
+
+    fixed = dict(parse_param(p) for p in args.param)
+    if len(paths) == 1:
+        exps = xs.ExperimentSet.from_manifest(paths[0], catheter=args.catheter)
+    else:
+        window = (args.t_start if args.t_start is not None else config.t0, config.t1)
+        exps = xs.ExperimentSet.from_files(paths, drive=args.drive, window=window, catheter=args.catheter)
+        exps = xs.ExperimentSet(tuple(dataclasses.replace(r, parameters={**recorded_parameters(Path(p)),
+                                                                          **r.parameters})
+                                      for r, p in zip(exps, paths)))
+    if fixed:
+        exps = xs.ExperimentSet(tuple(dataclasses.replace(r, parameters={**r.parameters, **fixed}) for r in exps))
+    for run in exps:
+        gj.validate(run.base())
+    return exps
+
+
+def _population(args, paths) -> dict:
+    """``growjax posterior SET.toml --hierarchical NAME``: the joint fit of the set, then the population of its
+    robots' NAME, and the predictive for a new robot of the same build."""
+    import growjax as gj
+    from growjax import experiment as ex
+    from growjax import experiments as xs
+    from growjax import joint
+    from growjax import population as pop
+    from growjax.params import resolve_name
+    from growjax.plotting import population_figure
+
+    config = make_config(args, args.drive, adjoint="forward")
+    exps = _read_set(args, paths, config)
+    base = exps.runs[0].base()
+    name = resolve_name(base, args.hierarchical)
+    if len(exps.robots) < 2:
+        raise ValueError(f"--hierarchical needs experiments of two or more robots, got robot {exps.robots[0]!r}: "
+                         "name each experiment's robot in a manifest")
+    started = _progress_note(args, f"posterior: joint fit of {name}@robot over {len(exps)} experiments")
+    fit = joint.fit_set(exps, free=[f"{name}@robot"], config=config, seed=args.seed, discrepancy=args.discrepancy,
+                        tolerances=tolerances_of(args))
+    if fit.status != "converged":
+        raise RunFailed(f"the joint fit did not converge ({fit.status})", {"command": "posterior", **fit.summary()})
+    _progress_note(args, f"posterior: joint fit done in {time.perf_counter() - started:.1f} s; NUTS on the population")
+    post = pop.sample(fit, name, chains=args.chains, warmup=args.warmup, samples=args.samples, seed=args.seed,
+                      progress=not args.quiet)
+    if args.predict:
+        new = ex.read(Path(args.predict), catheter=args.catheter)
+        run = xs.Run("new robot", new, drive=exps.runs[0].drive, robot="new robot", rig=exps.runs[0].rig,
+                     parameters=exps.runs[0].parameters)
+    else:
+        run = exps.runs[0]
+    band = pop.predict_new_robot(post, run, config, draws=400, seed=args.seed)
+    out = _out(args)
+    nc = pop.save(post, out / "population.nc")
+    fig = population_figure(post, band, out / "population.png")
+    summary = {"command": "posterior", "hierarchical": name, "data": [str(p) for p in paths], "drive": args.drive,
+               "t_end_s": args.t_end, "fidelity": config.fidelity, "chains": args.chains, "warmup": args.warmup,
+               "samples": args.samples, **post.summary(), "joint_fit": fit.summary(),
+               "new_robot": {"input": args.predict or run.name, "median_final_length_m": float(band["median"][-1]),
+                             "band_90_final_length_m": [float(band["lower"][-1]), float(band["upper"][-1])],
+                             "median_band_width_m": float(np.median(band["upper"] - band["lower"])),
+                             "failed_draws": band["failed"]},
+               "wall_s": time.perf_counter() - started, "posterior_file": str(nc), "figure": str(fig)}
+    rhat = post.diagnostics["mu"]["r_hat"]
+    if args.chains > 1 and (rhat is None or not math.isfinite(rhat) or rhat > 1.1):
+        raise RunFailed(f"the chains did not mix (R-hat of mu {rhat}); run more --warmup and --samples", summary)
     return summary
 
 
@@ -410,6 +473,13 @@ def posterior_command(args) -> dict:
     from growjax import experiment as ex
     from growjax import posterior as gpost
 
+    paths = list(args.data or [])
+    if args.hierarchical is not None:
+        return _population(args, paths)
+    if len(paths) > 1 or (paths and Path(paths[0]).suffix.lower() == ".toml"):
+        raise ValueError("a posterior over several experiments is the population's: give --hierarchical NAME "
+                         "(for one robot's experiments, `growjax fit` gives their joint intervals)")
+    args.data = paths[0] if paths else None
     data, exp, base, origin = _setup(args, args.drive, growth_law=args.law)
     if "robot_length_m" not in exp:
         raise ValueError(f"{data} has no robot_length_m column to calibrate against")
@@ -573,7 +643,7 @@ def main(argv=None) -> int:
         _use_all_cpu_cores()
     elif args.command == "posterior":
         _use_all_cpu_cores(at_least=args.chains)  # chains in parallel, one per device
-        if not args.emulate:  # thousands of gradients through the solver: its loop compiled whole
+        if not args.emulate and args.hierarchical is None:  # thousands of gradients through the solver: its loop compiled whole
             xla_flags.apply()
     from growjax.datasets import DatasetError
     from growjax._cli_sweep import Stopped, start_distributed

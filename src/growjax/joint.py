@@ -35,6 +35,11 @@ from growjax.config import Config
 from growjax.experiments import ExperimentSet, Scope
 
 RIG_ERRORS = ("shared", "experiment")
+# The rig's sensitivities are taken again where the fit puts the rig (at most this many linearisations, until the
+# rig's errors move by less than this share of their tolerance): with three or more runs on one rig the data pull
+# its errors a good part of a tolerance from nominal, where the secants taken at nominal bias every robot's Y alike.
+RELINEARISE_STEPS = 3
+RELINEARISE_TOLERANCE = 0.1
 
 
 @dataclasses.dataclass
@@ -58,6 +63,9 @@ class SetFitResult:
     wall_s: float
     simulate_s: float  # of which in the batched simulations and Jacobians
     programs: int = 1  # batched groups of runs: one compiled program each
+    rig_labels: tuple = ()  # (Q,) (rig key, tolerance name) of the fitted rig errors b, when inferred
+    rig_vector: np.ndarray | None = None  # (Q,) fitted b = ln(ψ/ψ₀)
+    joint_covariance: np.ndarray | None = None  # (P + Q, P + Q) of (z, b), the z block as covariance_log
 
     def summary(self) -> dict:
         return {"status": self.status, "rig": self.rig, "rig_errors": self.rig_errors,
@@ -140,19 +148,48 @@ def fit_set(
                                   max_steps, gf.LM_TOLERANCE, bounds=bounds) for z0 in z0s]
     k_best = int(np.argmin([s[1] for s in solved]))
     z, converged = np.asarray(solved[k_best][0]), bool(solved[k_best][2])
-    sensitivities = batch.sensitivities(z, layout, tol) if tol else None  # at the least-squares optimum
-    if sensitivities is not None and rig == "inferred":
-        likelihoods = [lik.with_tolerances(g, tol, inferred=True) for lik, g in zip(likelihoods, sensitivities)]
-    b = np.zeros(len(layout.rig_labels) if likelihoods[0].inferred else 0)
-    hypers = [None] * len(runs)
     model_error = gf.default_model_error(config) if model_error is None else model_error
+    plain = likelihoods
+    centre = np.zeros(len(layout.rig_labels) if tol and rig == "inferred" else 0)  # rig point of linearisation
+    b, hypers = centre.copy(), [None] * len(runs)
+    for step in range(RELINEARISE_STEPS):
+        sensitivities = batch.sensitivities(z, layout, tol) if tol else None
+        if sensitivities is not None and rig == "inferred":
+            likelihoods = [lik.with_tolerances(g, tol, inferred=True) for lik, g in zip(plain, sensitivities)]
+        z, b, hypers, cost, converged = _gls(batch, layout, likelihoods, hypers, z, b - centre, centre, bounds,
+                                             discrepancy, max_steps)
+        b = centre + b
+        if (centre.size == 0 or step == RELINEARISE_STEPS - 1
+                or np.all(np.abs(b - centre) <= RELINEARISE_TOLERANCE * _rig_sd(likelihoods, layout))):
+            break
+        centre = b.copy()  # the rig's errors moved: take the sensitivities again where the data put the rig
+        spent = batch.simulate_s
+        batch = _Batch([_at_rig(pr, layout, e, centre, tol) for e, pr in enumerate(problems)])
+        batch.simulate_s = spent
+    outs = batch.linearised(z, layout)
+    if tol and rig == "fixed":
+        likelihoods = [lik.with_tolerances(g, tol) for lik, g in zip(likelihoods, sensitivities)]
+    cov, parts, info, joint = _covariance(outs, likelihoods, layout, hypers, b - centre, model_error, tol, rig,
+                                          centre)
+    result = _result(z, b, cov, parts, info, outs, likelihoods, layout, hypers, runs, tol, rig, rig_errors, cost,
+                     converged, clock, batch.simulate_s, centre)
+    result.programs = len(batch.groups)
+    if joint is not None:
+        result.rig_labels, result.rig_vector, result.joint_covariance = tuple(layout.rig_labels), np.asarray(b), joint
+    return result
+
+
+def _gls(batch, layout: _Layout, likelihoods, hypers, z, b, centre, bounds, discrepancy: str, max_steps: int):
+    """Alternate each run's hyperparameter mode and the whitened Gauss–Newton fit of (z, b), b the rig's errors
+    from ``centre``. Returns (z, b, hypers, cost, converged)."""
     p_all = z.size
+    cost, converged = np.nan, False
     for _ in range(gf.OUTER_STEPS):
         outs = batch.linearised(z, layout)
         hypers = [lik.estimate(r, discrepancy, h) for lik, (r, _), h in zip(likelihoods, outs, hypers)]
         w_new, cost, converged, _, jac_w = levenberg_marquardt(
             lambda w, hs=tuple(hypers): _whitened(batch.linearised(w[:p_all], layout), likelihoods, layout, hs,
-                                                 w[p_all:]),
+                                                 w[p_all:], centre),
             np.concatenate([z, b]), max_steps, gf.LM_TOLERANCE, bounds=_with_rig(bounds, b.size),
             cost_resolution=gf.COST_RESOLUTION)
         sd = np.sqrt(np.diag(np.linalg.pinv(jac_w.T @ jac_w, rcond=1e-10, hermitian=True)))
@@ -160,14 +197,14 @@ def fit_set(
         z, b = np.asarray(w_new[:p_all]), np.asarray(w_new[p_all:])
         if np.all(moved <= gf.OUTER_TOLERANCE * sd):
             break
-    outs = batch.linearised(z, layout)
-    if tol and rig == "fixed":
-        likelihoods = [lik.with_tolerances(g, tol) for lik, g in zip(likelihoods, sensitivities)]
-    cov, parts, info = _covariance(outs, likelihoods, layout, hypers, b, model_error, tol, rig)
-    result = _result(z, b, cov, parts, info, outs, likelihoods, layout, hypers, runs, tol, rig, rig_errors, cost,
-                     converged, clock, batch.simulate_s)
-    result.programs = len(batch.groups)
-    return result
+    return z, b, hypers, cost, converged
+
+
+def _at_rig(problem: gf.Problem, layout: _Layout, e: int, centre, tol: dict) -> gf.Problem:
+    """``problem`` with its rig's toleranced parameters at ψ₀·e^centre."""
+    values = {name: gp.get(problem.base, name) * np.exp(centre[layout.rig_index[e, j]])
+              for j, name in enumerate(tol)}
+    return eqx.tree_at(lambda pr: pr.base, problem, gp.replace(problem.base, **values))
 
 
 def _layout(experiments: ExperimentSet, scopes, bases, problems, tol: dict, rig_errors: str) -> _Layout:
@@ -321,9 +358,10 @@ def _weighted(outs, likelihoods, layout: _Layout):
     return np.concatenate(rs), np.concatenate(js)
 
 
-def _whitened(outs, likelihoods, layout: _Layout, hypers, b):
+def _whitened(outs, likelihoods, layout: _Layout, hypers, b, centre=None):
     """The set's whitened residuals and Jacobian of w = (z (P,), b (Q,)): every run whitened under its own
-    hyperparameters, its rig columns (when inferred) those of its rig's errors, then the rig's prior rows b/u."""
+    hyperparameters, its rig columns (when inferred) those of its rig's errors b from the point ``centre`` (Q,)
+    where the runs are linearised, then the rig's prior rows (centre + b)/u."""
     p_all, q_all = len(layout.labels), np.asarray(b).size
     rs, js = [], []
     for e, ((r, jac), lik, h) in enumerate(zip(outs, likelihoods, hypers)):
@@ -338,7 +376,7 @@ def _whitened(outs, likelihoods, layout: _Layout, hypers, b):
         js.append(full)
     if q_all:
         u = _rig_sd(likelihoods, layout)
-        rs.append(np.asarray(b) / u)
+        rs.append((np.asarray(b) + (0.0 if centre is None else np.asarray(centre))) / u)
         js.append(np.concatenate([np.zeros((q_all, p_all)), np.diag(1.0 / u)], axis=1))
     return np.concatenate(rs), np.concatenate(js)
 
@@ -357,10 +395,11 @@ def _run_rows(likelihood: gf.Likelihood, r, jac, hyper, b):
     return w[:, 0], w[:, 1:1 + p], w[:, 1 + p:], r[n:], jac[n:]
 
 
-def _covariance(outs, likelihoods, layout: _Layout, hypers, b, model_error: float, tol: dict, rig: str):
+def _covariance(outs, likelihoods, layout: _Layout, hypers, b, model_error: float, tol: dict, rig: str,
+                centre=None):
     """(covariance (P, P) of z, its parts {source: (P, P)}, the information on z (P, P)): as
     :meth:`growjax.fit.Likelihood.covariance`, summed over the runs, a shared rig error counted once."""
-    _, jac_w = _whitened(outs, likelihoods, layout, hypers, b)
+    _, jac_w = _whitened(outs, likelihoods, layout, hypers, b, centre)
     full = np.linalg.pinv(jac_w.T @ jac_w, rcond=1e-10, hermitian=True)
     p_all, size = len(layout.labels), full.shape[0]
     parts: dict = {}
@@ -398,11 +437,16 @@ def _covariance(outs, likelihoods, layout: _Layout, hypers, b, model_error: floa
             c = full[:p_all, p_all + j] / u[j] if rig == "inferred" else fixed_gain[:, j] * u[j]
             add(name, np.outer(c, c))
     info = np.linalg.pinv(full[:p_all, :p_all], rcond=1e-12, hermitian=True)
-    return sum(parts.values()), parts, info
+    cov = sum(parts.values())
+    joint = None
+    if rig == "inferred" and tol:
+        joint = full.copy()
+        joint[:p_all, :p_all] = cov
+    return cov, parts, info, joint
 
 
 def _result(z, b, cov, parts, info, outs, likelihoods, layout: _Layout, hypers, runs, tol, rig, rig_errors, cost,
-            converged, clock, simulate_s) -> SetFitResult:
+            converged, clock, simulate_s, centre) -> SetFitResult:
     theta = layout.refs * np.exp(z)
     evals, evecs = np.linalg.eigh(info)
     blind = np.zeros(theta.size, bool)
@@ -425,7 +469,7 @@ def _result(z, b, cov, parts, info, outs, likelihoods, layout: _Layout, hypers, 
     for e, ((r, _), lik, hyper, run) in enumerate(zip(outs, likelihoods, hypers, runs)):
         r_len = np.asarray(r)[: lik.n_len] * lik.sigma_length
         if lik.inferred:
-            r_len = r_len + np.asarray(lik.sensitivity) @ np.asarray(b)[layout.rig_index[e]]
+            r_len = r_len + np.asarray(lik.sensitivity) @ (np.asarray(b) - centre)[layout.rig_index[e]]
         per_run.append({"name": run.name, "robot": run.robot, "rig": run.rig, "drive": run.drive,
                         "rmse_length_m": float(np.sqrt(np.mean(r_len**2))), "discrepancy": hyper.as_dict(),
                         "samples_used": int(np.sum(np.asarray(lik.used)))})

@@ -66,6 +66,31 @@ def set_figure(traces, path, title: str = ""):
     return _save(fig, path)
 
 
+def population_figure(population, band: dict, path):
+    """Left: each robot's posterior of the population's parameter (median, 90 %) and the population's median
+    with its 90 % interval. Right: a new robot's predictive length band (mm) against time."""
+    label, scale = _axis(population.name)
+    fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(10, 3.6), constrained_layout=True)
+    theta = np.exp(population.ln_theta) * scale
+    q = np.quantile(theta, [0.05, 0.5, 0.95], axis=0)
+    y = np.arange(len(population.robots))
+    ax0.errorbar(q[1], y, xerr=[q[1] - q[0], q[2] - q[1]], fmt="o", color="C0", label="robot")
+    med = np.quantile(np.exp(population.mu) * scale, [0.05, 0.5, 0.95])
+    ax0.axvspan(med[0], med[2], color="C1", alpha=0.25, label="population median, 90 %")
+    ax0.axvline(med[1], color="C1")
+    ax0.set_yticks(y, population.robots, fontsize=8)
+    ax0.set_xlabel(label)
+    ax0.legend(fontsize=8)
+    t = band["times"]
+    ax1.fill_between(t, 1e3 * band["lower"], 1e3 * band["upper"], color="C2", alpha=0.3,
+                     label=f"new robot, {round(100 * band['level'])} %")
+    ax1.plot(t, 1e3 * band["median"], color="C2")
+    ax1.set_xlabel("time (s)")
+    ax1.set_ylabel("length (mm)")
+    ax1.legend(fontsize=8, loc="upper left")
+    return _save(fig, path)
+
+
 _LABELS = {
     "robot.yield_pressure": ("Y (kPa)", 1e-3),
     "robot.extensibility": ("ext φ", 1.0),
