@@ -141,7 +141,8 @@ def geometry(exp, inputs, base, cfg, chains, warmup, samples, target_accepts, ma
     The coordinates are ``posterior.sample``'s (:func:`growjax.posterior.bound_start`: a prior pressed against a
     bound in a softplus coordinate, start and mass matrix found again there); ``logit``: every prior in NumPyro's
     own coordinate, as before that."""
-    import arviz as az
+    import arviz_base as azb
+    import arviz_stats as azs
     import numpyro
     from numpyro.infer import MCMC, NUTS
 
@@ -181,7 +182,7 @@ def geometry(exp, inputs, base, cfg, chains, warmup, samples, target_accepts, ma
         draw = {k: np.asarray(v) for k, v in mcmc.get_extra_fields(group_by_chain=True).items()}
         sites = [p.site for p in priors] + ["sigma"]
         post = {k: np.asarray(v) for k, v in mcmc.get_samples(group_by_chain=True).items() if k in sites}
-        rhat = az.rhat(az.convert_to_dataset(post))
+        rhat = azs.rhat(azb.convert_to_dataset(post))
         rows.append({"target_accept": accept, "leapfrog_per_draw_warmup": float(warm["num_steps"].mean()),
                      "leapfrog_per_draw_sampling": float(draw["num_steps"].mean()),
                      "leapfrog_per_chain": float(warm["num_steps"].sum(1).mean() + draw["num_steps"].sum(1).mean()),

@@ -192,13 +192,13 @@ def test_microstepping_driver_is_the_same_in_both_configurations():
 
 
 def test_posterior_draws_are_joint_seeded_and_only_model_parameters(tmp_path):
-    import arviz as az
+    import arviz_base as azb
 
     rng = np.random.default_rng(0)
     y = 8000.0 + 50.0 * rng.standard_normal((2, 40))
     post = {"Y": y, "ext": 10.0 * y, "sigma": np.full((2, 40), 1e-3), "length_model": rng.random((2, 40, 3))}
     path = tmp_path / "posterior.nc"
-    az.from_dict(posterior=post).to_netcdf(str(path))
+    azb.from_dict({"posterior": post}).to_netcdf(str(path))
     draws = gc.parameter_draws(16, 3, str(path))
     assert set(draws) == {"Y", "ext"}  # σ and derived sites are not model parameters
     np.testing.assert_array_equal(draws["ext"], 10.0 * draws["Y"])  # one draw index for every variable

@@ -1,22 +1,38 @@
-"""A posterior's InferenceData works with ArviZ's standard calls: summary, LOO, the predictive check, the trace and
-posterior plots, and a NetCDF round trip."""
+"""A posterior's DataTree works with ArviZ 1.x's standard calls (arviz-base, arviz-stats, arviz-plots): summary, LOO,
+the predictive check, the trace and posterior plots, and a netCDF round trip."""
+
+import subprocess
+import sys
 
 import matplotlib
 
 matplotlib.use("Agg")
 
-import arviz as az
+import arviz_stats as azs
 import jax.numpy as jnp
 import matplotlib.pyplot as plt
 import numpy as np
 import pytest
+import xarray as xr
 
 import growjax as gj
 from growjax import emulator as em
+from growjax import plotting as gplot
 from growjax import posterior as gpost
+
+azp = gplot.arviz_plots()
 
 TIMES = np.arange(0.01, 0.81, 0.01)  # s
 GROUPS = {"posterior", "posterior_predictive", "log_likelihood", "sample_stats", "observed_data", "constant_data"}
+
+
+def _minor(module) -> tuple:
+    return tuple(int(p) for p in module.__version__.split(".")[:2])
+
+
+# arviz-plots before 1.1 lays out its grid plots (plot_trace_dist, plot_rank_dist) with a call xarray 2026.4 rejects
+# (a Dataset passed to the Dataset constructor, a TypeError); the pair is fixed in arviz-plots 1.1 (Python ≥ 3.12).
+GRID_BROKEN = _minor(azp) < (1, 1) and _minor(xr) >= (2026, 4)
 
 
 def _linear_emulator(prior):
@@ -43,7 +59,7 @@ def small_posterior():
 
 def test_the_groups_hold_what_arviz_expects_where_it_looks(small_posterior):
     idata = small_posterior.idata
-    assert set(idata.groups()) == GROUPS
+    assert isinstance(idata, xr.DataTree) and set(idata.children) == GROUPS
     assert set(idata.posterior.data_vars) == {"Y", "sigma"}  # the model's length is not a sampled site
     assert set(idata.posterior_predictive.data_vars) == {"length", "length_new_experiment", "length_model"}
     assert set(idata.observed_data.data_vars) == {"length"}  # no solver_ok beside the data
@@ -56,31 +72,49 @@ def test_the_groups_hold_what_arviz_expects_where_it_looks(small_posterior):
     assert np.std(noise) == pytest.approx(2e-4, rel=0.3)
 
 
+def _plotted(plots) -> int:
+    """Axes in the matplotlib figure of an arviz-plots result (figures closed)."""
+    n = len(plots.viz["figure"].item().axes)
+    plt.close("all")
+    return n
+
+
 def test_arviz_summary_loo_and_plots_run_on_it_and_it_survives_netcdf(small_posterior, tmp_path):
     idata = small_posterior.idata
-    table = az.summary(idata)
+    table = azs.summary(idata)
     assert list(table.index) == ["Y", "sigma"]  # by default: the sampled sites, not 80 entries of length_model
-    assert table.loc["Y", "mean"] == pytest.approx(9000.0, abs=300.0)
-    loo = az.loo(idata)
-    assert np.isfinite(loo.elpd_loo) and loo.n_data_points == TIMES.size
-    for plot in (az.plot_ppc, az.plot_trace, az.plot_posterior):
-        assert np.asarray(plot(idata)).size >= 1, plot.__name__
-        plt.close("all")
+    assert table.loc["Y", "mean"] == pytest.approx(9000.0, abs=300.0) and table.loc["Y", "r_hat"] < 1.1
+    loo = azs.loo(idata)
+    assert np.isfinite(loo.elpd) and loo.n_data_points == TIMES.size
+    with plt.style.context("arviz-variat"):
+        assert _plotted(azp.plot_ppc_dist(idata, var_names=["length"])) == 1  # measured against replicated
+        assert _plotted(azp.plot_dist(idata)) == 2  # the posterior plot: Y and σ
+        assert _plotted(azp.plot_trace(idata)) == 2
     path = tmp_path / "posterior.nc"
     idata.to_netcdf(str(path))
-    back = az.from_netcdf(str(path))
-    assert set(back.groups()) == GROUPS
-    np.testing.assert_array_equal(back.posterior_predictive["length_model"], idata.posterior_predictive["length_model"])
-    np.testing.assert_array_equal(back.constant_data["scored"], idata.constant_data["scored"])
-    assert az.summary(back).equals(table)
-    az.plot_ppc(back)
-    plt.close("all")
+    with xr.open_datatree(str(path)) as back:  # ArviZ 1.x's from_netcdf
+        assert set(back.children) == GROUPS
+        np.testing.assert_array_equal(back.posterior_predictive["length_model"],
+                                      idata.posterior_predictive["length_model"])
+        np.testing.assert_array_equal(back.constant_data["scored"], idata.constant_data["scored"])
+        assert back.constant_data["scored"].dtype == bool
+        assert azs.summary(back).equals(table)
+        assert _plotted(azp.plot_ppc_dist(back, var_names=["length"])) == 1
 
 
-def test_a_likelihood_that_scores_some_samples_keeps_every_sample_observed():
+@pytest.mark.parametrize("name", [
+    pytest.param(name, marks=pytest.mark.xfail(GRID_BROKEN, raises=TypeError, strict=True,
+                                               reason="arviz-plots < 1.1 with xarray ≥ 2026.4"))
+    for name in ("plot_trace_dist", "plot_rank_dist")])
+def test_arviz_trace_plots_with_marginals(small_posterior, name):
+    with plt.style.context("arviz-variat"):
+        assert _plotted(getattr(azp, name)(small_posterior.idata)) >= 4  # Y and σ: marginal and trace or ranks
+
+
+def test_a_likelihood_that_scores_some_samples_keeps_every_sample_observed(tmp_path):
     """With a discrepancy on a piecewise-linear record only its keyframes are scored (the log-likelihood is 0
-    elsewhere); the observed, replicated and model lengths still cover every sample, so the predictive check
-    pairs them, and ``scored`` says which samples LOO counts."""
+    elsewhere, no term of it); the observed, replicated and model lengths still cover every sample, so the
+    predictive check pairs them, and the log-likelihood holds the scored samples alone, those LOO counts."""
     rng = np.random.default_rng(1)
     chains, draws, n = 2, 30, TIMES.size
     model = 2e-2 * TIMES * (1.0 + 0.01 * rng.standard_normal((chains, draws, 1)))
@@ -95,6 +129,43 @@ def test_a_likelihood_that_scores_some_samples_keeps_every_sample_observed():
     assert idata.observed_data["length"].shape == (n,) and int(idata.constant_data["scored"].sum()) == 10
     assert set(idata.sample_stats.data_vars) == {"diverging", "energy", "n_steps", "tree_depth", "solver_ok"}
     assert int(idata.sample_stats["tree_depth"].max()) == 3  # 7 leapfrog steps: a tree of depth 3
-    az.plot_ppc(idata)
-    plt.close("all")
-    assert az.loo(idata).n_data_points == n
+    assert idata.posterior.attrs["inference_library"] == "numpyro"
+    np.testing.assert_array_equal(idata.log_likelihood["time"], TIMES[scored])
+    np.testing.assert_array_equal(idata.log_likelihood["length"], loglik[..., scored])
+    assert _plotted(azp.plot_ppc_dist(idata, var_names=["length"])) == 1
+    assert azs.loo(idata).n_data_points == 10
+    idata.to_netcdf(str(tmp_path / "p.nc"))
+    with xr.open_datatree(str(tmp_path / "p.nc")) as back:
+        np.testing.assert_array_equal(back.log_likelihood["time"], TIMES[scored])
+        assert back.observed_data["length"].shape == (n,) and azs.loo(back).n_data_points == 10
+
+
+def test_diagnostics_and_loo_comparison_come_from_arviz_stats(small_posterior):
+    s = small_posterior.summary
+    rhat = azs.rhat(small_posterior.idata)
+    assert s["rhat_max"] == pytest.approx(max(float(rhat["Y"]), float(rhat["sigma"])))
+    assert s["ess_bulk_min"] > 10 and 0.0 < s["bfmi_min"] and s["divergences"] == 0
+    table = gpost.compare_loo({"a": small_posterior, "b": small_posterior})
+    assert {t["rank"] for t in table.values()} == {0, 1}
+    for t in table.values():
+        assert t["elpd_loo"] == pytest.approx(float(azs.loo(small_posterior.idata).elpd))
+        assert t["elpd_diff"] == pytest.approx(0.0) and t["weight"] == pytest.approx(0.5, abs=0.01)
+        assert t["pareto_k_max"] < 1.0 and t["p_loo"] > 0.0
+
+
+def test_posterior_figures_are_written(small_posterior, tmp_path):
+    trace, pair = gplot.posterior_figures(small_posterior.idata, ["Y", "sigma"], tmp_path, prefix="a_")
+    assert trace.name == "a_trace.png" and pair.name == "a_pair.png"
+    assert trace.stat().st_size > 10_000 and pair.stat().st_size > 10_000
+    assert not plt.get_fignums()  # both closed
+
+
+def test_importing_growjax_and_its_arviz_stack_warns_of_nothing():
+    """No deprecation or refactor warning at import (an error here), and ArviZ 0.x's package is not imported."""
+    code = ("import sys, growjax, growjax.posterior, growjax.plotting; growjax.plotting.arviz_plots(); "
+            "import arviz_base, arviz_stats; assert 'arviz' not in sys.modules, 'arviz 0.x imported'")
+    done = subprocess.run([sys.executable, "-W", "error::FutureWarning", "-W", "error::DeprecationWarning",
+                           "-W", "error::PendingDeprecationWarning", "-c", code],
+                          capture_output=True, text=True, check=False, timeout=300)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "arviz" not in done.stderr.lower(), done.stderr

@@ -178,14 +178,72 @@ def predictive_figure(times, observed, bands: dict, path, title: str = ""):
     return _save(fig, path)
 
 
-def posterior_figures(idata, sites, folder, prefix: str = ""):
-    """ArviZ trace (rank bars) and pair plots of ``sites`` → (trace path, pair path)."""
-    import arviz as az
+def arviz_plots():
+    """The ``arviz_plots`` module (ArviZ 1.x's plots), importable beside any matplotlib ≥ 3.8.
 
-    az.plot_trace(idata, var_names=list(sites), kind="rank_bars")
-    trace = _save(plt.gcf(), Path(folder) / f"{prefix}trace.png")
-    az.plot_pair(idata, var_names=list(sites), kind="kde", marginals=True, figsize=(8, 8), textsize=9)
-    pair = _save(plt.gcf(), Path(folder) / f"{prefix}pair.png")
+    arviz-plots up to 1.1 registers its styles through ``matplotlib.style.core``, a module matplotlib 3.11 keeps
+    (deprecated) but no longer imports with ``matplotlib.style``: it is imported here first, so ``import
+    arviz_plots`` succeeds. Its matplotlib backend is imported too; matplotlib's deprecation notices raised while
+    importing them are silenced."""
+    import importlib
+    import warnings
+
+    import matplotlib
+    import matplotlib.style
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", matplotlib.MatplotlibDeprecationWarning)
+        warnings.simplefilter("ignore", PendingDeprecationWarning)
+        if not hasattr(matplotlib.style, "core"):
+            try:
+                importlib.import_module("matplotlib.style.core")
+            except ImportError:  # a matplotlib without the module: an arviz-plots that does not need it
+                pass
+        importlib.import_module("arviz_plots.backend.matplotlib")
+        return importlib.import_module("arviz_plots")
+
+
+def _figure(plots):
+    """The matplotlib figure of an arviz-plots ``PlotCollection`` or ``PlotMatrix``."""
+    return plots.viz["figure"].item()
+
+
+def rank_figure(idata, sites, bins: int = 20):
+    """The rank-bar trace plot: per chain, each scalar site's histogram (left) and the histogram of its draws'
+    ranks among all chains' draws (right, ``bins`` bars; dashed: each bar's count when every chain samples the same
+    distribution). ``idata``: a DataTree with a ``posterior`` group of (chain, draw) variables → the figure."""
+    from scipy.stats import rankdata
+
+    post = idata["posterior"]
+    sites = list(sites)
+    fig, axes = plt.subplots(len(sites), 2, figsize=(8, 1.8 * len(sites)), squeeze=False, constrained_layout=True)
+    for (ax_d, ax_r), site in zip(axes, sites):
+        x = np.asarray(post[site], float)  # (chains, draws)
+        ranks = rankdata(x, axis=None).reshape(x.shape)
+        edges, rank_edges = np.histogram_bin_edges(x, bins=30), np.linspace(0.5, x.size + 0.5, bins + 1)
+        for c in range(x.shape[0]):
+            ax_d.hist(x[c], bins=edges, histtype="step", density=True, color=f"C{c}")
+            ax_r.hist(ranks[c], bins=rank_edges, histtype="step", color=f"C{c}")
+        ax_r.axhline(x.shape[1] / bins, color="k", ls="--", lw=0.8)
+        ax_d.set_ylabel(site)
+        ax_d.set_yticks([])
+        ax_d.locator_params(axis="x", nbins=4)
+    axes[0, 0].set_title("draws per chain", fontsize=10)
+    axes[0, 1].set_title("rank of each draw among all chains", fontsize=10)
+    axes[-1, 1].set_xlabel("rank")
+    return fig
+
+
+def posterior_figures(idata, sites, folder, prefix: str = ""):
+    """Figures of the posterior of ``sites`` in the DataTree ``idata``, PNG files in ``folder``: the rank-bar
+    trace (:func:`rank_figure`) and arviz-plots' pair plot with marginals (``plot_pair``) → (trace path, pair
+    path)."""
+    sites = list(sites)
+    trace = _save(rank_figure(idata, sites), Path(folder) / f"{prefix}trace.png")
+    azp = arviz_plots()
+    with plt.style.context("arviz-variat"):  # ArviZ's style (colours as arviz-plots reads them)
+        pair = azp.plot_pair(idata, var_names=sites, backend="matplotlib", figure_kwargs={"figsize": (8, 8)})
+        pair = _save(_figure(pair), Path(folder) / f"{prefix}pair.png")
     return trace, pair
 
 

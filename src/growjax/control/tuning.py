@@ -30,17 +30,19 @@ def parameter_draws(n: int, seed: int = 0, posterior: str | None = None, base=No
                     names=None):
     """Parameter sets as {name: (n,) array}.
 
-    From an ArviZ posterior file: joint draws (picked at random, seeded) of its variables that name a model
-    parameter (``names`` restricts them; noise scales such as σ and derived sites are skipped), so the
-    draws keep the posterior's correlations. With no file: Gaussian around the point estimate of ``base``
-    with relative s.d. ``rel_sd`` (seeded; a stand-in when no posterior is at hand), ``names`` default ("Y",).
+    From an ArviZ posterior file (netCDF, read as an xarray DataTree): joint draws (picked at random, seeded) of
+    its posterior's variables that name a model parameter (``names`` restricts them; noise scales such as σ and
+    derived sites are skipped), so the draws keep the posterior's correlations. With no file: Gaussian around the
+    point estimate of ``base`` with relative s.d. ``rel_sd`` (seeded; a stand-in when no posterior is at hand),
+    ``names`` default ("Y",).
     """
     rng = np.random.default_rng(seed)
     base = base if base is not None else gj.reference("forward")
     if posterior:
-        import arviz as az
+        import xarray as xr
 
-        post = az.from_netcdf(posterior).posterior
+        with xr.open_datatree(posterior) as tree:  # ArviZ 1.x's from_netcdf
+            post = tree["posterior"].to_dataset().load()
         wanted = list(names) if names is not None else [k for k in post.data_vars if _is_parameter(base, k)]
         flat = {k: np.asarray(post[k]).ravel() for k in wanted if k in post}
         if not flat:

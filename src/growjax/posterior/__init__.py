@@ -19,7 +19,8 @@ others across the ridge they form with it (:class:`RidgePrior`). A failed solve 
 (−∞ log density, rejected by NUTS), never an exception.
 
 The model, its priors and its mean length (``_priors``, ``_model``), NUTS's start (``_laplace``), the sampler
-(``_sample``), its record as ArviZ InferenceData (``_record``) and the checks on its output (``_checks``).
+(``_sample``), its record as an xarray DataTree for ArviZ 1.x (``_record``) and the checks on its output
+(``_checks``).
 """
 
 from ._checks import (

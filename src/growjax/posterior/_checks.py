@@ -28,14 +28,15 @@ def predictive_band(draws, level: float = 0.9):
 def diagnostics(idata, priors, observed, mcmc=None, residuals: Residuals | None = None) -> dict:
     """Posterior means and 90 % intervals, R-hat, ESS, divergences, BFMI and predictive coverage: the share of
     the measured samples inside the pointwise 90 % band of this experiment replicated (``coverage_90``) and of a
-    new experiment (``coverage_90_new_experiment``, a fresh discrepancy and rig error: wider)."""
-    import arviz as az
+    new experiment (``coverage_90_new_experiment``, a fresh discrepancy and rig error: wider). ``idata``: the run's
+    DataTree (:func:`inference_data`); R-hat, ESS and BFMI are arviz-stats'."""
+    import arviz_stats as azs
 
     sites = [p.site for p in priors] + ["sigma"]
     sites += [s for s in ("delta_amplitude", "delta_time_scale", "noise_time") if s in idata.posterior]
-    rhat = az.rhat(idata, var_names=sites)
-    ess_bulk = az.ess(idata, var_names=sites, method="bulk")
-    ess_tail = az.ess(idata, var_names=sites, method="tail")
+    rhat = azs.rhat(idata, var_names=sites)
+    ess_bulk = azs.ess(idata, var_names=sites, method="bulk")
+    ess_tail = azs.ess(idata, var_names=sites, method="tail")
     post = idata.posterior
     params = {}
     for s in sites:
@@ -60,7 +61,7 @@ def diagnostics(idata, priors, observed, mcmc=None, residuals: Residuals | None 
         "ess_bulk_min": float(min(p["ess_bulk"] for p in params.values())),
         "ess_tail_min": float(min(p["ess_tail"] for p in params.values())),
         "divergences": div,
-        "bfmi_min": float(np.min(az.bfmi(idata))),
+        "bfmi_min": float(np.min(np.asarray(azs.bfmi(idata)["energy"]))),
         "coverage_90": coverage,
         "coverage_90_new_experiment": coverage_new,
     }
@@ -183,19 +184,20 @@ def sbc(emulator: em.Emulator, priors: Sequence[Prior], replicates: int = 100, w
 
 
 def compare_loo(results: dict) -> dict:
-    """PSIS-LOO of several posteriors of the same data ({label: PosteriorResult}) via ArviZ.
+    """PSIS-LOO of several posteriors of the same data ({label: PosteriorResult}) via arviz-stats.
 
     Returns per model ``elpd_loo``, its standard error, ``p_loo``, the largest Pareto k̂, and
-    the ArviZ ranking (``elpd_diff``, ``dse``, ``weight``). The likelihood treats residuals as
-    independent; when they are autocorrelated (model discrepancy) the standard errors are optimistic.
+    the ArviZ ranking (``rank``, 0 the best; ``elpd_diff``, ``dse``, and the stacking ``weight``). The likelihood
+    treats residuals as independent; when they are autocorrelated (model discrepancy) the standard errors are
+    optimistic.
     """
-    import arviz as az
+    import arviz_stats as azs
 
-    table = az.compare({k: r.idata for k, r in results.items()}, ic="loo", var_name="length")
+    loos = {k: azs.loo(r.idata, pointwise=True, var_name="length") for k, r in results.items()}
+    table = azs.compare(loos, method="stacking")
     out = {}
-    for label, r in results.items():
-        loo = az.loo(r.idata, pointwise=True, var_name="length")
-        out[label] = {"elpd_loo": float(loo.elpd_loo), "se": float(loo.se), "p_loo": float(loo.p_loo),
+    for label, loo in loos.items():
+        out[label] = {"elpd_loo": float(loo.elpd), "se": float(loo.se), "p_loo": float(loo.p),
                       "pareto_k_max": float(np.max(np.asarray(loo.pareto_k))),
                       "rank": int(table.loc[label, "rank"]), "elpd_diff": float(table.loc[label, "elpd_diff"]),
                       "dse": float(table.loc[label, "dse"]), "weight": float(table.loc[label, "weight"])}

@@ -1,4 +1,5 @@
-"""A NUTS run as ArviZ InferenceData, its groups laid out for ArviZ's standard calls.
+"""A NUTS run as an xarray DataTree, its groups laid out for ArviZ's standard calls (ArviZ 1.x: arviz-base,
+arviz-stats, arviz-plots).
 
 - ``posterior``: the sampled sites (chain, draw): the parameters, ``sigma``, the discrepancy's hyperparameters,
   and a bounded prior's sampling coordinate (``u_<site>``, ``v_<site>``);
@@ -6,15 +7,17 @@
   rig error as the data determine them, fresh sensor noise); ``length_new_experiment``, a new experiment under the
   same input (a fresh discrepancy and rig error); ``length_model`` (chain, draw, time), m, the model's length at
   each draw, without noise or discrepancy;
-- ``log_likelihood``: ``length`` (chain, draw, time), the pointwise log-likelihood (0 at samples not scored);
+- ``log_likelihood``: ``length`` (chain, draw, time), the pointwise log-likelihood at the samples the likelihood
+  scores (all of them, but a discrepancy on a piecewise-linear record scores its keyframes alone);
 - ``sample_stats``: NUTS's ``diverging``, ``energy``, ``n_steps``, ``tree_depth``, and ``solver_ok``, the model's
   solve succeeded at the draw (a failed solve has zero likelihood, so NUTS keeps none);
 - ``observed_data``: ``length`` (time,), m, the measured length;
 - ``constant_data``: ``scored`` (time,) bool, the samples the likelihood scores.
 
-Every ``time`` coordinate is the sample time in s. ``az.summary`` lists the posterior's sites alone,
-``az.plot_ppc`` pairs the observed with the replicated length, ``az.loo`` reads the log-likelihood, and
-``to_netcdf`` / ``az.from_netcdf`` keep all of it (``idata.to_datatree()`` gives the xarray DataTree).
+Every ``time`` coordinate is the sample time in s (in ``log_likelihood``, the scored samples' times).
+``arviz_stats.summary`` lists the posterior's sites alone, ``arviz_plots.plot_ppc_dist`` pairs the observed with
+the replicated length, ``arviz_stats.loo`` reads the log-likelihood, and ``tree.to_netcdf`` /
+``xarray.open_datatree`` (ArviZ 1.x's ``from_netcdf``) keep all of it.
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ import numpy as np
 from jaxtyping import ArrayLike, Bool, Float
 
 if TYPE_CHECKING:
-    import arviz as az
+    import xarray as xr
 
 MODEL_SITE = "length_model"  # the deterministic site growth_model records the model's length in
 NUTS_STATS = {"diverging": "diverging", "energy": "energy", "num_steps": "n_steps"}  # NumPyro's → ArviZ's names
@@ -34,24 +37,27 @@ NUTS_STATS = {"diverging": "diverging", "energy": "energy", "num_steps": "n_step
 def inference_data(samples: dict, extra_fields: dict, times: Float[ArrayLike, " T"], observed: Float[ArrayLike, " T"],
                    scored: Bool[ArrayLike, " T"], loglik: Float[ArrayLike, "C S T"],
                    predicted: Float[ArrayLike, "C S T"],
-                   new_experiment: Float[ArrayLike, "C S T"] | None = None) -> az.InferenceData:
-    """ArviZ InferenceData of one NUTS run, laid out for ArviZ's standard calls.
+                   new_experiment: Float[ArrayLike, "C S T"] | None = None) -> xr.DataTree:
+    """One NUTS run as an xarray DataTree (ArviZ 1.x's data structure), laid out for ArviZ's standard calls.
 
     ``posterior``: the sampled sites; ``posterior_predictive``: ``length`` (replicated data) and ``length_model``
-    (the model's length at each draw, no noise or discrepancy), m; ``log_likelihood``: ``length``, pointwise;
-    ``sample_stats``: NUTS's statistics and ``solver_ok`` per draw; ``observed_data``: ``length``, m;
-    ``constant_data``: ``scored``. Lengths and log-likelihoods have a ``time`` coordinate (s). So ``az.summary``
-    lists the sampled sites alone, ``az.plot_ppc`` pairs the measured with the replicated length and ``az.loo``
-    reads the pointwise terms.
+    (the model's length at each draw, no noise or discrepancy), m; ``log_likelihood``: ``length``, pointwise at
+    the scored samples; ``sample_stats``: NUTS's statistics and ``solver_ok`` per draw; ``observed_data``:
+    ``length``, m; ``constant_data``: ``scored``. Lengths and log-likelihoods have a ``time`` coordinate (s); every sampled
+    variable has ``chain`` and ``draw`` dimensions. So ``arviz_stats.summary`` lists the sampled sites alone,
+    ``arviz_plots.plot_ppc_dist`` pairs the measured with the replicated length and ``arviz_stats.loo`` reads the
+    pointwise terms.
 
     ``samples`` {site: (C, S, ...)}: NumPyro's draws by chain, with the deterministic ``length_model``
     (C, S, T) m; ``extra_fields`` {name: (C, S)}: NumPyro's extra fields by chain (``diverging``, ``energy``,
     ``num_steps``); ``times`` (T,) s; ``observed`` (T,) m; ``scored`` (T,) bool; ``loglik`` and ``predicted``
-    (C, S, T): pointwise log-likelihood and replicated length (m); ``new_experiment`` (C, S, T): a new
+    (C, S, T): pointwise log-likelihood (read at the scored samples only: elsewhere it is no term of the likelihood,
+    and a constant column would stop PSIS-LOO) and replicated length (m); ``new_experiment`` (C, S, T): a new
     experiment's length (m), stored as ``length_new_experiment`` where given.
     """
-    import arviz as az
+    import arviz_base as azb
     import numpyro
+    import xarray as xr
 
     samples = {k: np.asarray(v) for k, v in samples.items()}
     model = samples.pop(MODEL_SITE)
@@ -63,14 +69,18 @@ def inference_data(samples: dict, extra_fields: dict, times: Float[ArrayLike, " 
     predictive = {"length": np.asarray(predicted), MODEL_SITE: model}
     if new_experiment is not None:
         predictive["length_new_experiment"] = np.asarray(new_experiment)
-    return az.from_dict(
-        posterior=samples,
-        posterior_predictive=predictive,
-        log_likelihood={"length": np.asarray(loglik)},
-        sample_stats=stats,
-        observed_data={"length": np.asarray(observed, float)},
-        constant_data={"scored": np.asarray(scored, bool)},
-        coords={"time": np.asarray(times, float)},
-        dims=dims,
-        attrs={"inference_library": "numpyro", "inference_library_version": numpyro.__version__},
-    )
+    scored, times = np.asarray(scored, bool), np.asarray(times, float)
+    library = {"inference_library": "numpyro", "inference_library_version": numpyro.__version__}
+
+    def group(data, at=times, sampled=True, attrs=None):
+        return azb.dict_to_dataset(data, coords={"time": at}, dims=dims, attrs=attrs,
+                                   sample_dims=["chain", "draw"] if sampled else [])
+
+    return xr.DataTree.from_dict({
+        "posterior": group(samples, attrs=library),
+        "posterior_predictive": group(predictive),
+        "log_likelihood": group({"length": np.asarray(loglik)[..., scored]}, at=times[scored]),
+        "sample_stats": group(stats, attrs=library),
+        "observed_data": group({"length": np.asarray(observed, float)}, sampled=False),
+        "constant_data": group({"scored": scored}, sampled=False),
+    })

@@ -40,7 +40,8 @@ from ._record import inference_data
 
 @dataclasses.dataclass
 class PosteriorResult:
-    """NUTS output: ArviZ InferenceData plus the headline diagnostics."""
+    """NUTS output: ``idata``, the run as an xarray DataTree (ArviZ 1.x, :func:`inference_data`), plus the headline
+    diagnostics."""
 
     idata: object
     summary: dict
@@ -96,7 +97,7 @@ def sample(
     discrepancy's amplitude and time scale are sampled with the parameters; the rig's tolerances enter through
     the length's sensitivities at the start point (linearised), marginalised exactly.
 
-    Returns InferenceData (:func:`inference_data`: the sampled sites in the posterior, the replicated and the
+    Returns a DataTree (:func:`inference_data`: the sampled sites in the posterior, the replicated and the
     model's length in the posterior predictive, the pointwise log-likelihood for LOO, the measured length as
     observed data, NUTS's sample stats) and a summary: per-parameter
     mean and 90 % interval, ``rhat_max``, ``ess_bulk_min``, ``ess_tail_min``,
