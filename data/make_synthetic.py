@@ -20,6 +20,11 @@ values (drawn once from the default budget, recorded in set/truth.json), run und
 (the published pulse train, a slower train and a 100 kPa train) given to the controller as sampled every 10 ms
 (the CSV's demand column), made by the reference configuration; noise as above. set/set.toml is its manifest (the pressure sensor named
 for the first experiment).
+
+population/ — a population: eight membranes built alike (Y_i = 8 kPa·e^(0.1 η_i)) on one rig drawn from the
+default budget, each under its own seeded pulse train (100–160 kPa), length only; new_robot.csv is a ninth of the
+same population, held out. population/population.toml names each experiment's robot; truth in
+population/truth.json.
 """
 
 from __future__ import annotations
@@ -38,6 +43,7 @@ HERE = Path(__file__).resolve().parent
 DATASETS = HERE.parent / "src" / "growjax" / "datasets"  # package resources
 TRUTH = {"Y": 9000.0}
 NOISE = {"robot_length_m": 2e-4, "pressure_Pa": 500.0}
+POPULATION_MEDIAN, POPULATION_SPREAD = 8000.0, 0.1  # Pa, sd of ln Y
 
 
 def make_forward(path: Path = DATASETS / "synthetic_forward.csv") -> Path:
@@ -215,13 +221,60 @@ def make_set(folder: Path = DATASETS / "set") -> Path:
     return folder
 
 
+def make_population(folder: Path = DATASETS / "population", robots: int = 8) -> Path:
+    """A population: ``robots`` membranes built alike (Y_i = 8 kPa·e^(0.1 η_i)) on one rig drawn from the default
+    tolerance budget, each under its own pulse train, plus one more robot of the same population held out
+    (new_robot.csv) to check a new robot's predictive band against."""
+    from growjax import tolerance as tl
+
+    folder.mkdir(parents=True, exist_ok=True)
+    time = np.round(np.arange(1, 1001) * 0.01, 10)
+    catheter = 0.004 + 0.004 * time
+    base = gj.reference("forward")
+    rng = np.random.default_rng(SEED + 2)
+    offsets = {k: float(rng.normal(0.0, u)) for k, u in tl.default_budget(base).items()}
+    rig = gj.replace(base, **{k: gj.get(base, k) * np.exp(b) for k, b in offsets.items()})
+    ys = POPULATION_MEDIAN * np.exp(POPULATION_SPREAD * rng.standard_normal(robots + 1))
+    config = gj.Config(fidelity="reference", t1=float(time[-1]), rtol=TRUTH_RTOL, atol=TRUTH_RTOL)
+    ts = np.concatenate([[config.t0], time])
+    names = [f"robot_{i + 1}" for i in range(robots)] + ["new_robot"]
+    trains = {}
+    for name, y in zip(names, ys):
+        train = gj.PulseTrain(float(rng.uniform(100e3, 160e3)), float(rng.uniform(1.2, 2.2)),
+                              float(rng.uniform(0.5, 0.8)), float(rng.uniform(0.1, 0.4)))
+        demand_column = np.asarray(train(jnp.asarray(time)))
+        inputs = gj.Inputs(catheter_length=gj.Sampled(jnp.asarray(time), jnp.asarray(catheter)),
+                           pressure_demand=gj.Sampled(jnp.asarray(time), jnp.asarray(demand_column)))
+        traj = gj.simulate(gj.replace(rig, Y=float(y)), inputs, config, ts=ts)
+        assert int(traj.status) == gj.OK, (name, gj.status_name(traj.status))
+        length = np.asarray(traj.length)[1:] + rng.normal(0.0, NOISE["robot_length_m"], time.size)
+        ex.write_csv(folder / f"{name}.csv", time, {"robot_length_m": length, "catheter_length_m": catheter,
+                                                   "pressure_demand_Pa": demand_column})
+        trains[name] = repr(train)
+        print(name, f"Y {y:.0f} Pa, {float(length[-1]) * 1e3:.3f} mm", flush=True)
+    manifest = [f"# {robots} robots built alike on one rig, one pulse train each (made by data/make_synthetic.py).",
+                "[defaults]", 'drive = "forward"', 'rig = "bench"', ""]
+    for name in names[:-1]:
+        manifest += ["[[experiment]]", f'file = "{name}.csv"', f'robot = "{name}"', ""]
+    (folder / "population.toml").write_text("\n".join(manifest))
+    meta = {"seed": SEED + 2, "truth": {"Y_median": POPULATION_MEDIAN, "Y_sd_ln": POPULATION_SPREAD,
+                                        "Y": dict(zip(names, map(float, ys)))},
+            "rig_offsets_ln": offsets, "noise_sd": {"robot_length_m": NOISE["robot_length_m"]},
+            "demands": trains, "catheter_length_m": "0.004 + 0.004 t",
+            "solver": {"fidelity": "reference", "rtol": TRUTH_RTOL}}
+    (folder / "truth.json").write_text(json.dumps(meta, indent=2) + "\n")
+    return folder
+
+
 if __name__ == "__main__":
     import sys
 
-    wanted = sys.argv[1:] or ["forward", "reference", "set"]
+    wanted = sys.argv[1:] or ["forward", "reference", "set", "population"]
     if "forward" in wanted:
         print(make_forward())
     if "reference" in wanted:
         print(make_reference_lengths())
     if "set" in wanted:
         print(make_set())
+    if "population" in wanted:
+        print(make_population())

@@ -224,7 +224,8 @@ def _population(args, paths) -> dict:
     band = pop.predict_new_robot(post, run, config, draws=400, seed=args.seed)
     out = _out(args)
     nc = pop.save(post, out / "population.nc")
-    fig = population_figure(post, band, out / "population.png")
+    measured = (run.times, run.length) if "robot_length_m" in run.experiment else None
+    fig = population_figure(post, band, out / "population.png", measured=measured)
     summary = {"command": "posterior", "hierarchical": name, "data": [str(p) for p in paths], "drive": args.drive,
                "t_end_s": args.t_end, "fidelity": config.fidelity, "chains": args.chains, "warmup": args.warmup,
                "samples": args.samples, **post.summary(), "joint_fit": fit.summary(),

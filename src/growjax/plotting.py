@@ -66,9 +66,10 @@ def set_figure(traces, path, title: str = ""):
     return _save(fig, path)
 
 
-def population_figure(population, band: dict, path):
+def population_figure(population, band: dict, path, measured=None):
     """Left: each robot's posterior of the population's parameter (median, 90 %) and the population's median
-    with its 90 % interval. Right: a new robot's predictive length band (mm) against time."""
+    with its 90 % interval. Right: a new robot's predictive length band (mm) against time, with ``measured``
+    (time s, length m) if given."""
     label, scale = _axis(population.name)
     fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(10, 3.6), constrained_layout=True)
     theta = np.exp(population.ln_theta) * scale
@@ -85,6 +86,10 @@ def population_figure(population, band: dict, path):
     ax1.fill_between(t, 1e3 * band["lower"], 1e3 * band["upper"], color="C2", alpha=0.3,
                      label=f"new robot, {round(100 * band['level'])} %")
     ax1.plot(t, 1e3 * band["median"], color="C2")
+    if measured is not None:
+        tm, ym = (np.asarray(x) for x in measured)
+        keep = (tm >= t[0]) & (tm <= t[-1])
+        ax1.plot(tm[keep], 1e3 * ym[keep], color="k", lw=0.8, label="measured")
     ax1.set_xlabel("time (s)")
     ax1.set_ylabel("length (mm)")
     ax1.legend(fontsize=8, loc="upper left")
