@@ -32,6 +32,8 @@ machine named in each row, after compilation unless a row says otherwise.
 | `benchmarks/fit_speed.py` | the fit's cost under the discrepancy likelihood against independent noise, and with the rig inferred against it fixed |
 | `benchmarks/rig_agreement.py` | Y's interval from the fit (rig inferred; rig fixed) beside the posterior's, coverage and the posterior's band, rig nominal and drawn |
 | `benchmarks/set_speed.py` | a joint fit of eight experiments against one experiment's fit |
+| `benchmarks/sets.py` | joint fits of sets of four experiments on one drawn rig: coverage, against each experiment alone and against rig errors taken per experiment |
+| `benchmarks/population.py` | populations of eight robots on one drawn rig: coverage of the population's median and spread, and of a held-out robot's predictive band |
 | `benchmarks/discover_discrepancy.py` | discovery's answer on data with a discrepancy but no catalogue effect |
 | `benchmarks/least_squares.py` | growjax's Levenberg–Marquardt engine against optimistix's solvers on the fit's and the control profile's problems; `least_squares_linearize`: `--cases fit_Y --solvers lm_linearize --out benchmarks/results/least_squares_linearize.json` (optimistix linearising the model itself) |
 """
@@ -147,6 +149,32 @@ def rows_set_speed(r: dict) -> list[tuple[str, str, str]]:
              f"{100 * r['set_simulate_share']:.0f} % in the batched simulations; target ≤ 3")]
 
 
+def rows_population(r: dict) -> list[tuple[str, str, str]]:
+    s = r["summary"]
+    n = f"{s['populations']} populations of {s['robots']} robots"
+    return [("coverage of the population median's 90 % interval", f"{s['median_coverage_90']:.2f}",
+             f"{n}; target 0.80–0.97"),
+            ("coverage of the population spread's 90 % interval", f"{s['spread_coverage_90']:.2f}",
+             f"{n}; target 0.80–0.97"),
+            ("coverage of each robot's 90 % interval", f"{s['robot_coverage_90']:.2f}", n),
+            ("a held-out robot's points inside its 90 % predictive band", f"{s['new_robot_band_coverage']:.3f}",
+             "target 0.80–0.97"),
+            ("NUTS, 4 × (500 + 500), median", f"{s['median_nuts_s']:.0f} s",
+             f"joint fit of the eight runs {s['median_fit_s']:.0f} s (median); target ≤ 15 min")]
+
+
+def rows_sets(r: dict) -> list[tuple[str, str, str]]:
+    s = r["summary"]
+    return [("joint Y: coverage of the 90 % interval", f"{s['joint']['coverage_90']:.2f}",
+             f"{s['sets']} sets; median width {s['joint']['median_width_Pa']:.0f} Pa; target 0.80–0.97"),
+            ("joint Y narrower than the best single experiment's", f"{s['joint_narrower_than_best_single']:.2f}",
+             "share of the sets; target ≥ 0.90"),
+            ("rig errors taken per experiment: coverage", f"{s['joint_independent_rig']['coverage_90']:.2f}",
+             f"median width {s['joint_independent_rig']['median_width_Pa']:.0f} Pa"),
+            ("single experiments: coverage", f"{s['single']['coverage_90']:.2f}",
+             f"median width {s['single']['median_width_Pa']:.0f} Pa")]
+
+
 def rows_discover_discrepancy(r: dict) -> list[tuple[str, str, str]]:
     return [("answer `none`, no catalogue effect but a discrepancy", f"{r['none']} of {r['sets']}",
              f"{r['t_end_s']:g} s windows, target ≥ 19 of 20")]
@@ -220,7 +248,7 @@ EXTRACTORS = {"simulate": rows_simulate, "sweep": rows_sweep, "agreement": rows_
               "agreement_quick": rows_agreement,
               "control": rows_control, "least_squares": rows_least_squares,
               "least_squares_linearize": rows_least_squares, "rig_agreement": rows_rig_agreement,
-              "set_speed": rows_set_speed}
+              "set_speed": rows_set_speed, "population": rows_population, "sets": rows_sets}
 
 
 def environment_line(r: dict, path: Path) -> str:

@@ -163,7 +163,7 @@ def save(population: PopulationResult, path) -> Path:
 @functools.lru_cache(maxsize=8)
 def _mcmc(chains: int, warmup: int, samples: int, progress: bool) -> MCMC:
     """One sampler per shape of run, its compiled step reused across data sets (the model's arguments traced)."""
-    return MCMC(NUTS(model, target_accept_prob=0.9), num_warmup=warmup, num_samples=samples, num_chains=chains,
+    return MCMC(NUTS(model, target_accept_prob=0.95), num_warmup=warmup, num_samples=samples, num_chains=chains,
                 chain_method="sequential", progress_bar=progress, jit_model_args=True)
 
 
