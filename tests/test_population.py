@@ -48,7 +48,7 @@ def _coverage(populations: int, shared_rig: bool):
             j[:ROBOTS, :ROBOTS] = np.diag(np.diag(j[:ROBOTS, :ROBOTS]))
             j[:ROBOTS, ROBOTS:] = j[ROBOTS:, :ROBOTS] = 0.0
             fit.joint_covariance = j
-        post = pop.sample(fit, "Y", chains=1, warmup=300, samples=400, seed=k)
+        post = pop.sample(fit, "Y", chains=1, warmup=200, samples=300, seed=k)
         lo, _, hi = post.interval(post.mu)
         hits["mu"].append(lo <= np.log(MEDIAN) <= hi)
         lo, _, hi = post.interval(post.s)
