@@ -124,26 +124,35 @@ def main():
     args = ap.parse_args()
     clock = time.perf_counter()
     tasks = [(args.seed, s, args.experiments, args.rtol) for s in range(args.sets)]
-    if args.workers > 1:
-        import multiprocessing as mp
-        from concurrent.futures import ProcessPoolExecutor
-
-        with ProcessPoolExecutor(args.workers, mp_context=mp.get_context("spawn")) as pool:
-            done = list(pool.map(one_set, tasks))
-    else:
-        done = [one_set(t) for t in tasks]
+    partial = Path(args.out).with_suffix(".partial.jsonl")  # rows as they finish, kept if the run is cut short
+    partial.parent.mkdir(parents=True, exist_ok=True)
+    partial.write_text("")
     rows = []
-    for s, row in enumerate(done):
+
+    def keep(s, row):
         if row is None:
             print(f"set {s}: a reference run failed; skipped", flush=True)
-            continue
+            return
         rows.append(row)
+        with partial.open("a") as fh:
+            fh.write(json.dumps(row) + "\n")
         j, i = row["joint"], row["joint_independent_rig"]
         singles = row["single"]
         print(f"set {s:2d} Y {row['truth_Pa']:7.0f}: joint [{j['interval_90_Pa'][0]:.0f}, {j['interval_90_Pa'][1]:.0f}] "
               f"{j['wall_s']:.0f} s; independent rig [{i['interval_90_Pa'][0]:.0f}, {i['interval_90_Pa'][1]:.0f}]; "
               f"best single width {min(x['width_Pa'] for x in singles):.0f} Pa "
               f"(single fits {sum(x['wall_s'] for x in singles):.0f} s)", flush=True)
+
+    if args.workers > 1:
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(args.workers, mp_context=mp.get_context("spawn")) as pool:
+            for s, row in enumerate(pool.map(one_set, tasks)):
+                keep(s, row)
+    else:
+        for s, t in enumerate(tasks):
+            keep(s, one_set(t))
     summary = {"sets": len(rows)}
     for label in ("joint", "joint_independent_rig"):
         summary[label] = {"coverage_90": float(np.mean([r[label]["covered"] for r in rows])),
