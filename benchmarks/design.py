@@ -66,17 +66,19 @@ def replicate(job: dict) -> dict:
     clock = time.perf_counter()
     rng = np.random.default_rng([job["seed"], job["index"]])
     base = gj.replace(gj.reference("forward"), **job["recorded"])
-    offsets = {n: float(rng.normal(0.0, u)) for n, u in job["tolerances"].items()}
+    offsets = {n: float(rng.normal(0.0, u)) if job["rig"] == "drawn" else 0.0 for n, u in job["tolerances"].items()}
     truth = gj.replace(base, **job["estimate"], **{n: gj.get(base, n) * np.exp(b) for n, b in offsets.items()})
     times = np.asarray(job["times"])
     catheter = gj.Sampled(jnp.asarray(job["catheter_t"]), jnp.asarray(job["catheter_m"]))
     demands = {"design": KnotProfile(jnp.asarray(job["knots"]), jnp.asarray(job["demand"])),
                "published pulse train": gj.published_pulse()}
     duration = float(job["duration"])
-    reference = gj.Config(fidelity="reference", t1=duration)
+    reference = gj.Config(fidelity=job["maker"], t1=duration)
     config = gj.Config(t1=duration)
     out = {"index": job["index"], "rig_offsets": offsets}
     for label, demand in demands.items():
+        if label not in job["inputs"]:
+            continue
         inputs = gj.Inputs(catheter_length=catheter, pressure_demand=demand)
         traj = gj.simulate(truth, inputs, reference, ts=np.concatenate([[reference.t0], times]))
         if int(traj.status) != gj.OK:
@@ -139,6 +141,14 @@ def main():
     ap.add_argument("--replications", type=int, default=20)
     ap.add_argument("--workers", type=int, default=1, help="replications run at a time (spawned processes)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--maker", choices=["reference", "fast"], default="reference",
+                    help="the configuration that makes the replications' data (fast: no model error, a diagnostic)")
+    ap.add_argument("--rig", choices=["drawn", "nominal"], default="drawn",
+                    help="the replications' rig: drawn from the tolerance budget, or nominal (a diagnostic)")
+    ap.add_argument("--inputs", nargs="+", default=["design", "published pulse train"],
+                    choices=["design", "published pulse train"], help="the inputs replicated")
+    ap.add_argument("--design-from", default=None, metavar="DESIGN.json",
+                    help="take the design (and its prediction) from this benchmark's earlier results file")
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "design.json"))
     args = ap.parse_args()
     from _environment import environment
@@ -151,26 +161,30 @@ def main():
     known, exp, base = knowledge_of(args)
     space = gd.DesignSpace(args.duration, gd.limits(base).pressure, gd.catheter_of(exp, args.duration))
     sensors = tuple(args.sensors.split(","))
-    t = time.perf_counter()
-    result = gd.design(known, space, sensors=sensors, random=args.random, starts=args.starts,
-                       iterations=args.iterations, seed=args.seed, progress=True)
-    design_wall = time.perf_counter() - t
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    space.write_csv(out.with_suffix(".csv"), result.x)
-    gd.design_figure(result, out.with_suffix(".png"))
-    summary = result.summary()
+    if args.design_from:  # an earlier run's design and landscape
+        earlier = json.loads(Path(args.design_from).read_text())
+        summary, landscape = earlier["design"], earlier["landscape"]
+        knots, demand = np.asarray(summary["design"]["knots_s"]), np.asarray(summary["design"]["demand_Pa"])
+    else:
+        t = time.perf_counter()
+        result = gd.design(known, space, sensors=sensors, random=args.random, starts=args.starts,
+                           iterations=args.iterations, seed=args.seed, progress=True)
+        design_wall = time.perf_counter() - t
+        space.write_csv(out.with_suffix(".csv"), result.x)
+        gd.design_figure(result, out.with_suffix(".png"))
+        summary = result.summary()
+        knots, demand = result.knots, result.demand
+        crit = {r["input"]: r["criterion"] for r in summary["table"] if tuple(r["sensors"]) == sensors}
+        landscape = {"random_admissible": summary["random"]["admissible"], "random_drawn": summary["random"]["drawn"],
+                     "random_best_criterion": summary["random"]["criterion_best"],
+                     "random_quantiles": summary["random"]["criterion_quantiles"],
+                     "random_criterion": result.random.criterion.tolist(),
+                     "design_criterion": crit["design"], "published_criterion": crit["published pulse train"],
+                     "design_beats_best_random": bool(crit["design"] < summary["random"]["criterion_best"]),
+                     "design_wall_s": design_wall}
     table = {r["input"]: r["parameters"] for r in summary["table"] if tuple(r["sensors"]) == sensors}
-    landscape = {"random_admissible": summary["random"]["admissible"], "random_drawn": summary["random"]["drawn"],
-                 "random_best_criterion": summary["random"]["criterion_best"],
-                 "random_quantiles": summary["random"]["criterion_quantiles"],
-                 "random_criterion": result.random.criterion.tolist(),
-                 "design_criterion": next(r["criterion"] for r in summary["table"]
-                                          if r["input"] == "design" and tuple(r["sensors"]) == sensors),
-                 "published_criterion": next(r["criterion"] for r in summary["table"]
-                                             if r["input"] == "published pulse train" and tuple(r["sensors"]) == sensors),
-                 "design_beats_best_random": None, "design_wall_s": design_wall}
-    landscape["design_beats_best_random"] = bool(landscape["design_criterion"] < landscape["random_best_criterion"])
     print(json.dumps({k: v for k, v in landscape.items() if k != "random_criterion"}, indent=1), flush=True)
     names = list(known.names)
     predicted = {label: {n: table[label][n]["sd_log_alone"] for n in names} for label in ("design", "published pulse train")}
@@ -179,8 +193,9 @@ def main():
     job = {"seed": args.seed, "recorded": recorded_parameters(Path(args.data)), "tolerances": dict(known.tolerances),
            "estimate": dict(zip(names, map(float, known.estimate))), "names": names,
            "times": np.asarray(space.times).tolist(), "catheter_t": t_cath.tolist(), "catheter_m": c_cath.tolist(),
-           "knots": result.knots.tolist(), "demand": result.demand.tolist(), "duration": args.duration,
-           "noise_m": float(known.hyper.noise), "pressure": "pressure" in sensors, "pressure_noise": 1e3}
+           "knots": np.asarray(knots).tolist(), "demand": np.asarray(demand).tolist(), "duration": args.duration,
+           "noise_m": float(known.hyper.noise), "pressure": "pressure" in sensors, "pressure_noise": 1e3,
+           "maker": args.maker, "rig": args.rig, "inputs": args.inputs}
     jobs = [{**job, "index": i} for i in range(args.replications)]
     rows = []
     if args.workers > 1:

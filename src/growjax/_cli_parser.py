@@ -284,8 +284,10 @@ def build_parser():
     des.add_argument("--starts", type=_count(), default=3, help="descents, from the best random inputs")
     des.add_argument("--iterations", type=_count(), default=30, help="gradient steps per descent")
     des.add_argument("--draws", type=_count(2), default=32, help="draws of the rig and θ every design is checked on")
-    des.add_argument("--theta-points", type=_count(), default=1,
-                     help="points of θ the criterion is averaged over (1: the local design at the estimate)")
+    des.add_argument("--points", type=_count(), default=4,
+                     help="points of θ and the rig the criterion is averaged over (1: the local design at the estimate)")
+    des.add_argument("--nonlinear-draws", type=_count(0), default=16,
+                     help="draws of the rig on which what the fit's linearised rig misses is measured (0: none)")
     des.add_argument("--pressure-noise", type=_positive, default=1e3, metavar="PA",
                      help="sd of the pressure sensor's noise, Pa (with --sensors length,pressure)")
     des.add_argument("--max-pump-speed", type=_positive, default=None, metavar="M_S",

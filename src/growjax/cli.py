@@ -514,8 +514,8 @@ def design_command(args) -> dict:
                                    f"sensors {args.sensors}")
     result = gd.design(known, space, criterion=args.criterion, sensors=tuple(args.sensors.split(",")), random=args.random,
                        starts=args.starts, iterations=args.iterations, n_draws=args.draws, seed=args.seed,
-                       theta_points=args.theta_points, pressure_noise=args.pressure_noise, limits=lim,
-                       progress=not args.quiet)
+                       points=args.points, pressure_noise=args.pressure_noise, limits=lim,
+                       nonlinear_draws=args.nonlinear_draws, progress=not args.quiet)
     _progress_note(args, f"design: done in {time.perf_counter() - started:.1f} s")
     out = _out(args)
     csv = space.write_csv(out / "design.csv", result.x)

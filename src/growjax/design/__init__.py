@@ -14,7 +14,9 @@ What is here, in the order a design uses it:
   the rig as nuisance, linearised, and its A- or D-criterion (:mod:`.criterion`).
 * :func:`limits`, :func:`draws`, :func:`check`, :func:`penalty` — the membrane limit with the control module's
   margin, the stroke, checked over draws of the rig and θ (:mod:`.constraints`).
-* :func:`make`, :func:`value_and_gradient` — the problem and its objective's gradient (:mod:`.problem`).
+* :func:`make`, :func:`evaluate`, :func:`smoothed_gradient`, :func:`value_and_gradient` — the problem, its
+  objective, the slope the descent follows (differences over a step of the demand) and the exact derivative by
+  forward mode through the model (:mod:`.problem`).
 * :func:`random_admissible`, :func:`multistart` — the random baseline and the descent (:mod:`.optimise`).
 * :func:`design` — all of it end to end (:mod:`.workflow`; the ``growjax design`` command) and
   :func:`design_figure`.
@@ -22,12 +24,21 @@ What is here, in the order a design uses it:
 SI units throughout: s, Pa, m; uncertainties of ln θ (relative).
 """
 
-from growjax.design.constraints import Check, Limits, check, draws, limits, penalty
+from growjax.design.constraints import Check, Limits, check, draws, limits, penalty, stack
 from growjax.design.criterion import Precision, Prediction, information, posterior
 from growjax.design.figure import design_figure
 from growjax.design.knowledge import Knowledge, from_fit, from_summary
 from growjax.design.optimise import Descent, RandomBatch, adam, multistart, random_admissible
-from growjax.design.problem import Problem, covariances, make, score, value_and_gradient
+from growjax.design.problem import (
+    Problem,
+    covariances,
+    evaluate,
+    evaluate_many,
+    make,
+    smoothed_gradient,
+    value_and_gradient,
+    values,
+)
 from growjax.design.sensitivity import Sensitivities, solve
 from growjax.design.space import DesignSpace, catheter_of
 from growjax.design.workflow import DesignError, DesignResult, design, published_inputs
@@ -52,6 +63,8 @@ __all__ = [
     "design",
     "design_figure",
     "draws",
+    "evaluate",
+    "evaluate_many",
     "from_fit",
     "from_summary",
     "information",
@@ -62,7 +75,9 @@ __all__ = [
     "posterior",
     "published_inputs",
     "random_admissible",
-    "score",
+    "smoothed_gradient",
     "solve",
+    "stack",
     "value_and_gradient",
+    "values",
 ]

@@ -77,8 +77,9 @@ def draws(knowledge: Knowledge, n: int = DRAWS, seed: int = 0) -> dict:
 def penalty(s: Sensitivities, prior_covariance, lim: Limits, spread: float = SPREAD):
     """Σ over samples of the squared excess (kPa, mm) of the nominal run plus ``spread`` linearised sds over the
     prior (Σ₀ = ``prior_covariance`` (m, m)) above the pressure and length ceilings: 0 inside them (traceable)."""
-    sd_l = jnp.sqrt(jnp.einsum("ni,ij,nj->n", s.jac_length, prior_covariance, s.jac_length))
-    sd_p = jnp.sqrt(jnp.einsum("ni,ij,nj->n", s.jac_pressure, prior_covariance, s.jac_pressure))
+    # (a floor of 1 nm and 1 mPa keeps the square root's derivative finite where a run does not move)
+    sd_l = jnp.sqrt(jnp.einsum("ni,ij,nj->n", s.jac_length, prior_covariance, s.jac_length) + 1e-18)
+    sd_p = jnp.sqrt(jnp.einsum("ni,ij,nj->n", s.jac_pressure, prior_covariance, s.jac_pressure) + 1e-6)
     over_p = jax.nn.relu((s.pressure + spread * sd_p - lim.pressure) / 1e3)
     over_l = jax.nn.relu((s.length + spread * sd_l - lim.length) / 1e-3)
     return jnp.sum(over_p**2) + jnp.sum(over_l**2)

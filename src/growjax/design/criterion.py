@@ -35,21 +35,29 @@ KINDS = ("A", "D")
 
 
 class Prediction(NamedTuple):
-    """What an input gives: ``sensitivities`` on the sample times, the posterior covariance of w with what is
-    known (``covariance`` (m, m)) and of the next experiment alone (``covariance_alone``: no prior on θ, the
-    rig under its tolerances)."""
+    """What an input gives: ``sensitivities`` on the sample times, the covariance of the estimate of w with what is
+    known (``covariance`` (m, m)) and from the next experiment alone (``covariance_alone``: no prior on θ, the
+    rig under its tolerances), each with the rig's nonlinearity where it was given; ``covariance_linear``: with
+    what is known, the rig linearised (the posterior covariance alone)."""
 
     sensitivities: Sensitivities
     covariance: jax.Array
     covariance_alone: jax.Array
+    covariance_linear: jax.Array
+
+
+def check_sensors(sensors) -> tuple:
+    """``sensors`` as a tuple; ValueError unless it is ('length',) or ('length', 'pressure')."""
+    sensors = tuple(sensors)
+    if set(sensors) - set(SENSORS) or "length" not in sensors:
+        raise ValueError(f"sensors must be 'length' or 'length,pressure', got {','.join(sensors)}")
+    return sensors
 
 
 def information(s: Sensitivities, times, hyper: dc.Hyper, sensors=("length",), pressure_noise: float = PRESSURE_NOISE):
     """The information J̃ᵀK⁻¹J̃ (+ J_PᵀJ_P/σ_P² with ``"pressure"`` in ``sensors``) (m, m) on w of the samples at
     ``times`` (n,) s."""
-    unknown = set(sensors) - set(SENSORS)
-    if unknown or "length" not in sensors:
-        raise ValueError(f"sensors must be 'length' or 'length,pressure', got {','.join(sensors)}")
+    check_sensors(sensors)
     w = dc.whiten(s.jac_length, times, hyper)
     info = w.T @ w
     if "pressure" in sensors:
@@ -59,12 +67,31 @@ def information(s: Sensitivities, times, hyper: dc.Hyper, sensors=("length",), p
 
 
 def posterior(s: Sensitivities, times, hyper: dc.Hyper, precision_known, precision_alone, sensors=("length",),
-              pressure_noise: float = PRESSURE_NOISE) -> Prediction:
-    """The :class:`Prediction` of sensitivities ``s``: (Λ₀ + information)⁻¹ for the prior precisions Λ₀
-    ``precision_known`` and ``precision_alone`` (m, m) (:meth:`growjax.design.knowledge.Knowledge.prior_precision`)."""
-    info = information(s, times, hyper, sensors, pressure_noise)
+              pressure_noise: float = PRESSURE_NOISE, remainder=None) -> Prediction:
+    """The :class:`Prediction` of sensitivities ``s``: Σ = (Λ₀ + information)⁻¹ for the prior precisions Λ₀
+    ``precision_known`` and ``precision_alone`` (m, m) (:meth:`growjax.design.knowledge.Knowledge.prior_precision`).
+
+    ``remainder`` (n, D) m: what the rig's linearised effect misses at D draws of the rig
+    (:func:`growjax.design.sensitivity.remainder`). A fit that linearises the rig (:func:`growjax.fit.fit`) takes
+    it for data: its estimate moves by Σ J̃ᵀK⁻¹ r for a remainder r, so the covariance gains
+    Σ J̃ᵀK⁻¹ V VᵀK⁻¹J̃ Σ with V Vᵀ = the remainder's second moment over the draws (the sandwich of the estimator
+    the fit is, with the remainder as an error it does not model)."""
+    check_sensors(sensors)
+    m = s.jac_length.shape[1]
+    if remainder is None:
+        remainder = jnp.zeros((s.jac_length.shape[0], 0))
+    d = remainder.shape[1]
+    cols = jnp.concatenate([s.jac_length, remainder / jnp.sqrt(max(d, 1))], axis=1)
+    w = dc.whiten(cols, times, hyper)
+    info = w[:, :m].T @ w[:, :m]
+    if "pressure" in sensors:
+        jp = s.jac_pressure / pressure_noise
+        info = info + jp.T @ jp
+    cross = w[:, :m].T @ w[:, m:]  # (m, D)
     inv = lambda a: jnp.linalg.inv(0.5 * (a + a.T))
-    return Prediction(s, inv(precision_known + info), inv(precision_alone + info))
+    known, alone = inv(precision_known + info), inv(precision_alone + info)
+    spread = lambda c: c + c @ cross @ cross.T @ c
+    return Prediction(s, spread(known), spread(alone), known)
 
 
 class Precision(eqx.Module):

@@ -69,13 +69,23 @@ def adam(value_and_grad: Callable, x0, iterations: int = ITERATIONS, learning_ra
     return Descent(best_x, best_f, history, np.asarray(x0, float))
 
 
+GRADIENTS = ("differences", "jax")
+
+
 def multistart(problem: dprob.Problem, starts, iterations: int = ITERATIONS, learning_rate: float = LEARNING_RATE,
-               progress: bool = False) -> list[Descent]:
-    """:func:`adam` on the problem's objective from each row of ``starts`` (S, K), best first."""
+               gradient: str = "differences", progress: bool = False) -> list[Descent]:
+    """:func:`adam` on the problem's objective from each row of ``starts`` (S, K − 1), best first. ``gradient``:
+    ``"differences"``, the slope over a step of the demand (:func:`growjax.design.problem.smoothed_gradient`), or
+    ``"jax"``, the exact derivative by forward mode through the model
+    (:func:`growjax.design.problem.value_and_gradient`)."""
+    if gradient not in GRADIENTS:
+        raise ValueError(f"gradient must be one of {GRADIENTS}, got {gradient!r}")
     starts = np.atleast_2d(np.asarray(starts, float))
 
     def vg(x):
-        return dprob.value_and_gradient(problem, np.asarray(x))
+        if gradient == "jax":
+            return dprob.value_and_gradient(problem, np.asarray(x))
+        return dprob.smoothed_gradient(problem, np.asarray(x))
 
     runs = []
     with _progress.bar(len(starts) * (iterations + 1), "design: descent", "step", progress) as bar:
@@ -108,7 +118,7 @@ def random_admissible(problem: dprob.Problem, space: DesignSpace, knowledge: Kno
     """n random admissible inputs, scored: each random design simulated over every draw (``drawn``, default
     :func:`growjax.design.constraints.draws` of ``knowledge``, seeded) in batches, the inadmissible dropped, more
     drawn (at most ``rounds`` rounds) until n pass; then the criterion of each (one compiled evaluation per
-    input). Fewer than n where the rounds run out; ValueError where none is admissible."""
+    input, one per CPU core at a time). Fewer than n where the rounds run out; ValueError where none is admissible."""
     clock = time.perf_counter()
     rng = np.random.default_rng([seed, 4])
     drawn = drawn if drawn is not None else dcon.draws(knowledge, seed=seed)
@@ -126,10 +136,7 @@ def random_admissible(problem: dprob.Problem, space: DesignSpace, knowledge: Kno
         raise ValueError(f"none of {total} random inputs in [0, {space.p_max / 1e3:.0f} kPa] stays inside the limits "
                          "for every draw of the rig: lower p_max or shorten the run")
     designs = np.asarray(kept[:n])
-    crit = []
-    with _progress.bar(len(designs), "design: random inputs", "input", progress) as bar:
-        for x in designs:
-            crit.append(dprob.score(problem, problem.inputs(x)))
-            bar.update(1)
-    crit = np.asarray(crit)
+    _progress.note(f"design: scoring {len(designs)} random admissible inputs", progress)
+    crit = dprob.evaluate_many(problem, designs)[:, 0]
+    crit = np.where(np.isfinite(crit), crit, np.inf)
     return RandomBatch(designs, crit, total, time.perf_counter() - clock)

@@ -1,8 +1,10 @@
 """The design space of the forward drive: a piecewise-linear pressure demand on fixed knots over the run.
 
-A design is a vector x (K,) of unconstrained numbers, one per knot; the demand at knot k is
+A design is a vector x (K − 1,) of unconstrained numbers, one per knot after the first; the demand at knot k is
 p_max·σ(x_k) (σ the logistic function), so every x is a demand inside (0, p_max) and the map is smooth for the
-optimiser. Between knots the demand is linear (:class:`growjax.control.KnotProfile`: every interior knot is a
+optimiser. The run starts at rest: the demand is 0 at t = 0 (the first knot), as in the shipped experiments (a
+demand already high when the run starts sends the fast configuration through a start-up transient the
+reference does not have). Between knots the demand is linear (:class:`growjax.control.KnotProfile`: every interior knot is a
 declared slope break, so the solver's breaks do not depend on the values). The catheter is an input the rig
 gives, not a design variable: its length is the one of the experiment already run (held after its end).
 SI units: s, Pa, m.
@@ -58,8 +60,8 @@ class DesignSpace:
 
     @property
     def size(self) -> int:
-        """K, the number of design variables."""
-        return int(self.knots.size)
+        """K − 1, the number of design variables (the knots after the first)."""
+        return int(self.knots.size) - 1
 
     @property
     def times(self) -> np.ndarray:
@@ -72,16 +74,17 @@ class DesignSpace:
         return Config(t1=float(self.duration), adjoint="forward", **changes)
 
     def demand(self, x):
-        """Demand at the knots (K,) Pa of a design x (K,) (traceable)."""
-        return self.p_max * jax.nn.sigmoid(jnp.asarray(x))
+        """Demand at the knots (K,) Pa of a design x (K − 1,): 0 at the first (traceable)."""
+        return demand_at_knots(x, self.p_max)
 
     def unconstrained(self, demand) -> np.ndarray:
-        """The design x (K,) whose demand is ``demand`` (K,) Pa (clipped a hair inside (0, p_max))."""
-        u = np.clip(np.asarray(demand, float) / self.p_max, _EDGE, 1.0 - _EDGE)
+        """The design x (K − 1,) whose demand at the knots after the first is ``demand`` (K,) Pa's (clipped a
+        hair inside (0, p_max); the first knot's value is ignored: it is 0)."""
+        u = np.clip(np.asarray(demand, float)[..., 1:] / self.p_max, _EDGE, 1.0 - _EDGE)
         return np.log(u) - np.log1p(-u)
 
     def inputs(self, x) -> Inputs:
-        """The model's inputs under design x (K,) (traceable)."""
+        """The model's inputs under design x (K − 1,) (traceable)."""
         return Inputs(catheter_length=self.catheter, pressure_demand=KnotProfile(jnp.asarray(self.knots), self.demand(x)))
 
     def breaks(self):
@@ -93,7 +96,7 @@ class DesignSpace:
         low, moderate and high demands are all drawn)."""
         scale = rng.uniform(0.0, 1.0, (n, 1))
         scale = np.where(scale > 0, scale, 1.0)
-        return self.unconstrained(self.p_max * scale * rng.uniform(0.0, 1.0, (n, self.size)))
+        return self.unconstrained(self.p_max * scale * rng.uniform(0.0, 1.0, (n, self.size + 1)))
 
     def table(self, x) -> tuple[np.ndarray, dict]:
         """(time (T,) s, {column: (T,)}) of design x in the experiment CSV's columns: the demand and the catheter
@@ -112,6 +115,12 @@ class DesignSpace:
         t, series = self.table(x)
         ex.write_csv(path, t, series)
         return Path(path)
+
+
+def demand_at_knots(x, p_max):
+    """(K,) Pa: 0, then p_max·σ(x) for design x (K − 1,) (traceable)."""
+    x = jnp.asarray(x)
+    return jnp.concatenate([jnp.zeros(x.shape[:-1] + (1,)), p_max * jax.nn.sigmoid(x)], axis=-1)
 
 
 def catheter_of(experiment: ex.Experiment | None, duration: float):

@@ -81,20 +81,24 @@ def published_inputs(space: DesignSpace) -> Inputs:
 
 def design(knowledge: Knowledge, space: DesignSpace, criterion: str = "A", sensors=("length",), random: int = 64,
            starts: int = 3, iterations: int = dopt.ITERATIONS, n_draws: int = dcon.DRAWS, seed: int = 0,
-           theta_points: int = 1, pressure_noise: float = dcrit.PRESSURE_NOISE, limits: dcon.Limits | None = None,
-           learning_rate: float = dopt.LEARNING_RATE, progress: bool = False) -> DesignResult:
+           points: int = dprob.POINTS, pressure_noise: float = dcrit.PRESSURE_NOISE, limits: dcon.Limits | None = None,
+           learning_rate: float = dopt.LEARNING_RATE, nonlinear_draws: int = dprob.NONLINEAR_DRAWS,
+           gradient: str = "differences", progress: bool = False) -> DesignResult:
     """Design the next experiment's input for the precision of ``knowledge``'s parameters.
 
     ``random`` random admissible inputs are drawn and scored (:func:`growjax.design.optimise.random_admissible`);
     the optimiser descends from the ``starts`` best of them (``iterations`` Adam steps each); the best result that
     passes the check over ``n_draws`` draws of the rig and θ (scaled down a little where it does not) is the design.
-    ``theta_points``: 1 is the local design at the estimate (the criterion's cost grows with each point). The
+    ``points``: the points of (θ, rig) the criterion is averaged over (1: the local design at the estimate; the
+    criterion's cost grows with each point);
+    ``nonlinear_draws``: draws of the rig on which what its linearisation misses is measured (0: none). The
     table reports the design, the best random input and the published pulse train under ``sensors`` and, where
     the pressure is recorded, under the length alone. DesignError where nothing admissible is found.
     """
     clock, wall = time.perf_counter(), {}
     sensors = tuple(sensors)
-    problem = dprob.make(knowledge, space, criterion, sensors, pressure_noise, limits, theta_points, seed)
+    problem = dprob.make(knowledge, space, criterion, sensors, pressure_noise, limits, points, seed,
+                         nonlinear_draws=nonlinear_draws)
     lim = problem.limits
     if space.p_max > lim.pressure + 1e-9:
         raise ValueError(f"p_max {space.p_max / 1e3:.1f} kPa is above the sensed-pressure ceiling "
@@ -105,7 +109,7 @@ def design(knowledge: Knowledge, space: DesignSpace, criterion: str = "A", senso
     wall["random_s"] = batch.wall_s
     t = time.perf_counter()
     order = batch.order()[: max(starts, 1)]
-    descents = dopt.multistart(problem, batch.designs[order], iterations, learning_rate, progress)
+    descents = dopt.multistart(problem, batch.designs[order], iterations, learning_rate, gradient, progress)
     wall["descent_s"] = time.perf_counter() - t
     t = time.perf_counter()
     x, scaled, check = _admissible(problem, space, knowledge, descents, drawn, lim)
@@ -157,17 +161,19 @@ def _row(problem, knowledge: Knowledge, label: str, inputs, breaks, sets) -> lis
     """The table's rows of one input, one per sensor set of ``sets``."""
     p = len(knowledge.names)
     theta = knowledge.estimate
-    info_l, info_p = dprob.information(problem, inputs, breaks, np.zeros(p))[:2]
+    info_l, info_p, cross = dprob.information(problem, inputs, breaks)[:3]
     rows = []
     for sensors in sets:
-        cov, alone = dprob.covariances(problem, info_l, info_p, sensors)
-        sd = np.sqrt(np.clip(np.diag(cov)[:p], 0, None))
-        sd_alone = np.sqrt(np.clip(np.diag(alone)[:p], 0, None))
+        covs = dprob.covariances(problem, info_l, info_p, cross, sensors)
+        sd, sd_alone, sd_linear = (np.sqrt(np.clip(np.diag(covs[k])[:p], 0, None))
+                                   for k in ("known", "alone", "known_local"))
+        cov = covs["known"]
         params = {}
         for i, n in enumerate(knowledge.names):
             lo, hi = theta[i] * np.exp(-gf.Z90 * sd[i]), theta[i] * np.exp(gf.Z90 * sd[i])
             params[n] = {"estimate": float(theta[i]), "sd_log": float(sd[i]), "sd_log_alone": float(sd_alone[i]),
-                         "interval_90": [float(lo), float(hi)], "width_90": float(hi - lo)}
+                         "sd_log_local": float(sd_linear[i]), "interval_90": [float(lo), float(hi)],
+                         "width_90": float(hi - lo)}
         crit = float(problem.criterion.of_covariance(jax.numpy.asarray(cov)))
         rows.append({"input": label, "sensors": list(sensors), "criterion": crit, "parameters": params})
     return rows
