@@ -37,7 +37,7 @@ def test_docs_build_strict_with_executed_tutorials(tmp_path):
     wall = time.perf_counter() - start
     assert run.returncode == 0, run.stderr[-6000:]
     site = tmp_path / "site"
-    for page in ("getting-started", "model", "data", "results", "uncertainty", "benchmarks", "api",
+    for page in ("getting-started", "model", "data", "results", "uncertainty", "design", "benchmarks", "api",
                  "tutorials/simulate", "tutorials/sweep", "tutorials/fit_posterior", "tutorials/discover",
                  "tutorials/control", "tutorials/sets"):
         assert (site / page / "index.html").is_file(), page

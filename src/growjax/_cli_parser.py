@@ -179,7 +179,7 @@ def build_parser():
 
     fmt = _Formatter
     parser = _Parser(prog="growjax", formatter_class=fmt,
-                     description="MAMMOBOT soft growing robot: simulate, sweep, fit, sample, discover, control")
+                     description="MAMMOBOT soft growing robot: simulate, sweep, fit, sample, discover, control, design")
     parser.add_argument("--version", action="version", version=f"growjax {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
 
@@ -272,6 +272,36 @@ def build_parser():
     _tolerance(ctl, "(repeat; the feedback design is then tuned on the cost averaged over --draws draws of the "
                     "rig within the default budget of `growjax params` and these; none given: the rig as it is)")
     _quiet(ctl)
+
+    des = sub.add_parser("design", formatter_class=fmt,
+                         help="design the next experiment: the forward drive's demand that most shrinks the intervals")
+    _shared(des, "design")
+    des.add_argument("--for", dest="design_for", action="extend", nargs="+", default=[], metavar="NAME",
+                     help="parameters whose precision the design is for (repeat or list; none: Y)")
+    des.add_argument("--fit-from", metavar="FIT.json", default=None,
+                     help="what is known: the JSON summary of `growjax fit --json` (default: fit DATA first)")
+    des.add_argument("--sensors", choices=["length", "length,pressure"], default="length",
+                     help="what the next experiment records (length,pressure: the table also shows the length alone)")
+    des.add_argument("--criterion", choices=["A", "D"], default="A",
+                     help="A: the sum of the relative variances; D: their generalised variance (log det)")
+    des.add_argument("--duration", type=_positive, default=10.0, metavar="S", help="length of the designed run, s")
+    des.add_argument("--knot-spacing", type=_positive, default=0.5, metavar="S", help="s between the demand's knots")
+    des.add_argument("--p-max", type=_positive, default=None, metavar="PA",
+                     help="top of the demand, Pa (default: the sensed-pressure ceiling, the membrane limit × 0.9)")
+    des.add_argument("--random", type=_count(), default=64, help="random admissible inputs drawn and scored")
+    des.add_argument("--starts", type=_count(), default=3, help="descents, from the best random inputs")
+    des.add_argument("--iterations", type=_count(), default=30, help="gradient steps per descent")
+    des.add_argument("--draws", type=_count(2), default=32, help="draws of the rig and θ every design is checked on")
+    des.add_argument("--points", type=_count(), default=4,
+                     help="points of θ and the rig the criterion is averaged over (1: the local design at the estimate)")
+    des.add_argument("--nonlinear-draws", type=_count(0), default=16,
+                     help="draws of the rig on which what the fit's linearised rig misses is measured (0: none)")
+    des.add_argument("--pressure-noise", type=_positive, default=1e3, metavar="PA",
+                     help="sd of the pressure sensor's noise, Pa (with --sensors length,pressure)")
+    des.add_argument("--max-pump-speed", type=_positive, default=None, metavar="M_S",
+                     help="limit of the pump platform's speed, m/s (the model's ideal torque source has none)")
+    _quiet(des)
+    _likelihood(des)
 
     par = sub.add_parser("params", formatter_class=fmt,
                          help="list the parameters: names, symbols, defaults, units, physical ranges")

@@ -179,6 +179,31 @@ def _control(s: dict, name: str) -> list[str]:
     return lines
 
 
+def _design(s: dict, name: str) -> list[str]:
+    names = s["parameters"]
+    lines = [f"design: {name}, {s['criterion']}-optimal for {', '.join(names)}, {s['duration_s']:g} s, demand in "
+             f"0–{_kpa(s['p_max_Pa'])} on knots every {s['knot_spacing_s']:g} s", *_origin_lines(s["fixed_parameters"])]
+    head = f"  {'input':24s} {'sensors':16s}" + "".join(f" {n.split('.')[-1][:14]:>14s} sd  90 % width" for n in names)
+    lines += [head + "   alone sd"]
+    for row in s["table"]:
+        cells = ""
+        for n in names:
+            p = row["parameters"][n]
+            cells += f" {100 * p['sd_log']:16.2f} %  {_value(n, p['width_90']):>10s}"
+        alone = ", ".join(f"{100 * row['parameters'][n]['sd_log_alone']:.2f} %" for n in names)
+        lines.append(f"  {row['input']:24s} {'+'.join(row['sensors']):16s}{cells}   {alone}")
+    check = s["checks"]["design"]
+    lim = s["limits"]
+    lines.append(f"  design over the draws: peak pressure {_kpa(check['peak_pressure_Pa'])} (ceiling "
+                 f"{_kpa(lim['pressure_ceiling_Pa'])}), peak length {_mm(check['peak_length_m'])} (ceiling "
+                 f"{_mm(lim['length_ceiling_m'])}): {'admissible' if check['admissible'] else 'NOT admissible'}")
+    r = s["random"]
+    lines.append(f"  {r['admissible']} random admissible inputs (of {r['drawn']} drawn); "
+                 f"{s['wall_s']['total_s']:.0f} s")
+    lines.append(f"  wrote {s['design_csv']}, {s['figure']}, {s['summary_json']}")
+    return lines
+
+
 def _params(s: dict, name: str) -> list[str]:
     lines = [f"{'name':34s} {'symbol':7s} {'value':>12s} {'unit':16s} {'physical range':24s} description"]
     for r in s["parameters"]:
@@ -198,7 +223,7 @@ def _effects(s: dict, name: str) -> list[str]:
 
 
 SUMMARIES = {"simulate": _simulate, "sweep": _sweep, "fit": _fit, "posterior": _posterior, "discover": _discover,
-             "control": _control, "params": _params, "effects": _effects}  # command → its lines (summary, data name)
+             "control": _control, "params": _params, "effects": _effects, "design": _design}  # command → its lines (summary, data name)
 
 
 def summary_lines(s: dict) -> list[str]:

@@ -547,6 +547,56 @@ def control_command(args) -> dict:
     return summary
 
 
+def design_command(args) -> dict:
+    """What is known (a fit of DATA, or --fit-from), then the design; writes design.csv, design.png, summary.json."""
+    from growjax import design as gd
+    from growjax import experiment as ex
+    from growjax import fit as gf
+    from growjax import params as gp
+
+    if args.drive != "forward":
+        raise ValueError("growjax design designs the forward drive's pressure demand: --drive inverse is not designed")
+    if args.fidelity != "fast":
+        raise ValueError("growjax design runs the fast configuration (its sensitivities are differentiated again)")
+    data, exp, base, origin = _setup(args, "forward")
+    names = tuple(dict.fromkeys(gp.resolve_name(base, n) for n in (args.design_for or ["Y"])))
+    lim = gd.limits(base, max_speed=args.max_pump_speed)
+    p_max = lim.pressure if args.p_max is None else args.p_max
+    if p_max > lim.pressure + 1e-9:
+        raise ValueError(f"--p-max {p_max / 1e3:.1f} kPa is above the sensed-pressure ceiling {lim.pressure / 1e3:.1f} kPa "
+                         f"(the membrane limit {lim.membrane / 1e3:.1f} kPa × the margin)")
+    space = gd.DesignSpace(args.duration, p_max, gd.catheter_of(exp, args.duration), args.knot_spacing)
+    tolerances = tolerances_of(args)
+    if args.fit_from:
+        known = gd.from_summary(args.fit_from, base, names, tolerances)
+    else:
+        if "robot_length_m" not in exp:
+            raise ValueError(f"{data} has no robot_length_m column to fit: give what is known with --fit-from")
+        config = make_config(args, "forward", adjoint="forward")
+        inputs = ex.to_inputs(exp, "forward", base, config.t0, config.t1)
+        pressure = exp["pressure_Pa"] if "pressure_Pa" in exp else None  # noqa: SIM401 (Experiment is not a dict)
+        started = _progress_note(args, f"design: what is known, a fit of {', '.join(names)} to {data.name}")
+        fitted = gf.fit(exp.time, exp["robot_length_m"], inputs, free=names, base=base, config=config,
+                        pressure=pressure, seed=args.seed, window=scored_window(args, config),
+                        discrepancy=args.discrepancy, tolerances=tolerances)
+        _progress_note(args, f"design: fitted in {time.perf_counter() - started:.1f} s")
+        known = gd.from_fit(fitted, base, tolerances)
+    started = _progress_note(args, f"design: {args.criterion}-optimal for {', '.join(names)}, {args.duration:g} s, "
+                                   f"sensors {args.sensors}")
+    result = gd.design(known, space, criterion=args.criterion, sensors=tuple(args.sensors.split(",")), random=args.random,
+                       starts=args.starts, iterations=args.iterations, n_draws=args.draws, seed=args.seed,
+                       points=args.points, pressure_noise=args.pressure_noise, limits=lim,
+                       nonlinear_draws=args.nonlinear_draws, progress=not args.quiet)
+    _progress_note(args, f"design: done in {time.perf_counter() - started:.1f} s")
+    out = _out(args)
+    csv = space.write_csv(out / "design.csv", result.x)
+    figure = gd.design_figure(result, out / "design.png")
+    summary = {"command": "design", "data": str(data), "fixed_parameters": origin, **result.summary(),
+               "design_csv": str(csv), "figure": str(figure), "summary_json": str(out / "summary.json")}
+    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
+    return summary
+
+
 def params_command(args) -> dict:
     import growjax as gj
     from growjax import params as gp
@@ -608,7 +658,7 @@ def effects_command(args) -> dict:
 
 COMMANDS = {"simulate": simulate_command, "sweep": sweep_command, "fit": fit_command,
             "posterior": posterior_command, "discover": discover_command, "control": control_command,
-            "params": params_command, "effects": effects_command}
+            "params": params_command, "effects": effects_command, "design": design_command}
 
 
 def _write_json(summary: dict, where: str | None):

@@ -1,0 +1,83 @@
+"""Design of the next experiment: the forward drive's pressure demand that makes the next fit most precise about
+the parameters of interest, safe on every plausible rig.
+
+What is here, in the order a design uses it:
+
+* :class:`Knowledge` (:func:`from_fit`, :func:`from_summary`) — what is known: the parameters of interest at their
+  estimate, their covariance of ln θ, the rig's tolerances and the residual model (:mod:`.knowledge`).
+* :class:`DesignSpace` — the demand as a piecewise-linear profile on fixed knots in (0, p_max), a smooth map
+  of unconstrained design variables; the catheter as in the experiment already run; the CSV in the rig's
+  terms (:mod:`.space`).
+* :func:`solve` — the length and pressure with their sensitivities to (ln θ, the rig's errors), one forward
+  sensitivity solve that forward mode differentiates again (:mod:`.sensitivity`).
+* :class:`Precision`, :func:`posterior` — the expected posterior covariance under the discrepancy, the noise and
+  the rig as nuisance, linearised, and its A- or D-criterion (:mod:`.criterion`).
+* :func:`limits`, :func:`draws`, :func:`check`, :func:`penalty` — the membrane limit with the control module's
+  margin, the stroke, checked over draws of the rig and θ (:mod:`.constraints`).
+* :func:`make`, :func:`evaluate`, :func:`smoothed_gradient`, :func:`value_and_gradient` — the problem, its
+  objective, the slope the descent follows (differences over a step of the demand) and the exact derivative by
+  forward mode through the model (:mod:`.problem`).
+* :func:`random_admissible`, :func:`multistart` — the random baseline and the descent (:mod:`.optimise`).
+* :func:`design` — all of it end to end (:mod:`.workflow`; the ``growjax design`` command) and
+  :func:`design_figure`.
+
+SI units throughout: s, Pa, m; uncertainties of ln θ (relative).
+"""
+
+from growjax.design.constraints import Check, Limits, check, draws, limits, penalty, stack
+from growjax.design.criterion import Precision, Prediction, information, posterior
+from growjax.design.figure import design_figure
+from growjax.design.knowledge import Knowledge, from_fit, from_summary
+from growjax.design.optimise import Descent, RandomBatch, adam, multistart, random_admissible
+from growjax.design.problem import (
+    Problem,
+    covariances,
+    evaluate,
+    evaluate_many,
+    make,
+    smoothed_gradient,
+    value_and_gradient,
+    values,
+)
+from growjax.design.sensitivity import Sensitivities, solve
+from growjax.design.space import DesignSpace, catheter_of
+from growjax.design.workflow import DesignError, DesignResult, design, published_inputs
+
+__all__ = [
+    "Check",
+    "Descent",
+    "DesignError",
+    "DesignResult",
+    "DesignSpace",
+    "Knowledge",
+    "Limits",
+    "Precision",
+    "Prediction",
+    "Problem",
+    "RandomBatch",
+    "Sensitivities",
+    "adam",
+    "catheter_of",
+    "check",
+    "covariances",
+    "design",
+    "design_figure",
+    "draws",
+    "evaluate",
+    "evaluate_many",
+    "from_fit",
+    "from_summary",
+    "information",
+    "limits",
+    "make",
+    "multistart",
+    "penalty",
+    "posterior",
+    "published_inputs",
+    "random_admissible",
+    "smoothed_gradient",
+    "solve",
+    "stack",
+    "value_and_gradient",
+    "values",
+]

@@ -1,0 +1,154 @@
+"""What a design must respect on every plausible rig: the sensed pressure below the membrane limit with the control
+module's margin, the robot's length inside its stroke and the syringes' travel inside theirs (and, when a limit is
+given, the pump platform's speed).
+
+"Every plausible rig" is a set of draws (:func:`draws`): the rig's toleranced parameters within their tolerances
+(:func:`growjax.control.rig_draws`) and θ from its current uncertainty, seeded. In the optimisation the limits are
+a penalty on the nominal run widened by the spread the draws would give, linearised (:func:`penalty`, free: the
+sensitivities are at hand); on a finished design they are checked by simulating every draw (:func:`check`). The
+forward drive's pump is an ideal torque source in the model, so its speed has no limit there: ``max_speed`` is
+off unless given.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from growjax import fit as gf
+from growjax import params as gp
+from growjax.control.targets import PRESSURE_MARGIN
+from growjax.control.tuning import rig_draws
+from growjax.design.knowledge import Knowledge
+from growjax.design.sensitivity import Sensitivities
+from growjax.robot import pressure_limit
+from growjax.simulate import as_arrays, simulate
+from growjax.trajectory import OK
+
+STROKE_MARGIN = 0.95  # the length's ceiling as a share of the robot's stroke
+SPREAD = 2.5  # sds of the linearised spread over the draws the penalty keeps clear of each limit
+DRAWS = 32  # rig and θ draws a design is checked on
+CHUNK = 128  # runs per compiled batch of the check
+
+
+@dataclasses.dataclass(frozen=True)
+class Limits:
+    """``pressure`` Pa: ceiling of the sensed pressure (the membrane limit × the control module's margin);
+    ``length`` m: ceiling of the robot's length; ``syringe`` m: the syringes' travel; ``speed`` m/s or None: the
+    pump platform's."""
+
+    pressure: float
+    length: float
+    syringe: float
+    speed: float | None = None
+    membrane: float = float("nan")  # Pa, the membrane limit itself (for reports)
+
+    def summary(self) -> dict:
+        return {"pressure_ceiling_Pa": self.pressure, "membrane_limit_Pa": self.membrane,
+                "length_ceiling_m": self.length, "syringe_stroke_m": self.syringe, "max_pump_speed_m_s": self.speed}
+
+
+def limits(base: gp.Parameters, margin: float = PRESSURE_MARGIN, stroke_margin: float = STROKE_MARGIN,
+           max_speed: float | None = None) -> Limits:
+    """The :class:`Limits` of ``base``: sensed pressure ≤ ``margin`` × the membrane limit, length ≤
+    ``stroke_margin`` × the robot's stroke, syringe travel ≤ its stroke, the platform's speed ≤ ``max_speed``."""
+    membrane = float(pressure_limit(base.robot))
+    return Limits(margin * membrane, stroke_margin * float(base.robot.stroke), float(base.pump.syringe_stroke),
+                  max_speed, membrane)
+
+
+def draws(knowledge: Knowledge, n: int = DRAWS, seed: int = 0) -> dict:
+    """n draws {qualified name: (n,) SI} of the rig within its tolerances and of θ from N(ln θ̂, Σ_θ), clipped into
+    each parameter's physical range; seeded."""
+    out = dict(rig_draws(n, knowledge.base, knowledge.tolerances, seed))
+    rng = np.random.default_rng([seed, 2])
+    theta = knowledge.estimate
+    z = rng.multivariate_normal(np.zeros(theta.size), knowledge.covariance, size=n)
+    lo, hi = gf.physical_bounds(knowledge.base, knowledge.names, theta)
+    z = np.clip(z, lo, hi)
+    out.update({name: theta[i] * np.exp(z[:, i]) for i, name in enumerate(knowledge.names)})
+    return out
+
+
+def penalty(s: Sensitivities, prior_covariance, lim: Limits, spread: float = SPREAD):
+    """Σ over samples of the squared excess (kPa, mm) of the nominal run plus ``spread`` linearised sds over the
+    prior (Σ₀ = ``prior_covariance`` (m, m)) above the pressure and length ceilings: 0 inside them (traceable)."""
+    # (a floor of 1 nm and 1 mPa keeps the square root's derivative finite where a run does not move)
+    sd_l = jnp.sqrt(jnp.einsum("ni,ij,nj->n", s.jac_length, prior_covariance, s.jac_length) + 1e-18)
+    sd_p = jnp.sqrt(jnp.einsum("ni,ij,nj->n", s.jac_pressure, prior_covariance, s.jac_pressure) + 1e-6)
+    over_p = jax.nn.relu((s.pressure + spread * sd_p - lim.pressure) / 1e3)
+    over_l = jax.nn.relu((s.length + spread * sd_l - lim.length) / 1e-3)
+    return jnp.sum(over_p**2) + jnp.sum(over_l**2)
+
+
+class Check(eqx.Module):
+    """A check of inputs over draws, per input (C,): the worst over the draws of the sensed pressure (Pa), the
+    length (m), the syringes' travel (m), the platform's speed (m/s), whether every run reached its end, and
+    whether all of it is inside the :class:`Limits`; ``length`` and ``pressure`` (C, D, n) the runs
+    themselves when kept."""
+
+    peak_pressure: np.ndarray
+    peak_length: np.ndarray
+    peak_syringe: np.ndarray
+    peak_speed: np.ndarray
+    completed: np.ndarray
+    admissible: np.ndarray
+    length: np.ndarray | None = None
+    pressure: np.ndarray | None = None
+
+    def row(self, i: int) -> dict:
+        return {"admissible": bool(self.admissible[i]), "runs_completed": bool(self.completed[i]),
+                "peak_pressure_Pa": float(self.peak_pressure[i]), "peak_length_m": float(self.peak_length[i]),
+                "peak_syringe_travel_m": float(self.peak_syringe[i]), "peak_pump_speed_m_s": float(self.peak_speed[i])}
+
+
+def stack(inputs: list):
+    """Inputs of one structure stacked into one pytree with a leading axis (C, …) on every leaf."""
+    return jax.tree_util.tree_map(lambda *leaves: jnp.stack([jnp.asarray(v) for v in leaves]), *inputs)
+
+
+def check(inputs, knowledge: Knowledge, config, ts, breaks, lim: Limits, drawn: dict, keep_runs: bool = False) -> Check:
+    """Simulate every input × draw (the fast configuration, batched ``CHUNK`` runs at a time) and compare the worst
+    of each input with ``lim``. ``inputs``: C inputs of one structure stacked (:func:`stack`), sharing their
+    ``breaks``; ``drawn`` from :func:`draws`; ``ts`` (n,) s; ``keep_runs``: keep the runs' length and pressure."""
+    c = jax.tree_util.tree_leaves(inputs)[0].shape[0]
+    d = len(next(iter(drawn.values())))
+    names = tuple(drawn)
+    values = np.stack([np.asarray(drawn[k], float) for k in names], axis=1)  # (D, r)
+    idx_c, idx_d = np.repeat(np.arange(c), d), np.tile(np.arange(d), c)
+    total = idx_c.size
+    size = min(CHUNK, total)
+    out = {k: [] for k in ("length", "pressure", "syringe", "ok")}
+    base = as_arrays(knowledge.base)
+    for start in range(0, total, size):
+        sl = np.arange(start, start + size) % total  # the last chunk padded by wrapping round
+        batch = jax.tree_util.tree_map(lambda a: a[idx_c[sl]], inputs)
+        res = _runs(base, names, batch, jnp.asarray(values[idx_d[sl]]), config, jnp.asarray(ts), breaks)
+        n_real = min(size, total - start)
+        for k, v in zip(out, res):
+            out[k].append(np.asarray(v)[:n_real])
+    length, pressure, syringe, ok = (np.concatenate(out[k]).reshape((c, d) + np.shape(out[k][0])[1:]) for k in out)
+    t = np.asarray(ts, float)
+    speed = np.abs(np.diff(syringe, axis=-1)) / np.diff(t)
+    worst = lambda a: np.max(np.where(np.isfinite(a), a, np.inf), axis=(1, 2))
+    peak_p, peak_l, peak_s, peak_v = worst(pressure), worst(length), worst(np.abs(syringe)), worst(speed)
+    completed = np.all(ok, axis=1)
+    admissible = completed & (peak_p <= lim.pressure) & (peak_l <= lim.length) & (peak_s <= lim.syringe)
+    if lim.speed is not None:
+        admissible &= peak_v <= lim.speed
+    return Check(peak_p, peak_l, peak_s, peak_v, completed, admissible,
+                 length if keep_runs else None, pressure if keep_runs else None)
+
+
+@eqx.filter_jit
+def _runs(base, names, inputs, values, config, ts, breaks):
+    def one(i, value):
+        p = gp.replace(base, **{k: value[j] for j, k in enumerate(names)})
+        tr = simulate(p, i, config, ts=ts, breaks=breaks)
+        return tr.length, tr.pressure, tr.syringe_displacement, tr.status == OK
+
+    return jax.vmap(one)(inputs, values)

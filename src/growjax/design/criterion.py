@@ -1,0 +1,121 @@
+"""Criteria of a design: the expected posterior covariance of the parameters of interest under the full residual
+model, linearised, and the precision criteria on it.
+
+For the next experiment's data y = L(w) + δ + ε (length; and the pressure when it is recorded), linearised in
+w = (ln θ, b) at the estimate with J̃ = [J_θ, G_b] the length's sensitivities (:mod:`.sensitivity`), the
+posterior covariance of w is
+
+    Σ_post = (Σ_prior⁻¹ + J̃ᵀ K⁻¹ J̃ + J_Pᵀ J_P / σ_P²)⁻¹,
+
+K the covariance of the discrepancy and the sensor noise on the sample times (:mod:`growjax.discrepancy`; K⁻¹J̃
+by the Kalman filter's whitening, exact for the Matérn-3/2 and Ornstein–Uhlenbeck processes) and the pressure
+rows with independent noise of sd σ_P. The rig's errors b are nuisance parameters (their tolerances the
+prior): the block of Σ_post on θ has them integrated out. The covariance does not depend on the data, only on
+the input: it is what a fit of the designed experiment will report, to the linearisation.
+
+A criterion maps that block to a number to minimise: :class:`Precision` (Bayesian A- or D-optimality). Any
+callable ``(Prediction) → scalar`` serves the optimiser (:mod:`.optimise`) the same way: a criterion of model
+discrimination takes the same place.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from growjax import discrepancy as dc
+from growjax.design.sensitivity import Sensitivities
+
+SENSORS = ("length", "pressure")
+PRESSURE_NOISE = 1e3  # Pa, sd of the pressure sensor's noise (independent samples)
+KINDS = ("A", "D")
+
+
+class Prediction(NamedTuple):
+    """What an input gives: ``sensitivities`` on the sample times, the covariance of the estimate of w with what is
+    known (``covariance`` (m, m)) and from the next experiment alone (``covariance_alone``: no prior on θ, the
+    rig under its tolerances), each with the rig's nonlinearity where it was given; ``covariance_linear``: with
+    what is known, the rig linearised (the posterior covariance alone)."""
+
+    sensitivities: Sensitivities
+    covariance: jax.Array
+    covariance_alone: jax.Array
+    covariance_linear: jax.Array
+
+
+def check_sensors(sensors) -> tuple:
+    """``sensors`` as a tuple; ValueError unless it is ('length',) or ('length', 'pressure')."""
+    sensors = tuple(sensors)
+    if set(sensors) - set(SENSORS) or "length" not in sensors:
+        raise ValueError(f"sensors must be 'length' or 'length,pressure', got {','.join(sensors)}")
+    return sensors
+
+
+def information(s: Sensitivities, times, hyper: dc.Hyper, sensors=("length",), pressure_noise: float = PRESSURE_NOISE):
+    """The information J̃ᵀK⁻¹J̃ (+ J_PᵀJ_P/σ_P² with ``"pressure"`` in ``sensors``) (m, m) on w of the samples at
+    ``times`` (n,) s."""
+    check_sensors(sensors)
+    w = dc.whiten(s.jac_length, times, hyper)
+    info = w.T @ w
+    if "pressure" in sensors:
+        jp = s.jac_pressure / pressure_noise
+        info = info + jp.T @ jp
+    return info
+
+
+def posterior(s: Sensitivities, times, hyper: dc.Hyper, precision_known, precision_alone, sensors=("length",),
+              pressure_noise: float = PRESSURE_NOISE, remainder=None) -> Prediction:
+    """The :class:`Prediction` of sensitivities ``s``: Σ = (Λ₀ + information)⁻¹ for the prior precisions Λ₀
+    ``precision_known`` and ``precision_alone`` (m, m) (:meth:`growjax.design.knowledge.Knowledge.prior_precision`).
+
+    ``remainder`` (n, D) m: what the rig's linearised effect misses at D draws of the rig
+    (:func:`growjax.design.sensitivity.remainder`). A fit that linearises the rig (:func:`growjax.fit.fit`) takes
+    it for data: its estimate moves by Σ J̃ᵀK⁻¹ r for a remainder r, so the covariance gains
+    Σ J̃ᵀK⁻¹ V VᵀK⁻¹J̃ Σ with V Vᵀ = the remainder's second moment over the draws (the sandwich of the estimator
+    the fit is, with the remainder as an error it does not model)."""
+    check_sensors(sensors)
+    m = s.jac_length.shape[1]
+    if remainder is None:
+        remainder = jnp.zeros((s.jac_length.shape[0], 0))
+    d = remainder.shape[1]
+    cols = jnp.concatenate([s.jac_length, remainder / jnp.sqrt(max(d, 1))], axis=1)
+    w = dc.whiten(cols, times, hyper)
+    info = w[:, :m].T @ w[:, :m]
+    if "pressure" in sensors:
+        jp = s.jac_pressure / pressure_noise
+        info = info + jp.T @ jp
+    cross = w[:, :m].T @ w[:, m:]  # (m, D)
+    inv = lambda a: jnp.linalg.inv(0.5 * (a + a.T))
+    known, alone = inv(precision_known + info), inv(precision_alone + info)
+    spread = lambda c: c + c @ cross @ cross.T @ c
+    return Prediction(s, spread(known), spread(alone), known)
+
+
+class Precision(eqx.Module):
+    """Bayesian precision of the first ``size`` entries of w (the parameters of interest, in ln θ: relative
+    uncertainties): ``"A"`` the log of the trace of their posterior covariance (the sum of their relative
+    variances), ``"D"`` its log determinant. Smaller is better."""
+
+    size: int = eqx.field(static=True)
+    kind: str = eqx.field(static=True, default="A")
+
+    def __check_init__(self):
+        if self.kind not in KINDS:
+            raise ValueError(f"the precision criterion must be one of {KINDS}, got {self.kind!r}")
+
+    def of_covariance(self, cov):
+        block = cov[: self.size, : self.size]
+        if self.kind == "A":
+            return jnp.log(jnp.trace(block))
+        return jnp.linalg.slogdet(block)[1]
+
+    def __call__(self, prediction: Prediction):
+        return self.of_covariance(prediction.covariance)
+
+
+def standard_deviations(cov, size: int):
+    """sd (size,) of ln θ: each parameter's relative standard uncertainty."""
+    return jnp.sqrt(jnp.clip(jnp.diag(cov)[:size], 0.0, None))

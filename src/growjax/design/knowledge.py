@@ -1,0 +1,139 @@
+"""What is known before the next experiment: the parameters of interest, their estimate and covariance, the rig's
+tolerances and the residual model's hyperparameters, from a fit of the experiments already run.
+
+The design's prior on w = (ln θ, b) is blockdiag(Σ_θ, U): Σ_θ the fit's covariance of ln θ (what the data
+already say), U = diag(u²) the rig's tolerances (its relative errors b = ln ψ/ψ₀, :mod:`growjax.tolerance`).
+The rig enters the next experiment as a fresh nuisance with its tolerance prior: what the old data said of the
+rig is not carried over (conservative where the next experiment runs on the same rig). A parameter the fit left
+undetermined (no interval) takes the variance of a uniform prior over its sampling box
+(:func:`growjax.fit.default_range`) instead.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+
+from growjax import discrepancy as dc
+from growjax import fit as gf
+from growjax import params as gp
+from growjax import tolerance as tl
+
+# Residual model when no fit gives one: white length noise of 0.2 mm, no discrepancy.
+DEFAULT_HYPER = {"amplitude_m": 0.0, "time_scale_s": 1.0, "noise_m": 2e-4, "noise_time_s": 0.0}
+
+
+@dataclasses.dataclass(frozen=True)
+class Knowledge:
+    """What is known: ``base`` the parameters (θ at its estimate), ``names`` (p,) the parameters of interest
+    (qualified), ``covariance`` (p, p) of ln θ, ``tolerances`` {rig parameter: relative sd u}, ``hyper`` the
+    length's residual model (discrepancy and noise), ``source`` where it came from."""
+
+    base: gp.Parameters
+    names: tuple
+    covariance: np.ndarray
+    tolerances: dict
+    hyper: dc.Hyper
+    source: str = ""
+
+    def __post_init__(self):
+        c = np.asarray(self.covariance, float)
+        if c.shape != (len(self.names),) * 2 or not np.all(np.isfinite(c)):
+            raise ValueError(f"the covariance must be a finite ({len(self.names)}, {len(self.names)}) matrix")
+        if np.any(np.linalg.eigvalsh(0.5 * (c + c.T)) <= 0):
+            raise ValueError("the covariance of ln θ must be positive definite")
+
+    @property
+    def estimate(self) -> np.ndarray:
+        """θ (p,) SI at the estimate."""
+        return np.array([float(gp.get(self.base, n)) for n in self.names])
+
+    @property
+    def rig(self) -> tuple:
+        """The toleranced rig parameters (q,)."""
+        return tuple(self.tolerances)
+
+    def prior_covariance(self) -> np.ndarray:
+        """blockdiag(Σ_θ, U) (p + q, p + q) of w = (ln θ, b)."""
+        p, q = len(self.names), len(self.tolerances)
+        out = np.zeros((p + q, p + q))
+        out[:p, :p] = self.covariance
+        out[p:, p:] = np.diag(np.asarray(list(self.tolerances.values()), float) ** 2)
+        return out
+
+    def prior_precision(self, known: bool = True) -> np.ndarray:
+        """The prior's precision (p + q, p + q); ``known=False``: none on θ (the next experiment alone, its rig
+        still under its tolerances)."""
+        p = len(self.names)
+        out = np.zeros_like(self.prior_covariance())
+        if known:
+            out[:p, :p] = np.linalg.inv(self.covariance)
+        u = np.asarray(list(self.tolerances.values()), float)
+        out[p:, p:] = np.diag(1.0 / u**2)
+        return out
+
+    def summary(self) -> dict:
+        sd = np.sqrt(np.diag(self.covariance))
+        return {"source": self.source,
+                "parameters": {n: {"estimate": float(v), "sd_log": float(s)}
+                               for n, v, s in zip(self.names, self.estimate, sd)},
+                "tolerances": dict(self.tolerances), "discrepancy": self.hyper.as_dict()}
+
+
+def box_variance(base: gp.Parameters, name: str) -> float:
+    """Variance of ln θ under a uniform prior over the parameter's sampling box."""
+    lo, hi = gf.default_range(base, name)
+    return float(np.log(hi / lo) ** 2 / 12.0)
+
+
+def _covariance(base, names, cov, determined) -> np.ndarray:
+    """``cov`` with each undetermined parameter's row and column replaced by its box variance (uncorrelated)."""
+    cov = np.array(cov, float)
+    for i, n in enumerate(names):
+        if not determined[i] or not cov[i, i] > 0:
+            cov[i, :] = cov[:, i] = 0.0
+            cov[i, i] = box_variance(base, n)
+    return cov
+
+
+def _hyper(record: dict | None) -> dc.Hyper:
+    h = {**DEFAULT_HYPER, **{k: v for k, v in (record or {}).items() if k in DEFAULT_HYPER}}
+    return dc.Hyper.of(h["amplitude_m"], h["time_scale_s"], h["noise_m"], h["noise_time_s"])
+
+
+def from_fit(result: gf.FitResult, base: gp.Parameters, tolerances: dict | None = None) -> Knowledge:
+    """What a :class:`growjax.fit.FitResult` of ``base`` knows: θ at its estimate, its covariance of ln θ, its
+    residual model and tolerances (``tolerances`` overrides them; None: the fit's, else the default budget)."""
+    names = tuple(result.names)
+    determined = [result.standard_error.get(n) is not None for n in names]
+    cov = _covariance(base, names, result.covariance_log, determined)
+    tol = dict(result.tolerances) if tolerances is None and result.tolerances else tl.budget(base, tolerances, names)
+    return Knowledge(gp.replace(base, **result.estimate), names, cov, tol, _hyper(result.discrepancy), "fit")
+
+
+def from_summary(path, base: gp.Parameters, names, tolerances: dict | None = None) -> Knowledge:
+    """What a saved fit knows: the JSON summary ``growjax fit --json FILE`` writes. It holds each parameter's
+    estimate and standard error (not their correlations: the covariance is taken diagonal). ``names``: the
+    parameters of interest, each among the fit's; ValueError naming what is missing."""
+    path = Path(path)
+    try:
+        record = json.loads(path.read_text())
+    except (OSError, ValueError) as err:
+        raise ValueError(f"cannot read the saved fit {path}: {err}") from None
+    fitted = record.get("parameters") if isinstance(record, dict) else None
+    if not isinstance(fitted, dict):
+        raise ValueError(f"{path} is not the JSON summary of `growjax fit` (no 'parameters')")
+    names = tuple(gp.resolve_name(base, n) for n in names)
+    missing = [n for n in names if n not in fitted]
+    if missing:
+        raise ValueError(f"{path} did not fit {', '.join(missing)} (it fitted {', '.join(fitted)})")
+    est = {n: float(fitted[n]["estimate"]) for n in names}
+    se = [fitted[n].get("standard_error") for n in names]
+    var = [0.0 if s is None else (float(s) / est[n]) ** 2 for s, n in zip(se, names)]
+    cov = _covariance(base, names, np.diag(var), [s is not None for s in se])
+    saved = record.get("tolerances") or None
+    tol = dict(saved) if tolerances is None and saved else tl.budget(base, tolerances, names)
+    return Knowledge(gp.replace(base, **est), names, cov, tol, _hyper(record.get("discrepancy")), str(path))

@@ -1,0 +1,142 @@
+"""Search of the design space: a batch of random admissible inputs, and gradient descent (Adam) through the model
+from several starts.
+
+The random batch is the baseline a design must beat and the source of the starts: n random designs
+(:meth:`growjax.design.space.DesignSpace.random`) are simulated over every draw of the rig and θ in batches
+(:func:`growjax.design.constraints.check`), the inadmissible ones dropped (more are drawn, a few rounds at most,
+until n pass), and the rest scored by the criterion. The optimiser then descends from the best of them: its
+design is the best iterate it met, so it is never worse than its start.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from growjax import _progress
+from growjax.design import constraints as dcon
+from growjax.design import problem as dprob
+from growjax.design.knowledge import Knowledge
+from growjax.design.space import DesignSpace
+
+ITERATIONS = 30  # Adam steps per start
+LEARNING_RATE = 0.2  # in the logits of the demand: ~5 % of p_max per step at most, early on
+ROUNDS = 4  # rounds of random draws for n admissible inputs
+
+
+@dataclasses.dataclass
+class Descent:
+    """One start's descent: ``x`` (K,) the best design met, ``value`` its objective, ``history`` the objective
+    at every iterate, ``start`` (K,)."""
+
+    x: np.ndarray
+    value: float
+    history: list
+    start: np.ndarray
+
+
+def adam(value_and_grad: Callable, x0, iterations: int = ITERATIONS, learning_rate: float = LEARNING_RATE,
+         beta1: float = 0.9, beta2: float = 0.999, eps: float = 1e-8, progress=None) -> Descent:
+    """Adam on ``value_and_grad(x) → (f, ∇f)`` from ``x0`` (K,), the step decaying linearly to a tenth over
+    ``iterations``. A non-finite value (the model failed there) sends the search back to the best point with half
+    the step. Returns the best iterate (the start included)."""
+    x = np.asarray(x0, float).copy()
+    m, v = np.zeros_like(x), np.zeros_like(x)
+    best_x, best_f, history = x.copy(), np.inf, []
+    lr, k = learning_rate, 0
+    for it in range(iterations + 1):
+        f, g = (np.asarray(a, float) for a in value_and_grad(x))
+        f = float(f)
+        history.append(f)
+        if progress is not None:
+            progress.update(1)
+        ok = np.isfinite(f) and np.all(np.isfinite(g))
+        if ok and f < best_f:
+            best_x, best_f = x.copy(), f
+        if it == iterations:
+            break
+        if not ok:
+            x, m, v, k, lr = best_x.copy(), np.zeros_like(x), np.zeros_like(x), 0, 0.5 * lr
+            continue
+        k += 1
+        m = beta1 * m + (1 - beta1) * g
+        v = beta2 * v + (1 - beta2) * g * g
+        step = lr * (1.0 - 0.9 * it / max(iterations, 1))
+        x = x - step * (m / (1 - beta1**k)) / (np.sqrt(v / (1 - beta2**k)) + eps)
+    return Descent(best_x, best_f, history, np.asarray(x0, float))
+
+
+GRADIENTS = ("differences", "jax")
+
+
+def multistart(problem: dprob.Problem, starts, iterations: int = ITERATIONS, learning_rate: float = LEARNING_RATE,
+               gradient: str = "differences", progress: bool = False) -> list[Descent]:
+    """:func:`adam` on the problem's objective from each row of ``starts`` (S, K − 1), best first. ``gradient``:
+    ``"differences"``, the slope over a step of the demand (:func:`growjax.design.problem.smoothed_gradient`), or
+    ``"jax"``, the exact derivative by forward mode through the model
+    (:func:`growjax.design.problem.value_and_gradient`)."""
+    if gradient not in GRADIENTS:
+        raise ValueError(f"gradient must be one of {GRADIENTS}, got {gradient!r}")
+    starts = np.atleast_2d(np.asarray(starts, float))
+
+    def vg(x):
+        if gradient == "jax":
+            return dprob.value_and_gradient(problem, np.asarray(x))
+        return dprob.smoothed_gradient(problem, np.asarray(x))
+
+    runs = []
+    with _progress.bar(len(starts) * (iterations + 1), "design: descent", "step", progress) as bar:
+        for x0 in starts:
+            runs.append(adam(vg, x0, iterations, learning_rate, progress=bar))
+    return sorted(runs, key=lambda r: r.value)
+
+
+@dataclasses.dataclass
+class RandomBatch:
+    """Random admissible inputs: ``designs`` (N, K), their ``criterion`` (N,), how many inputs were ``drawn`` to
+    find them and the ``wall_s``."""
+
+    designs: np.ndarray
+    criterion: np.ndarray
+    drawn: int
+    wall_s: float
+
+    @property
+    def best(self) -> int:
+        """Index of the best (lowest criterion) admissible input."""
+        return int(np.argmin(self.criterion))
+
+    def order(self) -> np.ndarray:
+        return np.argsort(self.criterion)
+
+
+def random_admissible(problem: dprob.Problem, space: DesignSpace, knowledge: Knowledge, n: int, seed: int = 0,
+                      drawn: dict | None = None, rounds: int = ROUNDS, progress: bool = False) -> RandomBatch:
+    """n random admissible inputs, scored: each random design simulated over every draw (``drawn``, default
+    :func:`growjax.design.constraints.draws` of ``knowledge``, seeded) in batches, the inadmissible dropped, more
+    drawn (at most ``rounds`` rounds) until n pass; then the criterion of each (one compiled evaluation per
+    input, one per CPU core at a time). Fewer than n where the rounds run out; ValueError where none is admissible."""
+    clock = time.perf_counter()
+    rng = np.random.default_rng([seed, 4])
+    drawn = drawn if drawn is not None else dcon.draws(knowledge, seed=seed)
+    kept, total = [], 0
+    breaks = space.breaks()
+    for _ in range(rounds):
+        batch = space.random(max(n - len(kept), 1) * 2 if kept or total else n, rng)
+        total += len(batch)
+        res = dcon.check(dcon.stack([space.inputs(x) for x in batch]), knowledge, space.config(), space.times, breaks,
+                         problem.limits, drawn)
+        kept += [x for x, ok in zip(batch, res.admissible) if ok]
+        if len(kept) >= n:
+            break
+    if not kept:
+        raise ValueError(f"none of {total} random inputs in [0, {space.p_max / 1e3:.0f} kPa] stays inside the limits "
+                         "for every draw of the rig: lower p_max or shorten the run")
+    designs = np.asarray(kept[:n])
+    _progress.note(f"design: scoring {len(designs)} random admissible inputs", progress)
+    crit = dprob.evaluate_many(problem, designs)[:, 0]
+    crit = np.where(np.isfinite(crit), crit, np.inf)
+    return RandomBatch(designs, crit, total, time.perf_counter() - clock)

@@ -1,0 +1,234 @@
+"""A design problem as data: what is known, the design space, the sensors, the criterion and the limits, with the
+objective the optimiser minimises and its gradient by forward mode through the model.
+
+The criterion is Bayesian: the posterior covariance depends on where θ and the rig really are, so it is taken at
+``points`` of w = (ln θ/θ̂, b) (the estimate on the nominal rig first, then draws from the prior
+blockdiag(Σ_θ, U), seeded and held fixed) and averaged as log E_k[exp(criterion_k)] (for the A-criterion, the
+log of the expected sum of relative variances). An input whose information comes from a feature the nominal rig
+has and the others lack (a growth threshold crossed just so) is worth what it is worth on average. With one point
+the design is local, at the estimate.
+
+objective(x) = that average + the limits' penalty (:func:`.constraints.penalty`) at the estimate. Arrays are
+leaves, so one compiled program serves every design of one problem's shapes. What the fit's linearised rig misses
+(:func:`.sensitivity.remainder`, at ``offsets``) is left out of the objective (one plain solve per draw) and added
+to the reported covariances (:func:`covariances`).
+"""
+
+from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from growjax import discrepancy as dc
+from growjax import params as gp
+from growjax.config import Config
+from growjax.control.profile import KnotProfile
+from growjax.control.tuning import rig_draws
+from growjax.design import constraints as dcon
+from growjax.design import criterion as dcrit
+from growjax.design import sensitivity
+from growjax.design.knowledge import Knowledge
+from growjax.design.space import DesignSpace, demand_at_knots
+from growjax.signals import Inputs
+from growjax.simulate import as_arrays
+
+POINTS = 4  # points of (θ, rig) the criterion is averaged over
+DEMAND_STEP = 0.02  # share of p_max by which :func:`smoothed_gradient` moves each knot
+NONLINEAR_DRAWS = 16  # draws of the rig on which what its linearisation misses is measured (reports)
+
+
+class Problem(eqx.Module):
+    """The design problem (see the module docstring). Build it with :func:`make`."""
+
+    base: object  # Parameters at the estimate on the nominal rig, numbers as arrays
+    knots: jax.Array  # (K,) s
+    p_max: jax.Array  # Pa
+    catheter: object  # signal, m
+    times: jax.Array  # (n,) s, the sensors' samples
+    hyper: dc.Hyper
+    precision_known: jax.Array  # (m, m)
+    precision_alone: jax.Array  # (m, m)
+    prior_covariance: jax.Array  # (m, m)
+    points: jax.Array  # (P, m) points of w the criterion is averaged over (the first: 0)
+    offsets: jax.Array  # (D, q) the rig's relative errors at the draws its nonlinearity is measured on
+    breaks: tuple
+    limits: dcon.Limits = eqx.field(static=True)
+    names: tuple = eqx.field(static=True)
+    rig: tuple = eqx.field(static=True)
+    sensors: tuple = eqx.field(static=True)
+    pressure_noise: float = eqx.field(static=True)
+    criterion: dcrit.Precision = eqx.field(static=True)
+    config: object = eqx.field(static=True)
+    spread: float = eqx.field(static=True, default=dcon.SPREAD)
+
+    def inputs(self, x) -> Inputs:
+        """The inputs of design x (K,) (traceable)."""
+        return Inputs(catheter_length=self.catheter, pressure_demand=KnotProfile(self.knots, demand_at_knots(x, self.p_max)))
+
+    def sensitivities(self, inputs, breaks=None, z=None) -> sensitivity.Sensitivities:
+        return sensitivity.solve(self.base, inputs, self.names, self.rig, self.config, self.times,
+                                 self.breaks if breaks is None else breaks, z)
+
+    def predict(self, inputs, breaks=None, z=None, sensors=None, nonlinear: bool = False) -> dcrit.Prediction:
+        """The :class:`growjax.design.criterion.Prediction` of ``inputs`` (their ``breaks``, default the design
+        space's) at the point ``z`` of w (default 0), with ``sensors`` (default the problem's); ``nonlinear``: with
+        what the rig's linearisation misses at the problem's ``offsets``."""
+        breaks = self.breaks if breaks is None else breaks
+        s = self.sensitivities(inputs, breaks, z)
+        rem = None
+        if nonlinear and self.offsets.shape[0]:
+            rem = sensitivity.remainder(self.base, inputs, self.names, self.rig, self.config, self.times, breaks, s,
+                                        self.offsets, z)
+        return dcrit.posterior(s, self.times, self.hyper, self.precision_known, self.precision_alone,
+                               self.sensors if sensors is None else sensors, self.pressure_noise, rem)
+
+    def parts(self, inputs, breaks=None):
+        """(criterion averaged over the points, penalty at the estimate) of ``inputs`` (traceable)."""
+        def at(z):
+            pred = self.predict(inputs, breaks, z)
+            return self.criterion(pred), dcon.penalty(pred.sensitivities, self.prior_covariance, self.limits,
+                                                      self.spread)
+
+        values, penalties = jax.lax.map(at, self.points)
+        return jax.nn.logsumexp(values) - jnp.log(values.shape[0]), penalties[0]
+
+    def objective(self, x):
+        """criterion + penalty of design x (K,); +inf where the model failed."""
+        crit, pen = self.parts(self.inputs(x))
+        value = crit + pen
+        return jnp.where(jnp.isfinite(value), value, jnp.inf)
+
+
+def make(knowledge: Knowledge, space: DesignSpace, criterion: str = "A", sensors=("length",),
+         pressure_noise: float = dcrit.PRESSURE_NOISE, limits: dcon.Limits | None = None, points: int = POINTS,
+         seed: int = 0, config: Config | None = None, nonlinear_draws: int = NONLINEAR_DRAWS) -> Problem:
+    """The :class:`Problem` of designing ``space``'s input given ``knowledge``; ``criterion`` ``"A"`` or ``"D"`` on
+    the parameters of interest; ``points``: the points of (θ, rig) the criterion is averaged over (1: the local
+    design at the estimate; more: the estimate and draws from the prior, seeded); ``config``: the fast
+    configuration's settings over the run (default :meth:`growjax.design.space.DesignSpace.config`);
+    ``nonlinear_draws``: draws of the rig (seeded) on which what its linearisation misses is measured for the
+    reports (0: none)."""
+    sensors = dcrit.check_sensors(sensors)
+    if points < 1:
+        raise ValueError(f"points must be at least 1, got {points}")
+    prior = knowledge.prior_covariance()
+    rng = np.random.default_rng([seed, 3])
+    zs = np.concatenate([np.zeros((1, prior.shape[0])),
+                         rng.multivariate_normal(np.zeros(prior.shape[0]), prior, size=points - 1)])
+    lim = limits if limits is not None else dcon.limits(knowledge.base)
+    drawn = rig_draws(nonlinear_draws, knowledge.base, knowledge.tolerances, seed + 1) if nonlinear_draws else {}
+    offsets = np.zeros((0, len(knowledge.rig)))
+    if drawn:
+        offsets = np.stack([np.log(drawn[n] / float(gp.get(knowledge.base, n))) for n in knowledge.rig], axis=1)
+    return Problem(
+        base=as_arrays(knowledge.base), knots=jnp.asarray(space.knots), p_max=jnp.asarray(float(space.p_max)),
+        catheter=space.catheter, times=jnp.asarray(space.times), hyper=knowledge.hyper,
+        precision_known=jnp.asarray(knowledge.prior_precision(True)),
+        precision_alone=jnp.asarray(knowledge.prior_precision(False)),
+        prior_covariance=jnp.asarray(prior), points=jnp.asarray(zs), offsets=jnp.asarray(offsets),
+        breaks=space.breaks(), limits=lim, names=tuple(knowledge.names), rig=knowledge.rig, sensors=sensors,
+        pressure_noise=float(pressure_noise), criterion=dcrit.Precision(len(knowledge.names), criterion),
+        config=(config or space.config()).replace(t1=float(space.duration), adjoint="forward").resolved())
+
+
+@eqx.filter_jit
+def value_and_gradient(problem: Problem, x):
+    """(objective, its gradient (K,)) of design x: forward mode along each design variable (the sensitivities
+    differentiated again through the solver's loop)."""
+    units = jnp.eye(x.shape[0], dtype=x.dtype)
+    value, grad = jax.vmap(lambda e: jax.jvp(problem.objective, (x,), (e,)), out_axes=(None, 0))(units)
+    return value, grad
+
+
+@eqx.filter_jit
+def information(problem: Problem, inputs, breaks):
+    """At every point (P of them): the information of the length rows (P, m, m) and of the pressure rows (P, m, m);
+    at the estimate, the whitened cross term J̃ᵀK⁻¹V (m, D) of what the rig's linearisation misses
+    (:func:`growjax.design.criterion.posterior`), the run's length (n,) m and pressure (n,) Pa. One compiled
+    program per inputs' structure."""
+    def at(z):
+        s = problem.sensitivities(inputs, breaks, z)
+        w = dc.whiten(s.jac_length, problem.times, problem.hyper)
+        jp = s.jac_pressure / problem.pressure_noise
+        return w.T @ w, jp.T @ jp
+
+    info_l, info_p = jax.lax.map(at, problem.points)
+    s = problem.sensitivities(inputs, breaks)
+    m, d = s.jac_length.shape[1], problem.offsets.shape[0]
+    cross = jnp.zeros((m, 0))
+    if d:
+        rem = sensitivity.remainder(problem.base, inputs, problem.names, problem.rig, problem.config, problem.times,
+                                    breaks, s, problem.offsets)
+        w = dc.whiten(jnp.concatenate([s.jac_length, rem / jnp.sqrt(d)], axis=1), problem.times, problem.hyper)
+        cross = w[:, :m].T @ w[:, m:]
+    return info_l, info_p, cross, s.length, s.pressure
+
+
+def covariances(problem: Problem, info_length, info_pressure, cross, sensors) -> dict:
+    """Covariances (m, m) of the estimate of w under ``sensors``, from :func:`information`'s output:
+    ``"known"`` (with what is known) and ``"alone"`` (the next experiment alone), each averaged over the points
+    plus what the rig's linearisation misses (at the estimate); ``"known_local"``, ``"alone_local"``: at the
+    estimate on the nominal rig, linearised (the classical local prediction)."""
+    info = np.asarray(info_length) + (np.asarray(info_pressure) if "pressure" in sensors else 0.0)
+    c = np.asarray(cross)
+    out = {}
+    for key, prec in (("known", problem.precision_known), ("alone", problem.precision_alone)):
+        a = np.asarray(prec)[None] + info
+        covs = np.linalg.inv(0.5 * (a + np.swapaxes(a, -1, -2)))
+        local = covs[0]
+        out[key + "_local"] = local
+        out[key] = covs.mean(axis=0) + local @ c @ c.T @ local
+    return out
+
+
+@eqx.filter_jit
+def evaluate(problem: Problem, x):
+    """(criterion averaged over the points, penalty) of design x (K − 1,): the objective's two parts."""
+    return problem.parts(problem.inputs(x))
+
+
+def evaluate_many(problem: Problem, xs, workers: int | None = None) -> np.ndarray:
+    """(criterion, penalty) (S, 2) of designs ``xs`` (S, K − 1), one compiled evaluation each, ``workers`` at a time
+    (threads: a compiled evaluation releases the GIL; default one per CPU core)."""
+    xs = np.atleast_2d(np.asarray(xs, float))
+
+    def one(x):
+        return [float(v) for v in evaluate(problem, x)]
+
+    workers = workers or os.cpu_count() or 1
+    if workers == 1 or len(xs) == 1:
+        return np.array([one(x) for x in xs])
+    with ThreadPoolExecutor(max_workers=min(workers, len(xs))) as pool:
+        return np.array(list(pool.map(one, xs)))
+
+
+def values(problem: Problem, xs, workers: int | None = None) -> np.ndarray:
+    """The objective (S,) of designs ``xs`` (S, K − 1) (:func:`evaluate_many`); +inf where the model failed."""
+    v = evaluate_many(problem, xs, workers).sum(axis=1)
+    return np.where(np.isfinite(v), v, np.inf)
+
+
+def smoothed_gradient(problem: Problem, x, step: float = DEMAND_STEP, workers: int | None = None):
+    """(objective, its gradient (K − 1,)) of design x by forward differences of the demand at each knot by
+    ``step`` × p_max (backward where that would pass p_max), the K perturbed designs evaluated together
+    (:func:`values`).
+
+    The criterion is a function of the sensitivities, and those carry the model's regularised switches (the
+    growth threshold's friction, the valves, the end stops: C¹ over bands far narrower than any change of a
+    design worth making), so the exact derivative (:func:`value_and_gradient`) at a design near a switch
+    reports the switch, not the slope of the criterion over a step of the demand. A difference over a step of a
+    few kPa is the slope that matters to the descent."""
+    x = np.asarray(x, float)
+    p_max = float(problem.p_max)
+    demand = p_max * (1.0 / (1.0 + np.exp(-x)))
+    delta = np.where(demand + step * p_max < p_max * (1 - 1e-6), step * p_max, -step * p_max)
+    moved = np.clip(demand[None, :] + np.diag(delta), 1e-6 * p_max, p_max * (1 - 1e-6))
+    xs = np.concatenate([x[None], np.log(moved / p_max) - np.log1p(-moved / p_max)])
+    f = values(problem, xs, workers)
+    slope = (f[1:] - f[0]) / delta  # per Pa
+    return f[0], slope * demand * (1.0 - demand / p_max)  # chain rule: dp/dx = p(1 − p/p_max)

@@ -1,0 +1,81 @@
+"""The model's length and pressure under an input, with their sensitivities to w = (ln θ, b): one forward
+sensitivity solve of the fast configuration.
+
+The solve is plain JAX (the Rosenbrock integrator's loop, :func:`growjax._fast_solve.solve_with_sensitivities`),
+so forward mode differentiates it again: ``jax.jvp`` of :func:`solve` along a change of the input gives the
+sensitivities' own derivatives, and with them the gradient of any criterion built on them with respect to the
+design (a while loop, so forward mode only: one tangent per design variable).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from growjax import _fast_solve
+from growjax import effects as fx
+from growjax import params as gp
+from growjax.simulate import as_arrays, simulate
+from growjax.trajectory import OK
+
+
+class Sensitivities(NamedTuple):
+    """On the sample times (n,): ``length`` m and ``pressure`` Pa; ``jac_length`` (n, m) m and ``jac_pressure``
+    (n, m) Pa per unit of w = (ln θ, b); ``ok`` whether the run reached its end. Past a failure: NaN."""
+
+    length: jax.Array
+    pressure: jax.Array
+    jac_length: jax.Array
+    jac_pressure: jax.Array
+    ok: jax.Array
+
+
+def moved(base: gp.Parameters, names: tuple, rig: tuple, z) -> gp.Parameters:
+    """``base`` at the point z (p + q,) of w = (ln θ/θ̂ for ``names``, ln ψ/ψ₀ for the ``rig``) (traceable)."""
+    return gp.replace(base, **{n: gp.get(base, n) * jnp.exp(z[i]) for i, n in enumerate((*names, *rig))})
+
+
+def solve(base: gp.Parameters, inputs, names: tuple, rig: tuple, config, ts, breaks, z=None) -> Sensitivities:
+    """One sensitivity solve along w = (ln θ for ``names``, ln ψ/ψ₀ for the ``rig``) at the point ``z`` (p + q,) of
+    w (default 0: the estimate on the nominal rig). Traceable in ``inputs``, ``base`` and ``z``; ``config``
+    resolved (forward adjoint), ``breaks`` the inputs' (jump, slope-break) times, ``ts`` (n,) s."""
+    p, q = len(names), len(rig)
+    z = jnp.zeros(p + q) if z is None else jnp.asarray(z)
+    w0 = jnp.zeros(p + q)
+
+    def params_of(w):
+        return fx.apply_all(as_arrays(moved(base, names, rig, z + w)))
+
+    params = params_of(w0)
+    mask = jax.tree_util.tree_map(eqx.is_inexact_array, params)
+
+    def zeros(x):
+        return jnp.zeros((p + q,) + jnp.shape(x))
+
+    d_float = jax.vmap(lambda e: jax.jvp(lambda v: eqx.filter(params_of(v), mask), (w0,), (e,))[1])(jnp.eye(p + q))
+    d_params = eqx.combine(d_float, jax.tree_util.tree_map(zeros, eqx.filter(params, mask, inverse=True)))
+    d_inputs = jax.tree_util.tree_map(zeros, inputs)
+    traj, tangents = _fast_solve.solve_with_sensitivities(params, inputs, config, jnp.asarray(ts), *breaks,
+                                                          (d_params, d_inputs))
+    return Sensitivities(traj.length, traj.pressure, tangents["length"].T, tangents["pressure"].T, traj.status == OK)
+
+
+def remainder(base: gp.Parameters, inputs, names: tuple, rig: tuple, config, ts, breaks, s: Sensitivities, offsets,
+              z=None):
+    """R (n, D) m: what the rig's linearised effect misses, L(b + b_k) − L(b) − G b_k for each row b_k of
+    ``offsets`` (D, q) (the rig's relative errors) about the point ``z`` (p + q,) of w (default 0); ``s`` the
+    sensitivities there (G its rig columns). One plain solve per draw and one at the point (traceable)."""
+    p, q = len(names), len(rig)
+    z = jnp.zeros(p + q) if z is None else jnp.asarray(z)
+
+    def run(b):
+        point = z + jnp.concatenate([jnp.zeros(p), b])
+        return simulate(moved(base, names, rig, point), inputs, config, ts=ts, breaks=breaks).length
+
+    offsets = jnp.asarray(offsets)
+    lengths = jax.lax.map(run, offsets)  # (D, n)
+    nominal = run(jnp.zeros(q))
+    return (lengths - nominal).T - s.jac_length[:, p:] @ offsets.T

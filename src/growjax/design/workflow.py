@@ -1,0 +1,179 @@
+"""One design end to end: the random admissible batch, the descent from its best, the check of the result over
+every draw, and the table that sets the design beside the published pulse train and the best random input."""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import jax
+import numpy as np
+
+from growjax import _progress
+from growjax import fit as gf
+from growjax.design import constraints as dcon
+from growjax.design import criterion as dcrit
+from growjax.design import optimise as dopt
+from growjax.design import problem as dprob
+from growjax.design.knowledge import Knowledge
+from growjax.design.space import DesignSpace
+from growjax.signals import Inputs, published_pulse
+from growjax.simulate import input_breaks
+
+SHRINK = (0.97, 0.93, 0.88, 0.8, 0.7)  # demand scalings tried on a design that fails its check
+
+
+class DesignError(ValueError):
+    """No admissible design: the message says which limit every candidate crossed."""
+
+
+@dataclasses.dataclass
+class DesignResult:
+    """A designed input and what it is predicted to give.
+
+    ``x`` (K,) the design, ``knots`` (K,) s and ``demand`` (K,) Pa its demand; ``rows``: the table, one row per
+    input ("published pulse train", "best random input", "design") and sensor set, each parameter's predicted sd
+    of ln θ with what is known (``sd_log``) and from the next experiment alone (``sd_log_alone``) and its 90 %
+    interval (SI); ``checks``: {input: :class:`growjax.design.constraints.Check` over the draws};
+    ``random``: the random batch; ``descents``: the optimiser's starts, best first."""
+
+    names: tuple
+    estimate: np.ndarray
+    space: DesignSpace
+    x: np.ndarray
+    knots: np.ndarray
+    demand: np.ndarray
+    rows: list
+    checks: dict
+    random: dopt.RandomBatch
+    descents: list
+    limits: dcon.Limits
+    criterion: str
+    sensors: tuple
+    knowledge: dict
+    wall_s: dict
+    scaled: float = 1.0  # the share of the optimiser's demand kept to pass the check (1: as optimised)
+
+    def summary(self) -> dict:
+        random = self.random
+        return {
+            "parameters": list(self.names), "criterion": self.criterion, "sensors": list(self.sensors),
+            "duration_s": self.space.duration, "knot_spacing_s": self.space.knot_spacing,
+            "p_max_Pa": self.space.p_max, "sample_interval_s": self.space.sample_interval,
+            "design": {"knots_s": self.knots.tolist(), "demand_Pa": self.demand.tolist(), "demand_scaled": self.scaled},
+            "table": self.rows,
+            "checks": {k: c.row(0) for k, c in self.checks.items()},
+            "limits": self.limits.summary(),
+            "random": {"admissible": int(len(random.designs)), "drawn": random.drawn,
+                       "criterion_best": float(random.criterion[random.best]),
+                       "criterion_quantiles": {q: float(np.quantile(random.criterion, float(q)))
+                                               for q in ("0.1", "0.5", "0.9")}},
+            "descents": [{"start_criterion": float(d.history[0]), "best": float(d.value), "history": d.history}
+                         for d in self.descents],
+            "knowledge": self.knowledge, "wall_s": self.wall_s,
+        }
+
+
+def published_inputs(space: DesignSpace) -> Inputs:
+    """The baseline: the published pulse train with the design's catheter."""
+    return Inputs(catheter_length=space.catheter, pressure_demand=published_pulse())
+
+
+def design(knowledge: Knowledge, space: DesignSpace, criterion: str = "A", sensors=("length",), random: int = 64,
+           starts: int = 3, iterations: int = dopt.ITERATIONS, n_draws: int = dcon.DRAWS, seed: int = 0,
+           points: int = dprob.POINTS, pressure_noise: float = dcrit.PRESSURE_NOISE, limits: dcon.Limits | None = None,
+           learning_rate: float = dopt.LEARNING_RATE, nonlinear_draws: int = dprob.NONLINEAR_DRAWS,
+           gradient: str = "differences", progress: bool = False) -> DesignResult:
+    """Design the next experiment's input for the precision of ``knowledge``'s parameters.
+
+    ``random`` random admissible inputs are drawn and scored (:func:`growjax.design.optimise.random_admissible`);
+    the optimiser descends from the ``starts`` best of them (``iterations`` Adam steps each); the best result that
+    passes the check over ``n_draws`` draws of the rig and θ (scaled down a little where it does not) is the design.
+    ``points``: the points of (θ, rig) the criterion is averaged over (1: the local design at the estimate; the
+    criterion's cost grows with each point);
+    ``nonlinear_draws``: draws of the rig on which what its linearisation misses is measured (0: none). The
+    table reports the design, the best random input and the published pulse train under ``sensors`` and, where
+    the pressure is recorded, under the length alone. DesignError where nothing admissible is found.
+    """
+    clock, wall = time.perf_counter(), {}
+    sensors = tuple(sensors)
+    problem = dprob.make(knowledge, space, criterion, sensors, pressure_noise, limits, points, seed,
+                         nonlinear_draws=nonlinear_draws)
+    lim = problem.limits
+    if space.p_max > lim.pressure + 1e-9:
+        raise ValueError(f"p_max {space.p_max / 1e3:.1f} kPa is above the sensed-pressure ceiling "
+                         f"{lim.pressure / 1e3:.1f} kPa (the membrane limit {lim.membrane / 1e3:.1f} kPa × the margin)")
+    drawn = dcon.draws(knowledge, n_draws, seed)
+    _progress.note(f"design: {random} random admissible inputs, each checked over {n_draws} draws", progress)
+    batch = dopt.random_admissible(problem, space, knowledge, random, seed, drawn, progress=progress)
+    wall["random_s"] = batch.wall_s
+    t = time.perf_counter()
+    order = batch.order()[: max(starts, 1)]
+    descents = dopt.multistart(problem, batch.designs[order], iterations, learning_rate, gradient, progress)
+    wall["descent_s"] = time.perf_counter() - t
+    t = time.perf_counter()
+    x, scaled, check = _admissible(problem, space, knowledge, descents, drawn, lim)
+    wall["check_s"] = time.perf_counter() - t
+    best_random = batch.designs[batch.best]
+    base_inputs = published_inputs(space)
+    base_breaks = input_breaks(base_inputs, space.config())
+    checks = {"design": check,
+              "best random input": dcon.check(dcon.stack([space.inputs(best_random)]), knowledge, space.config(),
+                                              space.times, space.breaks(), lim, drawn, keep_runs=True),
+              "published pulse train": dcon.check(dcon.stack([base_inputs]), knowledge, space.config(), space.times,
+                                                  base_breaks, lim, drawn, keep_runs=True)}
+    sets = [sensors] if sensors == ("length",) else [("length",), sensors]
+    rows = []
+    for label, inputs, breaks in (("published pulse train", base_inputs, base_breaks),
+                                  ("best random input", space.inputs(best_random), problem.breaks),
+                                  ("design", space.inputs(x), problem.breaks)):
+        rows += _row(problem, knowledge, label, inputs, breaks, sets)
+    wall["total_s"] = time.perf_counter() - clock
+    return DesignResult(tuple(knowledge.names), knowledge.estimate, space, x, space.knots, np.asarray(space.demand(x)),
+                        rows, checks, batch, descents, lim, criterion, sensors, knowledge.summary(), wall, scaled)
+
+
+def _admissible(problem, space, knowledge, descents, drawn, lim):
+    """(design, the share of its demand kept, its check): the best descent that passes the check over the draws,
+    else the best scaled down until it does."""
+    xs = np.stack([d.x for d in descents])
+    check = dcon.check(dcon.stack([space.inputs(x) for x in xs]), knowledge, space.config(), space.times, space.breaks(),
+                       lim, drawn)
+    for i in np.flatnonzero(check.admissible):
+        return xs[i], 1.0, _one(space, knowledge, xs[i], drawn, lim)
+    best = np.asarray(space.demand(xs[0]))
+    scaled = [space.unconstrained(f * best) for f in SHRINK]
+    check = dcon.check(dcon.stack([space.inputs(x) for x in scaled]), knowledge, space.config(), space.times,
+                       space.breaks(), lim, drawn)
+    for i in np.flatnonzero(check.admissible):
+        return scaled[i], SHRINK[i], _one(space, knowledge, scaled[i], drawn, lim)
+    raise DesignError(f"no admissible design: over the draws the best one reaches {check.peak_pressure[0] / 1e3:.1f} kPa "
+                      f"(ceiling {lim.pressure / 1e3:.1f}) and {check.peak_length[0] * 1e3:.1f} mm "
+                      f"(ceiling {lim.length * 1e3:.1f}); lower p_max or shorten the run")
+
+
+def _one(space, knowledge, x, drawn, lim):
+    return dcon.check(dcon.stack([space.inputs(x)]), knowledge, space.config(), space.times, space.breaks(), lim, drawn,
+                      keep_runs=True)
+
+
+def _row(problem, knowledge: Knowledge, label: str, inputs, breaks, sets) -> list[dict]:
+    """The table's rows of one input, one per sensor set of ``sets``."""
+    p = len(knowledge.names)
+    theta = knowledge.estimate
+    info_l, info_p, cross = dprob.information(problem, inputs, breaks)[:3]
+    rows = []
+    for sensors in sets:
+        covs = dprob.covariances(problem, info_l, info_p, cross, sensors)
+        sd, sd_alone, sd_linear = (np.sqrt(np.clip(np.diag(covs[k])[:p], 0, None))
+                                   for k in ("known", "alone", "known_local"))
+        cov = covs["known"]
+        params = {}
+        for i, n in enumerate(knowledge.names):
+            lo, hi = theta[i] * np.exp(-gf.Z90 * sd[i]), theta[i] * np.exp(gf.Z90 * sd[i])
+            params[n] = {"estimate": float(theta[i]), "sd_log": float(sd[i]), "sd_log_alone": float(sd_alone[i]),
+                         "sd_log_local": float(sd_linear[i]), "interval_90": [float(lo), float(hi)],
+                         "width_90": float(hi - lo)}
+        crit = float(problem.criterion.of_covariance(jax.numpy.asarray(cov)))
+        rows.append({"input": label, "sensors": list(sensors), "criterion": crit, "parameters": params})
+    return rows

@@ -1,0 +1,221 @@
+"""Design of the next experiment: the criterion against a dense posterior, the design space's CSV, the limits
+checked on simulation, the gradient against finite differences, the design against its baselines, the command."""
+
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import growjax as gj
+from growjax import cli
+from growjax import design as gd
+from growjax import discrepancy as dc
+from growjax import experiment as ex
+from growjax import fit as gf
+from growjax import tolerance as tl
+
+Y = "robot.yield_pressure"
+DATA = "src/growjax/datasets/synthetic_forward.csv"
+
+
+def _catheter():
+    t = np.round(np.arange(0, 1001) * 0.01, 10)
+    return gj.Sampled(jnp.asarray(t), jnp.asarray(0.004 + 0.004 * t))
+
+
+def _knowledge(sd=0.03, tolerances=None):
+    base = gj.replace(gj.reference("forward"), Y=9000.0)
+    tol = tl.default_budget(base) if tolerances is None else tolerances
+    hyper = dc.Hyper.of(1e-4, 0.8, 2e-4, 0.01)
+    return gd.Knowledge(base, (Y,), np.array([[sd**2]]), tol, hyper, "test")
+
+
+def test_criterion_is_the_dense_gaussian_posterior():
+    """The information form (Kalman whitening, pressure rows, prior) equals the data-space conditioning of the joint
+    Gaussian of (w, y) built from dense covariances."""
+    rng = np.random.default_rng(0)
+    n, m = 40, 4
+    t = np.sort(rng.uniform(0.0, 4.0, n))
+    hyper = dc.Hyper.of(3e-4, 0.7, 2e-4, 0.05)
+    s = gd.Sensitivities(jnp.zeros(n), jnp.zeros(n), jnp.asarray(rng.normal(0, 1e-3, (n, m))),
+                         jnp.asarray(rng.normal(0, 2e3, (n, m))), jnp.asarray(True))
+    prior = np.diag([0.05, 0.2, 0.05, 0.02]) ** 2
+    rem = rng.normal(0, 1e-4, (n, 3))
+    for sensors, sigma_p in ((("length",), 1e3), (("length", "pressure"), 1.5e3)):
+        pred = gd.posterior(s, t, hyper, np.linalg.inv(prior), np.diag([0.0, *np.diag(np.linalg.inv(prior))[1:]]),
+                            sensors, sigma_p, jnp.asarray(rem))
+        h = np.asarray(s.jac_length)
+        r = dc.kernel(t, hyper) + dc.noise_kernel(t, hyper)
+        v = rem
+        if "pressure" in sensors:
+            h = np.concatenate([h, np.asarray(s.jac_pressure)])
+            r = np.block([[r, np.zeros((n, n))], [np.zeros((n, n)), sigma_p**2 * np.eye(n)]])
+            v = np.concatenate([rem, np.zeros((n, 3))])
+        dense = prior - prior @ h.T @ np.linalg.solve(h @ prior @ h.T + r, h @ prior)
+        np.testing.assert_allclose(np.asarray(pred.covariance_linear), dense, rtol=1e-6, atol=1e-14)
+        # the rig's nonlinearity: the estimator's gain (a linear map of the data) applied to the remainder
+        gain = dense @ h.T @ np.linalg.inv(r)
+        sandwich = dense + gain @ (v @ v.T / 3) @ gain.T
+        np.testing.assert_allclose(np.asarray(pred.covariance), sandwich, rtol=1e-6, atol=1e-14)
+    # Alone: no prior on θ, so Y's variance is that of the data with the rig integrated out.
+    assert float(pred.covariance_alone[0, 0]) > float(pred.covariance[0, 0])
+    crit = gd.Precision(2, "A")
+    cov = np.array([[4.0, 1.0, 0.0], [1.0, 9.0, 0.0], [0.0, 0.0, 7.0]])
+    assert float(crit.of_covariance(jnp.asarray(cov))) == pytest.approx(np.log(13.0))
+    assert float(gd.Precision(2, "D").of_covariance(jnp.asarray(cov))) == pytest.approx(np.log(35.0))
+    with pytest.raises(ValueError, match="precision criterion"):
+        gd.Precision(1, "E")
+    with pytest.raises(ValueError, match="sensors"):
+        gd.information(s, t, hyper, ("pressure",))
+
+
+def test_knowledge_from_a_saved_fit(tmp_path):
+    base = gj.reference("forward")
+    saved = tmp_path / "fit.json"
+    saved.write_text(json.dumps({"parameters": {Y: {"estimate": 8000.0, "standard_error": 160.0},
+                                                "robot.extensibility": {"estimate": 0.03, "standard_error": None}},
+                                 "discrepancy": {"kind": "matern32", "amplitude_m": 5e-4, "time_scale_s": 1.0,
+                                                 "noise_m": 2e-4, "noise_time_s": 0.0},
+                                 "tolerances": {"pid.proportional": 0.05}}))
+    known = gd.from_summary(saved, base, ["Y", "ext"])
+    assert known.estimate[0] == 8000.0 and known.rig == ("pid.proportional",)
+    assert np.sqrt(known.covariance[0, 0]) == pytest.approx(0.02)
+    lo, hi = gf.default_range(base, "robot.extensibility")
+    assert known.covariance[1, 1] == pytest.approx(np.log(hi / lo) ** 2 / 12)  # undetermined: its box
+    assert float(known.hyper.amplitude) == 5e-4
+    assert known.prior_precision(False)[0, 0] == 0.0 and known.prior_precision(True)[0, 0] == pytest.approx(1 / 0.02**2)
+    with pytest.raises(ValueError, match="did not fit robot.growth_exponent"):
+        gd.from_summary(saved, base, ["n"])
+    with pytest.raises(ValueError, match="unknown"):
+        gd.from_summary(saved, base, ["no_such_parameter"])
+
+
+def test_a_design_is_written_in_the_rigs_terms(tmp_path):
+    exp = ex.read(DATA)
+    space = gd.DesignSpace(12.0, 300e3, gd.catheter_of(exp, 12.0), knot_spacing=0.5)
+    assert space.size == 24 and space.knots.size == 25 and space.times[0] == 0.01 and space.times[-1] == 12.0
+    demand = np.linspace(0.0, 300e3, space.size + 1)
+    x = space.unconstrained(demand)
+    np.testing.assert_allclose(np.asarray(space.demand(x)), [0.0, *np.clip(demand[1:], 0.3, 300e3 - 0.3)], rtol=1e-9)
+    path = space.write_csv(tmp_path / "design.csv", x)
+    back = ex.read(path)
+    assert "robot_length_m" not in back and back.time[0] == 0.0 and back.time[-1] == 12.0
+    inputs = ex.to_inputs(back, "forward", gj.reference("forward"), t1=12.0)
+    ts = jnp.asarray(space.times)
+    np.testing.assert_allclose(np.asarray(jax.vmap(inputs.pressure_demand)(ts)),
+                               np.asarray(jax.vmap(space.inputs(x).pressure_demand)(ts)), rtol=1e-9, atol=1e-6)
+    # The catheter follows the experiment already run, held at its last value after its end (10 s).
+    cath = np.asarray(jax.vmap(inputs.catheter_length)(jnp.asarray([5.0, 10.0, 11.5])))
+    np.testing.assert_allclose(cath, [0.024, 0.044, 0.044], atol=1e-12)
+    for bad in ({"duration": 0.0}, {"duration": -1.0}, {"p_max": 0.0}, {"knot_spacing": 20.0}):
+        with pytest.raises(ValueError):
+            gd.DesignSpace(**{"duration": 3.0, "p_max": 1e5, "catheter": gj.Constant(0.0), **bad})
+
+
+def test_the_check_flags_exactly_the_inputs_that_cross_a_limit_on_simulation():
+    known = _knowledge()
+    space = gd.DesignSpace(2.0, 336e3, _catheter(), knot_spacing=1.0)
+    lim = gd.Limits(pressure=200e3, length=0.015, syringe=0.05)
+    drawn = gd.draws(known, 3, seed=1)
+    assert set(drawn) == {Y, *known.tolerances} and all(v.shape == (3,) for v in drawn.values())
+    designs = [space.unconstrained(np.full(space.size + 1, v)) for v in (60e3, 150e3, 250e3)]
+    res = gd.check(gd.stack([space.inputs(x) for x in designs]), known, space.config(), space.times, space.breaks(),
+                   lim, drawn, keep_runs=True)
+    # on its own simulation of every draw: the peaks the check reports, and the verdict they imply
+    config = space.config()
+    for i, x in enumerate(designs):
+        peaks_p, peaks_l = [], []
+        for d in range(3):
+            p = gj.replace(known.base, **{k: float(v[d]) for k, v in drawn.items()})
+            tr = gj.simulate(p, space.inputs(x), config, ts=space.times)
+            assert int(tr.status) == gj.OK
+            peaks_p.append(float(jnp.max(tr.pressure)))
+            peaks_l.append(float(jnp.max(tr.length)))
+        assert res.peak_pressure[i] == pytest.approx(max(peaks_p), rel=1e-6)
+        assert res.peak_length[i] == pytest.approx(max(peaks_l), rel=1e-6)
+        assert bool(res.admissible[i]) == (max(peaks_p) <= lim.pressure and max(peaks_l) <= lim.length)
+    assert res.admissible.tolist() == [True, False, False]  # 150 kPa grows past 15 mm; 250 kPa crosses 200 kPa too
+    assert res.peak_pressure[2] > lim.pressure > res.peak_pressure[1]
+    assert res.length.shape == (3, 3, space.times.size)
+
+
+def test_design_command_refuses_bad_input_with_exit_2(capsys):
+    for argv, message in ((["--for", "Y", "no_such_parameter"], "no_such_parameter"),
+                          (["--duration", "0"], "--duration"),
+                          (["--p-max", "400e3"], "above the sensed-pressure ceiling"),
+                          (["--drive", "inverse"], "forward drive"),
+                          (["--knot-spacing", "20", "--duration", "5"], "knot spacing"),
+                          (["--fit-from", "/nonexistent/fit.json"], "cannot read the saved fit")):
+        assert cli.main(["design", DATA, "--out", "/tmp/never", *argv]) == 2, argv
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and message in err, (argv, err)
+
+
+@pytest.fixture(scope="module")
+def short_problem():
+    known = _knowledge(sd=0.03, tolerances={"robot.catheter_friction": 0.2, "pid.proportional": 0.05})
+    space = gd.DesignSpace(2.0, 336e3, _catheter(), knot_spacing=0.5)
+    return known, space
+
+
+@pytest.mark.slow
+def test_the_criterions_gradient_through_the_model_matches_finite_differences(short_problem):
+    known, space = short_problem
+    problem = gd.make(known, space, points=2, nonlinear_draws=0, config=gj.Config(rtol=1e-7, atol=1e-7))
+    x = space.unconstrained(np.array([0.0, 90e3, 60e3, 120e3, 80e3]))
+    value, grad = (np.asarray(a) for a in gd.value_and_gradient(problem, x))
+    fd = []
+    for k in range(space.size):
+        e = np.zeros(space.size)
+        e[k] = 1e-3
+        up, down = (float(gd.value_and_gradient(problem, x + s * e)[0]) for s in (1, -1))
+        fd.append((up - down) / 2e-3)
+    np.testing.assert_allclose(grad, fd, rtol=0.02, atol=2e-3 * np.max(np.abs(fd)))
+    assert np.max(np.abs(grad)) > 1e-2  # the criterion does move with the input
+
+
+@pytest.mark.slow
+def test_the_design_beats_the_published_pulse_and_the_best_random_input_and_is_admissible(short_problem):
+    known, space = short_problem
+    res = gd.design(known, space, random=6, starts=1, iterations=6, n_draws=4, seed=0, points=2, nonlinear_draws=2)
+    crit = {r["input"]: r["criterion"] for r in res.rows}
+    assert crit["design"] < crit["best random input"] < crit["published pulse train"] or \
+        crit["design"] < min(crit["best random input"], crit["published pulse train"])
+    assert crit["design"] <= res.random.criterion[res.random.best] + 1e-9
+    sd = {r["input"]: r["parameters"][Y]["sd_log"] for r in res.rows}
+    assert sd["design"] < sd["best random input"] and sd["design"] < sd["published pulse train"]
+    # every admissible input, the design's included, stays inside the limits on simulation over fresh draws
+    drawn = gd.draws(known, 4, seed=7)
+    lim = res.limits
+    for x in [res.x, *res.random.designs]:
+        for d in range(4):
+            p = gj.replace(known.base, **{k: float(v[d]) for k, v in drawn.items()})
+            tr = gj.simulate(p, space.inputs(x), space.config(), ts=space.times)
+            assert int(tr.status) == gj.OK
+            assert float(jnp.max(tr.pressure)) <= lim.pressure and float(jnp.max(tr.length)) <= lim.length
+
+
+@pytest.mark.slow
+def test_design_command_writes_a_csv_that_simulate_reads(tmp_path, capsys):
+    saved = tmp_path / "fit.json"
+    saved.write_text(json.dumps({"parameters": {Y: {"estimate": 9000.0, "standard_error": 200.0}},
+                                 "discrepancy": {"amplitude_m": 3e-5, "time_scale_s": 2.0, "noise_m": 2e-4},
+                                 "tolerances": {"robot.catheter_friction": 0.2}}))
+    out = tmp_path / "design"
+    argv = ["design", DATA, "--fit-from", str(saved), "--duration", "2", "--knot-spacing", "1", "--random", "3",
+            "--starts", "1", "--iterations", "2", "--draws", "3", "--points", "1", "--nonlinear-draws", "2",
+            "--sensors", "length,pressure", "--out", str(out),
+            "--quiet"]
+    assert cli.main(argv) == 0
+    text = capsys.readouterr().out
+    assert "published pulse train" in text and "best random input" in text and "length+pressure" in text
+    summary = json.loads((out / "summary.json").read_text())
+    assert {(r["input"], tuple(r["sensors"])) for r in summary["table"]} == {
+        (i, s) for i in ("published pulse train", "best random input", "design")
+        for s in (("length",), ("length", "pressure"))}
+    assert (out / "design.png").stat().st_size > 10_000
+    assert cli.main(["simulate", str(out / "design.csv"), "--t-end", "2", "--out", str(tmp_path / "sim")]) == 0
+    traj = ex.read(tmp_path / "sim" / "trajectory.csv")
+    assert np.max(traj["pressure_Pa"]) <= summary["limits"]["pressure_ceiling_Pa"]
