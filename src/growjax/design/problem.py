@@ -8,8 +8,10 @@ log of the expected sum of relative variances). An input whose information comes
 has and the others lack (a growth threshold crossed just so) is worth what it is worth on average. With one point
 the design is local, at the estimate.
 
-objective(x) = that average + the limits' penalty (:func:`.constraints.penalty`) at the estimate. Arrays are
-leaves, so one compiled program serves every design of one problem's shapes. What the fit's linearised rig misses
+objective(x) = that average + the limits' penalty (:func:`.constraints.penalty`) at the estimate. Its slope: exact
+by forward mode through the model (:func:`value_and_gradient`), or by differences over a step of the demand
+(:func:`smoothed_gradient`, what the descent follows: see there why). Arrays are leaves, so one compiled program
+serves every design of one problem's shapes. What the fit's linearised rig misses
 (:func:`.sensitivity.remainder`, at ``offsets``) is left out of the objective (one plain solve per draw) and added
 to the reported covariances (:func:`covariances`).
 """
