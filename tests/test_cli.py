@@ -74,7 +74,7 @@ def test_every_command_shares_the_options_and_shows_defaults():
 
     parser = cli.build_parser()
     commands = parser._subparsers._group_actions[0].choices
-    for name in ("simulate", "sweep", "fit", "posterior", "discover", "control"):
+    for name in ("simulate", "sweep", "fit", "posterior", "discover", "control", "design"):
         sub = commands[name]
         options = {o for a in sub._actions for o in a.option_strings}
         assert {"--drive", "--param", "--fidelity", "--rtol", "--seed", "--out", "--json"} <= options, name
@@ -83,7 +83,7 @@ def test_every_command_shares_the_options_and_shows_defaults():
         assert all(a.help for a in sub._actions), name
         assert "(default: out/" in " ".join(helptext.split()), name
     assert "--range" in {o for a in commands["sweep"]._actions for o in a.option_strings}
-    for name in ("sweep", "fit", "posterior", "discover", "control"):  # progress on stderr, or none
+    for name in ("sweep", "fit", "posterior", "discover", "control", "design"):  # progress on stderr, or none
         assert commands[name].parse_args(["--quiet"]).quiet and not commands[name].parse_args([]).quiet
 
 

@@ -26,6 +26,9 @@ def relative_size(theta, direction, typical):
     the leaf's ``typical`` size stands in (an effect parameter: the top of its physical range; a leak of
     3e-13 m³/(s·Pa) absent at 0 and moved along d = 1 must be shifted by ε·1e-12, not by ε), and where that is
     0 too, |d| itself."""
+    # A step size, not a quantity of the model: held constant under differentiation (its derivative at a leaf
+    # that is 0 would be 0/0).
+    theta, direction, typical = jax.lax.stop_gradient((theta, direction, typical))
     ratios = [jnp.max(jnp.abs(d) / jnp.maximum(jnp.where(jnp.abs(x) > 0, jnp.abs(x),
                                                          jnp.where(jnp.abs(c) > 0, jnp.abs(c), jnp.abs(d))), 1e-300))
               for x, d, c in zip(jax.tree_util.tree_leaves(theta), jax.tree_util.tree_leaves(direction),

@@ -22,7 +22,7 @@ from growjax.design import problem as dprob
 from growjax.design.knowledge import Knowledge
 from growjax.design.space import DesignSpace
 
-ITERATIONS = 30  # Adam steps per start
+ITERATIONS = 15  # Adam steps per start
 LEARNING_RATE = 0.2  # in the logits of the demand: ~5 % of p_max per step at most, early on
 ROUNDS = 4  # rounds of random draws for n admissible inputs
 

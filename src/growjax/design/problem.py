@@ -8,8 +8,10 @@ log of the expected sum of relative variances). An input whose information comes
 has and the others lack (a growth threshold crossed just so) is worth what it is worth on average. With one point
 the design is local, at the estimate.
 
-objective(x) = that average + the limits' penalty (:func:`.constraints.penalty`) at the estimate. Arrays are
-leaves, so one compiled program serves every design of one problem's shapes. What the fit's linearised rig misses
+objective(x) = that average + the limits' penalty (:func:`.constraints.penalty`) at the estimate. Its slope: exact
+by forward mode through the model (:func:`value_and_gradient`), or by differences over a step of the demand
+(:func:`smoothed_gradient`, what the descent follows: see there why). Arrays are leaves, so one compiled program
+serves every design of one problem's shapes. What the fit's linearised rig misses
 (:func:`.sensitivity.remainder`, at ``offsets``) is left out of the objective (one plain solve per draw) and added
 to the reported covariances (:func:`covariances`).
 """
@@ -138,11 +140,24 @@ def make(knowledge: Knowledge, space: DesignSpace, criterion: str = "A", sensors
 
 @eqx.filter_jit
 def value_and_gradient(problem: Problem, x):
-    """(objective, its gradient (K,)) of design x: forward mode along each design variable (the sensitivities
-    differentiated again through the solver's loop)."""
+    """(objective, its exact gradient (K − 1,)) of design x by forward mode through the model: at each point, the
+    sensitivities differentiated again through the solver's loop along every design variable (the map over
+    points outside the batch of directions)."""
     units = jnp.eye(x.shape[0], dtype=x.dtype)
-    value, grad = jax.vmap(lambda e: jax.jvp(problem.objective, (x,), (e,)), out_axes=(None, 0))(units)
-    return value, grad
+
+    def at(z):
+        def f(v):
+            pred = problem.predict(problem.inputs(v), None, z)
+            return problem.criterion(pred), dcon.penalty(pred.sensitivities, problem.prior_covariance,
+                                                         problem.limits, problem.spread)
+
+        value, tangent = jax.vmap(lambda e: jax.jvp(f, (x,), (e,)), out_axes=(None, 0))(units)
+        return value, tangent
+
+    (crit, pen), (d_crit, d_pen) = jax.lax.map(at, problem.points)
+    weights = jax.nn.softmax(crit)
+    value = jax.nn.logsumexp(crit) - jnp.log(crit.shape[0]) + pen[0]
+    return jnp.where(jnp.isfinite(value), value, jnp.inf), weights @ d_crit + d_pen[0]
 
 
 @eqx.filter_jit

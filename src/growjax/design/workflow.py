@@ -31,11 +31,12 @@ class DesignError(ValueError):
 class DesignResult:
     """A designed input and what it is predicted to give.
 
-    ``x`` (K,) the design, ``knots`` (K,) s and ``demand`` (K,) Pa its demand; ``rows``: the table, one row per
+    ``x`` (K − 1,) the design, ``knots`` (K,) s and ``demand`` (K,) Pa its demand; ``rows``: the table, one row per
     input ("published pulse train", "best random input", "design") and sensor set, each parameter's predicted sd
-    of ln θ with what is known (``sd_log``) and from the next experiment alone (``sd_log_alone``) and its 90 %
-    interval (SI); ``checks``: {input: :class:`growjax.design.constraints.Check` over the draws};
-    ``random``: the random batch; ``descents``: the optimiser's starts, best first."""
+    of ln θ with what is known (``sd_log``: averaged over the points, with what the fit's linearised rig misses),
+    from the next experiment alone (``sd_log_alone``), the classical local prediction at the estimate
+    (``sd_log_local``) and its 90 % interval (SI); ``checks``: {input: :class:`growjax.design.constraints.Check`
+    over the draws}; ``random``: the random batch; ``descents``: the optimiser's starts, best first."""
 
     names: tuple
     estimate: np.ndarray
@@ -80,7 +81,7 @@ def published_inputs(space: DesignSpace) -> Inputs:
 
 
 def design(knowledge: Knowledge, space: DesignSpace, criterion: str = "A", sensors=("length",), random: int = 64,
-           starts: int = 3, iterations: int = dopt.ITERATIONS, n_draws: int = dcon.DRAWS, seed: int = 0,
+           starts: int = 2, iterations: int = dopt.ITERATIONS, n_draws: int = dcon.DRAWS, seed: int = 0,
            points: int = dprob.POINTS, pressure_noise: float = dcrit.PRESSURE_NOISE, limits: dcon.Limits | None = None,
            learning_rate: float = dopt.LEARNING_RATE, nonlinear_draws: int = dprob.NONLINEAR_DRAWS,
            gradient: str = "differences", progress: bool = False) -> DesignResult:
@@ -91,7 +92,9 @@ def design(knowledge: Knowledge, space: DesignSpace, criterion: str = "A", senso
     passes the check over ``n_draws`` draws of the rig and θ (scaled down a little where it does not) is the design.
     ``points``: the points of (θ, rig) the criterion is averaged over (1: the local design at the estimate; the
     criterion's cost grows with each point);
-    ``nonlinear_draws``: draws of the rig on which what its linearisation misses is measured (0: none). The
+    ``nonlinear_draws``: draws of the rig on which what its linearisation misses is measured (0: none);
+    ``gradient``: the descent's slope, ``"differences"`` over a step of the demand or ``"jax"``, exact
+    (:func:`growjax.design.optimise.multistart`). The
     table reports the design, the best random input and the published pulse train under ``sensors`` and, where
     the pressure is recorded, under the length alone. DesignError where nothing admissible is found.
     """
