@@ -127,8 +127,8 @@ def sample(set_fit: SetFitResult, name: str = "Y", *, chains: int = 4, warmup: i
     diagnostics = {}
     for site in ("mu", "s", "ln_theta"):
         x = draws[site]
-        diagnostics[site] = {"r_hat": _max(numpyro.diagnostics.split_gelman_rubin(x)) if chains > 1 else None,
-                             "ess": _min(numpyro.diagnostics.effective_sample_size(x))}
+        diagnostics[site] = {"r_hat": float(np.max(numpyro.diagnostics.split_gelman_rubin(x))) if chains > 1 else None,
+                             "ess": float(np.min(numpyro.diagnostics.effective_sample_size(x)))}
     diagnostics["divergences"] = int(np.sum(mcmc.get_extra_fields()["diverging"]))
     ln_theta = draws["ln_theta"].reshape(-1, r)
     gain = np.linalg.solve(czz, czb).T  # (Q, R)
@@ -236,11 +236,3 @@ def _median_hyper(runs: list) -> dc.Hyper:
     keys = ("amplitude_m", "time_scale_s", "noise_m", "noise_time_s")
     med = [float(np.median([r["discrepancy"][k] for r in runs])) for k in keys]
     return dc.Hyper.of(*med)
-
-
-def _max(x) -> float:
-    return float(np.max(np.asarray(x)))
-
-
-def _min(x) -> float:
-    return float(np.min(np.asarray(x)))
