@@ -1,7 +1,8 @@
 """Hierarchical populations: coverage of the population's median and spread, and of a new robot's predictive band.
 
-Run: ``python benchmarks/population.py [--populations 20] [--robots 8] [--workers 1]
-[--out benchmarks/results/population.json]``.
+Run: ``python benchmarks/population.py [--populations 20] [--robots 8] [--workers 1] [--resume]
+[--out benchmarks/results/population.json]``; ``--resume`` keeps the populations already done with the same
+settings (in ``--out`` and its partial file) and runs the rest.
 
 Each population: ``--robots`` robots with Y_i ~ LogNormal(ln 8 kPa, 0.1) on one rig drawn from the default
 tolerance budget, each run under its own seeded random pulse train (amplitude 80–180 kPa, period 1–2.5 s,
@@ -109,6 +110,20 @@ def one_population(task: tuple) -> dict:
             "make_s": made, "fit_s": fit_s, "nuts_s": nuts_s}
 
 
+def _kept(out: Path, partial: Path, args) -> list[dict]:
+    """Populations of an earlier run with the same settings, from its results file and its partial file."""
+    same = ("robots", "rtol", "chains", "warmup", "samples")
+    rows = {}
+    if out.exists():
+        earlier = json.loads(out.read_text())
+        if any(earlier["arguments"][k] != getattr(args, k) for k in same):
+            raise SystemExit(f"{out}: made with other settings ({', '.join(same)} must match); not resumed")
+        rows.update({r["seed"]: r for r in earlier["populations"]})
+    if partial.exists():
+        rows.update({r["seed"]: r for r in map(json.loads, filter(str.strip, partial.read_text().splitlines()))})
+    return list(rows.values())
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--populations", type=int, default=20)
@@ -120,14 +135,18 @@ def main():
     ap.add_argument("--samples", type=int, default=500)
     ap.add_argument("--workers", type=int, default=1, help="populations run at a time, one process each")
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "population.json"))
+    ap.add_argument("--resume", action="store_true",
+                    help="keep the populations already in --out and its partial file; run the rest")
     args = ap.parse_args()
     clock = time.perf_counter()
-    tasks = [(args.seed + k, args.robots, args.rtol, args.chains, args.warmup, args.samples)
-             for k in range(args.populations)]
     partial = Path(args.out).with_suffix(".partial.jsonl")  # rows as they finish, kept if the run is cut short
     partial.parent.mkdir(parents=True, exist_ok=True)
-    partial.write_text("")
-    rows = []
+    rows = _kept(Path(args.out), partial, args) if args.resume else []
+    if not args.resume:
+        partial.write_text("")
+    done = {r["seed"] for r in rows}
+    tasks = [(args.seed + k, args.robots, args.rtol, args.chains, args.warmup, args.samples)
+             for k in range(args.populations) if args.seed + k not in done]
 
     def keep(row):
         rows.append(row)
@@ -141,10 +160,10 @@ def main():
         with ProcessPoolExecutor(args.workers, mp_context=mp.get_context("spawn")) as pool:
             for fut in as_completed([pool.submit(one_population, t) for t in tasks]):
                 keep(fut.result())
-        rows.sort(key=lambda r: r["seed"])
     else:
         for t in tasks:
             keep(one_population(t))
+    rows.sort(key=lambda r: r["seed"])
     for r in rows:
         if "skipped" in r:
             print(f"population {r['seed']}: {r['skipped']}", flush=True)

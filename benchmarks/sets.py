@@ -1,7 +1,8 @@
 """Joint fits of experiment sets: coverage of Y and the gain over single experiments, with the rig's errors shared
 by the set's experiments (the default) and, for contrast, taken as independent per experiment.
 
-Run: ``python benchmarks/sets.py [--sets 30] [--experiments 4] [--workers 1] [--out benchmarks/results/sets.json]``.
+Run: ``python benchmarks/sets.py [--sets 30] [--experiments 4] [--workers 1] [--resume]
+[--out benchmarks/results/sets.json]``; ``--resume`` keeps the sets already in the partial file.
 
 Each set: one robot (Y uniform on 6–12 kPa) on one rig drawn from the default tolerance budget, run under
 ``--experiments`` seeded random pulse trains (amplitude 80–180 kPa, period 1–2.5 s, duty 40–90 %, delay
@@ -94,7 +95,7 @@ def one_set(task):
     if np.any(status != gj.OK):
         return None
     runs = xs.ExperimentSet(tuple(xs.Run(e.source, e) for e in exps))
-    row = {"truth_Pa": y, "rig_offsets": offsets}
+    row = {"set": s, "study": [seed, experiments, rtol], "truth_Pa": y, "rig_offsets": offsets}
     for label, options in (("joint", {}), ("joint_independent_rig", {"rig_errors": "experiment"})):
         t0 = time.perf_counter()
         res = joint.fit_set(runs, free=["Y@robot"], config=config, **options)
@@ -113,6 +114,15 @@ def one_set(task):
     return row
 
 
+def _kept(partial: Path, args) -> list[dict]:
+    """Rows of an earlier run of the same study (same seed, experiments and tolerance) from its partial file."""
+    rows = [json.loads(line) for line in partial.read_text().splitlines() if line.strip()] if partial.exists() else []
+    same = [r for r in rows if r.get("study") == [args.seed, args.experiments, args.rtol]]
+    if len(same) != len(rows):
+        raise SystemExit(f"{partial}: rows from another study (seed, experiments or rtol differ); not resumed")
+    return same
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sets", type=int, default=30)
@@ -121,13 +131,16 @@ def main():
     ap.add_argument("--rtol", type=float, default=1e-6, help="the reference configuration's tolerance")
     ap.add_argument("--workers", type=int, default=1, help="sets run at a time, one process each")
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "sets.json"))
+    ap.add_argument("--resume", action="store_true", help="keep the sets already in the partial file; run the rest")
     args = ap.parse_args()
     clock = time.perf_counter()
-    tasks = [(args.seed, s, args.experiments, args.rtol) for s in range(args.sets)]
     partial = Path(args.out).with_suffix(".partial.jsonl")  # rows as they finish, kept if the run is cut short
     partial.parent.mkdir(parents=True, exist_ok=True)
-    partial.write_text("")
-    rows = []
+    rows = _kept(partial, args) if args.resume else []
+    if not args.resume:
+        partial.write_text("")
+    done = {r["set"] for r in rows}
+    tasks = [(args.seed, s, args.experiments, args.rtol) for s in range(args.sets) if s not in done]
 
     def keep(s, row):
         if row is None:
@@ -148,11 +161,12 @@ def main():
         from concurrent.futures import ProcessPoolExecutor
 
         with ProcessPoolExecutor(args.workers, mp_context=mp.get_context("spawn")) as pool:
-            for s, row in enumerate(pool.map(one_set, tasks)):
-                keep(s, row)
+            for t, row in zip(tasks, pool.map(one_set, tasks)):
+                keep(t[1], row)
     else:
-        for s, t in enumerate(tasks):
-            keep(s, one_set(t))
+        for t in tasks:
+            keep(t[1], one_set(t))
+    rows.sort(key=lambda r: r["set"])
     summary = {"sets": len(rows)}
     for label in ("joint", "joint_independent_rig"):
         summary[label] = {"coverage_90": float(np.mean([r[label]["covered"] for r in rows])),

@@ -76,6 +76,7 @@ def test_growth_law_is_validated():
         gj.validate(_lockhart(phi_L=-1.0))
 
 
+@pytest.mark.slow
 def test_forward_mode_and_difference_tangents_give_the_same_jacobian():
     """The fast configuration's sensitivities with their field in forward mode (``jax.jvp``: the Lockhart law's
     default, the rod balance's Newton solve evaluated once) and by central differences of the field (whose match

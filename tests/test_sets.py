@@ -96,11 +96,11 @@ def test_a_set_of_one_is_the_single_fit(shipped_set):
     assert alone.standard_error[Y] <= single.standard_error[Y] * (1 + 1e-6)
 
 
-def test_the_shipped_set_fitted_jointly_covers_and_beats_each_experiment_alone(shipped_set):
-    """Reference-made, one robot on one drawn rig, three demands: the joint interval covers the true Y, is
-    narrower than the best single experiment's, comes from two batched programs (the experiment with the pressure
-    sensor has more rows than the two without), and the rig's catheter friction (made 32 % low) is read as low. Taking the rig's errors as independent per experiment narrows it further:
-    more than the runs on one rig can say."""
+def test_the_shipped_set_fitted_jointly_covers_and_an_unshared_rig_claims_more(shipped_set):
+    """Reference-made, one robot on one drawn rig, three demands: the joint interval covers the true Y, comes from
+    two batched programs (the experiment with the pressure sensor has more rows than the two without), and the
+    rig's catheter friction (made 32 % low) is read as low. Taking the rig's errors as independent per experiment
+    narrows it: more than the runs on one rig can say."""
     exps, truth, config = shipped_set
     label = f"{Y}@membrane-1"
     together = joint.fit_set(exps, config=config)
@@ -109,8 +109,17 @@ def test_the_shipped_set_fitted_jointly_covers_and_beats_each_experiment_alone(s
     assert together.programs == 2 and len(together.runs) == 3
     assert all(r["rmse_length_m"] < 3e-4 for r in together.runs)
     assert together.rig_offset["bench"]["robot.catheter_friction"] < -0.1
-    best_single = min(np.diff(joint.fit_set(xs.ExperimentSet((r,)), config=config).interval_90[label])[0]
-                      for r in exps.runs)
-    assert hi - lo < best_single
     independent = joint.fit_set(exps, config=config, rig_errors="experiment")
     assert np.diff(independent.interval_90[label])[0] < hi - lo
+
+
+@pytest.mark.slow
+def test_the_shipped_set_fitted_jointly_beats_each_experiment_alone(shipped_set):
+    """The joint interval is narrower than the best single experiment's (over 30 drawn sets:
+    ``benchmarks/sets.py``)."""
+    exps, _, config = shipped_set
+    label = f"{Y}@membrane-1"
+    together = np.diff(joint.fit_set(exps, config=config).interval_90[label])[0]
+    best_single = min(np.diff(joint.fit_set(xs.ExperimentSet((r,)), config=config).interval_90[label])[0]
+                      for r in exps.runs)
+    assert together < best_single
