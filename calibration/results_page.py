@@ -124,7 +124,7 @@ def paper_section(p: dict) -> str:
             ("stepper (\"inverse\") model with the shipped step controller at 3 Hz", mm(p["stepper_rmse_m"]), "2.5 mm",
              f"`{p['commands']['stepper']['command']}`"),
             (f"best set of the paper's {p['sweep_n']}-set Latin hypercube",
-             f"Y = {best['parameters'][Y] / 1e3:.2f} kPa, {mm(best['rmse_length_m'])}", "Y ≈ 7.9 kPa, 1.7 mm",
+             f"Y = {best['parameters'][Y] / 1e3:.2f} kPa, {1e3 * best['rmse_length_m']:.3f} mm", "Y ≈ 7.9 kPa, 1.7 mm",
              "`growjax sweep mammobot`"),
             ("safe pressure of the membrane, 2tσ_y/(r_o·SF)", f"{p['pressure_limit_Pa'] / 1e3:.1f} kPa", "373.3 kPa",
              "`growjax params`, `gj.pressure_limit`")]
@@ -289,14 +289,26 @@ def discovery_section(b: dict, public: dict | None) -> str:
         "should say so with `--tolerance`; otherwise the `confounded` answer, with its separating measurement, is "
         "what these data support.\n")
     if public:
-        effects = " and ".join(e.replace("_", " ") for e in public.get("effects", []))
-        lowered = f": {effects} together lower the RMSE from {mm(public['rmse_before_m'])} to " \
-                  f"{mm(public['rmse_after_m'])}" if effects else ""
-        text += (f"\nOn the public experiment (`growjax discover mammobot`, `calibration/discover_public/`) the verdict "
-                 f"is `{public['effect']}`{lowered}"
-                 + (", but the misfit test still finds structure in the residuals"
-                    if public.get("misfit_after", {}).get("structured") else "") + ".\n")
+        text += public_discovery(public)
     return text
+
+
+def public_discovery(d: dict) -> str:
+    """The sentence on ``growjax discover mammobot``'s verdict (its ``--json``)."""
+    head = ("\nOn the public experiment (`growjax discover mammobot --json calibration/discover_public/discover.json "
+            f"--out calibration/discover_public`, under the default likelihood) the verdict is `{d['effect']}`")
+    effects = " and ".join(e.replace("_", " ") for e in d.get("effects", []))
+    if effects:
+        head += (f": {effects} lower the RMSE from {mm(d['rmse_before_m'])} to {mm(d['rmse_after_m'])}"
+                 + (", but the misfit test still finds structure in the residuals"
+                    if d.get("misfit_after", {}).get("structured") else ""))
+    first = d["evidence"][0] if d.get("evidence") else {}
+    if d["effect"] == "none" and first:
+        best = max(first, key=lambda k: first[k]["lr_statistic"])
+        head += (f": no catalogue effect clears the threshold (2ΔlogL > {d['threshold']:.2f}; the largest is "
+                 f"{first[best]['lr_statistic']:.2f}, {best.replace('_', ' ')}), and the misfit of "
+                 f"{mm(d['rmse_before_m'])} is left to the discrepancy term")
+    return head + ".\n"
 
 
 def environment_line_copied(section: dict) -> str:
