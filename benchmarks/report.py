@@ -1,14 +1,17 @@
 """Write docs/benchmarks.md from the benchmark results in benchmarks/results/*.json.
 
-Run: ``python benchmarks/report.py [--results benchmarks/results] [--out docs/benchmarks.md]``, after any of
-the benchmark scripts (each writes its results file, with the machine and versions it ran on). The page
-is regenerated from the files alone: edit the scripts or rerun them, never the page.
+Run: ``python benchmarks/report.py [--results benchmarks/results] [--out docs/benchmarks.md] [--drop-missing]``,
+after any of the benchmark scripts (each writes its results file, with the machine and versions it ran on). A
+section is regenerated from its results file alone: edit the scripts or rerun them, never the page. Results
+files are not kept in the repository, so a section whose file is absent here is kept as the page has it
+(``--drop-missing``: removed).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import re
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
@@ -16,12 +19,14 @@ HEADER = """# Benchmarks
 
 This page is written by `python benchmarks/report.py` from the results files the benchmark scripts leave in
 `benchmarks/results/`; rerun a script, then the report, to refresh it. Times are wall-clock seconds on the
-machine named in each row, after compilation unless a row says otherwise.
+machine named in each row, after compilation unless a row says otherwise. A section whose results file is not
+on the machine that writes the page is kept as it was.
 
 | script | what it measures |
 |---|---|
 | `benchmarks/simulate.py` | one 10 s simulation and one forward-mode gradient of the log-likelihood |
 | `benchmarks/sweep.py` | a 500-set Latin-hypercube sweep, the whole `growjax sweep` process, a SciPy BDF baseline |
+| `benchmarks/sweep_resume.py` | a `growjax sweep` stopped by SIGINT at about half its chunks and resumed, against the same sweep uninterrupted: tables and time |
 | `benchmarks/agreement.py` | fast against reference configuration across the parameter box, both growth laws, six inputs |
 | `benchmarks/calibrate.py` | fit, Laplace approximation and NUTS |
 | `benchmarks/discover.py` | the discovery matrix: hidden effects, seeds and verdicts |
@@ -238,6 +243,23 @@ def rows_least_squares(r: dict) -> list[tuple[str, str, str]]:
     return out
 
 
+def rows_sweep_resume(r: dict) -> list[tuple[str, str, str]]:
+    full, cut, resumed = r["uninterrupted"], r["interrupted"], r["resumed"]
+    same = r["identical"]
+    return [("resumed table identical to the uninterrupted one", "yes" if same["all"] else "no",
+             f"sweep.csv {'identical' if same['sweep_csv'] else 'different'}, the store's arrays "
+             f"{'identical' if all(same['store_arrays'].values()) else 'different'}, bit for bit"),
+            ("chunks done when the SIGINT stopped it", f"{cut['chunks_done']} of {r['chunks']}",
+             f"{r['n']} sets in chunks of {r['chunk_size']}, {r['n_devices']} devices; exit status {cut['exit_status']}"),
+            ("uninterrupted `growjax sweep` process (T)", _s(full["process_wall_s"]),
+             f"sweep loop {_s(full['sweep_wall_s'])}; compilation cache warm"),
+            ("`growjax sweep --resume` process (R)", _s(resumed["process_wall_s"]),
+             f"sweep loop {_s(resumed['sweep_wall_s'])}"),
+            ("R ÷ (remaining share f × T)", f"{r['ratio_process']:.2f}",
+             f"f = {r['remaining_share']:.2f}; sweep loops alone {r['ratio_sweep_loop']:.2f}; "
+             f"target ≤ {r['target_ratio']:g}")]
+
+
 EXTRACTORS = {"simulate": rows_simulate, "sweep": rows_sweep, "agreement": rows_agreement,
               "windows_public": rows_windows, "coverage_discrepancy": rows_coverage,
               "coverage_discrepancy_nominal": rows_coverage, "predict_public": rows_predict,
@@ -248,7 +270,8 @@ EXTRACTORS = {"simulate": rows_simulate, "sweep": rows_sweep, "agreement": rows_
               "agreement_quick": rows_agreement,
               "control": rows_control, "least_squares": rows_least_squares,
               "least_squares_linearize": rows_least_squares, "rig_agreement": rows_rig_agreement,
-              "set_speed": rows_set_speed, "population": rows_population, "sets": rows_sets}
+              "set_speed": rows_set_speed, "population": rows_population, "sets": rows_sets,
+              "sweep_resume": rows_sweep_resume}
 
 
 def environment_line(r: dict, path: Path) -> str:
@@ -259,20 +282,48 @@ def environment_line(r: dict, path: Path) -> str:
             f"growjax {env['growjax']}; run {env['date']}")
 
 
-def render(results: Path) -> str:
+def section(path: Path) -> str:
+    """The page's section of one results file: heading, machine and versions, table."""
+    try:
+        r = json.loads(path.read_text())
+        rows = EXTRACTORS.get(path.stem, rows_generic)(r)
+    except (KeyError, TypeError, ValueError) as err:
+        rows, r = [("could not be read", type(err).__name__, str(err)[:60])], {}
+    data = f"; data: {Path(r['data']).name}" if r.get("data") else ""
+    head = f"## {path.stem}\n\n{environment_line(r, path)}{data}\n\n| measurement | value | note |\n|---|---|---|\n"
+    return head + "".join(f"| {a} | {b} | {c} |\n" for a, b, c in rows)
+
+
+HEADING = re.compile(r"^## (\S+)[ \t]*$", re.MULTILINE)
+
+
+def sections(page: str) -> dict[str, str]:
+    """{name: text} of the results sections of a page :func:`render` wrote, each from its heading to the next."""
+    marks = list(HEADING.finditer(page))
+    ends = [m.start() for m in marks[1:]] + [len(page)]
+    return {m.group(1): page[m.start():end].rstrip("\n") + "\n" for m, end in zip(marks, ends)}
+
+
+def table_rows(text: str) -> list[list[str]]:
+    """The (measurement, value, note) rows of a section's table."""
+    rows = []
+    for line in text.splitlines():
+        if line.startswith("| ") and line.endswith(" |") and not line.startswith("| measurement | value |"):
+            rows.append([c.strip() for c in line[2:-2].split(" | ")])
+    return rows
+
+
+def render(results: Path, kept: dict | None = None) -> str:
+    """The page from the results files in ``results``; ``kept`` {name: section text}: sections shown as they are
+    where ``results`` has no file of that name."""
+    files = {p.stem: p for p in sorted(results.glob("*.json"))} if results.is_dir() else {}
+    kept = {k: v for k, v in (kept or {}).items() if k not in files}
+    names = sorted(set(files) | set(kept))
     parts = [HEADER]
-    files = sorted(results.glob("*.json")) if results.is_dir() else []
-    if not files:
+    if not names:
         parts.append("\nNo results yet: run a benchmark script, then `python benchmarks/report.py`.\n")
-    for path in files:
-        try:
-            r = json.loads(path.read_text())
-            rows = EXTRACTORS.get(path.stem, rows_generic)(r)
-        except (KeyError, TypeError, ValueError) as err:
-            rows, r = [("could not be read", type(err).__name__, str(err)[:60])], {}
-        data = f"; data: {Path(r['data']).name}" if r.get("data") else ""
-        parts.append(f"\n## {path.stem}\n\n{environment_line(r, path)}{data}\n\n| measurement | value | note |\n|---|---|---|\n")
-        parts.extend(f"| {a} | {b} | {c} |\n" for a, b, c in rows)
+    for name in names:
+        parts.append("\n" + (section(files[name]) if name in files else kept[name]))
     return "".join(parts)
 
 
@@ -280,9 +331,12 @@ def main(argv=None) -> Path:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--results", default=str(REPO / "benchmarks" / "results"))
     parser.add_argument("--out", default=str(REPO / "docs" / "benchmarks.md"))
+    parser.add_argument("--drop-missing", action="store_true",
+                        help="remove the page's sections whose results file is absent (default: keep them)")
     args = parser.parse_args(argv)
     out = Path(args.out)
-    out.write_text(render(Path(args.results)))
+    kept = {} if args.drop_missing or not out.exists() else sections(out.read_text())
+    out.write_text(render(Path(args.results), kept))
     print("wrote", out)
     return out
 
