@@ -532,6 +532,8 @@ def _discover_set(args, paths) -> dict:
     fits, its parameter one value per robot."""
     from growjax import discover as gd
 
+    if len(paths) > 1 and any(Path(p).suffix.lower() == ".toml" for p in paths):
+        raise ValueError("a manifest (.toml) describes the whole set: give it alone")
     config = make_config(args, args.drive, adjoint="forward")
     exps = _read_set(args, paths, config)
     started = _progress_note(args, f"discover: {len(args.candidates or gd.fx.CATALOGUE)} candidates over "
