@@ -12,6 +12,7 @@ from scipy import stats
 import growjax as gj
 from growjax import cli
 from growjax import discover as gd
+from growjax import experiment as ex
 from growjax import experiments as xs
 
 DISCOVERY_SET = Path(str(files("growjax") / "datasets" / "discovery_set"))
@@ -73,7 +74,8 @@ def folding_set():
 @pytest.mark.slow
 def test_the_set_names_a_folding_that_no_experiment_alone_can(folding_set):
     """A small retraction folding hidden by the reference configuration in three short runs of one robot: each run
-    alone leaves it under the threshold; the set's joint fits name it, their 2ΔlogL above every run's, its size's
+    alone leaves it under the threshold, by the set's procedure and by single-experiment discovery (which names
+    nothing); the set's joint fits name it, their 2ΔlogL above every run's, its size's
     90 % interval covering the truth, and no structure left in any run's residuals."""
     exps, truth, together = folding_set
     assert together.effect == "retraction_folding", gd.set_summary_text(together)
@@ -85,6 +87,10 @@ def test_the_set_names_a_folding_that_no_experiment_alone_can(folding_set):
         alone = gd.discover_set(xs.ExperimentSet((run,)), config=CONFIG, candidates=CANDIDATES)
         assert alone.effect != "retraction_folding", (run.name, gd.set_summary_text(alone))
         assert alone.evidence[0]["retraction_folding"]["lr_statistic"] < min(alone.threshold, lr_set)
+        inputs = ex.to_inputs(run.experiment, "forward", run.base(), CONFIG.t0, CONFIG.t1)
+        single = gd.discover(run.times, run.length, inputs, config=CONFIG, candidates=CANDIDATES, workers=1)
+        assert single.effect == "none", (run.name, gd.summary_text(single))  # single discovery: nothing named
+        assert single.evidence[0]["retraction_folding"]["lr_statistic"] < lr_set
     assert not together.misfit_after["structured"]
     assert all(r["rmse_after_m"] < 1.2 * truth["noise_sd"]["robot_length_m"] for r in together.runs)
     assert not together.confounded_with and together.fits == 1 + len(CANDIDATES)
