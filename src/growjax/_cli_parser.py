@@ -250,7 +250,7 @@ def build_parser():
 
     dis = sub.add_parser("discover", formatter_class=fmt,
                          help="which catalogue effect the data need beyond the model (`growjax effects`)")
-    _shared(dis, "discover")
+    _shared(dis, "discover", many=True)
     dis.add_argument("--candidates", nargs="+", metavar="EFFECT", type=_effect_name, default=None,
                      help="catalogue effects to test (None: all of `growjax effects`)")
     dis.add_argument("--workers", type=_count(), default=None, help="fits run at a time (None: one per CPU core)")

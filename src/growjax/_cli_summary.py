@@ -163,7 +163,7 @@ def _population(s: dict, name: str) -> list[str]:
 
 def _discover(s: dict, name: str) -> list[str]:
     return [f"discover: {name}", *_origin_lines(s["fixed_parameters"]),
-            *("  " + line for line in s["text"].splitlines()), f"  wrote {s['figure']}"]
+            *("  " + line for line in s["text"].splitlines()), *([f"  wrote {s['figure']}"] if "figure" in s else [])]
 
 
 def _control(s: dict, name: str) -> list[str]:

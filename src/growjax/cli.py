@@ -507,6 +507,10 @@ def discover_command(args) -> dict:
     from growjax import experiment as ex
     from growjax.plotting import discovery_figure
 
+    paths = list(args.data or [])
+    if len(paths) > 1 or (paths and Path(paths[0]).suffix.lower() == ".toml"):
+        return _discover_set(args, paths)
+    args.data = paths[0] if paths else None
     data, exp, base, origin = _setup(args, args.drive)
     if "robot_length_m" not in exp:
         raise ValueError(f"{data} has no robot_length_m column to explain")
@@ -521,6 +525,26 @@ def discover_command(args) -> dict:
     figure = discovery_figure(res, out / "discover.png", title=f"{data.name}: {res.effect}")
     return {"command": "discover", "data": str(data), "drive": args.drive, "t_end_s": args.t_end,
             "fixed_parameters": origin, **res.report(), "figure": str(figure), "text": gd.summary_text(res)}
+
+
+def _discover_set(args, paths) -> dict:
+    """``growjax discover A.csv B.csv …`` or ``growjax discover SET.toml``: each effect tested by the set's joint
+    fits, its parameter one value per robot."""
+    from growjax import discover as gd
+
+    if len(paths) > 1 and any(Path(p).suffix.lower() == ".toml" for p in paths):
+        raise ValueError("a manifest (.toml) describes the whole set: give it alone")
+    config = make_config(args, args.drive, adjoint="forward")
+    exps = _read_set(args, paths, config)
+    started = _progress_note(args, f"discover: {len(args.candidates or gd.fx.CATALOGUE)} candidates over "
+                                   f"{len(exps)} experiments, one joint fit each")
+    res = gd.discover_set(exps, config=config, candidates=args.candidates or None, seed=args.seed,
+                          discrepancy=args.discrepancy, tolerances=tolerances_of(args))
+    _progress_note(args, f"discover: done in {time.perf_counter() - started:.1f} s")
+    return {"command": "discover", "data": [str(p) for p in paths], "drive": args.drive, "t_end_s": args.t_end,
+            "fixed_parameters": {"fixed": dict(parse_param(p) for p in args.param)},
+            "experiments": [{"name": r.name, "robot": r.robot, "rig": r.rig, "window": r.window} for r in exps],
+            **res.report(), "text": gd.set_summary_text(res)}
 
 
 def control_command(args) -> dict:

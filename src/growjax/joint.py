@@ -66,6 +66,9 @@ class SetFitResult:
     rig_labels: tuple = ()  # (Q,) (rig key, tolerance name) of the fitted rig errors b, when inferred
     rig_vector: np.ndarray | None = None  # (Q,) fitted b = ln(ψ/ψ₀)
     joint_covariance: np.ndarray | None = None  # (P + Q, P + Q) of (z, b), the z block as covariance_log
+    log_likelihood: float = float("nan")  # nats: the set's total at the fit (rig marginalised)
+    # per run (times (n,) s, length residual (n,) m, the rig at its fitted errors)
+    residuals: list = dataclasses.field(default_factory=list, repr=False)
 
     def summary(self) -> dict:
         return {"status": self.status, "rig": self.rig, "rig_errors": self.rig_errors,
@@ -103,6 +106,7 @@ def fit_set(
     tolerances: dict | None = None,
     rig: str = "inferred",
     rig_errors: str = "shared",
+    effects: Sequence = (),
 ) -> SetFitResult:
     """Fit the ``free`` parameters (``NAME`` shared, ``NAME@robot|rig|experiment`` one per robot, rig or run) to
     every run of ``experiments`` at once.
@@ -110,7 +114,9 @@ def fit_set(
     ``config``: the simulation's settings (its drive is taken from each run). Starts: the ``n_starts`` best of a
     ``sweep_n``-point Latin hypercube over the free names (every copy at the same value; 0: the runs' values).
     ``discrepancy``, ``tolerances``, ``rig``, ``model_error``: as in :func:`growjax.fit.fit`, run by run;
-    ``rig_errors``: ``"shared"`` (one error vector per rig) or ``"experiment"`` (one per run).
+    ``rig_errors``: ``"shared"`` (one error vector per rig) or ``"experiment"`` (one per run). ``effects``:
+    :class:`growjax.Effect` instances added to every run's parameters at their given values (an effect's parameter
+    can then be freed by name, e.g. ``fluid_leak.conductance@robot``, and starts there).
     """
     if discrepancy not in dc.KINDS:
         raise ValueError(f"discrepancy must be one of {dc.KINDS}, got {discrepancy!r}")
@@ -121,7 +127,7 @@ def fit_set(
     clock = time.perf_counter()
     config = (config if config is not None else Config()).replace(adjoint="forward")
     runs = list(experiments)
-    bases = [r.base() for r in runs]
+    bases = [gp.with_effects(r.base(), *effects) if effects else r.base() for r in runs]
     scopes = [s if isinstance(s, Scope) else Scope.parse(s, bases[0]) for s in free]
     names = tuple(s.name for s in scopes)
     if len(set(names)) != len(names):
@@ -174,9 +180,59 @@ def fit_set(
     result = _result(z, b, cov, parts, info, outs, likelihoods, layout, hypers, runs, tol, rig, rig_errors, cost,
                      converged, clock, batch.simulate_s, centre)
     result.programs = len(batch.groups)
+    result.log_likelihood = _set_log_likelihood(outs, likelihoods, layout, hypers, centre, rig if tol else "none")
+    result.residuals = [(np.asarray(lik.times), np.asarray(r[: lik.n_len]) * lik.sigma_length
+                         + (np.asarray(lik.sensitivity) @ (b - centre)[layout.rig_index[e]] if lik.inferred else 0.0))
+                        for e, ((r, _), lik) in enumerate(zip(outs, likelihoods))]
     if joint is not None:
         result.rig_labels, result.rig_vector, result.joint_covariance = tuple(layout.rig_labels), np.asarray(b), joint
     return result
+
+
+def _set_log_likelihood(outs, likelihoods, layout: _Layout, hypers, centre, rig: str) -> float:
+    """The set's total log-likelihood (nats) at the runs' residuals ``outs``: each run's length under its own
+    discrepancy and noise (hyperparameters ``hypers``, at their mode), the rig's errors marginalised under their
+    priors (``rig="inferred"``: one error vector per rig shared by its runs, :func:`growjax.discrepancy.
+    log_likelihood_runs`, the runs linearised at the rig's errors ``centre``; ``"fixed"``: each run's own), the
+    pressure rows independent normal. What the joint fit maximises, up to a constant, profiled over the rig's errors;
+    the score of a nested comparison of two fits of one set."""
+    total = 0.0
+    rows = []
+    for e, ((r, _), lik, h) in enumerate(zip(outs, likelihoods, hypers)):
+        r = np.asarray(r)
+        n, idx = lik.n_len, np.asarray(lik.index)
+        r_len = r[:n] * lik.sigma_length
+        g = None if lik.sensitivity is None else np.asarray(lik.sensitivity)
+        if lik.inferred:
+            r_len = r_len - g @ np.asarray(centre)[layout.rig_index[e]]  # the errors' prior is centred on nominal
+        rows.append((r_len[idx], np.asarray(lik.times)[idx], None if g is None else g[idx], h))
+        r_p = r[n:]  # pressure, in units of its sd
+        if r_p.size:
+            total += float(-0.5 * np.sum(r_p**2) - r_p.size * 0.5 * np.log(2.0 * np.pi))
+    if rig == "inferred":
+        q = len(likelihoods[0].tolerance_names)
+        size = max(x[0].size for x in rows)
+        pad = lambda a, fill: np.concatenate([a, np.full((size - a.shape[0], *a.shape[1:]), fill)])  # noqa: E731
+        times = [np.concatenate([t, t[-1] + 1e-3 * np.arange(1, size - t.size + 1)]) for _, t, _, _ in rows]
+        rig_of = layout.rig_index[:, 0] // q
+        hyper = jax.tree_util.tree_map(lambda *xs: jnp.stack([jnp.asarray(x) for x in xs]), *[x[3] for x in rows])
+        total += float(_log_likelihood_runs(jnp.asarray(np.stack([pad(x[0], 0.0) for x in rows])),
+                                            jnp.asarray(np.stack(times)), hyper,
+                                            jnp.asarray(np.stack([pad(x[2], 0.0) for x in rows])),
+                                            jnp.asarray(likelihoods[0].tolerance),
+                                            jnp.asarray(np.stack([np.arange(size) < x[0].size for x in rows])),
+                                            jnp.asarray(rig_of), int(rig_of.max()) + 1))
+        return total
+    for (r_e, t_e, g_e, h), lik in zip(rows, likelihoods):
+        marginal = rig == "fixed" and g_e is not None
+        total += float(_log_likelihood(jnp.asarray(r_e), jnp.asarray(t_e), h,
+                                       jnp.asarray(g_e) if marginal else None,
+                                       jnp.asarray(lik.tolerance) if marginal else None))
+    return total
+
+
+_log_likelihood = jax.jit(dc.log_likelihood)
+_log_likelihood_runs = jax.jit(dc.log_likelihood_runs, static_argnums=7)
 
 
 def _gls(batch, layout: _Layout, likelihoods, hypers, z, b, centre, bounds, discrepancy: str, max_steps: int):

@@ -94,11 +94,13 @@ from ._scoring import (
     score_round,
 )
 from ._scoring import _pinned as _pinned
+from ._set import SetDiscoveryResult, boundary_p_value, boundary_threshold, discover_set, set_summary_text
 from ._workflow import discover
 
 __all__ = [
     "BASE_START_FACTORS", "COST_NOISE", "ETA_FLOOR", "LR_RESOLUTION", "MATERIAL_MISFIT", "PHASES", "PINNED_FACTOR",
     "SEPARATING", "START_FRACTIONS", "STRUCTURE_THRESHOLD", "Z90", "CandidateFit", "Candidates", "DiscoveryResult",
-    "Fitter", "Scorer", "candidate_parameter", "discover", "fx", "locate", "make_candidates", "misfit_test",
-    "noise_from_differences", "phases", "score_candidate", "score_round", "summary_text",
+    "Fitter", "Scorer", "SetDiscoveryResult", "boundary_p_value", "boundary_threshold", "candidate_parameter",
+    "discover", "discover_set", "fx", "locate", "make_candidates", "misfit_test",
+    "noise_from_differences", "phases", "score_candidate", "score_round", "set_summary_text", "summary_text",
 ]

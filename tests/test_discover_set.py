@@ -1,0 +1,109 @@
+"""Discovery over an experiment set: its threshold, its refusals of bad input, and (slow) its verdicts on
+reference-made sets, with and without a hidden effect."""
+
+import json
+from importlib.resources import files
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import stats
+
+import growjax as gj
+from growjax import cli
+from growjax import discover as gd
+from growjax import experiment as ex
+from growjax import experiments as xs
+
+DISCOVERY_SET = Path(str(files("growjax") / "datasets" / "discovery_set"))
+CLEAN_SET = Path(str(files("growjax") / "datasets" / "set"))
+CANDIDATES = ("retraction_folding", "fluid_leak", "active_channel_force")
+CONFIG = gj.Config(t1=3.0)
+
+
+def test_the_threshold_is_the_single_rule_for_one_robot_and_holds_its_rate_for_several():
+    """One copy: ½χ²₀ + ½χ²₁ at the Bonferroni share, the single experiment's rule. Several copies (one per robot):
+    the boundary mixture, whose false-alarm rate at the threshold matches draws of Σ max(0, Z)²."""
+    assert gd.boundary_threshold(0.05 / 3) == pytest.approx(stats.chi2.isf(2 * 0.05 / 3, df=1), rel=1e-12)
+    rng = np.random.default_rng(20261126)
+    for copies in (2, 3):
+        c = gd.boundary_threshold(0.01, copies)
+        assert gd.boundary_p_value(c, copies) == pytest.approx(0.01, rel=1e-6)
+        draws = np.sum(np.clip(rng.standard_normal((400_000, copies)), 0.0, None) ** 2, axis=1)
+        assert np.mean(draws > c) == pytest.approx(0.01, rel=0.08)
+        assert c > gd.boundary_threshold(0.01, copies - 1)
+    assert gd.boundary_p_value(0.0, 2) == 1.0
+
+
+def test_bad_input_is_refused_before_any_fit():
+    exps = xs.read([DISCOVERY_SET / "set.toml"])
+    with pytest.raises(ValueError, match="unknown effect 'folding'"):
+        gd.discover_set(exps, candidates=["retraction_folding", "folding"])
+    with pytest.raises(ValueError, match="named twice"):
+        gd.discover_set(exps, candidates=["fluid_leak", "fluid_leak"])
+    with pytest.raises(ValueError, match="effect_scope"):
+        gd.discover_set(exps, candidates=["fluid_leak"], effect_scope="membrane")
+    with pytest.raises(ValueError, match="false_positive_rate"):
+        gd.discover_set(exps, candidates=["fluid_leak"], false_positive_rate=1.5)
+    with pytest.raises(ValueError, match="unknown parameter 'Q'"):
+        gd.discover_set(exps, candidates=["fluid_leak"], base_free=["Q@robot"])
+
+
+def test_the_command_line_refuses_a_bad_set_or_effect_with_exit_2_and_one_line(tmp_path, capsys):
+    manifest = DISCOVERY_SET / "set.toml"
+    for argv, message in (([str(manifest), "--candidates", "folding"], "unknown effect 'folding'"),
+                          ([str(manifest), str(manifest)], "give it alone"),
+                          ([str(DISCOVERY_SET / "pulse_slow.csv"), str(tmp_path / "absent.csv")],
+                           "not found")):
+        try:
+            code = cli.main(["discover", *argv, "--out", str(tmp_path / "out")])
+        except SystemExit as stop:  # the parser's refusal
+            code = stop.code
+        assert code == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and message in err[0], err
+
+
+@pytest.fixture(scope="module")
+def folding_set():
+    exps = xs.read([DISCOVERY_SET / "set.toml"])
+    truth = json.loads((DISCOVERY_SET / "pulse_slow.json").read_text())
+    return exps, truth, gd.discover_set(exps, config=CONFIG, candidates=CANDIDATES)
+
+
+@pytest.mark.slow
+def test_the_set_names_a_folding_that_no_experiment_alone_can(folding_set):
+    """A small retraction folding hidden by the reference configuration in three short runs of one robot: each run
+    alone leaves it under the threshold, by the set's procedure and by single-experiment discovery (which names
+    nothing); the set's joint fits name it, their 2ΔlogL above every run's, its size's
+    90 % interval covering the truth, and no structure left in any run's residuals."""
+    exps, truth, together = folding_set
+    assert together.effect == "retraction_folding", gd.set_summary_text(together)
+    label = f"{truth['parameter']}@membrane-1"
+    lo, hi = together.parameters[label]["interval_90"]
+    assert lo <= truth["magnitude"] <= hi
+    lr_set = together.evidence[0]["retraction_folding"]["lr_statistic"]
+    for run in exps.runs:
+        alone = gd.discover_set(xs.ExperimentSet((run,)), config=CONFIG, candidates=CANDIDATES)
+        assert alone.effect != "retraction_folding", (run.name, gd.set_summary_text(alone))
+        assert alone.evidence[0]["retraction_folding"]["lr_statistic"] < min(alone.threshold, lr_set)
+        inputs = ex.to_inputs(run.experiment, "forward", run.base(), CONFIG.t0, CONFIG.t1)
+        single = gd.discover(run.times, run.length, inputs, config=CONFIG, candidates=CANDIDATES, workers=1)
+        assert single.effect == "none", (run.name, gd.summary_text(single))  # single discovery: nothing named
+        assert single.evidence[0]["retraction_folding"]["lr_statistic"] < lr_set
+    assert not together.misfit_after["structured"]
+    assert all(r["rmse_after_m"] < 1.2 * truth["noise_sd"]["robot_length_m"] for r in together.runs)
+    assert not together.confounded_with and together.fits == 1 + len(CANDIDATES)
+
+
+@pytest.mark.slow
+def test_no_effect_is_named_on_a_clean_set_on_a_rig_off_its_nominal_values():
+    """The shipped set (three demands, one robot, the rig drawn from its tolerances, no effect): no candidate clears
+    the threshold, and the answer is none."""
+    runs = xs.read([CLEAN_SET / "set.toml"])
+    exps = xs.ExperimentSet(tuple(xs.Run(r.name, r.experiment.window(CONFIG.t1 + 1e-9), robot=r.robot, rig=r.rig)
+                                  for r in runs))  # the length alone, 3 s: the folding set's programs serve it
+    res = gd.discover_set(exps, config=CONFIG, candidates=CANDIDATES)
+    assert res.effect == "none", gd.set_summary_text(res)
+    assert not any(s["clears_threshold"] for s in res.evidence[0].values())
+    assert not res.effects and not res.confounded_with
