@@ -5,14 +5,10 @@ from pathlib import Path
 
 from growjax import xla_flags
 
-# The run is mostly compiles, so its programs are compiled for speed of compiling: XLA's quicker emitters
-# (growjax.xla_flags) and LLVM without its optimisation passes (a quarter less compile time; the code runs slower,
-# which a run of compiles does not feel). Set before JAX starts, inherited by the xdist workers and CLI
-# subprocesses; the emitters only for a jaxlib known to have them (XLA aborts a process on an unknown flag).
-# test_xla_flags runs XLA's default too.
+# The run is mostly compiles: XLA's quicker emitters for all of it (growjax.xla_flags), set before JAX starts and
+# inherited by the xdist workers and CLI subprocesses; only for a jaxlib known to have them (XLA aborts a process
+# on an unknown flag). test_xla_flags runs XLA's default too.
 xla_flags.apply_quick_compile()
-if "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
-    os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} --xla_backend_optimization_level=0".strip()
 
 import jax
 import numpy as np

@@ -31,8 +31,6 @@ def test_docs_build_strict_with_executed_tutorials(tmp_path):
     pytest.importorskip("mkdocs_jupyter")
     pytest.importorskip("mkdocstrings_handlers.python")
     env = dict(os.environ, GROWJAX_QUICK="1", GROWJAX_DOCS_CACHE="false", NO_MKDOCS_2_WARNING="1")
-    # the tutorials run as a user's would: LLVM's default optimisation, not the test run's (conftest.py)
-    env["XLA_FLAGS"] = env.get("XLA_FLAGS", "").replace("--xla_backend_optimization_level=0", "").strip()
     start = time.perf_counter()
     run = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "-d", str(tmp_path / "site")],
                          cwd=REPO, env=env, capture_output=True, text=True, timeout=900, check=False)
