@@ -38,8 +38,7 @@ RIG_ERRORS = ("shared", "experiment")
 # The rig's sensitivities are taken again where the fit puts the rig (at most this many linearisations, until the
 # rig's errors move by less than this share of their tolerance): with three or more runs on one rig the data pull
 # its errors a good part of a tolerance from nominal, where the secants taken at nominal bias every robot's Y alike
-# (on four reference-made runs with the screw friction 2.6 tolerances low: Y 2.1 % low, 3.2 standard errors, when
-# stopped at 3 linearisations and 0.1; 0.14 % with these).
+# by several standard errors unless the rig is let settle (benchmarks/sets.py measures the coverage).
 RELINEARISE_STEPS = 8
 RELINEARISE_TOLERANCE = 0.02
 

@@ -76,6 +76,16 @@ def _unit(name: str) -> str:
             "robot.lockhart_rate": "m/s", "robot.lockhart_exponent": "-"}.get(name, "")
 
 
+def confounded_lines(confounded_with: dict) -> list[str]:
+    """One line per confounded effect: what it trades with and the measurement that would separate them."""
+    lines = []
+    for name, c in confounded_with.items():
+        with_ = [f"{c['parameter']} (correlation {c['correlation']:.3f})"] if c["parameter"] else []
+        with_ += [f"the effect {r}" for r in c.get("rival_effects", ())]
+        lines.append(f"confounded: {name} with {' and '.join(with_)}; separate by {c['separate_by']}")
+    return lines
+
+
 def summary_text(result: DiscoveryResult) -> str:
     """A readable summary of a :class:`DiscoveryResult` for the terminal."""
     lines = [f"effect: {result.effect}" + (f" (added: {', '.join(result.effects)})" if result.effects else ""),
@@ -90,9 +100,6 @@ def summary_text(result: DiscoveryResult) -> str:
             flag = "confounded" if s["confounded"] else ("clears" if s["clears_threshold"] else "")
             lines.append(f"  {name:22s} 2ΔlogL {s['lr_statistic']:8.2f}  {s['parameter']} = {s['estimate']:.3g} "
                          f"{s['unit']}  {flag}")
-    for name, c in result.confounded_with.items():
-        with_ = [f"{c['parameter']} (correlation {c['correlation']:.3f})"] if c["parameter"] else []
-        with_ += [f"the effect {r}" for r in c.get("rival_effects", ())]
-        lines.append(f"confounded: {name} with {' and '.join(with_)}; separate by {c['separate_by']}")
+    lines += confounded_lines(result.confounded_with)
     lines.append(f"{result.wall_s:.1f} s: {result.fits} fits, {result.linearisations} linearisations of the model")
     return "\n".join(lines)

@@ -18,7 +18,7 @@ from growjax.experiments import SCOPES, ExperimentSet, Scope
 
 from ._candidates import START_FRACTIONS, candidate_parameter
 from ._decision import SEPARATING, choose, confounded_with_base, final_effect
-from ._report import _unit
+from ._report import _unit, confounded_lines
 from ._scoring import MATERIAL_MISFIT, Scorer, _pinned, noise_from_differences
 
 EFFECT_START = START_FRACTIONS[1]  # an effect's joint fit starts at this fraction of its range's top
@@ -229,9 +229,6 @@ def set_summary_text(result: SetDiscoveryResult) -> str:
         flag = "confounded" if s["confounded"] else ("clears" if s["clears_threshold"] else "")
         sizes = ", ".join(f"{v:.3g}" for v in s["estimate"].values())
         lines.append(f"  {name:22s} 2ΔlogL {s['lr_statistic']:8.2f}  {s['parameter']} = {sizes} {s['unit']}  {flag}")
-    for name, c in result.confounded_with.items():
-        with_ = [f"{c['parameter']} (correlation {c['correlation']:.3f})"] if c["parameter"] else []
-        with_ += [f"the effect {r}" for r in c.get("rival_effects", ())]
-        lines.append(f"confounded: {name} with {' and '.join(with_)}; separate by {c['separate_by']}")
+    lines += confounded_lines(result.confounded_with)
     lines.append(f"{result.wall_s:.1f} s: {result.fits} joint fits")
     return "\n".join(lines)
