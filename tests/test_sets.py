@@ -91,7 +91,8 @@ def test_a_set_of_one_is_the_single_fit(shipped_set):
 
     single = gf.fit(run.times, run.length, ex.to_inputs(run.experiment, "forward", run.base(), config.t0, config.t1),
                     free=["Y"], config=config, sweep_n=0)
-    assert alone.estimate[Y] == pytest.approx(single.estimate[Y], rel=2e-3)
+    # both take the rig's sensitivities again where it settles, each to its own stopping rule
+    assert abs(alone.estimate[Y] - single.estimate[Y]) < 0.25 * single.standard_error[Y]
     assert alone.standard_error[Y] == pytest.approx(single.standard_error[Y], rel=0.15)
     assert alone.standard_error[Y] <= single.standard_error[Y] * (1 + 1e-6)
 

@@ -91,6 +91,7 @@ class FitResult:
     rig: str = "none"  # how the tolerances entered: "inferred", "fixed", or "none" (no tolerances)
     rig_offset: dict = dataclasses.field(default_factory=dict)  # {tolerance: fitted ln(ψ/ψ₀)} when inferred
     rig_estimate: dict = dataclasses.field(default_factory=dict)  # {tolerance: fitted ψ, SI} when inferred
+    linearisations: int = 1  # points at which the rig's sensitivities were taken (see RELINEARISE_STEPS)
 
     def summary(self) -> dict:
         return {
@@ -106,6 +107,7 @@ class FitResult:
             "rig": self.rig,
             "rig_offset": self.rig_offset,
             "rig_estimate": self.rig_estimate,
+            "linearisations": self.linearisations,
             "samples_used": self.samples_used,
             "undetermined_directions": self.undetermined,
             "at_physical_bound": list(self.at_bound),
@@ -239,12 +241,8 @@ def fit(
     likelihood = Likelihood(problem.times, jnp.asarray(used), jnp.asarray(np.flatnonzero(used)), sigma_length, n_len)
     bounds = physical_bounds(base, names, refs)
     z0s = jnp.log(jnp.asarray(start_values[order]) / refs)
-
-    def model(z):
-        return _linearised(z, problem)
-
-    zs, costs, oks, z, b, raw, hyper, converged, likelihood = _solve(model, likelihood, z0s, bounds, max_steps,
-                                                                     problem, tol, discrepancy, rig)
+    zs, costs, oks, z, b, raw, hyper, converged, likelihood, linearisations = _solve(
+        likelihood, z0s, bounds, max_steps, problem, tol, discrepancy, rig)
     starts = [{"start": dict(zip(names, map(float, start_values[i]))),
                "estimate": dict(zip(names, map(float, refs * np.exp(zs[k])))),
                "cost": float(costs[k]), "converged": bool(oks[k])} for k, i in enumerate(order)]
@@ -259,9 +257,11 @@ def fit(
     result = _result(names, theta, z, cov, parts, info, hyper, likelihood, raw, starts, converged, bounds,
                      start_clock, int(np.sum(used)), discrepancy)
     result.rig = rig if likelihood.tolerance is not None else "none"
+    result.linearisations = linearisations
     if likelihood.inferred:  # the rig as fitted: its values, and the length residual with its linearised effect
-        result.rig_offset = {t: float(b[j]) for j, t in enumerate(likelihood.tolerance_names)}
-        result.rig_estimate = {t: float(gp.get(base, t)) * float(np.exp(b[j]))
+        at = np.asarray(likelihood.centre) + b
+        result.rig_offset = {t: float(at[j]) for j, t in enumerate(likelihood.tolerance_names)}
+        result.rig_estimate = {t: float(gp.get(base, t)) * float(np.exp(at[j]))
                                for j, t in enumerate(likelihood.tolerance_names)}
         r_len = np.asarray(raw[0])[:n_len] * sigma_length + np.asarray(likelihood.sensitivity) @ b
         result.rmse_length_m = float(np.sqrt(np.mean(r_len**2)))
@@ -286,41 +286,61 @@ def _starts(base, names, refs, inputs, config, times, length, window, n_starts: 
     return scout.values, order
 
 
-def _solve(model, likelihood, z0s, bounds, max_steps: int, problem, tol: dict, discrepancy: str, rig: str):
+def _solve(likelihood, z0s, bounds, max_steps: int, problem, tol: dict, discrepancy: str, rig: str):
     """Least squares from every start (one after another through one compiled solver: consistent under any
     correlation of the residuals, and a start that a discrepancy absorbing the misfit cannot trap); the rig's
     sensitivities at the best; then generalised least squares alternating with the hyperparameters' mode, the
-    rig's errors b fitted beside z (``rig="inferred"``) or the rig held nominal (``"fixed"``: its tolerances
-    propagated afterwards). Returns (z per start, cost per start, converged per start, z, b (q,) the rig's
-    relative errors (empty unless inferred), the linearisation at z, the hyperparameters, converged, the
-    likelihood with its tolerances)."""
+    rig's errors fitted beside z (``rig="inferred"``) or the rig held nominal (``"fixed"``: its tolerances
+    propagated afterwards). When inferred, the model and the rig's sensitivities are taken again where the fit
+    put the rig (:data:`RELINEARISE_STEPS`), until the rig's errors move by less than
+    :data:`RELINEARISE_TOLERANCE` of their tolerance or a new linearisation moves z by less than
+    :data:`OUTER_TOLERANCE` of its sd. Returns (z per start, cost per start, converged per start,
+    z, b (q,) the rig's errors from the likelihood's ``centre`` (empty unless inferred), the linearisation at z
+    with the rig at that centre, the hyperparameters, converged, the likelihood with its tolerances, the number
+    of linearisations)."""
+    model = lambda w, pr=problem: _linearised(w, pr)  # noqa: E731
     solved = [levenberg_marquardt(lambda w: likelihood.weighted(*model(w)), z0, max_steps, LM_TOLERANCE,
                                   bounds=bounds) for z0 in z0s]
     zs, costs, oks = (np.asarray([s[k] for s in solved]) for k in range(3))
     k_best = int(np.argmin(costs))
     z, converged = np.asarray(zs[k_best]), bool(oks[k_best])
     p = z.size
-    raw = model(jnp.asarray(z))
-    g = _tolerance_sensitivity(problem, z, raw[0], tol) if tol else None
-    if g is not None and rig == "inferred":
-        likelihood = likelihood.with_tolerances(g, tol, inferred=True)
-    b = np.zeros(len(tol) if likelihood.inferred else 0)
-    hyper = None
-    for _ in range(OUTER_STEPS):
-        hyper = likelihood.estimate(raw[0], discrepancy, hyper)
-        w_new, _, converged, _, jac_w = levenberg_marquardt(lambda w, h=hyper: likelihood.augmented(*model(w[:p]), h, w[p:]),
-                                                           np.concatenate([z, b]), max_steps, LM_TOLERANCE,
-                                                           bounds=likelihood.bounds(bounds),
-                                                           cost_resolution=COST_RESOLUTION)
-        sd = np.sqrt(np.diag(np.linalg.pinv(jac_w.T @ jac_w, rcond=1e-10, hermitian=True)))
-        moved = np.abs(w_new - np.concatenate([z, b]))
-        z, b = np.asarray(w_new[:p]), np.asarray(w_new[p:])
+    plain, centre, hyper, linearisations = likelihood, np.zeros(len(tol)), None, 0
+    b = np.zeros(len(tol) if tol and rig == "inferred" else 0)
+    at_rig, z_before = problem, None
+    for step in range(RELINEARISE_STEPS):
+        linearisations += 1
+        model = lambda w, pr=at_rig: _linearised(w, pr)  # noqa: E731
         raw = model(jnp.asarray(z))
-        if np.all(moved <= OUTER_TOLERANCE * sd):
+        g = _tolerance_sensitivity(at_rig, z, raw[0], tol) if tol else None
+        if g is not None and rig == "inferred":
+            likelihood = plain.with_tolerances(g, tol, inferred=True, centre=centre)
+        for _ in range(OUTER_STEPS):
+            hyper = likelihood.estimate(raw[0], discrepancy, hyper)
+            w_new, _, converged, _, jac_w = levenberg_marquardt(
+                lambda w, h=hyper: likelihood.augmented(*model(w[:p]), h, w[p:]), np.concatenate([z, b]),
+                max_steps, LM_TOLERANCE, bounds=likelihood.bounds(bounds), cost_resolution=COST_RESOLUTION)
+            sd = np.sqrt(np.diag(np.linalg.pinv(jac_w.T @ jac_w, rcond=1e-10, hermitian=True)))
+            moved = np.abs(w_new - np.concatenate([z, b]))
+            z, b = np.asarray(w_new[:p]), np.asarray(w_new[p:])
+            raw = model(jnp.asarray(z))
+            if np.all(moved <= OUTER_TOLERANCE * sd):
+                break
+        settled = z_before is not None and np.all(np.abs(z - z_before) <= OUTER_TOLERANCE * sd[:p])
+        if (not likelihood.inferred or step == RELINEARISE_STEPS - 1 or settled
+                or np.all(np.abs(b) <= RELINEARISE_TOLERANCE * np.asarray(likelihood.tolerance))):
             break
+        centre, b, z_before = centre + b, np.zeros_like(b), z  # the rig moved: linearise again where the data put it
+        at_rig = _at_rig(problem, tol, centre)
     if g is not None and not likelihood.inferred:  # fixed: propagated after the fit
         likelihood = likelihood.with_tolerances(g, tol)
-    return zs, costs, oks, z, b, raw, hyper, converged, likelihood
+    return zs, costs, oks, z, b, raw, hyper, converged, likelihood, linearisations
+
+
+def _at_rig(problem: Problem, tol: dict, centre) -> Problem:
+    """``problem`` with the toleranced parameters at ψ₀·e^centre."""
+    values = {name: gp.get(problem.base, name) * np.exp(centre[j]) for j, name in enumerate(tol)}
+    return eqx.tree_at(lambda pr: pr.base, problem, gp.replace(problem.base, **values))
 
 
 # The smallest change of the whitened cost (nats) that matters: a 90 % interval spans 1.35 nats, and the
@@ -328,6 +348,11 @@ def _solve(model, likelihood, z0s, bounds, max_steps: int, problem, tol: dict, d
 COST_RESOLUTION = 1e-2
 OUTER_STEPS = 4  # alternations of the hyperparameters' mode and the GLS fit
 OUTER_TOLERANCE = 0.05  # stop once a GLS fit moves ln θ by less than this share of its sd
+# The rig's sensitivities are secants taken at one point: where the data pull the rig's errors a good part of a
+# tolerance from nominal, secants at nominal bias θ by several standard errors. The fit takes them again where it
+# put the rig (at most this many linearisations, until the errors move by less than this share of their tolerance).
+RELINEARISE_STEPS = 8
+RELINEARISE_TOLERANCE = 0.02
 
 
 class Likelihood(eqx.Module):
@@ -343,10 +368,12 @@ class Likelihood(eqx.Module):
     tolerance: jax.Array | None = None  # (q,) relative sd
     tolerance_names: tuple = eqx.field(static=True, default=())
     inferred: bool = eqx.field(static=True, default=False)  # the rig's errors b fitted beside z (prior N(0, u²))
+    centre: jax.Array | None = None  # (q,) the rig's errors (ln ψ/ψ₀) where the model is linearised; b is from here
 
-    def with_tolerances(self, sensitivity, tol: dict, inferred: bool = False):
+    def with_tolerances(self, sensitivity, tol: dict, inferred: bool = False, centre=None):
+        centre = jnp.zeros(len(tol)) if centre is None else jnp.asarray(centre, float)
         return Likelihood(self.times, self.used, self.index, self.sigma_length, self.n_len, jnp.asarray(sensitivity),
-                          jnp.asarray(list(tol.values())), tuple(tol), inferred)
+                          jnp.asarray(list(tol.values())), tuple(tol), inferred, centre)
 
     def bounds(self, bounds):
         """The box on w = (z, b): ``bounds`` on z, none on the rig's errors b."""
@@ -377,9 +404,11 @@ class Likelihood(eqx.Module):
     def estimate(self, r, kind, start=None):
         """The hyperparameters' mode for the residuals ``r`` (units of σ_L), the rig marginalised when inferred."""
         index = np.asarray(self.index)
+        r_len = np.asarray(r)[: self.n_len] * self.sigma_length
         g, u = (np.asarray(self.sensitivity)[index], np.asarray(self.tolerance)) if self.inferred else (None, None)
-        return dc.estimate(np.asarray(r)[: self.n_len][index] * self.sigma_length, np.asarray(self.times)[index], kind,
-                           g, u, start=start)
+        if self.inferred:  # the errors' prior is centred on nominal, not on the point of linearisation
+            r_len = r_len - np.asarray(self.sensitivity) @ np.asarray(self.centre)
+        return dc.estimate(r_len[index], np.asarray(self.times)[index], kind, g, u, start=start)
 
     def information(self, raw, hyper, b) -> np.ndarray:
         """The information (p, p) the data hold on z: J̃ᵀJ̃, or with the rig inferred its Schur complement
@@ -490,7 +519,7 @@ def _hyper_scan(likelihood: Likelihood, r, jac, grid: dc.Hyper, b):
 
 def _stacked(likelihood: Likelihood, w, r, jac, b):
     """Whitened residuals and Jacobian of w = (z[, b]) from the whitened length columns ``w``, the pressure rows
-    after them and, when inferred, the rig's prior rows b/u."""
+    after them and, when inferred, the rig's prior rows (centre + b)/u."""
     n, p = likelihood.n_len, jac.shape[1]
     if not likelihood.inferred:
         return jnp.concatenate([w[:, 0], r[n:]]), jnp.concatenate([w[:, 1:], jac[n:]], axis=0)
@@ -498,7 +527,8 @@ def _stacked(likelihood: Likelihood, w, r, jac, b):
     q = u.shape[0]
     prior = jnp.concatenate([jnp.zeros((q, p)), jnp.diag(1.0 / u)], axis=1)
     pressure = jnp.concatenate([jac[n:], jnp.zeros((jac.shape[0] - n, q))], axis=1)
-    return jnp.concatenate([w[:, 0], b / u, r[n:]]), jnp.concatenate([w[:, 1:], prior, pressure], axis=0)
+    return (jnp.concatenate([w[:, 0], (likelihood.centre + b) / u, r[n:]]),
+            jnp.concatenate([w[:, 1:], prior, pressure], axis=0))
 
 
 @eqx.filter_jit
