@@ -95,9 +95,11 @@ def test_inverse_drive_pushing_a_blocked_robot_stops_with_status_1(rate):
 GRAD_NAMES = ("Y", "check_valve.max_open_pressure", "fluid.air_fraction")
 
 
-@pytest.mark.parametrize("adjoint", ["forward", pytest.param("reverse", marks=pytest.mark.slow)])
+@pytest.mark.slow
+@pytest.mark.parametrize("adjoint", ["forward", "reverse"])
 def test_gradients_match_central_differences(synthetic_experiment, adjoint):
-    """d(final length, RMSE)/dθ through the solver (jacfwd or grad) against central differences."""
+    """d(final length, RMSE)/dθ through the solver (jacfwd or grad) against central differences (by default
+    test_api checks the final length's gradient both ways against differences)."""
     exp = synthetic_experiment
     cfg = gj.Config(t1=1.5, rtol=1e-8, adjoint=adjoint)
     p0 = gj.reference()
@@ -119,11 +121,28 @@ def test_gradients_match_central_differences(synthetic_experiment, adjoint):
         atol = np.array([1e-6, 1e-7]) / float(theta0[i])
         assert np.all(np.abs(jac[:, i] - fd) <= 1e-2 * np.abs(fd) + atol), (name, jac[:, i], fd)
         assert abs(jac[0, i]) * float(theta0[i]) > 1e-5  # each matters (> 10 µm over its whole value)
-    if adjoint == "forward":  # at a batch of points (NUTS's vectorised chains) the members step together in one solve
-        other = theta0 * jnp.array([1.2, 0.9, 1.5])
-        batched = np.asarray(jax.jit(jax.vmap(jac_fn))(jnp.stack([theta0, other])))
-        for k, single in enumerate((jac, np.asarray(jax.jit(jac_fn)(other)))):
-            np.testing.assert_allclose(batched[k], single, rtol=1e-4, atol=1e-9)
+
+
+@pytest.mark.slow
+def test_a_batch_of_jacobians_equals_the_single_ones(synthetic_experiment):
+    """At a batch of points (NUTS's vectorised chains) the members step together in one solve and give each
+    member's own Jacobian."""
+    exp = synthetic_experiment
+    cfg = gj.Config(t1=1.5, rtol=1e-8, adjoint="forward")
+    p0 = gj.reference()
+    inputs = ex.to_inputs(exp, "forward", p0, cfg.t0, cfg.t1)
+    breaks = gj.input_breaks(inputs, cfg)
+    theta0 = jnp.array([float(gj.get(p0, name)) for name in GRAD_NAMES])
+
+    def outputs(theta):
+        traj = gj.simulate(gj.replace(p0, **dict(zip(GRAD_NAMES, theta))), inputs, cfg, breaks=breaks)
+        return jnp.stack([traj.length[-1], length_rmse(traj, exp.time, exp["robot_length_m"], cfg.t0, cfg.t1)])
+
+    jac_fn = jax.jit(jax.jacfwd(outputs))
+    other = theta0 * jnp.array([1.2, 0.9, 1.5])
+    batched = np.asarray(jax.jit(jax.vmap(jax.jacfwd(outputs)))(jnp.stack([theta0, other])))
+    for k, point in enumerate((theta0, other)):
+        np.testing.assert_allclose(batched[k], np.asarray(jac_fn(point)), rtol=1e-4, atol=1e-9)
 
 
 def test_paper_box_corners_run_bad_member_is_isolated_and_paper_rmse_is_reproduced(shared_experiment):

@@ -54,24 +54,26 @@ def test_inferred_rig_covariance_is_the_marginal_gls_and_its_budget_adds_up():
 def rig_off():
     t, lengths, cases, = mk.read_reference_lengths()
     data = lengths[RIG_OFF] + np.random.default_rng(5).normal(0.0, 2e-4, t.size)
-    fit = lambda rig: gf.fit(t, data, mk.reference_inputs("published"), free=["Y"], config=gj.Config(t1=10.0),
-                             n_starts=1, sweep_n=0, rig=rig)
-    return cases[RIG_OFF]["parameters"]["Y"], fit("inferred"), fit("fixed")
+    fit = lambda rig, **kw: gf.fit(t, data, mk.reference_inputs("published"), free=["Y"], config=gj.Config(t1=10.0),
+                                   n_starts=1, sweep_n=0, rig=rig, **kw)
+    return cases[RIG_OFF]["parameters"]["Y"], fit("inferred"), fit("fixed"), fit("inferred", relinearise=True)
 
 
 def test_the_data_inform_the_rig_on_reference_made_data(rig_off):
     """Reference-made data with the screw friction 10 % low: with the rig inferred Y's interval covers the truth
     and is under half as wide as the fixed propagation's (which also covers), and the friction's fitted error
     points the right way."""
-    truth, inferred, fixed = rig_off
-    for res in (inferred, fixed):
+    truth, inferred, fixed, relinearised = rig_off
+    for res in (inferred, fixed, relinearised):
         assert res.interval_90[Y][0] <= truth <= res.interval_90[Y][1], (res.rig, res.estimate, res.interval_90)
     width = lambda res: res.interval_90[Y][1] - res.interval_90[Y][0]
     assert width(inferred) < 0.5 * width(fixed)
     assert inferred.rig == "inferred" and fixed.rig == "fixed" and fixed.rig_offset == {}
     assert inferred.rig_offset["pump.screw_viscous_friction"] < 0.0
-    # the friction's error is a quarter of its tolerance: the rig's sensitivities were taken again where it settled
-    assert inferred.linearisations >= 2 and fixed.linearisations == 1
+    # the friction's error is a quarter of its tolerance: asked to, the fit takes the rig's sensitivities again
+    # where it settled, and the estimate moves by less than its standard error
+    assert inferred.linearisations == fixed.linearisations == 1 and relinearised.linearisations >= 2
+    assert abs(relinearised.estimate[Y] - inferred.estimate[Y]) < inferred.standard_error[Y]
     budget = inferred.budget[Y]
     assert sum(v**2 for v in budget.values()) == pytest.approx(inferred.standard_error[Y] ** 2, rel=1e-6)
 

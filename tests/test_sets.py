@@ -90,28 +90,36 @@ def test_a_set_of_one_is_the_single_fit(shipped_set):
     from growjax import fit as gf
 
     single = gf.fit(run.times, run.length, ex.to_inputs(run.experiment, "forward", run.base(), config.t0, config.t1),
-                    free=["Y"], config=config, sweep_n=0)
+                    free=["Y"], config=config, sweep_n=0, relinearise=True)
     # both take the rig's sensitivities again where it settles, each to its own stopping rule
     assert abs(alone.estimate[Y] - single.estimate[Y]) < 0.25 * single.standard_error[Y]
     assert alone.standard_error[Y] == pytest.approx(single.standard_error[Y], rel=0.15)
     assert alone.standard_error[Y] <= single.standard_error[Y] * (1 + 1e-6)
 
 
-def test_the_shipped_set_fitted_jointly_covers_and_an_unshared_rig_claims_more(shipped_set):
+def test_the_shipped_set_fitted_jointly_covers(shipped_set):
     """Reference-made, one robot on one drawn rig, three demands: the joint interval covers the true Y, comes from
     two batched programs (the experiment with the pressure sensor has more rows than the two without), and the
-    rig's catheter friction (made 32 % low) is read as low. Taking the rig's errors as independent per experiment
-    narrows it: more than the runs on one rig can say."""
+    rig's catheter friction (made 32 % low) is read as low."""
     exps, truth, config = shipped_set
     label = f"{Y}@membrane-1"
-    together = joint.fit_set(exps, config=config)
+    together = joint.fit_set(exps, config=config, sweep_n=0)
     lo, hi = together.interval_90[label]
     assert lo <= truth["truth"]["Y"] <= hi and together.status == "converged"
     assert together.programs == 2 and len(together.runs) == 3
     assert all(r["rmse_length_m"] < 3e-4 for r in together.runs)
     assert together.rig_offset["bench"]["robot.catheter_friction"] < -0.1
-    independent = joint.fit_set(exps, config=config, rig_errors="experiment")
-    assert np.diff(independent.interval_90[label])[0] < hi - lo
+
+
+@pytest.mark.slow
+def test_an_unshared_rig_claims_more_than_the_shipped_set_can_say(shipped_set):
+    """Taking the rig's errors as independent per experiment narrows the joint interval: more than the runs on one
+    rig can say (over 30 drawn sets it under-covers: ``benchmarks/sets.py``)."""
+    exps, _, config = shipped_set
+    label = f"{Y}@membrane-1"
+    shared = np.diff(joint.fit_set(exps, config=config, sweep_n=0).interval_90[label])[0]
+    independent = joint.fit_set(exps, config=config, sweep_n=0, rig_errors="experiment")
+    assert np.diff(independent.interval_90[label])[0] < shared
 
 
 @pytest.mark.slow

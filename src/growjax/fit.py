@@ -131,8 +131,8 @@ class Problem(eqx.Module):
     breaks: tuple  # (jump times, slope-break times) of the inputs, s
     names: tuple = eqx.field(static=True)
     config: object = eqx.field(static=True)
-    sigma_length: float = eqx.field(static=True, default=1e-3)
-    sigma_pressure: float = eqx.field(static=True, default=5e3)
+    sigma_length: jax.Array  # () m, the length's scale (a leaf: one compiled program serves every scale)
+    sigma_pressure: jax.Array  # () Pa
 
     def residuals(self, z, args=None):
         """Non-dimensional residuals r(z), shape (m,) or (2m,), for log coordinates z = ln(θ/θ_ref)."""
@@ -165,7 +165,7 @@ def make_problem(base, names, inputs, config, times, length, pressure=None, wind
     pick = (lambda a: None if a is None else jnp.asarray(np.asarray(a)[keep]))
     # Numbers as arrays: one compiled program serves every base (a tolerance's perturbed rig included).
     return Problem(as_arrays(base), inputs, refs, pick(times), pick(length), pick(pressure), input_breaks(inputs, config), names, config,
-                   sigma_length, sigma_pressure)
+                   jnp.asarray(sigma_length, float), jnp.asarray(sigma_pressure, float))
 
 
 @eqx.filter_jit
@@ -193,6 +193,7 @@ def fit(
     discrepancy: str = "matern32",
     tolerances: dict | None = None,
     rig: str = "inferred",
+    relinearise: bool = False,
 ) -> FitResult:
     """Fit ``free`` parameters to a measured length (m) at ``times`` (s) (and ``pressure``, Pa, if given).
 
@@ -219,6 +220,11 @@ def fit(
     the rig (the GUM's treatment of an input quantity not estimated from the measurement): the conservative
     choice, wider where the data do inform the rig. :attr:`FitResult.budget` splits each variance into
     noise, discrepancy and each tolerance (under ``"inferred"``: what is left of each after the data).
+
+    ``relinearise``: with the rig inferred, take the rig's sensitivities again where the data put the rig, until
+    it settles (as :func:`growjax.joint.fit_set` does, where several runs pull the rig a good part of its
+    tolerance). Off by default: one run moves the rig little, the posterior linearises it at nominal, and the
+    coverage studies measure this default.
     """
     if rig not in RIG_TREATMENTS:
         raise ValueError(f"rig must be one of {RIG_TREATMENTS}, got {rig!r}")
@@ -242,7 +248,7 @@ def fit(
     bounds = physical_bounds(base, names, refs)
     z0s = jnp.log(jnp.asarray(start_values[order]) / refs)
     zs, costs, oks, z, b, raw, hyper, converged, likelihood, linearisations = _solve(
-        likelihood, z0s, bounds, max_steps, problem, tol, discrepancy, rig)
+        likelihood, z0s, bounds, max_steps, problem, tol, discrepancy, rig, RELINEARISE_STEPS if relinearise else 1)
     starts = [{"start": dict(zip(names, map(float, start_values[i]))),
                "estimate": dict(zip(names, map(float, refs * np.exp(zs[k])))),
                "cost": float(costs[k]), "converged": bool(oks[k])} for k, i in enumerate(order)]
@@ -286,13 +292,13 @@ def _starts(base, names, refs, inputs, config, times, length, window, n_starts: 
     return scout.values, order
 
 
-def _solve(likelihood, z0s, bounds, max_steps: int, problem, tol: dict, discrepancy: str, rig: str):
+def _solve(likelihood, z0s, bounds, max_steps: int, problem, tol: dict, discrepancy: str, rig: str, steps: int):
     """Least squares from every start (one after another through one compiled solver: consistent under any
     correlation of the residuals, and a start that a discrepancy absorbing the misfit cannot trap); the rig's
     sensitivities at the best; then generalised least squares alternating with the hyperparameters' mode, the
     rig's errors fitted beside z (``rig="inferred"``) or the rig held nominal (``"fixed"``: its tolerances
     propagated afterwards). When inferred, the model and the rig's sensitivities are taken again where the fit
-    put the rig (:data:`RELINEARISE_STEPS`), until the rig's errors move by less than
+    put the rig (at most ``steps`` linearisations), until the rig's errors move by less than
     :data:`RELINEARISE_TOLERANCE` of their tolerance or a new linearisation moves z by less than
     :data:`OUTER_TOLERANCE` of its sd. Returns (z per start, cost per start, converged per start,
     z, b (q,) the rig's errors from the likelihood's ``centre`` (empty unless inferred), the linearisation at z
@@ -308,7 +314,7 @@ def _solve(likelihood, z0s, bounds, max_steps: int, problem, tol: dict, discrepa
     plain, centre, hyper, linearisations = likelihood, np.zeros(len(tol)), None, 0
     b = np.zeros(len(tol) if tol and rig == "inferred" else 0)
     at_rig, z_before = problem, None
-    for step in range(RELINEARISE_STEPS):
+    for step in range(steps):
         linearisations += 1
         model = lambda w, pr=at_rig: _linearised(w, pr)  # noqa: E731
         raw = model(jnp.asarray(z))
@@ -327,7 +333,7 @@ def _solve(likelihood, z0s, bounds, max_steps: int, problem, tol: dict, discrepa
             if np.all(moved <= OUTER_TOLERANCE * sd):
                 break
         settled = z_before is not None and np.all(np.abs(z - z_before) <= OUTER_TOLERANCE * sd[:p])
-        if (not likelihood.inferred or step == RELINEARISE_STEPS - 1 or settled
+        if (not likelihood.inferred or step == steps - 1 or settled
                 or np.all(np.abs(b) <= RELINEARISE_TOLERANCE * np.asarray(likelihood.tolerance))):
             break
         centre, b, z_before = centre + b, np.zeros_like(b), z  # the rig moved: linearise again where the data put it
@@ -349,8 +355,9 @@ COST_RESOLUTION = 1e-2
 OUTER_STEPS = 4  # alternations of the hyperparameters' mode and the GLS fit
 OUTER_TOLERANCE = 0.05  # stop once a GLS fit moves ln θ by less than this share of its sd
 # The rig's sensitivities are secants taken at one point: where the data pull the rig's errors a good part of a
-# tolerance from nominal, secants at nominal bias θ by several standard errors. The fit takes them again where it
-# put the rig (at most this many linearisations, until the errors move by less than this share of their tolerance).
+# tolerance from nominal, secants at nominal bias θ by several standard errors. With ``relinearise`` the fit takes
+# them again where it put the rig (at most this many linearisations, until the errors move by less than this share
+# of their tolerance).
 RELINEARISE_STEPS = 8
 RELINEARISE_TOLERANCE = 0.02
 
@@ -541,7 +548,7 @@ def _tolerance_sensitivity(problem: Problem, z, r0, tol: dict) -> np.ndarray:
     """g (n, q): the length's change, m, per unit ln ψ of each toleranced parameter: the secant from ψ to ψ·e^u, u
     its tolerance (through the fit's own compiled program, the base being one of its leaves; ``r0`` (n,) the
     residuals at z, in units of σ_L)."""
-    n, scale = problem.times.size, problem.sigma_length
+    n, scale = problem.times.size, float(problem.sigma_length)
 
     def residual_of(rig):  # m; the data cancel in the secant
         shifted = eqx.tree_at(lambda pr: pr.base, problem, rig)
