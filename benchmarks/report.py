@@ -38,6 +38,7 @@ on the machine that writes the page is kept as it was.
 | `benchmarks/rig_agreement.py` | Y's interval from the fit (rig inferred; rig fixed) beside the posterior's, coverage and the posterior's band, rig nominal and drawn |
 | `benchmarks/set_speed.py` | a joint fit of eight experiments against one experiment's fit |
 | `benchmarks/sets.py` | joint fits of sets of four experiments on one drawn rig: coverage, against each experiment alone and against rig errors taken per experiment |
+| `benchmarks/mixed_set.py` | a forward experiment with the pressure recorded and a stepper experiment of one robot, alone and jointly |
 | `benchmarks/population.py` | populations of eight robots on one drawn rig: coverage of the population's median and spread, and of a held-out robot's predictive band |
 | `benchmarks/discover_discrepancy.py` | discovery's answer on data with a discrepancy but no catalogue effect |
 | `benchmarks/least_squares.py` | growjax's Levenberg–Marquardt engine against optimistix's solvers on the fit's and the control profile's problems; `least_squares_linearize`: `--cases fit_Y --solvers lm_linearize --out benchmarks/results/least_squares_linearize.json` (optimistix linearising the model itself) |
@@ -180,6 +181,21 @@ def rows_sets(r: dict) -> list[tuple[str, str, str]]:
              f"median width {s['single']['median_width_Pa']:.0f} Pa")]
 
 
+def rows_mixed_set(r: dict) -> list[tuple[str, str, str]]:
+    truth = r["truth_Pa"]
+    out = []
+    for label, what in (("forward", "forward drive, length and pressure, alone"), ("stepper", "stepper drive alone"),
+                        ("joint", "both jointly, one rig")):
+        x = r[label]
+        lo, hi = x["interval_90_Pa"]
+        out.append((f"Y, {what}", f"{x['estimate_Pa']:.0f} Pa [{lo:.0f}, {hi:.0f}]",
+                    f"truth {truth:.0f} Pa; {x['wall_s']:.0f} s, {x['programs']} compiled program(s)"))
+    (lf, hf), (ls, hs) = r["forward"]["interval_90_Pa"], r["stepper"]["interval_90_Pa"]
+    overlap = max(lf, ls) <= min(hf, hs)
+    out.append(("the two experiments' intervals overlap", "yes" if overlap else "no", "Y consistent across drives"))
+    return out
+
+
 def rows_discover_discrepancy(r: dict) -> list[tuple[str, str, str]]:
     return [("answer `none`, no catalogue effect but a discrepancy", f"{r['none']} of {r['sets']}",
              f"{r['t_end_s']:g} s windows, target ≥ 19 of 20")]
@@ -271,7 +287,7 @@ EXTRACTORS = {"simulate": rows_simulate, "sweep": rows_sweep, "agreement": rows_
               "control": rows_control, "least_squares": rows_least_squares,
               "least_squares_linearize": rows_least_squares, "rig_agreement": rows_rig_agreement,
               "set_speed": rows_set_speed, "population": rows_population, "sets": rows_sets,
-              "sweep_resume": rows_sweep_resume}
+              "sweep_resume": rows_sweep_resume, "mixed_set": rows_mixed_set}
 
 
 def environment_line(r: dict, path: Path) -> str:
@@ -279,7 +295,7 @@ def environment_line(r: dict, path: Path) -> str:
     if not env:
         return "machine and versions not recorded (rerun the script)"
     return (f"{env['machine']} ({env['device']}); Python {env['python']}, jax {env['jax']}, "
-            f"growjax {env['growjax']}; run {env['date']}")
+            f"growjax {env['growjax']}")
 
 
 def section(path: Path) -> str:
