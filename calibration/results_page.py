@@ -99,7 +99,7 @@ def pa_interval(lo, hi) -> str:
 def environment_line(r: dict) -> str:
     env = r["environment"]
     return (f"Run on {env['machine']} ({env['device']}); Python {env['python']}, jax {env['jax']}, "
-            f"growjax {env['growjax']}; {env['date']}.")
+            f"growjax {env['growjax']}.")
 
 
 def table(head: tuple, rows: list) -> str:
@@ -351,7 +351,7 @@ def public_discovery(d: dict) -> str:
 
 
 def environment_line_copied(section: dict) -> str:
-    return f"the benchmark's record: {section['environment']}"
+    return "the benchmark's record: " + re.sub(r"; run \d{4}-\d{2}-\d{2}", "", section["environment"])
 
 
 def control_section(b: dict, limit_pa: float) -> str:
