@@ -299,8 +299,7 @@ def _solve(likelihood, z0s, bounds, max_steps: int, problem, tol: dict, discrepa
     rig's errors fitted beside z (``rig="inferred"``) or the rig held nominal (``"fixed"``: its tolerances
     propagated afterwards). When inferred, the model and the rig's sensitivities are taken again where the fit
     put the rig (at most ``steps`` linearisations), until the rig's errors move by less than
-    :data:`RELINEARISE_TOLERANCE` of their tolerance or a new linearisation moves z by less than
-    :data:`OUTER_TOLERANCE` of its sd. Returns (z per start, cost per start, converged per start,
+    :data:`RELINEARISE_TOLERANCE` of their tolerance. Returns (z per start, cost per start, converged per start,
     z, b (q,) the rig's errors from the likelihood's ``centre`` (empty unless inferred), the linearisation at z
     with the rig at that centre, the hyperparameters, converged, the likelihood with its tolerances, the number
     of linearisations)."""
@@ -313,7 +312,7 @@ def _solve(likelihood, z0s, bounds, max_steps: int, problem, tol: dict, discrepa
     p = z.size
     plain, centre, hyper, linearisations = likelihood, np.zeros(len(tol)), None, 0
     b = np.zeros(len(tol) if tol and rig == "inferred" else 0)
-    at_rig, z_before = problem, None
+    at_rig = problem
     for step in range(steps):
         linearisations += 1
         model = lambda w, pr=at_rig: _linearised(w, pr)  # noqa: E731
@@ -332,11 +331,10 @@ def _solve(likelihood, z0s, bounds, max_steps: int, problem, tol: dict, discrepa
             raw = model(jnp.asarray(z))
             if np.all(moved <= OUTER_TOLERANCE * sd):
                 break
-        settled = z_before is not None and np.all(np.abs(z - z_before) <= OUTER_TOLERANCE * sd[:p])
-        if (not likelihood.inferred or step == steps - 1 or settled
+        if (not likelihood.inferred or step == steps - 1
                 or np.all(np.abs(b) <= RELINEARISE_TOLERANCE * np.asarray(likelihood.tolerance))):
             break
-        centre, b, z_before = centre + b, np.zeros_like(b), z  # the rig moved: linearise again where the data put it
+        centre, b = centre + b, np.zeros_like(b)  # the rig moved: linearise again where the data put it
         at_rig = _at_rig(problem, tol, centre)
     if g is not None and not likelihood.inferred:  # fixed: propagated after the fit
         likelihood = likelihood.with_tolerances(g, tol)
