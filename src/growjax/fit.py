@@ -317,7 +317,7 @@ def _solve(likelihood, z0s, bounds, max_steps: int, problem, tol: dict, discrepa
         linearisations += 1
         model = lambda w, pr=at_rig: _linearised(w, pr)  # noqa: E731
         raw = model(jnp.asarray(z))
-        g = _tolerance_sensitivity(at_rig, z, raw[0], tol) if tol else None
+        g = _tolerance_sensitivity(at_rig, z, raw[0], tol, central=step > 0) if tol else None
         if g is not None and rig == "inferred":
             likelihood = plain.with_tolerances(g, tol, inferred=True, centre=centre)
         for _ in range(OUTER_STEPS):
@@ -354,8 +354,8 @@ OUTER_STEPS = 4  # alternations of the hyperparameters' mode and the GLS fit
 OUTER_TOLERANCE = 0.05  # stop once a GLS fit moves ln θ by less than this share of its sd
 # The rig's sensitivities are secants taken at one point: where the data pull the rig's errors a good part of a
 # tolerance from nominal, secants at nominal bias θ by several standard errors. With ``relinearise`` the fit takes
-# them again where it put the rig (at most this many linearisations, until the errors move by less than this share
-# of their tolerance).
+# them again where it put the rig, as central secants (the slope there), at most this many linearisations, until
+# the errors move by less than this share of their tolerance.
 RELINEARISE_STEPS = 8
 RELINEARISE_TOLERANCE = 0.02
 
@@ -542,7 +542,7 @@ def _augmented(likelihood: Likelihood, r, jac, hyper, b):
     return _stacked(likelihood, dc.whiten(cols, t, hyper), r, jac, b)
 
 
-def _tolerance_sensitivity(problem: Problem, z, r0, tol: dict) -> np.ndarray:
+def _tolerance_sensitivity(problem: Problem, z, r0, tol: dict, central: bool = False) -> np.ndarray:
     """g (n, q): the length's change, m, per unit ln ψ of each toleranced parameter: the secant from ψ to ψ·e^u, u
     its tolerance (through the fit's own compiled program, the base being one of its leaves; ``r0`` (n,) the
     residuals at z, in units of σ_L)."""
@@ -552,7 +552,7 @@ def _tolerance_sensitivity(problem: Problem, z, r0, tol: dict) -> np.ndarray:
         shifted = eqx.tree_at(lambda pr: pr.base, problem, rig)
         return np.asarray(_linearised(jnp.asarray(z), shifted)[0])[:n] * scale
 
-    return tl.sensitivity(residual_of, problem.base, tol, reference=np.asarray(r0)[:n] * scale)
+    return tl.sensitivity(residual_of, problem.base, tol, reference=np.asarray(r0)[:n] * scale, central=central)
 
 
 def _check_window(window, config: Config):

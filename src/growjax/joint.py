@@ -38,7 +38,9 @@ RIG_ERRORS = ("shared", "experiment")
 # The rig's sensitivities are taken again where the fit puts the rig (at most this many linearisations, until the
 # rig's errors move by less than this share of their tolerance): with three or more runs on one rig the data pull
 # its errors a good part of a tolerance from nominal, where the secants taken at nominal bias every robot's Y alike
-# by several standard errors unless the rig is let settle (benchmarks/sets.py measures the coverage).
+# by several standard errors unless the rig is let settle (benchmarks/sets.py measures the coverage). Taken again,
+# they are central secants, the slope where the rig now is: a one-sided secant's slope belongs half a tolerance
+# away, and the rig would drift past its optimum step after step.
 RELINEARISE_STEPS = 8
 RELINEARISE_TOLERANCE = 0.02
 
@@ -164,7 +166,7 @@ def fit_set(
     linearisations = 0
     for step in range(RELINEARISE_STEPS):
         linearisations += 1
-        sensitivities = batch.sensitivities(z, layout, tol) if tol else None
+        sensitivities = batch.sensitivities(z, layout, tol, central=step > 0) if tol else None
         if sensitivities is not None and rig == "inferred":
             likelihoods = [lik.with_tolerances(g, tol, inferred=True) for lik, g in zip(plain, sensitivities)]
         z, b, hypers, cost, converged = _gls(batch, layout, likelihoods, hypers, z, b - centre, centre, bounds,
@@ -327,19 +329,26 @@ class _Batch:
         self.simulate_s += time.perf_counter() - clock
         return out
 
-    def sensitivities(self, z, layout: _Layout, tol: dict) -> list:
+    def sensitivities(self, z, layout: _Layout, tol: dict, central: bool = False) -> list:
         """Per run g (n_e, q): the length's change, m, per unit ln ψ of each toleranced parameter (the secant from
-        ψ to ψ·e^u, every run of a group in one batched solve)."""
-        r0 = self.linearised(z, layout)
+        ψ to ψ·e^u, or with ``central`` from ψ·e^(−u/2) to ψ·e^(u/2), as :func:`growjax.tolerance.sensitivity`;
+        every run of a group in one batched solve)."""
         cols = [[] for _ in range(self.size)]
+        lo_hi = (-0.5, 0.5) if central else (0.0, 1.0)
+        r0 = None if central else self.linearised(z, layout)
         for name, u in tol.items():
-            shifted = [eqx.tree_at(lambda pr: pr.base, problem,
-                                   gp.replace(problem.base, **{name: gp.get(problem.base, name) * np.exp(u)}))
-                       for _, problem in self.groups]
-            out = self.linearised(z, layout, shifted)
+            ends = []
+            for f in lo_hi:
+                if f == 0.0:
+                    ends.append(r0)
+                    continue
+                shifted = [eqx.tree_at(lambda pr: pr.base, problem,
+                                       gp.replace(problem.base, **{name: gp.get(problem.base, name) * np.exp(f * u)}))
+                           for _, problem in self.groups]
+                ends.append(self.linearised(z, layout, shifted))
             for e in range(self.size):
                 n = self.n_len[e]
-                cols[e].append((out[e][0][:n] - r0[e][0][:n]) * self.sigma_length / u)
+                cols[e].append((ends[1][e][0][:n] - ends[0][e][0][:n]) * self.sigma_length / u)
         g = [np.stack(c, axis=1) for c in cols]
         if not all(np.all(np.isfinite(x)) for x in g):
             raise RuntimeError("the model failed while measuring the rig's tolerance sensitivities")

@@ -75,15 +75,20 @@ def budget(base: gp.Parameters, overrides: dict | None = None, free=(), use_defa
     return out
 
 
-def sensitivity(length_of, base: gp.Parameters, tol: dict, reference=None) -> np.ndarray:
+def sensitivity(length_of, base: gp.Parameters, tol: dict, reference=None, central: bool = False) -> np.ndarray:
     """g (n, q): the length's change, m, per unit ln ψ of each toleranced parameter of ``tol`` {name: u}: the secant
-    from ψ to ψ·e^u. ``length_of(rig) → (n,)`` m is the model's length for a rig (the caller's own compiled run);
-    ``reference`` (n,) m its value at ``base`` if already known. RuntimeError where a run failed."""
-    l0 = np.asarray(length_of(base) if reference is None else reference, float)
+    from ψ to ψ·e^u (the effect of an error the size of the tolerance), or with ``central`` from ψ·e^(−u/2) to
+    ψ·e^(u/2) (the slope at ψ, where a fit linearises again at the rig it found). ``length_of(rig) → (n,)`` m is
+    the model's length for a rig (the caller's own compiled run); ``reference`` (n,) m its value at ``base`` if
+    already known. RuntimeError where a run failed."""
+    l0 = None if central else np.asarray(length_of(base) if reference is None else reference, float)
+
+    def at(n, f):
+        return np.asarray(length_of(gp.replace(base, **{n: gp.get(base, n) * np.exp(f)})), float)
 
     def column(item):
         n, u = item
-        return (np.asarray(length_of(gp.replace(base, **{n: gp.get(base, n) * np.exp(u)})), float) - l0) / u
+        return (at(n, 0.5 * u) - at(n, -0.5 * u)) / u if central else (at(n, u) - l0) / u
 
     # the runs are independent: one thread per core (a compiled run releases the GIL; the result is the same)
     with ThreadPoolExecutor(max_workers=max(1, min(len(tol), os.cpu_count() or 1))) as pool:
