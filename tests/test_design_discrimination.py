@@ -113,11 +113,11 @@ def test_t_vanishes_for_one_effect_against_itself_and_grows_with_the_true_effect
     t_ab_problem, t_ba_problem = (float(v) for v in ddis.statistics(problem, inputs, problem.breaks))
     assert t_ab_problem == pytest.approx(t_ab[1], rel=1e-6)
     assert t_ba_problem == pytest.approx(_t(problem, rival, run(a, 0.0), 0), rel=1e-6)
-    # A's model fitting its own data: 0 at the same size; off it only the linearisation's remainder (fourth order)
+    # A's model fitting its own data: 0 at the same size; off it only the linearisation's remainder
     own = run(a, 0.0)
     assert _t(problem, own, own, 0) == 0.0
-    near, nearer = (_t(problem, run(a * (1 + d), 0.0), own, 0) for d in (0.2, 0.1))
-    assert near < 1e-2 * t_ab[1] and nearer < near / 6, (near, nearer, t_ab)
+    near = _t(problem, run(1.2 * a, 0.0), own, 0)
+    assert near < 1e-6 * t_ab[0], (near, t_ab)
 
 
 @pytest.mark.slow
@@ -139,8 +139,10 @@ def test_the_discrimination_gradient_through_the_model_matches_finite_difference
 
 @pytest.mark.slow
 def test_the_discriminating_design_beats_the_published_pulse_and_the_best_random_input(short):
-    known, space, _ = short
-    res = gd.discriminate(known, space, PAIR, random=6, starts=1, iterations=5, n_draws=4, seed=0)
+    known, _, _ = short
+    # knots every 0.1 s: the published pulse train's short drops to 0 kPa, which both effects answer, are within reach
+    space = gd.DesignSpace(2.0, 336e3, _catheter(), knot_spacing=0.1)
+    res = gd.discriminate(known, space, PAIR, random=8, starts=1, iterations=8, n_draws=4, seed=0)
     t = {r["input"]: r["T_min"] for r in res.rows}
     assert t["design"] >= t["best random input"] and t["design"] >= t["published pulse train"], t
     assert res.checks["design"].admissible[0]
