@@ -152,3 +152,26 @@ def test_the_discriminating_design_beats_the_published_pulse_and_the_best_random
     assert row["T_min"] == min(row["T"].values())
     assert row["expected_to_separate"] == (row["T_min"] > s["discrimination"]["threshold"])
     json.dumps(s)
+
+
+@pytest.mark.slow
+def test_discriminate_command_prints_the_table_and_writes_the_files(tmp_path, capsys):
+    saved = tmp_path / "fit.json"
+    saved.write_text(json.dumps({"parameters": {Y: {"estimate": 9000.0, "standard_error": 270.0}},
+                                 "discrepancy": {"amplitude_m": 1e-4, "time_scale_s": 0.8, "noise_m": 2e-4},
+                                 "tolerances": {"robot.catheter_friction": 0.2, "pid.proportional": 0.05}}))
+    out = tmp_path / "discriminate"
+    argv = ["design", DATA, "--fit-from", str(saved), "--discriminate", *PAIR, "--duration", "2", "--knot-spacing",
+            "0.5", "--random", "3", "--starts", "1", "--iterations", "2", "--draws", "3", "--out", str(out), "--quiet"]
+    assert cli.main(argv) == 0
+    text = capsys.readouterr().out
+    assert "to tell retraction_folding from trapped_air" in text and "expected to separate" in text
+    summary = json.loads((out / "summary.json").read_text())
+    rows = {r["input"]: r for r in summary["table"]}
+    assert set(rows) == {"published pulse train", "best random input", "design"}
+    for label, row in rows.items():
+        line = next(ln for ln in text.splitlines() if ln.strip().startswith(label))
+        assert line.split()[-1] == ("yes" if row["expected_to_separate"] else "no")
+        assert f"{row['T_min']:.2f}" in line
+    assert summary["discrimination"]["sizes"] == [0.3, 0.005]
+    assert (out / "design.csv").exists() and (out / "design.png").stat().st_size > 10_000
