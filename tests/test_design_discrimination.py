@@ -170,7 +170,7 @@ def test_discriminate_command_prints_the_table_and_writes_the_files(tmp_path, ca
     rows = {r["input"]: r for r in summary["table"]}
     assert set(rows) == {"published pulse train", "best random input", "design"}
     for label, row in rows.items():
-        line = next(ln for ln in text.splitlines() if ln.strip().startswith(label))
+        line = next(ln for ln in text.splitlines() if ln.strip().startswith(label + "  "))
         assert line.split()[-1] == ("yes" if row["expected_to_separate"] else "no")
         assert f"{row['T_min']:.2f}" in line
     assert summary["discrimination"]["sizes"] == [0.3, 0.005]
