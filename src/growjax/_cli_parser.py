@@ -278,6 +278,11 @@ def build_parser():
     _shared(des, "design")
     des.add_argument("--for", dest="design_for", action="extend", nargs="+", default=[], metavar="NAME",
                      help="parameters whose precision the design is for (repeat or list; none: Y)")
+    des.add_argument("--discriminate", nargs="+", default=None, metavar="EFFECT",
+                     help="two rival catalogue effects A B: design to tell them apart (max min T, the expected "
+                          "2ΔlogL by which the data reject the wrong one) instead of for precision")
+    des.add_argument("--size", nargs="+", type=float, default=None, metavar="SI",
+                     help="with --discriminate: the two effects' assumed sizes (default their moderate magnitudes)")
     des.add_argument("--fit-from", metavar="FIT.json", default=None,
                      help="what is known: the JSON summary of `growjax fit --json` (default: fit DATA first)")
     des.add_argument("--sensors", choices=["length", "length,pressure"], default="length",

@@ -179,8 +179,27 @@ def _control(s: dict, name: str) -> list[str]:
     return lines
 
 
+def _discrimination_rows(s: dict) -> list[str]:
+    d = s["discrimination"]
+    a, b = d["effects"]
+    keys = (f"{a} real, {b} fitted", f"{b} real, {a} fitted")
+    lines = [f"  T: the expected 2ΔlogL by which the data reject the wrong effect (linearised; sizes "
+             + ", ".join(f"{p} = {v:g}" for p, v in zip(d["parameters"], d["sizes"]))
+             + f"); separates where min T > {d['threshold']:.2f}, the discovery's threshold",
+             f"  {'input':24s} {'T (' + a + ' real)':>30s} {'T (' + b + ' real)':>30s} {'min T':>9s}  expected to separate"]
+    for row in s["table"]:
+        lines.append(f"  {row['input']:24s} {row['T'][keys[0]]:30.2f} {row['T'][keys[1]]:30.2f} {row['T_min']:9.2f}  "
+                     f"{'yes' if row['expected_to_separate'] else 'no'}")
+    return lines
+
+
 def _design(s: dict, name: str) -> list[str]:
     names = s["parameters"]
+    if s.get("discrimination"):
+        a, b = s["discrimination"]["effects"]
+        lines = [f"design: {name}, to tell {a} from {b}, {s['duration_s']:g} s, demand in 0–{_kpa(s['p_max_Pa'])} on "
+                 f"knots every {s['knot_spacing_s']:g} s", *_origin_lines(s["fixed_parameters"]), *_discrimination_rows(s)]
+        return lines + _design_tail(s)
     lines = [f"design: {name}, {s['criterion']}-optimal for {', '.join(names)}, {s['duration_s']:g} s, demand in "
              f"0–{_kpa(s['p_max_Pa'])} on knots every {s['knot_spacing_s']:g} s", *_origin_lines(s["fixed_parameters"])]
     head = f"  {'input':24s} {'sensors':16s}" + "".join(f" {n.split('.')[-1][:14]:>14s} sd  90 % width" for n in names)
@@ -192,6 +211,11 @@ def _design(s: dict, name: str) -> list[str]:
             cells += f" {100 * p['sd_log']:16.2f} %  {_value(n, p['width_90']):>10s}"
         alone = ", ".join(f"{100 * row['parameters'][n]['sd_log_alone']:.2f} %" for n in names)
         lines.append(f"  {row['input']:24s} {'+'.join(row['sensors']):16s}{cells}   {alone}")
+    return lines + _design_tail(s)
+
+
+def _design_tail(s: dict) -> list[str]:
+    lines = []
     check = s["checks"]["design"]
     lim = s["limits"]
     lines.append(f"  design over the draws: peak pressure {_kpa(check['peak_pressure_Pa'])} (ceiling "

@@ -582,6 +582,22 @@ def design_command(args) -> dict:
         raise ValueError("growjax design designs the forward drive's pressure demand: --drive inverse is not designed")
     if args.fidelity != "fast":
         raise ValueError("growjax design runs the fast configuration (its sensitivities are differentiated again)")
+    if args.discriminate is not None:
+        from growjax.design import discrimination as ddis
+
+        if args.design_for:
+            raise ValueError("--for designs for precision, --discriminate to tell two effects apart: give one of them")
+        from growjax import synthetic as syn
+
+        ddis.rivals(args.discriminate)
+        if args.size is not None and len(args.size) != 2:
+            raise ValueError(f"--size takes one size per effect of --discriminate (two), got {len(args.size)}")
+        for effect, size in zip(args.discriminate, args.size or ()):
+            syn.make_effect(effect, size)  # ValueError outside its physical range
+        if args.sensors != "length":
+            raise ValueError("--discriminate scores the length alone: drop --sensors")
+    elif args.size is not None:
+        raise ValueError("--size gives the effects' sizes of --discriminate")
     data, exp, base, origin = _setup(args, "forward")
     names = tuple(dict.fromkeys(gp.resolve_name(base, n) for n in (args.design_for or ["Y"])))
     lim = gd.limits(base, max_speed=args.max_pump_speed)
@@ -605,12 +621,18 @@ def design_command(args) -> dict:
                         discrepancy=args.discrepancy, tolerances=tolerances)
         _progress_note(args, f"design: fitted in {time.perf_counter() - started:.1f} s")
         known = gd.from_fit(fitted, base, tolerances)
-    started = _progress_note(args, f"design: {args.criterion}-optimal for {', '.join(names)}, {args.duration:g} s, "
-                                   f"sensors {args.sensors}")
-    result = gd.design(known, space, criterion=args.criterion, sensors=tuple(args.sensors.split(",")), random=args.random,
-                       starts=args.starts, iterations=args.iterations, n_draws=args.draws, seed=args.seed,
-                       points=args.points, pressure_noise=args.pressure_noise, limits=lim,
-                       nonlinear_draws=args.nonlinear_draws, progress=not args.quiet)
+    if args.discriminate is not None:
+        started = _progress_note(args, f"design: to tell {' from '.join(args.discriminate)}, {args.duration:g} s")
+        result = gd.discriminate(known, space, args.discriminate, args.size, random=args.random, starts=args.starts,
+                                 iterations=args.iterations, n_draws=args.draws, seed=args.seed, limits=lim,
+                                 progress=not args.quiet)
+    else:
+        started = _progress_note(args, f"design: {args.criterion}-optimal for {', '.join(names)}, {args.duration:g} s, "
+                                       f"sensors {args.sensors}")
+        result = gd.design(known, space, criterion=args.criterion, sensors=tuple(args.sensors.split(",")),
+                           random=args.random, starts=args.starts, iterations=args.iterations, n_draws=args.draws,
+                           seed=args.seed, points=args.points, pressure_noise=args.pressure_noise, limits=lim,
+                           nonlinear_draws=args.nonlinear_draws, progress=not args.quiet)
     _progress_note(args, f"design: done in {time.perf_counter() - started:.1f} s")
     out = _out(args)
     csv = space.write_csv(out / "design.csv", result.x)

@@ -17,15 +17,20 @@ What is here, in the order a design uses it:
 * :func:`make`, :func:`evaluate`, :func:`smoothed_gradient`, :func:`value_and_gradient` — the problem, its
   objective, the slope the descent follows (differences over a step of the demand) and the exact derivative by
   forward mode through the model (:mod:`.problem`).
+* :class:`Discrimination`, :func:`discrimination.make`, :func:`discrimination.statistic` — the criterion of model
+  discrimination between two rival effects: min(T_AB, T_BA), the linearised expected 2ΔlogL by which the data
+  reject the wrong one (:mod:`.discrimination`).
 * :func:`random_admissible`, :func:`multistart` — the random baseline and the descent (:mod:`.optimise`).
-* :func:`design` — all of it end to end (:mod:`.workflow`; the ``growjax design`` command) and
-  :func:`design_figure`.
+* :func:`design` — all of it end to end (:mod:`.workflow`; the ``growjax design`` command), :func:`discriminate`
+  its sibling for two rival effects (``growjax design --discriminate A B``), and :func:`design_figure`.
 
 SI units throughout: s, Pa, m; uncertainties of ln θ (relative).
 """
 
 from growjax.design.constraints import Check, Limits, check, draws, limits, penalty, stack
 from growjax.design.criterion import Precision, Prediction, information, posterior
+from growjax.design import discrimination
+from growjax.design.discrimination import Discrimination
 from growjax.design.figure import design_figure
 from growjax.design.knowledge import Knowledge, from_fit, from_summary
 from growjax.design.optimise import Descent, RandomBatch, adam, multistart, random_admissible
@@ -41,7 +46,7 @@ from growjax.design.problem import (
 )
 from growjax.design.sensitivity import Sensitivities, solve
 from growjax.design.space import DesignSpace, catheter_of
-from growjax.design.workflow import DesignError, DesignResult, design, published_inputs
+from growjax.design.workflow import DesignError, DesignResult, design, discriminate, published_inputs
 
 __all__ = [
     "Check",
@@ -49,6 +54,7 @@ __all__ = [
     "DesignError",
     "DesignResult",
     "DesignSpace",
+    "Discrimination",
     "Knowledge",
     "Limits",
     "Precision",
@@ -62,6 +68,8 @@ __all__ = [
     "covariances",
     "design",
     "design_figure",
+    "discriminate",
+    "discrimination",
     "draws",
     "evaluate",
     "evaluate_many",

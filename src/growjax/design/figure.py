@@ -47,9 +47,14 @@ def design_figure(result, path) -> Path:
     for ax in (ax_d, ax_p, ax_l):
         ax.legend(loc="upper right", fontsize=7)
     row = next(r for r in result.rows if r["input"] == "design" and tuple(r["sensors"]) == result.sensors)
-    sds = ", ".join(f"{n.split('.')[-1]} ±{100 * p['sd_log']:.2f} %" for n, p in row["parameters"].items())
-    ax_d.set_title(f"designed input ({result.criterion}-optimal; {', '.join(result.sensors)}): {sds} "
-                   "(bands: range over the rig and θ draws)", fontsize=9)
+    if result.discrimination:
+        a, b = result.discrimination["effects"]
+        ax_d.set_title(f"designed input to tell {a} from {b}: min T {row['T_min']:.1f} (threshold "
+                       f"{result.discrimination['threshold']:.1f}) (bands: range over the rig and θ draws)", fontsize=9)
+    else:
+        sds = ", ".join(f"{n.split('.')[-1]} ±{100 * p['sd_log']:.2f} %" for n, p in row["parameters"].items())
+        ax_d.set_title(f"designed input ({result.criterion}-optimal; {', '.join(result.sensors)}): {sds} "
+                       "(bands: range over the rig and θ draws)", fontsize=9)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=120)

@@ -18,6 +18,7 @@ import numpy as np
 
 from growjax import _progress
 from growjax.design import constraints as dcon
+from growjax.design import discrimination as ddis
 from growjax.design import problem as dprob
 from growjax.design.knowledge import Knowledge
 from growjax.design.space import DesignSpace
@@ -84,7 +85,8 @@ def multistart(problem: dprob.Problem, starts, iterations: int = ITERATIONS, lea
 
     def vg(x):
         if gradient == "jax":
-            return dprob.value_and_gradient(problem, np.asarray(x))
+            exact = ddis.value_and_gradient if isinstance(problem, ddis.Discrimination) else dprob.value_and_gradient
+            return exact(problem, np.asarray(x))
         return dprob.smoothed_gradient(problem, np.asarray(x))
 
     runs = []

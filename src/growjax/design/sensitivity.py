@@ -44,18 +44,21 @@ def solve(base: gp.Parameters, inputs, names: tuple, rig: tuple, config, ts, bre
     resolved (forward adjoint), ``breaks`` the inputs' (jump, slope-break) times, ``ts`` (n,) s."""
     p, q = len(names), len(rig)
     z = jnp.zeros(p + q) if z is None else jnp.asarray(z)
-    w0 = jnp.zeros(p + q)
+    return solve_along(lambda w: moved(base, names, rig, z + w), p + q, inputs, config, ts, breaks)
 
-    def params_of(w):
-        return fx.apply_all(as_arrays(moved(base, names, rig, z + w)))
 
-    params = params_of(w0)
+def solve_along(params_of, m: int, inputs, config, ts, breaks) -> Sensitivities:
+    """One sensitivity solve along the m coordinates w of ``params_of(w) → Parameters`` (traceable) at w = 0; the
+    rest as :func:`solve`."""
+    w0 = jnp.zeros(m)
+    params = fx.apply_all(as_arrays(params_of(w0)))
     mask = jax.tree_util.tree_map(eqx.is_inexact_array, params)
 
     def zeros(x):
-        return jnp.zeros((p + q,) + jnp.shape(x))
+        return jnp.zeros((m,) + jnp.shape(x))
 
-    d_float = jax.vmap(lambda e: jax.jvp(lambda v: eqx.filter(params_of(v), mask), (w0,), (e,))[1])(jnp.eye(p + q))
+    applied = lambda v: eqx.filter(fx.apply_all(as_arrays(params_of(v))), mask)
+    d_float = jax.vmap(lambda e: jax.jvp(applied, (w0,), (e,))[1])(jnp.eye(m))
     d_params = eqx.combine(d_float, jax.tree_util.tree_map(zeros, eqx.filter(params, mask, inverse=True)))
     d_inputs = jax.tree_util.tree_map(zeros, inputs)
     traj, tangents = _fast_solve.solve_with_sensitivities(params, inputs, config, jnp.asarray(ts), *breaks,

@@ -10,9 +10,11 @@ import jax
 import numpy as np
 
 from growjax import _progress
+from growjax import effects as fx
 from growjax import fit as gf
 from growjax.design import constraints as dcon
 from growjax.design import criterion as dcrit
+from growjax.design import discrimination as ddis
 from growjax.design import optimise as dopt
 from growjax.design import problem as dprob
 from growjax.design.knowledge import Knowledge
@@ -54,6 +56,7 @@ class DesignResult:
     knowledge: dict
     wall_s: dict
     scaled: float = 1.0  # the share of the optimiser's demand kept to pass the check (1: as optimised)
+    discrimination: dict | None = None  # the rivals, their sizes and the threshold (a design by :func:`discriminate`)
 
     def summary(self) -> dict:
         random = self.random
@@ -72,6 +75,7 @@ class DesignResult:
             "descents": [{"start_criterion": float(d.history[0]), "best": float(d.value), "history": d.history}
                          for d in self.descents],
             "knowledge": self.knowledge, "wall_s": self.wall_s,
+            **({"discrimination": self.discrimination} if self.discrimination else {}),
         }
 
 
@@ -106,6 +110,70 @@ def design(knowledge: Knowledge, space: DesignSpace, criterion: str = "A", senso
     if space.p_max > lim.pressure + 1e-9:
         raise ValueError(f"p_max {space.p_max / 1e3:.1f} kPa is above the sensed-pressure ceiling "
                          f"{lim.pressure / 1e3:.1f} kPa (the membrane limit {lim.membrane / 1e3:.1f} kPa × the margin)")
+    batch, descents, x, scaled, checks, wall = _search(problem, knowledge, space, random, starts, iterations, n_draws,
+                                                       seed, learning_rate, gradient, progress)
+    best_random = batch.designs[batch.best]
+    base_inputs = published_inputs(space)
+    base_breaks = input_breaks(base_inputs, space.config())
+    sets = [sensors] if sensors == ("length",) else [("length",), sensors]
+    rows = []
+    for label, inputs, breaks in (("published pulse train", base_inputs, base_breaks),
+                                  ("best random input", space.inputs(best_random), problem.breaks),
+                                  ("design", space.inputs(x), problem.breaks)):
+        rows += _row(problem, knowledge, label, inputs, breaks, sets)
+    wall["total_s"] = time.perf_counter() - clock
+    return DesignResult(tuple(knowledge.names), knowledge.estimate, space, x, space.knots, np.asarray(space.demand(x)),
+                        rows, checks, batch, descents, lim, criterion, sensors, knowledge.summary(), wall, scaled)
+
+
+def discriminate(knowledge: Knowledge, space: DesignSpace, effects, sizes=None, random: int = 64, starts: int = 2,
+                 iterations: int = dopt.ITERATIONS, n_draws: int = dcon.DRAWS, seed: int = 0,
+                 limits: dcon.Limits | None = None, learning_rate: float = dopt.LEARNING_RATE,
+                 gradient: str = "differences", false_positive_rate: float = 0.05,
+                 progress: bool = False) -> DesignResult:
+    """Design the next experiment's input to tell two rival catalogue ``effects`` (A, B) apart: the input that
+    maximises min(T_AB, T_BA) (:mod:`growjax.design.discrimination`), with ``knowledge``'s parameters refitted
+    beside the rival's effect; ``sizes`` (a, b) SI: the effects' assumed sizes (default their moderate
+    magnitudes). The search, the limits and the check are those of :func:`design` (the objective −ln min T).
+
+    The table (``rows``): per input ("published pulse train", "best random input", "design") T_AB, T_BA, min T and
+    whether min T exceeds the discovery's single-experiment threshold (``false_positive_rate`` over the
+    catalogue, :func:`growjax.discover.boundary_threshold`): expected to separate. ValueError on a bad pair of
+    effects; DesignError where nothing admissible is found."""
+    from growjax.discover import boundary_threshold
+
+    clock = time.perf_counter()
+    problem = ddis.make(knowledge, space, effects, sizes, limits)
+    lim = problem.limits
+    if space.p_max > lim.pressure + 1e-9:
+        raise ValueError(f"p_max {space.p_max / 1e3:.1f} kPa is above the sensed-pressure ceiling "
+                         f"{lim.pressure / 1e3:.1f} kPa (the membrane limit {lim.membrane / 1e3:.1f} kPa × the margin)")
+    threshold = boundary_threshold(false_positive_rate / len(fx.CATALOGUE))
+    batch, descents, x, scaled, checks, wall = _search(problem, knowledge, space, random, starts, iterations, n_draws,
+                                                       seed, learning_rate, gradient, progress)
+    base_inputs = published_inputs(space)
+    a, b = problem.effects
+    rows = []
+    for label, inputs, breaks in (("published pulse train", base_inputs, input_breaks(base_inputs, space.config())),
+                                  ("best random input", space.inputs(batch.designs[batch.best]), problem.breaks),
+                                  ("design", space.inputs(x), problem.breaks)):
+        t_ab, t_ba = (max(float(v), 0.0) for v in ddis.statistics(problem, inputs, breaks))
+        rows.append({"input": label, "sensors": ["length"], "criterion": -float(np.log(max(min(t_ab, t_ba), ddis.FLOOR))),
+                     "T": {f"{a} real, {b} fitted": t_ab, f"{b} real, {a} fitted": t_ba}, "T_min": min(t_ab, t_ba),
+                     "expected_to_separate": bool(min(t_ab, t_ba) > threshold)})
+    wall["total_s"] = time.perf_counter() - clock
+    sizes = np.diag(np.asarray(problem.sizes))
+    record = {"effects": [a, b], "parameters": list(problem.fields), "sizes": [float(v) for v in sizes],
+              "refitted": list(knowledge.names), "threshold": threshold, "false_positive_rate": false_positive_rate}
+    return DesignResult((a, b), knowledge.estimate, space, x, space.knots, np.asarray(space.demand(x)), rows, checks,
+                        batch, descents, lim, "discrimination", ("length",), knowledge.summary(), wall, scaled, record)
+
+
+def _search(problem, knowledge, space, random, starts, iterations, n_draws, seed, learning_rate, gradient, progress):
+    """The random batch, the descent from its best, the check of the result and of the two baselines over the
+    draws: (batch, descents, design, the share of its demand kept, checks, wall times)."""
+    wall = {}
+    lim = problem.limits
     drawn = dcon.draws(knowledge, n_draws, seed)
     _progress.note(f"design: {random} random admissible inputs, each checked over {n_draws} draws", progress)
     batch = dopt.random_admissible(problem, space, knowledge, random, seed, drawn, progress=progress)
@@ -125,15 +193,7 @@ def design(knowledge: Knowledge, space: DesignSpace, criterion: str = "A", senso
                                               space.times, space.breaks(), lim, drawn, keep_runs=True),
               "published pulse train": dcon.check(dcon.stack([base_inputs]), knowledge, space.config(), space.times,
                                                   base_breaks, lim, drawn, keep_runs=True)}
-    sets = [sensors] if sensors == ("length",) else [("length",), sensors]
-    rows = []
-    for label, inputs, breaks in (("published pulse train", base_inputs, base_breaks),
-                                  ("best random input", space.inputs(best_random), problem.breaks),
-                                  ("design", space.inputs(x), problem.breaks)):
-        rows += _row(problem, knowledge, label, inputs, breaks, sets)
-    wall["total_s"] = time.perf_counter() - clock
-    return DesignResult(tuple(knowledge.names), knowledge.estimate, space, x, space.knots, np.asarray(space.demand(x)),
-                        rows, checks, batch, descents, lim, criterion, sensors, knowledge.summary(), wall, scaled)
+    return batch, descents, x, scaled, checks, wall
 
 
 def _admissible(problem, space, knowledge, descents, drawn, lim):
