@@ -52,3 +52,13 @@ def forward_inputs(amplitude=150e3, catheter=0.02):
 
 # One configuration for the short physics checks of the fast configuration, so they share one compiled solver.
 SHORT = gj.Config(t1=3.0)
+
+
+def objective_differences(evaluate, x, step=1e-3):
+    """Central differences (k,) of ``evaluate(x) → scalar`` along each coordinate of ``x`` (k,), step ``step``."""
+    out = []
+    for k in range(np.size(x)):
+        e = np.zeros(np.size(x))
+        e[k] = step
+        out.append((float(evaluate(x + e)) - float(evaluate(x - e))) / (2 * step))
+    return out

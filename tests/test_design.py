@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import objective_differences
 
 import growjax as gj
 from growjax import cli
@@ -172,12 +173,7 @@ def test_the_criterions_gradient_through_the_model_matches_finite_differences(sh
     x = space.unconstrained(np.array([0.0, 90e3, 60e3, 120e3, 80e3]))
     value, grad = (np.asarray(a) for a in gd.value_and_gradient(problem, x))
     assert value == pytest.approx(float(sum(gd.evaluate(problem, x))), rel=1e-5)  # two programs: rounding
-    fd = []
-    for k in range(space.size):
-        e = np.zeros(space.size)
-        e[k] = 1e-3
-        up, down = (float(sum(gd.evaluate(problem, x + s * e))) for s in (1, -1))
-        fd.append((up - down) / 2e-3)
+    fd = objective_differences(lambda y: sum(gd.evaluate(problem, y)), x)
     # The knots after the first: the exact derivative is the difference quotient's. The first (0.5 s) sets when the
     # pressure crosses the growth threshold, a switch the model smooths over a band far narrower than 1e-3 of a
     # logit: there the exact derivative is the band's, and the descent follows differences over a step of the

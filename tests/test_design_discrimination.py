@@ -7,6 +7,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import objective_differences
 
 import growjax as gj
 from growjax import cli
@@ -126,12 +127,7 @@ def test_the_discrimination_gradient_through_the_model_matches_finite_difference
     x = space.unconstrained(RISE_FALL)
     value, grad = (np.asarray(v) for v in ddis.value_and_gradient(problem, x))
     assert value == pytest.approx(float(sum(gd.evaluate(problem, x))), rel=1e-4)
-    fd = []
-    for k in range(space.size):
-        e = np.zeros(space.size)
-        e[k] = 1e-3
-        up, down = (float(sum(gd.evaluate(problem, x + s * e))) for s in (1, -1))
-        fd.append((up - down) / 2e-3)
+    fd = objective_differences(lambda y: sum(gd.evaluate(problem, y)), x)
     # the first knot sets when the growth threshold is crossed (a switch; see tests/test_design.py)
     np.testing.assert_allclose(grad[1:], fd[1:], rtol=0.05, atol=1e-3 * np.max(np.abs(fd)))
     assert np.max(np.abs(fd[1:])) > 1e-2

@@ -95,22 +95,26 @@ def test_inverse_drive_pushing_a_blocked_robot_stops_with_status_1(rate):
 GRAD_NAMES = ("Y", "check_valve.max_open_pressure", "fluid.air_fraction")
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("adjoint", ["forward", "reverse"])
-def test_gradients_match_central_differences(synthetic_experiment, adjoint):
-    """d(final length, RMSE)/dθ through the solver (jacfwd or grad) against central differences (by default
-    test_api checks the final length's gradient both ways against differences)."""
-    exp = synthetic_experiment
+def _final_length_and_rmse(exp, adjoint):
+    """(θ (3,) ↦ [final length m, length RMSE m] over 1.5 s at rtol 1e-8, θ at the reference) for GRAD_NAMES."""
     cfg = gj.Config(t1=1.5, rtol=1e-8, adjoint=adjoint)
     p0 = gj.reference()
     inputs = ex.to_inputs(exp, "forward", p0, cfg.t0, cfg.t1)
     breaks = gj.input_breaks(inputs, cfg)
-    theta0 = jnp.array([float(gj.get(p0, name)) for name in GRAD_NAMES])
 
     def outputs(theta):
         traj = gj.simulate(gj.replace(p0, **dict(zip(GRAD_NAMES, theta))), inputs, cfg, breaks=breaks)
         return jnp.stack([traj.length[-1], length_rmse(traj, exp.time, exp["robot_length_m"], cfg.t0, cfg.t1)])
 
+    return outputs, jnp.array([float(gj.get(p0, name)) for name in GRAD_NAMES])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("adjoint", ["forward", "reverse"])
+def test_gradients_match_central_differences(synthetic_experiment, adjoint):
+    """d(final length, RMSE)/dθ through the solver (jacfwd or grad) against central differences (by default
+    test_api checks the final length's gradient both ways against differences)."""
+    outputs, theta0 = _final_length_and_rmse(synthetic_experiment, adjoint)
     jac_fn = jax.jacfwd(outputs) if adjoint == "forward" else jax.jacrev(outputs)
     jac = np.asarray(jax.jit(jac_fn)(theta0))
     run = jax.jit(outputs)
@@ -127,17 +131,7 @@ def test_gradients_match_central_differences(synthetic_experiment, adjoint):
 def test_a_batch_of_jacobians_equals_the_single_ones(synthetic_experiment):
     """At a batch of points (NUTS's vectorised chains) the members step together in one solve and give each
     member's own Jacobian."""
-    exp = synthetic_experiment
-    cfg = gj.Config(t1=1.5, rtol=1e-8, adjoint="forward")
-    p0 = gj.reference()
-    inputs = ex.to_inputs(exp, "forward", p0, cfg.t0, cfg.t1)
-    breaks = gj.input_breaks(inputs, cfg)
-    theta0 = jnp.array([float(gj.get(p0, name)) for name in GRAD_NAMES])
-
-    def outputs(theta):
-        traj = gj.simulate(gj.replace(p0, **dict(zip(GRAD_NAMES, theta))), inputs, cfg, breaks=breaks)
-        return jnp.stack([traj.length[-1], length_rmse(traj, exp.time, exp["robot_length_m"], cfg.t0, cfg.t1)])
-
+    outputs, theta0 = _final_length_and_rmse(synthetic_experiment, "forward")
     jac_fn = jax.jit(jax.jacfwd(outputs))
     other = theta0 * jnp.array([1.2, 0.9, 1.5])
     batched = np.asarray(jax.jit(jax.vmap(jax.jacfwd(outputs)))(jnp.stack([theta0, other])))
