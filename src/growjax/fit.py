@@ -335,14 +335,14 @@ def _solve(likelihood, z0s, bounds, max_steps: int, problem, tol: dict, discrepa
                 or np.all(np.abs(b) <= RELINEARISE_TOLERANCE * np.asarray(likelihood.tolerance))):
             break
         centre, b = centre + b, np.zeros_like(b)  # the rig moved: linearise again where the data put it
-        at_rig = _at_rig(problem, tol, centre)
+        at_rig = problem_at_rig(problem, tol, centre)
     if g is not None and not likelihood.inferred:  # fixed: propagated after the fit
         likelihood = likelihood.with_tolerances(g, tol)
     return zs, costs, oks, z, b, raw, hyper, converged, likelihood, linearisations
 
 
-def _at_rig(problem: Problem, tol: dict, centre) -> Problem:
-    """``problem`` with the toleranced parameters at ψ₀·e^centre."""
+def problem_at_rig(problem: Problem, tol: dict, centre) -> Problem:
+    """``problem`` with the toleranced parameters of ``tol`` at ψ₀·e^centre (``centre`` (q,) in their order)."""
     values = {name: gp.get(problem.base, name) * np.exp(centre[j]) for j, name in enumerate(tol)}
     return eqx.tree_at(lambda pr: pr.base, problem, gp.replace(problem.base, **values))
 
@@ -544,7 +544,7 @@ def _augmented(likelihood: Likelihood, r, jac, hyper, b):
 
 def _tolerance_sensitivity(problem: Problem, z, r0, tol: dict, central: bool = False) -> np.ndarray:
     """g (n, q): the length's change, m, per unit ln ψ of each toleranced parameter: the secant from ψ to ψ·e^u, u
-    its tolerance (through the fit's own compiled program, the base being one of its leaves; ``r0`` (n,) the
+    its tolerance, or the central one with ``central`` (:func:`growjax.tolerance.sensitivity`; through the fit's own compiled program, the base being one of its leaves; ``r0`` (n,) the
     residuals at z, in units of σ_L)."""
     n, scale = problem.times.size, float(problem.sigma_length)
 

@@ -177,7 +177,7 @@ def fit_set(
             break
         centre = b.copy()  # the rig's errors moved: take the sensitivities again where the data put the rig
         spent = batch.simulate_s
-        batch = _Batch([_at_rig(pr, layout, e, centre, tol) for e, pr in enumerate(problems)])
+        batch = _Batch([gf.problem_at_rig(pr, tol, centre[layout.rig_index[e]]) for e, pr in enumerate(problems)])
         batch.simulate_s = spent
     outs = batch.linearised(z, layout)
     if tol and rig == "fixed":
@@ -262,13 +262,6 @@ def _gls(batch, layout: _Layout, likelihoods, hypers, z, b, centre, bounds, disc
         if np.all(moved <= gf.OUTER_TOLERANCE * sd):
             break
     return z, b, hypers, cost, converged
-
-
-def _at_rig(problem: gf.Problem, layout: _Layout, e: int, centre, tol: dict) -> gf.Problem:
-    """``problem`` with its rig's toleranced parameters at ψ₀·e^centre."""
-    values = {name: gp.get(problem.base, name) * np.exp(centre[layout.rig_index[e, j]])
-              for j, name in enumerate(tol)}
-    return eqx.tree_at(lambda pr: pr.base, problem, gp.replace(problem.base, **values))
 
 
 def _layout(experiments: ExperimentSet, scopes, bases, problems, tol: dict, rig_errors: str) -> _Layout:
