@@ -172,13 +172,28 @@ def rows_population(r: dict) -> list[tuple[str, str, str]]:
 def rows_sets(r: dict) -> list[tuple[str, str, str]]:
     s = r["summary"]
     return [("joint Y: coverage of the 90 % interval", f"{s['joint']['coverage_90']:.2f}",
-             f"{s['sets']} sets; median width {s['joint']['median_width_Pa']:.0f} Pa; target 0.80–0.97"),
+             f"{s['sets']} sets; median width {s['joint']['median_width_Pa']:.0f} Pa{_rms_z(s['joint'])}; "
+             "target 0.80–0.97"),
             ("joint Y narrower than the best single experiment's", f"{s['joint_narrower_than_best_single']:.2f}",
              "share of the sets; target ≥ 0.90"),
+            *_narrower_single(s),
             ("rig errors taken per experiment: coverage", f"{s['joint_independent_rig']['coverage_90']:.2f}",
-             f"median width {s['joint_independent_rig']['median_width_Pa']:.0f} Pa"),
+             f"median width {s['joint_independent_rig']['median_width_Pa']:.0f} Pa{_rms_z(s['joint_independent_rig'])}"),
             ("single experiments: coverage", f"{s['single']['coverage_90']:.2f}",
-             f"median width {s['single']['median_width_Pa']:.0f} Pa")]
+             f"median width {s['single']['median_width_Pa']:.0f} Pa{_rms_z(s['single'])}")]
+
+
+def _rms_z(group: dict) -> str:
+    """"; rms z …" where the results carry the rms of (estimate − truth) / sd."""
+    return f"; rms (estimate − truth)/sd {group['rms_z']:.2f}" if "rms_z" in group else ""
+
+
+def _narrower_single(s: dict) -> list[tuple[str, str, str]]:
+    n = s.get("narrower_single")
+    if not n or not n["sets"]:
+        return []
+    return [("where a single experiment is narrower: it covers", f"{n['covered']} of {n['sets']}",
+             f"median abs (estimate − truth)/sd of that single {n['median_abs_z']:.1f}")]
 
 
 def rows_mixed_set(r: dict) -> list[tuple[str, str, str]]:

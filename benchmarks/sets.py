@@ -114,6 +114,11 @@ def one_set(task):
     return row
 
 
+def _z(row: dict, truth: float) -> float:
+    """(estimate − truth) / sd, the sd read off the 90 % interval's width (± 1.645 sd)."""
+    return (row["estimate_Pa"] - truth) / (row["width_Pa"] / (2 * 1.6448536269514722))
+
+
 def _kept(partial: Path, args) -> list[dict]:
     """Rows of an earlier run of the same study (same seed, experiments and tolerance) from its partial file."""
     rows = [json.loads(line) for line in partial.read_text().splitlines() if line.strip()] if partial.exists() else []
@@ -176,6 +181,14 @@ def main():
                          "median_width_Pa": float(np.median([x["width_Pa"] for r in rows for x in r["single"]])),
                          "median_wall_s": float(np.median([x["wall_s"] for r in rows for x in r["single"]]))}
     summary["joint_narrower_than_best_single"] = float(np.mean([r["joint_narrower_than_best_single"] for r in rows]))
+    beaten = [(min(r["single"], key=lambda x: x["width_Pa"]), r["truth_Pa"]) for r in rows
+              if not r["joint_narrower_than_best_single"]]  # the single experiment narrower than the joint
+    summary["narrower_single"] = {"sets": len(beaten), "covered": int(sum(x["covered"] for x, _ in beaten)),
+                                  "median_abs_z": float(np.median([abs(_z(x, y)) for x, y in beaten]))
+                                  if beaten else None}
+    for label in ("joint", "joint_independent_rig"):
+        summary[label]["rms_z"] = float(np.sqrt(np.mean([_z(r[label], r["truth_Pa"]) ** 2 for r in rows])))
+    summary["single"]["rms_z"] = float(np.sqrt(np.mean([_z(x, r["truth_Pa"]) ** 2 for r in rows for x in r["single"]])))
     print(json.dumps(summary, indent=1))
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
