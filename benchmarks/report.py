@@ -41,6 +41,7 @@ on the machine that writes the page is kept as it was.
 | `benchmarks/mixed_set.py` | a forward experiment with the pressure recorded and a stepper experiment of one robot, alone and jointly |
 | `benchmarks/population.py` | populations of eight robots on one drawn rig: coverage of the population's median and spread, and of a held-out robot's predictive band |
 | `benchmarks/discover_discrepancy.py` | discovery's answer on data with a discrepancy but no catalogue effect |
+| `benchmarks/design.py` | the designed experiment: the criterion against random admissible inputs and the published pulse train, and replications on drawn rigs, predicted sd against realised; `design_discrimination`: `--discriminate A B` (discovery's verdicts under the discrimination design and the published pulse train) |
 | `benchmarks/least_squares.py` | growjax's Levenberg–Marquardt engine against optimistix's solvers on the fit's and the control profile's problems; `least_squares_linearize`: `--cases fit_Y --solvers lm_linearize --out benchmarks/results/least_squares_linearize.json` (optimistix linearising the model itself) |
 """
 
@@ -291,7 +292,38 @@ def rows_sweep_resume(r: dict) -> list[tuple[str, str, str]]:
              f"target ≤ {r['target_ratio']:g}")]
 
 
-EXTRACTORS = {"simulate": rows_simulate, "sweep": rows_sweep, "agreement": rows_agreement,
+def rows_design(r: dict) -> list[tuple[str, str, str]]:
+    land, rep = r["landscape"], r["replications"]
+    out = [("criterion (predicted sd of ln θ): design / best random / published pulse train",
+            f"{land['design_criterion']:.4f} / {land['random_best_criterion']:.4f} / {land['published_criterion']:.4f}",
+            f"{land['random_admissible']} admissible of {land['random_drawn']} random inputs; design beats the best: "
+            f"{'yes' if land['design_beats_best_random'] else 'no'}")]
+    for label in ("design", "published pulse train"):
+        for name, g in rep[label].items():
+            if g["realised_sd_log"] is None:
+                continue
+            out.append((f"{label}: {name}, realised sd of ln θ̂ / predicted",
+                        f"{100 * g['realised_sd_log']:.2f} % / {100 * g['predicted_sd_log_alone']:.2f} %",
+                        f"{g['replications']} replications; ratio {g['realised_over_predicted']:.2f} (target 0.75–1.25); "
+                        f"fits' mean reported sd {100 * g['mean_reported_sd_log']:.2f} %; "
+                        f"coverage {g['coverage_90']:.2f} (target 0.80–0.97)"))
+    for name, ratio in rep["design_over_published_realised_sd"].items():
+        if ratio is not None:
+            out.append((f"{name}: design's realised sd / the published pulse train's", f"{ratio:.2f}", "target ≤ 0.5"))
+    return out
+
+
+def rows_design_discrimination(r: dict) -> list[tuple[str, str, str]]:
+    out = [(f"min T: {row['input']}", f"{min(row['T'].values()):.1f}", "threshold 6.24")
+           for row in r["design"]["table"]]
+    for label, rates in r["named_rate"].items():
+        for effect, rate in rates.items():
+            n = sum(1 for x in r["replications"] if x["truth"] == effect)
+            out.append((f"{label}: discovery names {effect} when it is hidden", f"{rate:.2f}", f"{n} seeds"))
+    return out
+
+
+EXTRACTORS = {"design": rows_design, "design_discrimination": rows_design_discrimination, "simulate": rows_simulate, "sweep": rows_sweep, "agreement": rows_agreement,
               "windows_public": rows_windows, "coverage_discrepancy": rows_coverage,
               "coverage_discrepancy_nominal": rows_coverage, "predict_public": rows_predict,
               "fit_speed": rows_fit_speed, "discover_discrepancy": rows_discover_discrepancy,
