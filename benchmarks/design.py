@@ -2,6 +2,8 @@
 compare each input's realised precision with the design's prediction.
 
 Run: ``python benchmarks/design.py [--random 1000] [--replications 20] [--workers 16] [--out benchmarks/results/design.json]``.
+The design is written to ``--out`` as soon as it is made and each replication to its partial file as it finishes:
+``--design-from OUT --resume`` completes a run that stopped.
 
 What is known: the default fit (``growjax.fit.fit``, the default likelihood) of the shipped synthetic experiment
 (or ``--data``) for ``--for`` (default Y). Then:
@@ -191,6 +193,8 @@ def main():
                     help="the replications' rig: drawn from the tolerance budget, or nominal (a diagnostic)")
     ap.add_argument("--inputs", nargs="+", default=["design", "published pulse train"],
                     choices=["design", "published pulse train"], help="the inputs replicated")
+    ap.add_argument("--resume", action="store_true",
+                    help="with --design-from: keep the replications in --out's partial file; run the rest")
     ap.add_argument("--design-from", default=None, metavar="DESIGN.json",
                     help="take the design (and its prediction) from this benchmark's earlier results file")
     ap.add_argument("--discriminate", nargs=2, default=None, metavar="EFFECT",
@@ -244,6 +248,10 @@ def main():
                      "design_criterion": crit["design"], "published_criterion": crit["published pulse train"],
                      "design_beats_best_random": bool(crit["design"] < summary["random"]["criterion_best"]),
                      "design_wall_s": design_wall}
+    if not args.design_from:  # the design alone, so that ``--design-from`` can take it up if the replications stop
+        out.write_text(json.dumps({"environment": environment(), "arguments": vars(args), "knowledge": known.summary(),
+                                   "design": summary, "landscape": landscape, "growjax": gj.__version__},
+                                  indent=1, default=str) + "\n")
     table = {r["input"]: r["parameters"] for r in summary["table"] if tuple(r["sensors"]) == sensors}
     print(json.dumps({k: v for k, v in landscape.items() if k != "random_criterion"}, indent=1), flush=True)
     names = list(known.names)
@@ -256,19 +264,31 @@ def main():
            "knots": np.asarray(knots).tolist(), "demand": np.asarray(demand).tolist(), "duration": args.duration,
            "noise_m": float(known.hyper.noise), "pressure": "pressure" in sensors, "pressure_noise": 1e3,
            "maker": args.maker, "rig": args.rig, "inputs": args.inputs}
-    jobs = [{**job, "index": i} for i in range(args.replications)]
+    partial = out.with_suffix(".partial.jsonl")  # replications as they finish
     rows = []
+    if args.resume and partial.exists():
+        rows = [json.loads(line) for line in partial.read_text().splitlines() if line.strip()]
+    else:
+        partial.write_text("")
+    done = {r["index"] for r in rows}
+    jobs = [{**job, "index": i} for i in range(args.replications) if i not in done]
+
+    def keep(row):
+        rows.append(row)
+        with partial.open("a") as fh:
+            fh.write(json.dumps(row, default=str) + "\n")
+        print(json.dumps({k: v for k, v in row.items() if k != "rig_offsets"}), flush=True)
+
     if args.workers > 1:
         import multiprocessing as mp
 
         with ProcessPoolExecutor(args.workers, mp_context=mp.get_context("spawn")) as pool:
             for row in pool.map(replicate, jobs):
-                rows.append(row)
-                print(json.dumps({k: v for k, v in row.items() if k != "rig_offsets"}), flush=True)
+                keep(row)
     else:
         for j in jobs:
-            rows.append(replicate(j))
-            print(json.dumps({k: v for k, v in rows[-1].items() if k != "rig_offsets"}), flush=True)
+            keep(replicate(j))
+    rows.sort(key=lambda r: r["index"])
     replications = summarise(rows, names, predicted)
     print(json.dumps(replications, indent=1), flush=True)
     record = {"environment": environment(), "arguments": vars(args), "knowledge": known.summary(),

@@ -22,7 +22,7 @@ def test_the_sites_tutorials_are_the_notebooks_folder():
     assert link.resolve() == NOTEBOOKS.resolve()
     assert not any(p.suffix == ".ipynb" for p in (REPO / "docs").rglob("*") if not p.is_relative_to(link))
     nav = re.findall(r"tutorials/(\w+\.ipynb)", (REPO / "mkdocs.yml").read_text())
-    assert sorted(nav) == sorted(p.name for p in NOTEBOOKS.glob("*.ipynb")) and len(nav) == 6
+    assert sorted(nav) == sorted(p.name for p in NOTEBOOKS.glob("*.ipynb")) and len(nav) == 7
 
 
 @pytest.mark.docs
@@ -39,7 +39,7 @@ def test_docs_build_strict_with_executed_tutorials(tmp_path):
     site = tmp_path / "site"
     for page in ("getting-started", "model", "data", "results", "uncertainty", "design", "benchmarks", "api",
                  "tutorials/simulate", "tutorials/sweep", "tutorials/fit_posterior", "tutorials/discover",
-                 "tutorials/control", "tutorials/sets"):
+                 "tutorials/control", "tutorials/sets", "tutorials/design"):
         assert (site / page / "index.html").is_file(), page
     assert sorted(p.name for p in (site / "tutorials").rglob("*") if p.is_file() and p.suffix != ".html") == sorted(
         p.name for p in NOTEBOOKS.glob("*.ipynb"))  # the notebooks, not what running them may leave beside them

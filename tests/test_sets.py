@@ -12,6 +12,7 @@ import growjax as gj
 from growjax import cli
 from growjax import experiments as xs
 from growjax import joint
+from growjax._cli_summary import summary_lines
 from growjax.experiment import Experiment, ExperimentError
 
 REPO = Path(__file__).resolve().parents[1]
@@ -111,6 +112,14 @@ def test_the_shipped_set_fitted_jointly_covers(shipped_set):
     assert together.rig_offset["bench"]["robot.catheter_friction"] < -0.1
     # linearised again at the rig it found, the fit settles (the slope there, not half a tolerance away)
     assert 1 < together.linearisations < joint.RELINEARISE_STEPS
+    assert together.rig_settled and together.rig_last_move <= joint.RELINEARISE_TOLERANCE
+    summary = together.summary()
+    lines = summary_lines({**summary, "command": "fit", "figure": "fit.png"})
+    assert summary["rig_settled"] and not any("had not settled" in line for line in lines)
+    unsettled = summary_lines({**summary, "command": "fit", "figure": "fit.png", "rig_settled": False,
+                               "linearisations": joint.RELINEARISE_STEPS, "rig_last_move": 0.12})
+    assert any("had not settled after 8 linearisations" in line and "0.12 of a tolerance" in line
+               for line in unsettled)
 
 
 @pytest.mark.slow

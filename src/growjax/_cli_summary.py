@@ -77,6 +77,10 @@ def _fit_set(s: dict) -> list[str]:
         for key, offsets in s.get("rig_offset", {}).items():
             shown = ", ".join(f"{k.split('.')[-1]} {100 * v:+.1f} %" for k, v in offsets.items())
             lines.append(f"  rig {key} inferred (its tolerances as priors): {shown}")
+        if not s.get("rig_settled", True):
+            lines.append(f"  note: the rig had not settled after {s['linearisations']} linearisations (its errors "
+                         f"still moved by {s['rig_last_move']:.2f} of a tolerance): Y trades with the rig along a "
+                         "direction these data hardly fix, and the interval is taken where the fit stopped")
     elif s.get("rig") == "fixed":
         lines.append("  rig fixed at its nominal values, its tolerances propagated (--rig fixed)")
     for r in runs:

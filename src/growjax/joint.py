@@ -70,6 +70,12 @@ class SetFitResult:
     rig_vector: np.ndarray | None = None  # (Q,) fitted b = ln(ψ/ψ₀)
     joint_covariance: np.ndarray | None = None  # (P + Q, P + Q) of (z, b), the z block as covariance_log
     linearisations: int = 1  # of the rig's sensitivities (see RELINEARISE_STEPS)
+    rig_last_move: float = 0.0  # the rig's largest move in the last linearisation, in tolerances
+
+    @property
+    def rig_settled(self) -> bool:
+        """Whether the rig's errors stopped moving (by ≤ RELINEARISE_TOLERANCE of a tolerance) before the cap."""
+        return self.rig_last_move <= RELINEARISE_TOLERANCE
     log_likelihood: float = float("nan")  # nats: the set's total at the fit (rig marginalised)
     # per run (times (n,) s, length residual (n,) m, the rig at its fitted errors)
     residuals: list = dataclasses.field(default_factory=list, repr=False)
@@ -81,7 +87,8 @@ class SetFitResult:
                                for k in self.labels},
                 "runs": self.runs, "rig_offset": self.rig_offset, "tolerances": self.tolerances,
                 "cost": self.cost, "wall_s": self.wall_s, "simulate_s": self.simulate_s, "programs": self.programs,
-                "linearisations": self.linearisations}
+                "linearisations": self.linearisations, "rig_settled": self.rig_settled,
+                "rig_last_move": self.rig_last_move}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -172,8 +179,8 @@ def fit_set(
         z, b, hypers, cost, converged = _gls(batch, layout, likelihoods, hypers, z, b - centre, centre, bounds,
                                              discrepancy, max_steps)
         b = centre + b
-        if (centre.size == 0 or step == RELINEARISE_STEPS - 1
-                or np.all(np.abs(b - centre) <= RELINEARISE_TOLERANCE * _rig_sd(likelihoods, layout))):
+        move = float(np.max(np.abs(b - centre) / _rig_sd(likelihoods, layout))) if centre.size else 0.0
+        if centre.size == 0 or step == RELINEARISE_STEPS - 1 or move <= RELINEARISE_TOLERANCE:
             break
         centre = b.copy()  # the rig's errors moved: take the sensitivities again where the data put the rig
         spent = batch.simulate_s
@@ -188,6 +195,7 @@ def fit_set(
                      converged, clock, batch.simulate_s, centre)
     result.programs = len(batch.groups)
     result.linearisations = linearisations
+    result.rig_last_move = move
     result.log_likelihood = _set_log_likelihood(outs, likelihoods, layout, hypers, centre, rig if tol else "none")
     result.residuals = [(np.asarray(lik.times), np.asarray(r[: lik.n_len]) * lik.sigma_length
                          + (np.asarray(lik.sensitivity) @ (b - centre)[layout.rig_index[e]] if lik.inferred else 0.0))
