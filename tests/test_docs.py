@@ -33,7 +33,7 @@ def test_docs_build_strict_with_executed_tutorials(tmp_path):
     env = dict(os.environ, GROWJAX_QUICK="1", GROWJAX_DOCS_CACHE="false", NO_MKDOCS_2_WARNING="1")
     start = time.perf_counter()
     run = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "-d", str(tmp_path / "site")],
-                         cwd=REPO, env=env, capture_output=True, text=True, timeout=900, check=False)
+                         cwd=REPO, env=env, capture_output=True, text=True, timeout=1800, check=False)
     wall = time.perf_counter() - start
     assert run.returncode == 0, run.stderr[-6000:]
     site = tmp_path / "site"
