@@ -183,7 +183,8 @@ def _search(problem, knowledge, space, random, starts, iterations, n_draws, seed
     descents = dopt.multistart(problem, batch.designs[order], iterations, learning_rate, gradient, progress)
     wall["descent_s"] = time.perf_counter() - t
     t = time.perf_counter()
-    x, scaled, check = _admissible(problem, space, knowledge, descents, drawn, lim)
+    x, scaled, check = _admissible(problem, space, knowledge, _by_reported(problem, space, descents, batch, starts),
+                                   drawn, lim)
     wall["check_s"] = time.perf_counter() - t
     best_random = batch.designs[batch.best]
     base_inputs = published_inputs(space)
@@ -196,10 +197,27 @@ def _search(problem, knowledge, space, random, starts, iterations, n_draws, seed
     return batch, descents, x, scaled, checks, wall
 
 
-def _admissible(problem, space, knowledge, descents, drawn, lim):
-    """(design, the share of its demand kept, its check): the best descent that passes the check over the draws,
-    else the best scaled down until it does."""
-    xs = np.stack([d.x for d in descents])
+def _by_reported(problem, space, descents, batch, starts: int) -> np.ndarray:
+    """The descents' results and the best random inputs (S, K − 1), ordered by the criterion the table reports
+    (with what the rig's linearisation misses): the descent follows the linearised criterion, which an input that
+    drives the rig's nonlinearity hard can satisfy without delivering, so the design is chosen by the reported
+    one and is never one the table ranks below the best random input."""
+    xs = [d.x for d in descents] + [batch.designs[i] for i in batch.order()[: max(starts, 1)]]
+    if isinstance(problem, ddis.Discrimination):
+        return np.stack(xs)
+    return np.stack(xs)[np.argsort([_reported(problem, space.inputs(x), problem.breaks) for x in xs], kind="stable")]
+
+
+def _reported(problem, inputs, breaks) -> float:
+    """The criterion of the table's row for ``inputs`` under the problem's sensors."""
+    info_l, info_p, cross = dprob.information(problem, inputs, breaks)[:3]
+    covs = dprob.covariances(problem, info_l, info_p, cross, problem.sensors)
+    return float(problem.criterion.of_covariance(jax.numpy.asarray(covs["known"])))
+
+
+def _admissible(problem, space, knowledge, xs, drawn, lim):
+    """(design, the share of its demand kept, its check): the first of ``xs`` (S, K − 1) that passes the check
+    over the draws, else the first scaled down until it does."""
     check = dcon.check(dcon.stack([space.inputs(x) for x in xs]), knowledge, space.config(), space.times, space.breaks(),
                        lim, drawn)
     for i in np.flatnonzero(check.admissible):
