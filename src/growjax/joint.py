@@ -71,14 +71,14 @@ class SetFitResult:
     joint_covariance: np.ndarray | None = None  # (P + Q, P + Q) of (z, b), the z block as covariance_log
     linearisations: int = 1  # of the rig's sensitivities (see RELINEARISE_STEPS)
     rig_last_move: float = 0.0  # the rig's largest move in the last linearisation, in tolerances
+    log_likelihood: float = float("nan")  # nats: the set's total at the fit (rig marginalised)
+    # per run (times (n,) s, length residual (n,) m, the rig at its fitted errors)
+    residuals: list = dataclasses.field(default_factory=list, repr=False)
 
     @property
     def rig_settled(self) -> bool:
         """Whether the rig's errors stopped moving (by ≤ RELINEARISE_TOLERANCE of a tolerance) before the cap."""
         return self.rig_last_move <= RELINEARISE_TOLERANCE
-    log_likelihood: float = float("nan")  # nats: the set's total at the fit (rig marginalised)
-    # per run (times (n,) s, length residual (n,) m, the rig at its fitted errors)
-    residuals: list = dataclasses.field(default_factory=list, repr=False)
 
     def summary(self) -> dict:
         return {"status": self.status, "rig": self.rig, "rig_errors": self.rig_errors,

@@ -210,9 +210,14 @@ def _by_reported(problem, space, descents, batch, starts: int) -> np.ndarray:
 
 def _reported(problem, inputs, breaks) -> float:
     """The criterion of the table's row for ``inputs`` under the problem's sensors."""
-    info_l, info_p, cross = dprob.information(problem, inputs, breaks)[:3]
-    covs = dprob.covariances(problem, info_l, info_p, cross, problem.sensors)
+    covs = _covariances(problem, inputs, breaks, [problem.sensors])[0]
     return float(problem.criterion.of_covariance(jax.numpy.asarray(covs["known"])))
+
+
+def _covariances(problem, inputs, breaks, sets) -> list[dict]:
+    """The predicted covariances (:func:`growjax.design.problem.covariances`) of ``inputs``, one per sensor set."""
+    info_l, info_p, cross = dprob.information(problem, inputs, breaks)[:3]
+    return [dprob.covariances(problem, info_l, info_p, cross, sensors) for sensors in sets]
 
 
 def _admissible(problem, space, knowledge, xs, drawn, lim):
@@ -242,10 +247,8 @@ def _row(problem, knowledge: Knowledge, label: str, inputs, breaks, sets) -> lis
     """The table's rows of one input, one per sensor set of ``sets``."""
     p = len(knowledge.names)
     theta = knowledge.estimate
-    info_l, info_p, cross = dprob.information(problem, inputs, breaks)[:3]
     rows = []
-    for sensors in sets:
-        covs = dprob.covariances(problem, info_l, info_p, cross, sensors)
+    for sensors, covs in zip(sets, _covariances(problem, inputs, breaks, sets)):
         sd, sd_alone, sd_linear = (np.sqrt(np.clip(np.diag(covs[k])[:p], 0, None))
                                    for k in ("known", "alone", "known_local"))
         cov = covs["known"]
