@@ -294,7 +294,8 @@ def rows_sweep_resume(r: dict) -> list[tuple[str, str, str]]:
 
 def rows_design(r: dict) -> list[tuple[str, str, str]]:
     land, rep = r["landscape"], r["replications"]
-    out = [("criterion (predicted sd of ln θ): design / best random / published pulse train",
+    out = [("criterion, ln of the predicted variance of ln θ (lower is better): design / best random (its batch "
+            "score) / published pulse train",
             f"{land['design_criterion']:.4f} / {land['random_best_criterion']:.4f} / {land['published_criterion']:.4f}",
             f"{land['random_admissible']} admissible of {land['random_drawn']} random inputs; design beats the best: "
             f"{'yes' if land['design_beats_best_random'] else 'no'}")]
