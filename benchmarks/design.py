@@ -204,6 +204,8 @@ def main():
     ap.add_argument("--out", default=None, help="results file (default benchmarks/results/design.json, "
                                                 "design_discrimination.json with --discriminate)")
     args = ap.parse_args()
+    if args.resume and not args.design_from:
+        ap.error("--resume takes up the replications of a design: give it --design-from (the run's --out)")
     args.out = args.out or str(REPO / "benchmarks" / "results" /
                                ("design_discrimination.json" if args.discriminate else "design.json"))
     from _environment import environment

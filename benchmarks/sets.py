@@ -116,7 +116,7 @@ def one_set(task):
 
 def _z(row: dict, truth: float) -> float:
     """(estimate − truth) / sd, the sd read off the 90 % interval's width (± 1.645 sd)."""
-    return (row["estimate_Pa"] - truth) / (row["width_Pa"] / (2 * 1.6448536269514722))
+    return (row["estimate_Pa"] - truth) / (row["width_Pa"] / (2 * gf.Z90))
 
 
 def _kept(partial: Path, args) -> list[dict]:
