@@ -3,6 +3,9 @@ by the set's experiments (the default) and, for contrast, taken as independent p
 
 Run: ``python benchmarks/sets.py [--sets 30] [--experiments 4] [--workers 1] [--resume]
 [--out benchmarks/results/sets.json]``; ``--resume`` keeps the sets already in the partial file.
+``--relinearise-singles`` fits each experiment alone with ``relinearise=True`` (the rig's sensitivities taken
+again where the data put it, as the joint fit does); ``--joint-from FILE`` takes the joint fits from an earlier
+results file of the same study and runs the single fits only.
 
 Each set: one robot (Y uniform on 6–12 kPa) on one rig drawn from the default tolerance budget, run under
 ``--experiments`` seeded random pulse trains (amplitude 80–180 kPa, period 1–2.5 s, duty 40–90 %, delay
@@ -88,15 +91,19 @@ def row_of(lo, hi, truth, estimate):
 
 def one_set(task):
     """One set's row (None where a reference run failed): the set drawn from its own seeded stream."""
-    seed, s, experiments, rtol = task
+    seed, s, experiments, rtol, relinearise, kept = task
     rng = np.random.default_rng([seed, s])
     config = gj.Config(t1=10.0)
     y, offsets, exps, status = make_set(rng, experiments, rtol)
     if np.any(status != gj.OK):
         return None
     runs = xs.ExperimentSet(tuple(xs.Run(e.source, e) for e in exps))
-    row = {"set": s, "study": [seed, experiments, rtol], "truth_Pa": y, "rig_offsets": offsets}
+    row = {"set": s, "study": [seed, experiments, rtol], "truth_Pa": y, "rig_offsets": offsets,
+           "singles_relinearised": relinearise}
     for label, options in (("joint", {}), ("joint_independent_rig", {"rig_errors": "experiment"})):
+        if kept is not None:
+            row[label] = kept[label]
+            continue
         t0 = time.perf_counter()
         res = joint.fit_set(runs, free=["Y@robot"], config=config, **options)
         lab = f"{Y}@robot"
@@ -107,8 +114,10 @@ def one_set(task):
         t0 = time.perf_counter()
         inputs = gj.Inputs(catheter_length=gj.Sampled(TIME, CATHETER),
                            pressure_demand=gj.Sampled(TIME, run.experiment["pressure_demand_Pa"]))
-        res = gf.fit(TIME, run.length, inputs, free=["Y"], config=config, n_starts=1, sweep_n=16)
-        singles.append({**row_of(*res.interval_90[Y], y, res.estimate[Y]), "wall_s": time.perf_counter() - t0})
+        res = gf.fit(TIME, run.length, inputs, free=["Y"], config=config, n_starts=1, sweep_n=16,
+                     relinearise=relinearise)
+        singles.append({**row_of(*res.interval_90[Y], y, res.estimate[Y]), "wall_s": time.perf_counter() - t0,
+                        "linearisations": res.linearisations})
     row["single"] = singles
     row["joint_narrower_than_best_single"] = bool(row["joint"]["width_Pa"] < min(x["width_Pa"] for x in singles))
     return row
@@ -122,9 +131,11 @@ def _z(row: dict, truth: float) -> float:
 def _kept(partial: Path, args) -> list[dict]:
     """Rows of an earlier run of the same study (same seed, experiments and tolerance) from its partial file."""
     rows = [json.loads(line) for line in partial.read_text().splitlines() if line.strip()] if partial.exists() else []
-    same = [r for r in rows if r.get("study") == [args.seed, args.experiments, args.rtol]]
+    same = [r for r in rows if r.get("study") == [args.seed, args.experiments, args.rtol]
+            and r.get("singles_relinearised", False) == args.relinearise_singles]
     if len(same) != len(rows):
-        raise SystemExit(f"{partial}: rows from another study (seed, experiments or rtol differ); not resumed")
+        raise SystemExit(f"{partial}: rows from another study (seed, experiments, rtol or single fits differ); "
+                         "not resumed")
     return same
 
 
@@ -137,7 +148,18 @@ def main():
     ap.add_argument("--workers", type=int, default=1, help="sets run at a time, one process each")
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "sets.json"))
     ap.add_argument("--resume", action="store_true", help="keep the sets already in the partial file; run the rest")
+    ap.add_argument("--relinearise-singles", action="store_true",
+                    help="fit each experiment alone with the rig linearised again where the data put it")
+    ap.add_argument("--joint-from", default=None, metavar="SETS.json",
+                    help="the joint fits from this earlier results file of the same study; run the single fits only")
     args = ap.parse_args()
+    joint_rows = {}
+    if args.joint_from:
+        earlier = json.loads(Path(args.joint_from).read_text())
+        joint_rows = {r["set"]: r for r in earlier["rows"]
+                      if r.get("study") == [args.seed, args.experiments, args.rtol]}
+        if not joint_rows:
+            raise SystemExit(f"{args.joint_from}: no sets of this study (seed, experiments, rtol)")
     clock = time.perf_counter()
     partial = Path(args.out).with_suffix(".partial.jsonl")  # rows as they finish, kept if the run is cut short
     partial.parent.mkdir(parents=True, exist_ok=True)
@@ -145,7 +167,8 @@ def main():
     if not args.resume:
         partial.write_text("")
     done = {r["set"] for r in rows}
-    tasks = [(args.seed, s, args.experiments, args.rtol) for s in range(args.sets) if s not in done]
+    tasks = [(args.seed, s, args.experiments, args.rtol, args.relinearise_singles, joint_rows.get(s))
+             for s in range(args.sets) if s not in done and (not joint_rows or s in joint_rows)]
 
     def keep(s, row):
         if row is None:

@@ -33,13 +33,17 @@ def _synthetic(t1, seed):
 GRID = ["published_Y6000", "published_Y7920", "published_Y10000", "published_Y12000", "published_Y14000"]
 
 
-def test_fit_intervals_cover_the_truth_on_data_made_by_the_reference():
-    """Five Y across the paper's box, 10 s, noise 0.2 mm: the fast model's 90 % intervals (noise and its
-    measured model error) cover ≥ 4 of 5. Each fit starts at the published Y (sweep_n=0), up to 0.6 in ln Y away."""
+@pytest.mark.parametrize("grid, least", [((0, 2, 4), 2), pytest.param(range(5), 4, marks=pytest.mark.slow)],
+                         ids=["three", "five"])
+def test_fit_intervals_cover_the_truth_on_data_made_by_the_reference(grid, least):
+    """Y across the paper's box (three of the five by default), 10 s, noise 0.2 mm: the fast model's 90 % intervals
+    (noise and its measured model error) cover at least ``least`` of them. Each fit starts at the published Y
+    (sweep_n=0), up to 0.6 in ln Y away."""
     time, lengths, cases = mk.read_reference_lengths()
     inputs = mk.reference_inputs("published")
     covered, errors = 0, []
-    for k, name in enumerate(GRID):
+    for k in grid:
+        name = GRID[k]
         truth = cases[name]["parameters"]["Y"]
         data = lengths[name] + np.random.default_rng(100 + k).normal(0.0, NOISE, time.size)
         res = gf.fit(time, data, inputs, free=["Y"], config=gj.Config(t1=10.0), n_starts=1, sweep_n=0,
@@ -49,7 +53,7 @@ def test_fit_intervals_cover_the_truth_on_data_made_by_the_reference():
         errors.append((res.estimate["robot.yield_pressure"] - truth) / res.standard_error["robot.yield_pressure"])
         assert res.status == "converged"
         assert res.rmse_length_m == pytest.approx(NOISE, rel=0.1)  # the fit reaches the noise, no further
-    assert covered >= 4, errors
+    assert covered >= least, errors
     assert np.max(np.abs(errors)) < 3.5, errors  # no estimate far outside its interval
 
 

@@ -209,3 +209,22 @@ def test_posterior_command_writes_inference_data_and_the_issue_keys(tmp_path):
     # interval sits ~1–3 % above the truth (open, see tests/test_calibration.py), so this checks the command only.
     assert 8500.0 < lo < hi < 10000.0
     assert (tmp_path / "posterior.nc").stat().st_size > 10_000
+
+
+def test_fit_passes_relinearise_to_the_fit(monkeypatch, tmp_path, capsys):
+    """``growjax fit --relinearise`` asks the single experiment's fit to take the rig's sensitivities again; without
+    it the fit linearises the rig once (what the posterior does)."""
+    from growjax import cli
+    from growjax import fit as gf
+
+    seen = []
+
+    def stop(*args, **kwargs):
+        seen.append(kwargs.get("relinearise"))
+        raise ValueError("stopped before fitting")
+
+    monkeypatch.setattr(gf, "fit", stop)
+    data = "src/growjax/datasets/synthetic_forward.csv"
+    for extra in ([], ["--relinearise"]):
+        assert cli.main(["fit", data, "--out", str(tmp_path), "--quiet", *extra]) == 2
+    assert seen == [False, True] and "stopped before fitting" in capsys.readouterr().err

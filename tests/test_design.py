@@ -76,7 +76,8 @@ def test_knowledge_from_a_saved_fit(tmp_path):
     base = gj.reference("forward")
     saved = tmp_path / "fit.json"
     saved.write_text(json.dumps({"parameters": {Y: {"estimate": 8000.0, "standard_error": 160.0},
-                                                "robot.extensibility": {"estimate": 0.03, "standard_error": None}},
+                                                "robot.extensibility": {"estimate": 0.03, "standard_error": None},
+                                                "robot.growth_exponent": {"estimate": 0.64, "standard_error": 25.0}},
                                  "discrepancy": {"kind": "matern32", "amplitude_m": 5e-4, "time_scale_s": 1.0,
                                                  "noise_m": 2e-4, "noise_time_s": 0.0},
                                  "tolerances": {"pid.proportional": 0.05}}))
@@ -84,11 +85,16 @@ def test_knowledge_from_a_saved_fit(tmp_path):
     assert known.estimate[0] == 8000.0 and known.rig == ("pid.proportional",)
     assert np.sqrt(known.covariance[0, 0]) == pytest.approx(0.02)
     lo, hi = gf.default_range(base, "robot.extensibility")
-    assert known.covariance[1, 1] == pytest.approx(np.log(hi / lo) ** 2 / 12)  # undetermined: its box
+    assert known.covariance[1, 1] == pytest.approx(np.log(hi / lo) ** 2 / 12)  # undetermined: its box,
+    assert known.estimate[1] == pytest.approx(np.sqrt(lo * hi))  # centred there, not at the fit's arbitrary value
+    lo, hi = gf.default_range(base, "robot.growth_exponent")
+    wide = gd.from_summary(saved, base, ["Y", "n"])  # an interval wider than the box says less than the box
+    assert wide.estimate[1] == pytest.approx(np.sqrt(lo * hi)) and wide.covariance[1, 1] == pytest.approx(
+        np.log(hi / lo) ** 2 / 12)
     assert float(known.hyper.amplitude) == 5e-4
     assert known.prior_precision(False)[0, 0] == 0.0 and known.prior_precision(True)[0, 0] == pytest.approx(1 / 0.02**2)
-    with pytest.raises(ValueError, match="did not fit robot.growth_exponent"):
-        gd.from_summary(saved, base, ["n"])
+    with pytest.raises(ValueError, match="did not fit pid.proportional"):
+        gd.from_summary(saved, base, ["pid.proportional"])
     with pytest.raises(ValueError, match="unknown"):
         gd.from_summary(saved, base, ["no_such_parameter"])
 
@@ -192,6 +198,11 @@ def test_the_design_beats_the_published_pulse_and_the_best_random_input_and_is_a
     res = gd.design(known, space, random=6, starts=1, iterations=6, n_draws=4, seed=0, points=2, nonlinear_draws=2)
     crit = {r["input"]: r["criterion"] for r in res.rows}
     assert crit["design"] < crit["best random input"] and crit["design"] < crit["published pulse train"], crit
+    # one criterion: what the search minimised is what the table reports, the rig's nonlinearity included
+    problem = gd.make(known, space, points=2, seed=0, nonlinear_draws=2)
+    assert float(gd.evaluate(problem, res.x)[0]) == pytest.approx(crit["design"], rel=1e-4)  # two programs: rounding
+    linear = gd.make(known, space, points=2, seed=0, nonlinear_draws=0)
+    assert float(gd.evaluate(linear, res.x)[0]) < crit["design"] - 1e-3, float(gd.evaluate(linear, res.x)[0])
     assert res.descents[0].value <= res.descents[0].history[0]  # never worse than its start, the best random input
     sd = {r["input"]: r["parameters"][Y]["sd_log"] for r in res.rows}
     assert sd["design"] < sd["best random input"] and sd["design"] < sd["published pulse train"]

@@ -101,23 +101,26 @@ print(json.dumps({"applied": applied, "length": [float(x) for x in traj.length],
 """
 
 
-def test_a_simulation_under_each_option_gives_the_same_solution():
-    """The same 2 s run in three processes: small loops, XLA's default (which the test run itself does not use,
-    conftest.py), the quick compile: the same length to within the solver's tolerance (the elementwise inverse
-    and other emitters round differently, which can move an adaptive step); and a 600 kPa pulse stops at the
-    pressure limit in each, at the same time."""
+@pytest.mark.parametrize("modes", [("off", "quick"), pytest.param(("on", "off", "quick"), marks=pytest.mark.slow)],
+                         ids=["default-quick", "all"])
+def test_a_simulation_under_each_option_gives_the_same_solution(modes):
+    """The same 2 s run in one process per option: XLA's default (which the test run itself does not use,
+    conftest.py), the quick compile and (slow) the small loops: the same length to within the solver's tolerance
+    (the elementwise inverse and other emitters round differently, which can move an adaptive step); and a
+    600 kPa pulse stops at the pressure limit in each, at the same time."""
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
     out = {}
-    for mode in ("on", "off", "quick"):
+    for mode in modes:
         run = subprocess.run([sys.executable, "-c", CHILD, mode], capture_output=True, text=True, env=env, timeout=300,
                              check=False)
         assert run.returncode == 0, run.stderr[-2000:]
         out[mode] = json.loads(run.stdout.strip().splitlines()[-1])
-    assert out["on"]["applied"] and not out["off"]["applied"]
-    assert out["on"]["status"] == out["off"]["status"] == out["quick"]["status"] == 0
-    on, off, quick = (np.asarray(out[m]["length"]) for m in ("on", "off", "quick"))
+    assert not out["off"]["applied"] and out.get("on", {"applied": True})["applied"]
+    assert all(out[m]["status"] == 0 for m in modes)
+    off = np.asarray(out["off"]["length"])
     assert np.ptp(off) > 1e-3  # millimetres of growth
-    assert np.max(np.abs(on - off)) < 2e-6 and np.max(np.abs(quick - off)) < 2e-6  # 2 µm
-    stops = [out[m]["limit_time"] for m in ("on", "off", "quick")]
+    for m in modes:
+        assert np.max(np.abs(np.asarray(out[m]["length"]) - off)) < 2e-6  # 2 µm
+    stops = [out[m]["limit_time"] for m in modes]
     assert all(out[m]["over_status"] == 1 for m in out), out  # status 1 (pressure limit), never 2
     assert 0.26 < min(stops) and max(stops) - min(stops) < 1e-4, stops  # after the first rise; 0.1 ms

@@ -454,7 +454,8 @@ def fit_command(args) -> dict:
     started = _progress_note(args, f"fit: {', '.join(args.free or ['Y'])} from {args.starts} starts")
     result = gf.fit(exp.time, exp["robot_length_m"], inputs, free=args.free or ["Y"], base=base, config=config,
                     pressure=pressure, n_starts=args.starts, seed=args.seed, window=scored_window(args, config),
-                    discrepancy=args.discrepancy, tolerances=tolerances_of(args), rig=args.rig)
+                    discrepancy=args.discrepancy, tolerances=tolerances_of(args), rig=args.rig,
+                    relinearise=args.relinearise)
     _progress_note(args, f"fit: done in {time.perf_counter() - started:.1f} s")
     out = _out(args)
     fitted = gj.replace(base, **result.rig_estimate, **result.estimate)

@@ -5,8 +5,10 @@ The design's prior on w = (ln θ, b) is blockdiag(Σ_θ, U): Σ_θ the fit's cov
 already say), U = diag(u²) the rig's tolerances (its relative errors b = ln ψ/ψ₀, :mod:`growjax.tolerance`).
 The rig enters the next experiment as a fresh nuisance with its tolerance prior: what the old data said of the
 rig is not carried over (conservative where the next experiment runs on the same rig). A parameter the fit left
-undetermined (no interval) takes the variance of a uniform prior over its sampling box
-(:func:`growjax.fit.default_range`) instead.
+undetermined (no interval, or one wider than its sampling box, :func:`growjax.fit.default_range`) takes a uniform
+prior over that box instead: the box's variance of ln θ, centred on the box (the fit's estimate of such a
+parameter is arbitrary, and can lie far outside the box: draws about it would run the robot in a regime nothing
+supports).
 """
 
 from __future__ import annotations
@@ -89,14 +91,30 @@ def box_variance(base: gp.Parameters, name: str) -> float:
     return float(np.log(hi / lo) ** 2 / 12.0)
 
 
+def _determined(base, names, cov, known) -> list[bool]:
+    """Whether each parameter is determined: ``known`` (it has an interval) and its variance of ln θ in ``cov``
+    positive and below its box's."""
+    return [bool(k) and 0.0 < cov[i, i] < box_variance(base, n) for i, (n, k) in enumerate(zip(names, known))]
+
+
 def _covariance(base, names, cov, determined) -> np.ndarray:
     """``cov`` with each undetermined parameter's row and column replaced by its box variance (uncorrelated)."""
     cov = np.array(cov, float)
     for i, n in enumerate(names):
-        if not determined[i] or not cov[i, i] > 0:
+        if not determined[i]:
             cov[i, :] = cov[:, i] = 0.0
             cov[i, i] = box_variance(base, n)
     return cov
+
+
+def _centred(base, names, estimate: dict, determined) -> dict:
+    """``estimate`` with each undetermined parameter at its box's geometric centre."""
+    out = dict(estimate)
+    for n, d in zip(names, determined):
+        if not d:
+            lo, hi = gf.default_range(base, n)
+            out[n] = float(np.sqrt(lo * hi))
+    return out
 
 
 def _hyper(record: dict | None) -> dc.Hyper:
@@ -108,10 +126,13 @@ def from_fit(result: gf.FitResult, base: gp.Parameters, tolerances: dict | None 
     """What a :class:`growjax.fit.FitResult` of ``base`` knows: θ at its estimate, its covariance of ln θ, its
     residual model and tolerances (``tolerances`` overrides them; None: the fit's, else the default budget)."""
     names = tuple(result.names)
-    determined = [result.standard_error.get(n) is not None for n in names]
-    cov = _covariance(base, names, result.covariance_log, determined)
+    raw = np.asarray(result.covariance_log, float)
+    determined = _determined(base, names, raw, [result.standard_error.get(n) is not None for n in names])
+    cov = _covariance(base, names, raw, determined)
+    est = _centred(base, names, {n: result.estimate[n] for n in names}, determined)
     tol = dict(result.tolerances) if tolerances is None and result.tolerances else tl.budget(base, tolerances, names)
-    return Knowledge(gp.replace(base, **result.estimate), names, cov, tol, _hyper(result.discrepancy), "fit")
+    return Knowledge(gp.replace(base, **{**result.estimate, **est}), names, cov, tol, _hyper(result.discrepancy),
+                     "fit")
 
 
 def from_summary(path, base: gp.Parameters, names, tolerances: dict | None = None) -> Knowledge:
@@ -133,7 +154,9 @@ def from_summary(path, base: gp.Parameters, names, tolerances: dict | None = Non
     est = {n: float(fitted[n]["estimate"]) for n in names}
     se = [fitted[n].get("standard_error") for n in names]
     var = [0.0 if s is None else (float(s) / est[n]) ** 2 for s, n in zip(se, names)]
-    cov = _covariance(base, names, np.diag(var), [s is not None for s in se])
+    determined = _determined(base, names, np.diag(var), [s is not None for s in se])
+    cov = _covariance(base, names, np.diag(var), determined)
+    est = _centred(base, names, est, determined)
     saved = record.get("tolerances") or None
     tol = dict(saved) if tolerances is None and saved else tl.budget(base, tolerances, names)
     return Knowledge(gp.replace(base, **est), names, cov, tol, _hyper(record.get("discrepancy")), str(path))

@@ -3,17 +3,18 @@ objective the optimiser minimises and its gradient by forward mode through the m
 
 The criterion is Bayesian: the posterior covariance depends on where θ and the rig really are, so it is taken at
 ``points`` of w = (ln θ/θ̂, b) (the estimate on the nominal rig first, then draws from the prior
-blockdiag(Σ_θ, U), seeded and held fixed) and averaged as log E_k[exp(criterion_k)] (for the A-criterion, the
-log of the expected sum of relative variances). An input whose information comes from a feature the nominal rig
-has and the others lack (a growth threshold crossed just so) is worth what it is worth on average. With one point
-the design is local, at the estimate.
+blockdiag(Σ_θ, U), seeded and held fixed) and averaged (for the A-criterion, the log of the expected sum of
+relative variances). An input whose information comes from a feature the nominal rig has and the others lack (a
+growth threshold crossed just so) is worth what it is worth on average. With one point the design is local, at
+the estimate. To that average is added what the fit's linearised rig misses (:func:`.sensitivity.remainder`, at
+``offsets``: one plain solve per draw of the rig): an input that drives the rig's nonlinearity hard can look
+informative to the linearisation and not deliver, and the fit of its data would then claim more than it knows.
 
-objective(x) = that average + the limits' penalty (:func:`.constraints.penalty`) at the estimate. Its slope: exact
-by forward mode through the model (:func:`value_and_gradient`), or by differences over a step of the demand
-(:func:`smoothed_gradient`, what the descent follows: see there why). Arrays are leaves, so one compiled program
-serves every design of one problem's shapes. What the fit's linearised rig misses
-(:func:`.sensitivity.remainder`, at ``offsets``) is left out of the objective (one plain solve per draw) and added
-to the reported covariances (:func:`covariances`).
+objective(x) = that criterion (the one the design's table reports, :func:`covariances`) + the limits' penalty
+(:func:`.constraints.penalty`) at the estimate. Its slope: exact by forward mode through the model
+(:func:`value_and_gradient`), or by differences over a step of the demand (:func:`smoothed_gradient`, what the
+descent follows: see there why). Arrays are leaves, so one compiled program serves every design of one problem's
+shapes.
 """
 
 from __future__ import annotations
@@ -41,7 +42,7 @@ from growjax.simulate import as_arrays
 
 POINTS = 4  # points of (θ, rig) the criterion is averaged over
 DEMAND_STEP = 0.02  # share of p_max by which :func:`smoothed_gradient` moves each knot
-NONLINEAR_DRAWS = 16  # draws of the rig on which what its linearisation misses is measured (reports)
+NONLINEAR_DRAWS = 16  # draws of the rig on which what its linearisation misses is measured
 
 
 class Problem(eqx.Module):
@@ -89,15 +90,19 @@ class Problem(eqx.Module):
         return dcrit.posterior(s, self.times, self.hyper, self.precision_known, self.precision_alone,
                                self.sensors if sensors is None else sensors, self.pressure_noise, rem)
 
-    def parts(self, inputs, breaks=None):
-        """(criterion averaged over the points, penalty at the estimate) of ``inputs`` (traceable)."""
-        def at(z):
-            pred = self.predict(inputs, breaks, z)
-            return self.criterion(pred), dcon.penalty(pred.sensitivities, self.prior_covariance, self.limits,
-                                                      self.spread)
+    def covariance(self, inputs, breaks=None):
+        """The covariance (m, m) of the estimate of w with what is known that the table reports
+        (:func:`covariances`' ``"known"``): averaged over the points, plus what the rig's linearisation misses at
+        the estimate (at the problem's ``offsets``); and the sensitivities at the estimate (traceable)."""
+        first = self.predict(inputs, breaks, self.points[0], nonlinear=True)
+        rest = jax.lax.map(lambda z: self.predict(inputs, breaks, z).covariance_linear, self.points[1:])
+        mean = (first.covariance_linear + rest.sum(axis=0)) / self.points.shape[0]
+        return mean + (first.covariance - first.covariance_linear), first.sensitivities
 
-        values, penalties = jax.lax.map(at, self.points)
-        return jax.nn.logsumexp(values) - jnp.log(values.shape[0]), penalties[0]
+    def parts(self, inputs, breaks=None):
+        """(criterion of :meth:`covariance`, penalty at the estimate) of ``inputs`` (traceable)."""
+        cov, s = self.covariance(inputs, breaks)
+        return self.criterion.of_covariance(cov), dcon.penalty(s, self.prior_covariance, self.limits, self.spread)
 
     def objective(self, x):
         """criterion + penalty of design x (K,); +inf where the model failed."""
@@ -113,8 +118,8 @@ def make(knowledge: Knowledge, space: DesignSpace, criterion: str = "A", sensors
     the parameters of interest; ``points``: the points of (θ, rig) the criterion is averaged over (1: the local
     design at the estimate; more: the estimate and draws from the prior, seeded); ``config``: the fast
     configuration's settings over the run (default :meth:`growjax.design.space.DesignSpace.config`);
-    ``nonlinear_draws``: draws of the rig (seeded) on which what its linearisation misses is measured for the
-    reports (0: none)."""
+    ``nonlinear_draws``: draws of the rig (seeded) on which what its linearisation misses is measured, in the
+    objective and the reports alike (0: none, the linearised criterion)."""
     sensors = dcrit.check_sensors(sensors)
     if points < 1:
         raise ValueError(f"points must be at least 1, got {points}")
@@ -140,24 +145,16 @@ def make(knowledge: Knowledge, space: DesignSpace, criterion: str = "A", sensors
 
 @eqx.filter_jit
 def value_and_gradient(problem: Problem, x):
-    """(objective, its exact gradient (K − 1,)) of design x by forward mode through the model: at each point, the
-    sensitivities differentiated again through the solver's loop along every design variable (the map over
-    points outside the batch of directions)."""
+    """(objective, its exact gradient (K − 1,)) of design x by forward mode through the model: the sensitivities
+    (and the plain solves of what the rig's linearisation misses) differentiated again through the solver's loop
+    along every design variable."""
     units = jnp.eye(x.shape[0], dtype=x.dtype)
 
-    def at(z):
-        def f(v):
-            pred = problem.predict(problem.inputs(v), None, z)
-            return problem.criterion(pred), dcon.penalty(pred.sensitivities, problem.prior_covariance,
-                                                         problem.limits, problem.spread)
+    def f(v):
+        return sum(problem.parts(problem.inputs(v)))
 
-        value, tangent = jax.vmap(lambda e: jax.jvp(f, (x,), (e,)), out_axes=(None, 0))(units)
-        return value, tangent
-
-    (crit, pen), (d_crit, d_pen) = jax.lax.map(at, problem.points)
-    weights = jax.nn.softmax(crit)
-    value = jax.nn.logsumexp(crit) - jnp.log(crit.shape[0]) + pen[0]
-    return jnp.where(jnp.isfinite(value), value, jnp.inf), weights @ d_crit + d_pen[0]
+    value, tangent = jax.vmap(lambda e: jax.jvp(f, (x,), (e,)), out_axes=(None, 0))(units)
+    return jnp.where(jnp.isfinite(value), value, jnp.inf), tangent
 
 
 @eqx.filter_jit
@@ -203,7 +200,7 @@ def covariances(problem: Problem, info_length, info_pressure, cross, sensors) ->
 
 @eqx.filter_jit
 def evaluate(problem: Problem, x):
-    """(criterion averaged over the points, penalty) of design x (K − 1,): the objective's two parts."""
+    """(criterion, penalty) of design x (K − 1,): the objective's two parts (:meth:`Problem.parts`)."""
     return problem.parts(problem.inputs(x))
 
 

@@ -199,9 +199,8 @@ def _search(problem, knowledge, space, random, starts, iterations, n_draws, seed
 
 def _by_reported(problem, space, descents, batch, starts: int) -> np.ndarray:
     """The descents' results and the best random inputs (S, K − 1), ordered by the criterion the table reports
-    (with what the rig's linearisation misses): the descent follows the linearised criterion, which an input that
-    drives the rig's nonlinearity hard can satisfy without delivering, so the design is chosen by the reported
-    one and is never one the table ranks below the best random input."""
+    (the objective less the limits' penalty, which the check over the draws replaces): never a design the table
+    ranks below the best random input."""
     xs = [d.x for d in descents] + [batch.designs[i] for i in batch.order()[: max(starts, 1)]]
     if isinstance(problem, ddis.Discrimination):
         return np.stack(xs)
