@@ -37,7 +37,7 @@ on the machine that writes the page is kept as it was.
 | `benchmarks/fit_speed.py` | the fit's cost under the discrepancy likelihood against independent noise, and with the rig inferred against it fixed |
 | `benchmarks/rig_agreement.py` | Y's interval from the fit (rig inferred; rig fixed) beside the posterior's, coverage and the posterior's band, rig nominal and drawn |
 | `benchmarks/set_speed.py` | a joint fit of eight experiments against one experiment's fit |
-| `benchmarks/sets.py` | joint fits of sets of four experiments on one drawn rig: coverage, against each experiment alone and against rig errors taken per experiment |
+| `benchmarks/sets.py` | joint fits of sets of four experiments on one drawn rig: coverage, against each experiment alone and against rig errors taken per experiment; `sets_relinearised_singles`: `--relinearise-singles --joint-from sets.json` (the same sets, each experiment alone fitted with the rig relinearised) |
 | `benchmarks/mixed_set.py` | a forward experiment with the pressure recorded and a stepper experiment of one robot, alone and jointly |
 | `benchmarks/population.py` | populations of eight robots on one drawn rig: coverage of the population's median and spread, and of a held-out robot's predictive band |
 | `benchmarks/discover_discrepancy.py` | discovery's answer on data with a discrepancy but no catalogue effect |
@@ -344,6 +344,7 @@ EXTRACTORS = {"design": rows_design, "design_relinearised": rows_design, "design
               "control": rows_control, "least_squares": rows_least_squares,
               "least_squares_linearize": rows_least_squares, "rig_agreement": rows_rig_agreement,
               "set_speed": rows_set_speed, "population": rows_population, "sets": rows_sets,
+              "sets_relinearised_singles": rows_sets,
               "sweep_resume": rows_sweep_resume, "mixed_set": rows_mixed_set}
 
 
