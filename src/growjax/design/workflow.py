@@ -199,18 +199,12 @@ def _search(problem, knowledge, space, random, starts, iterations, n_draws, seed
 
 def _by_reported(problem, space, descents, batch, starts: int) -> np.ndarray:
     """The descents' results and the best random inputs (S, K − 1), ordered by the criterion the table reports
-    (the objective less the limits' penalty, which the check over the draws replaces): never a design the table
+    (the objective's, less the limits' penalty, which the check over the draws replaces): never a design the table
     ranks below the best random input."""
-    xs = [d.x for d in descents] + [batch.designs[i] for i in batch.order()[: max(starts, 1)]]
+    xs = np.stack([d.x for d in descents] + [batch.designs[i] for i in batch.order()[: max(starts, 1)]])
     if isinstance(problem, ddis.Discrimination):
-        return np.stack(xs)
-    return np.stack(xs)[np.argsort([_reported(problem, space.inputs(x), problem.breaks) for x in xs], kind="stable")]
-
-
-def _reported(problem, inputs, breaks) -> float:
-    """The criterion of the table's row for ``inputs`` under the problem's sensors."""
-    covs = _covariances(problem, inputs, breaks, [problem.sensors])[0]
-    return float(problem.criterion.of_covariance(jax.numpy.asarray(covs["known"])))
+        return xs
+    return xs[np.argsort(dprob.evaluate_many(problem, xs)[:, 0], kind="stable")]
 
 
 def _covariances(problem, inputs, breaks, sets) -> list[dict]:
