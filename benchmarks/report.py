@@ -41,7 +41,7 @@ on the machine that writes the page is kept as it was.
 | `benchmarks/mixed_set.py` | a forward experiment with the pressure recorded and a stepper experiment of one robot, alone and jointly |
 | `benchmarks/population.py` | populations of eight robots on one drawn rig: coverage of the population's median and spread, and of a held-out robot's predictive band |
 | `benchmarks/discover_discrepancy.py` | discovery's answer on data with a discrepancy but no catalogue effect |
-| `benchmarks/design.py` | the designed experiment: the criterion against random admissible inputs and the published pulse train, and replications on drawn rigs, predicted sd against realised; `design_discrimination`: `--discriminate A B` (discovery's verdicts under the discrimination design and the published pulse train); `design_relinearised`: `--design-from design.json --relinearise` (the same replications, fitted with the rig relinearised) |
+| `benchmarks/design.py` | the designed experiment: the criterion against random admissible inputs and the published pulse train, and replications on drawn rigs, predicted sd against realised; `design_discrimination`: `--discriminate A B` (discovery's verdicts under the discrimination design and the published pulse train); `design_relinearised`: `--design-from design.json --relinearise` (the same replications, fitted with the rig relinearised); `design_landscape`: `--random 1000 --replications 0 --safety-draws 0` (the design against 1 000 random admissible inputs) |
 | `benchmarks/least_squares.py` | growjax's Levenberg–Marquardt engine against optimistix's solvers on the fit's and the control profile's problems; `least_squares_linearize`: `--cases fit_Y --solvers lm_linearize --out benchmarks/results/least_squares_linearize.json` (optimistix linearising the model itself) |
 """
 
@@ -297,7 +297,8 @@ def rows_design(r: dict) -> list[tuple[str, str, str]]:
     out = [("criterion, ln of the predicted variance of ln θ (lower is better): design / best random input / "
             "published pulse train",
             f"{land['design_criterion']:.4f} / {land['random_best_criterion']:.4f} / {land['published_criterion']:.4f}",
-            f"{land['random_admissible']} admissible of {land['random_drawn']} random inputs; design beats the best: "
+            f"{land['random_admissible']} admissible of {land['random_drawn']} random inputs (their criterion's 10/50/90 % "
+            f"quantiles {' / '.join(f'{v:.2f}' for v in land['random_quantiles'].values())}); design beats the best: "
             f"{'yes' if land['design_beats_best_random'] else 'no'}")]
     for label in ("design", "published pulse train"):
         for name, g in rep[label].items():
@@ -333,7 +334,7 @@ def rows_design_discrimination(r: dict) -> list[tuple[str, str, str]]:
     return out
 
 
-EXTRACTORS = {"design": rows_design, "design_relinearised": rows_design, "design_discrimination": rows_design_discrimination, "simulate": rows_simulate, "sweep": rows_sweep, "agreement": rows_agreement,
+EXTRACTORS = {"design": rows_design, "design_relinearised": rows_design, "design_landscape": rows_design, "design_discrimination": rows_design_discrimination, "simulate": rows_simulate, "sweep": rows_sweep, "agreement": rows_agreement,
               "windows_public": rows_windows, "coverage_discrepancy": rows_coverage,
               "coverage_discrepancy_nominal": rows_coverage, "predict_public": rows_predict,
               "fit_speed": rows_fit_speed, "discover_discrepancy": rows_discover_discrepancy,
