@@ -19,6 +19,8 @@ What is known: the default fit (``growjax.fit.fit``, the default likelihood) of 
     realised sd of ln θ̂ over the replications against the predicted sd of the experiment alone, the fits'
     mean reported sd and the coverage of their 90 % intervals, and the design's realised sd against the
     published pulse train's. ``--workers`` runs replications in parallel processes (spawned; each compiles).
+(c) Safety: the design and the published pulse train run by the reference configuration over ``--safety-draws``
+    fresh draws of the rig and θ (:func:`safety`), the runs over the membrane limit and the stroke counted.
 
 With ``--discriminate A B`` (``python benchmarks/design.py --discriminate retraction_folding trapped_air
 --duration 3 --knot-spacing 0.1 --random 16 --replications 4``) it checks the design for model discrimination
