@@ -212,8 +212,8 @@ def test_posterior_command_writes_inference_data_and_the_issue_keys(tmp_path):
 
 
 def test_fit_passes_relinearise_to_the_fit(monkeypatch, tmp_path, capsys):
-    """``growjax fit --relinearise`` asks the single experiment's fit to take the rig's sensitivities again; without
-    it the fit linearises the rig once (what the posterior does)."""
+    """``growjax fit`` asks the single experiment's fit to take the rig's sensitivities again where the data put the
+    rig (the default, as the posterior does); ``--no-relinearise`` linearises it once, at nominal."""
     from growjax import cli
     from growjax import fit as gf
 
@@ -225,6 +225,6 @@ def test_fit_passes_relinearise_to_the_fit(monkeypatch, tmp_path, capsys):
 
     monkeypatch.setattr(gf, "fit", stop)
     data = "src/growjax/datasets/synthetic_forward.csv"
-    for extra in ([], ["--relinearise"]):
+    for extra in ([], ["--relinearise"], ["--no-relinearise"]):
         assert cli.main(["fit", data, "--out", str(tmp_path), "--quiet", *extra]) == 2
-    assert seen == [False, True] and "stopped before fitting" in capsys.readouterr().err
+    assert seen == [True, True, False] and "stopped before fitting" in capsys.readouterr().err

@@ -225,10 +225,11 @@ def build_parser():
     fit.add_argument("--rig-errors", choices=["shared", "experiment"], default="shared",
                      help="with several experiments: one set of rig errors per rig, shared by its experiments, or "
                           "one per experiment (treats them as independent: over-confident on one rig)")
-    fit.add_argument("--relinearise", action="store_true",
+    fit.add_argument("--relinearise", action=argparse.BooleanOptionalAction, default=True,
                      help="one experiment, the rig inferred: take the rig's sensitivities again where the data put "
-                          "the rig, until it settles (as a set's joint fit does); for an input that drives the "
-                          "rig's nonlinearity hard, such as a designed one")
+                          "the rig, until it settles, as a set's joint fit and the posterior do (default); "
+                          "--no-relinearise: once, at nominal (faster; over-confident where the rig is off by "
+                          "a tolerance or more)")
 
     post = sub.add_parser("posterior", formatter_class=fmt,
                           help="NUTS posterior of Y, ext, n (or Y, phi_L, n_L) and the noise; of a population of "

@@ -99,16 +99,19 @@ def sensitivity(length_of, base: gp.Parameters, tol: dict, reference=None, centr
     return g
 
 
-def length_sensitivity(theta: dict, base: gp.Parameters, inputs, config, times, tol: dict) -> np.ndarray:
+def length_sensitivity(theta: dict, base: gp.Parameters, inputs, config, times, tol: dict,
+                       central: bool = False) -> np.ndarray:
     """g (n, q): the model's length change (m) at ``times`` (n,) s per unit ln ψ of each toleranced parameter of
-    ``tol``, the secant from ψ to ψ·e^u at the values ``theta`` {qualified name: value} (one compiled run of
-    the model, the rig and θ as its arguments: compiled once per configuration and shapes)."""
+    ``tol``, the secant from ψ to ψ·e^u (``central``: the slope at ψ, :func:`sensitivity`) at the values
+    ``theta`` {qualified name: value} (one compiled run of the model, the rig and θ as its arguments: compiled
+    once per configuration and shapes)."""
     from growjax.simulate import as_arrays, input_breaks, sample_times
 
     ts = sample_times(jnp.asarray(times, float), config)
     values = {n: jnp.asarray(v, float) for n, v in theta.items()}
     breaks = input_breaks(inputs, config)
-    return sensitivity(lambda rig: _length(rig, values, inputs, breaks, config, ts), as_arrays(base), tol)
+    return sensitivity(lambda rig: _length(rig, values, inputs, breaks, config, ts), as_arrays(base), tol,
+                       central=central)
 
 
 @eqx.filter_jit

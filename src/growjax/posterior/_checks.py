@@ -12,6 +12,7 @@ from jaxtyping import ArrayLike, Float
 
 from growjax import discrepancy as dc
 from growjax import emulator as em
+from growjax import params as gp
 from growjax import tolerance as tl
 from growjax.emulator import predicted_length
 
@@ -92,9 +93,11 @@ def forecast(result, priors, base, inputs, config, times: Float[ArrayLike, " T"]
     sigma = np.asarray(post["sigma"]).ravel()
     take = np.random.default_rng(seed).choice(sigma.size, size=min(max_draws, sigma.size), replace=False)
     thetas = {p.name: jnp.asarray(np.asarray(post[p.site]).ravel()[take]) for p in priors}
+    res = result.residuals
+    if res is not None and res.centre is not None:  # the model runs where the posterior linearised the rig
+        base = gp.replace(base, **{n: gp.get(base, n) * np.exp(c) for n, c in zip(res.tolerance_names, res.centre)})
     mu = np.asarray(jax.jit(jax.vmap(lambda th: predicted_length(th, base, inputs, config, jnp.asarray(union))))(thetas))
     at_fit, at_new = np.searchsorted(union, t_fit), np.searchsorted(union, t_new)
-    res = result.residuals
     rng = np.random.default_rng(seed + 1)
     if res is None:
         return mu[:, at_new] + sigma[take][:, None] * rng.standard_normal((take.size, at_new.size))
@@ -103,9 +106,12 @@ def forecast(result, priors, base, inputs, config, times: Float[ArrayLike, " T"]
     g = u = None
     if res.sensitivity is not None:
         mean_theta = {n: float(np.mean(v)) for n, v in thetas.items()}
-        g = jnp.asarray(tl.length_sensitivity(mean_theta, base, inputs, config, union,
-                                              dict(zip(res.tolerance_names, map(float, res.tolerance)))))
-        u = jnp.asarray(res.tolerance)
+        g_np = tl.length_sensitivity(mean_theta, base, inputs, config, union,
+                                     dict(zip(res.tolerance_names, map(float, res.tolerance))),
+                                     central=res.centre is not None)
+        g, u = jnp.asarray(g_np), jnp.asarray(res.tolerance)
+        offset = np.asarray(res.rig_mean(g_np))  # the rig term's prior mean where the rig is not nominal
+        mu = mu + offset
     flat = lambda site: jnp.asarray(np.asarray(post[site]).ravel()[take]) if site in post else None
     amp, ell, tau = flat("delta_amplitude"), flat("delta_time_scale"), flat("noise_time")
     hyper = dc.Hyper(jnp.zeros(take.size) if amp is None else amp, jnp.ones(take.size) if ell is None else ell,

@@ -67,8 +67,10 @@ def growth_model(length=None, *, mean_length, priors: Sequence[Prior], noise_sca
 class Residuals:
     """What the likelihood of :func:`growth_model` holds besides the model: the discrepancy (``"matern32"`` or
     ``"none"``), the sample times (n,) s, the samples scored (n,) bool, and the rig's tolerances: sensitivities
-    (n, q) m per unit ln ψ, relative sds (q,), names. The filter runs over the scored samples alone (the
-    likelihood of an interpolated record is that of its keyframes)."""
+    (n, q) m per unit ln ψ, relative sds (q,), names, and ``centre`` (q,), the rig's errors ln(ψ/ψ₀) where the
+    model and the sensitivities are taken (None: nominal). The rig's errors b from there have the prior
+    N(−centre, u²) (their tolerance is about nominal), so the rig term's mean is −g·centre. The filter runs over
+    the scored samples alone (the likelihood of an interpolated record is that of its keyframes)."""
 
     discrepancy: str
     times: np.ndarray
@@ -76,32 +78,43 @@ class Residuals:
     sensitivity: np.ndarray | None = None
     tolerance: np.ndarray | None = None
     tolerance_names: tuple = ()
+    centre: np.ndarray | None = None
 
     @property
     def index(self) -> np.ndarray:
         return np.flatnonzero(self.observed)
 
+    def rig_mean(self, sensitivity=None) -> np.ndarray | float:
+        """The rig term's prior mean, m: −g·centre at the samples of ``sensitivity`` (default this likelihood's);
+        0 at nominal."""
+        g = self.sensitivity if sensitivity is None else sensitivity
+        if self.centre is None or g is None:
+            return 0.0
+        return -np.asarray(g) @ np.asarray(self.centre)
+
     def _terms(self, index):
         g = None if self.sensitivity is None else jnp.asarray(np.asarray(self.sensitivity)[index])
         u = None if self.tolerance is None else jnp.asarray(self.tolerance)
-        return jnp.asarray(np.asarray(self.times)[index]), g, u
+        offset = jnp.asarray(np.asarray(self.rig_mean())[index] if self.centre is not None and g is not None else 0.0)
+        return jnp.asarray(np.asarray(self.times)[index]), g, u, offset
 
     def distribution(self, mu, hyper):
         """The scored samples' distribution (event shape: the number scored) around the model ``mu`` (n,)."""
         index = self.index
-        t, g, u = self._terms(index)
-        return dc.distribution(mu[index], t, hyper, g, u)
+        t, g, u, offset = self._terms(index)
+        return dc.distribution(mu[index] + offset, t, hyper, g, u)
 
     def replicate(self, mu, hyper):
         """Replicated data at every sample (event shape (n,)) around ``mu`` (n,)."""
-        t, g, u = self._terms(np.arange(len(self.times)))
-        return dc.distribution(mu, t, hyper, g, u)
+        t, g, u, offset = self._terms(np.arange(len(self.times)))
+        return dc.distribution(mu + offset, t, hyper, g, u)
 
     def conditional(self, y, mu, hyper):
         """Mean (n,) m and variance (n,) m² of the discrepancy and rig term at every sample given the data ``y``
         (n,) at the scored samples (:func:`growjax.discrepancy.smooth`)."""
-        t, g, u = self._terms(np.arange(len(self.times)))
-        return dc.smooth(jnp.asarray(y) - mu, t, hyper, g, u, jnp.asarray(self.observed))
+        t, g, u, offset = self._terms(np.arange(len(self.times)))
+        mean, var = dc.smooth(jnp.asarray(y) - mu - offset, t, hyper, g, u, jnp.asarray(self.observed))
+        return mean + offset, var
 
     def pointwise(self, y, mu, hyper):
         """(n,) one-step-ahead log-densities of ``y`` at the scored samples, 0 elsewhere."""

@@ -76,6 +76,7 @@ def sample(
     chain_method: str | None = None,
     discrepancy: str = "matern32",
     tolerances: dict | None = None,
+    rig_centre: dict | None = None,
 ) -> PosteriorResult:
     """NUTS over the priors and σ given a measured length (m) at ``times`` (s).
 
@@ -95,7 +96,11 @@ def sample(
 
     ``discrepancy`` and ``tolerances``: the likelihood, as in :func:`growjax.fit.fit` (:func:`growth_model`): the
     discrepancy's amplitude and time scale are sampled with the parameters; the rig's tolerances enter through
-    the length's sensitivities at the start point (linearised), marginalised exactly.
+    the length's sensitivities (linearised), marginalised exactly. The rig is linearised where the fit puts it:
+    ``rig_centre`` {tolerance: ln(ψ/ψ₀)}, or None to take it from :func:`growjax.fit.fit` on the same data and
+    likelihood (its ``rig_offset``; nominal unless the model's departure from its linearisation there would move
+    θ, :func:`growjax.fit.linearisation_shift`), so that the fit and the posterior linearise the rig alike. The
+    model runs with the rig there, and the rig's errors keep their prior about nominal.
 
     Returns a DataTree (:func:`inference_data`: the sampled sites in the posterior, the replicated and the
     model's length in the posterior predictive, the pointwise log-likelihood for LOO, the measured length as
@@ -113,9 +118,15 @@ def sample(
     start = time.perf_counter()
     if emulate is True:
         _progress.note("posterior: building the emulator", progress)
+    if discrepancy not in dc.KINDS:
+        raise ValueError(f"discrepancy must be one of {dc.KINDS}, got {discrepancy!r}")
+    tol = tl.budget(base, tolerances, [p.name for p in priors], use_default=tolerances is None and discrepancy != "none")
+    centre, linearisations = _rig_centre(rig_centre, tol, times, length, inputs, priors, base, config, window,
+                                         discrepancy, tolerances, seed, progress)
+    base = rig_at(base, tol, centre)
     mean, model_error, emu_info = _mean_length(emulate, priors, base, inputs, config, t, seed, start)
     _progress.note(f"posterior: the likelihood ({discrepancy} discrepancy)", progress)
-    residuals, extra_init = _likelihood_terms(discrepancy, tolerances, t, y, mean, priors, base, inputs, config, seed)
+    residuals, extra_init = _likelihood_terms(discrepancy, tol, t, y, mean, priors, base, inputs, config, seed, centre)
 
     def make_model(mean_length, priors=priors):
         return functools.partial(growth_model, mean_length=mean_length, priors=priors, model_error=model_error,
@@ -145,7 +156,8 @@ def sample(
     summary.update({"wall_s": wall, "emulator": emu_info, "laplace_s": precondition_s if emulate is False else None,
                     "chain_method": mcmc.chain_method, "coordinates": {p.site: coordinate(p) for p in sampled},
                     "chains": chains, "warmup": warmup, "samples": samples, "discrepancy": discrepancy,
-                    **_likelihood_record(residuals, y)})
+                    "rig_centre": dict(zip(tol, map(float, centre))) if centre is not None else {},
+                    "linearisations": linearisations, **_likelihood_record(residuals, y)})
     return PosteriorResult(idata, summary, wall, residuals, (t, y))
 
 
@@ -164,15 +176,43 @@ def _mean_length(emulate, priors, base, inputs, config, t, seed: int, start: flo
     return emulated_mean(emu), float(emu.error_rms), emu_info
 
 
-def _likelihood_terms(discrepancy: str, tolerances, t, y, mean, priors, base, inputs, config, seed: int):
+def _likelihood_terms(discrepancy: str, tol: dict, t, y, mean, priors, base, inputs, config, seed: int, centre=None):
     """(:class:`Residuals` or None for independent noise, start values of σ and the discrepancy's sites)."""
-    if discrepancy not in dc.KINDS:
-        raise ValueError(f"discrepancy must be one of {dc.KINDS}, got {discrepancy!r}")
-    tol = tl.budget(base, tolerances, [p.name for p in priors], use_default=tolerances is None and discrepancy != "none")
     if discrepancy == "none" and not tol:
         return None, {}
-    residuals, hyper = build_residuals(discrepancy, t, y, mean, priors, base, inputs, config, tol, seed)
+    residuals, hyper = build_residuals(discrepancy, t, y, mean, priors, base, inputs, config, tol, seed, centre)
     return residuals, {**residuals.hyper_sites(hyper), "sigma": float(hyper.noise)}
+
+
+def _rig_centre(given, tol: dict, times, length, inputs, priors, base, config, window, discrepancy: str, tolerances,
+                seed: int, progress: bool):
+    """(the rig's errors (q,) ln(ψ/ψ₀) where the posterior linearises it, or None at nominal; the fit's number of
+    linearisations, 0 when given or without tolerances): ``given`` {tolerance: value}, or the fit's."""
+    if not tol:
+        return None, 0
+    if given is not None:
+        unknown = sorted(set(given) - set(tol))
+        if unknown:
+            raise ValueError(f"rig_centre names {unknown}, which carry no tolerance here (tolerances: {sorted(tol)})")
+        centre = np.array([float(given.get(name, 0.0)) for name in tol])
+        return (centre if np.any(centre != 0) else None), 0
+    from growjax import fit as gf
+
+    _progress.note("posterior: the fit, for where the data put the rig", progress)
+    fitted = gf.fit(times, length, inputs, free=[p.name for p in priors], base=base, config=config, window=window,
+                    seed=seed, discrepancy=discrepancy, tolerances=tolerances, relinearise=True)
+    centre = np.array([fitted.rig_offset.get(name, 0.0) for name in tol])
+    if fitted.linearisations == 1 or not np.all(np.isfinite(centre)):  # the rig stayed at nominal
+        return None, fitted.linearisations
+    return centre, fitted.linearisations
+
+
+def rig_at(base: gp.Parameters, tol: dict, centre) -> gp.Parameters:
+    """``base`` with the toleranced parameters of ``tol`` at ψ₀·e^centre (``centre`` (q,) in their order; None:
+    ``base``)."""
+    if centre is None:
+        return base
+    return gp.replace(base, **{name: gp.get(base, name) * np.exp(centre[j]) for j, name in enumerate(tol)})
 
 
 def _nuts_start(make_model, priors, mean, y, seed: int, emulate, extra_init: dict):
@@ -234,19 +274,24 @@ def _likelihood_record(residuals: Residuals | None, y) -> dict:
 
 
 def build_residuals(discrepancy: str, times, length, mean_length, priors, base, inputs, config, tol: dict,
-                    seed: int = 0) -> tuple[Residuals, dc.Hyper]:
+                    seed: int = 0, centre=None) -> tuple[Residuals, dc.Hyper]:
     """The :class:`Residuals` of a posterior and its hyperparameters' start: the samples scored
     (:func:`growjax.experiment.informative_samples` with a discrepancy), the rig's sensitivities at the scout's
-    best θ, and the hyperparameters' mode given the residuals there."""
+    best θ (``base`` holds the rig where it is linearised; ``centre`` (q,) its errors ln(ψ/ψ₀) there, None at
+    nominal: the slope there, as the fit takes it, rather than the secant from nominal), and the hyperparameters'
+    mode given the residuals there."""
     theta, _, _, _ = _scout(priors, mean_length, length, seed)
     observed = experiment.informative_samples(length) if discrepancy != "none" else np.ones(len(length), bool)
     g = u = None
     if tol:
-        g = tl.length_sensitivity(theta, base, inputs, config, times, tol)
+        g = tl.length_sensitivity(theta, base, inputs, config, times, tol, central=centre is not None)
         u = np.asarray(list(tol.values()))
-    r = np.asarray(length) - np.asarray(jax.jit(mean_length)({k: jnp.asarray(v) for k, v in theta.items()}))
+    residuals = Residuals(discrepancy, np.asarray(times), observed, g, u, tuple(tol),
+                          None if centre is None else np.asarray(centre, float))
+    r = (np.asarray(length) - np.asarray(jax.jit(mean_length)({k: jnp.asarray(v) for k, v in theta.items()}))
+         - residuals.rig_mean())
     hyper = dc.estimate(r, times, discrepancy, g, u, observed)
-    return Residuals(discrepancy, np.asarray(times), observed, g, u, tuple(tol)), hyper
+    return residuals, hyper
 
 
 def observation_draws(mean_length, sigma, model_error: float, observed, seed: int, residuals: Residuals | None = None,
