@@ -10,15 +10,20 @@ through its linearised sensitivity g = ∂L/∂ln ψ. Shared errors do not avera
 evidence about the rig's effect (and under-covers where they share one rig).
 
 The runs' simulations and Jacobians run batched: runs with the same drive, sample count and input structure are
-stacked (breaks padded to a common length) and solved by one ``vmap``-ed program; the Jacobian of each run is
-taken in its own parameters and scattered into the set's columns.
+stacked (breaks padded to a common length) and solved by one ``vmap``-ed program, in equal slices on one thread
+per core (a compiled run releases the GIL; each run's solve is its own, whichever runs share its slice); the
+Jacobian of each run is taken in its own parameters and scattered into the set's columns, and the rig's secants
+need the residuals alone.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
+import os
 import time
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 
 import equinox as eqx
 import jax
@@ -258,7 +263,8 @@ def _gls(batch, layout: _Layout, likelihoods, hypers, z, b, centre, bounds, disc
     cost, converged = np.nan, False
     for _ in range(gf.OUTER_STEPS):
         outs = batch.linearised(z, layout)
-        hypers = [lik.estimate(r, discrepancy, h) for lik, (r, _), h in zip(likelihoods, outs, hypers)]
+        with ThreadPoolExecutor(max_workers=max(1, min(len(outs), os.cpu_count() or 1))) as pool:  # as _sliced
+            hypers = list(pool.map(lambda a: a[0].estimate(a[1][0], discrepancy, a[2]), zip(likelihoods, outs, hypers)))
         w_new, cost, converged, _, jac_w = levenberg_marquardt(
             lambda w, hs=tuple(hypers): _whitened(batch.linearised(w[:p_all], layout), likelihoods, layout, hs,
                                                  w[p_all:], centre),
@@ -318,15 +324,21 @@ class _Batch:
 
     def linearised(self, z, layout: _Layout, stacked=None):
         """[(r (m_e,), J (m_e, p))] per run at the set's coordinates z (P,)."""
+        return self._run(_batched, z, layout, stacked)
+
+    def residuals(self, z, layout: _Layout, stacked=None):
+        """[(r (m_e,), None)] per run at the set's coordinates z (P,): the runs alone, no tangents."""
+        return self._run(_batched_residuals, z, layout, stacked)
+
+    def _run(self, program, z, layout: _Layout, stacked=None):
         clock = time.perf_counter()
         z_local = np.asarray(z)[layout.index] + layout.offset
         out = [None] * self.size
         for k, (members, problem) in enumerate(self.groups):
             pr = problem if stacked is None else stacked[k]
-            r, jac = _batched(jnp.asarray(z_local[members]), pr)
-            r, jac = np.asarray(r), np.asarray(jac)
+            results = _sliced(program, jnp.asarray(z_local[members]), pr, len(members))
             for i, e in enumerate(members):
-                out[e] = (r[i], jac[i])
+                out[e] = tuple(None if x is None else x[i] for x in results)
         self.simulate_s += time.perf_counter() - clock
         return out
 
@@ -336,7 +348,7 @@ class _Batch:
         every run of a group in one batched solve)."""
         cols = [[] for _ in range(self.size)]
         lo_hi = (-0.5, 0.5) if central else (0.0, 1.0)
-        r0 = None if central else self.linearised(z, layout)
+        r0 = None if central else self.residuals(z, layout)
         for name, u in tol.items():
             ends = []
             for f in lo_hi:
@@ -346,7 +358,7 @@ class _Batch:
                 shifted = [eqx.tree_at(lambda pr: pr.base, problem,
                                        gp.replace(problem.base, **{name: gp.get(problem.base, name) * np.exp(f * u)}))
                            for _, problem in self.groups]
-                ends.append(self.linearised(z, layout, shifted))
+                ends.append(self.residuals(z, layout, shifted))
             for e in range(self.size):
                 n = self.n_len[e]
                 cols[e].append((ends[1][e][0][:n] - ends[0][e][0][:n]) * self.sigma_length / u)
@@ -360,6 +372,31 @@ class _Batch:
 def _batched(z_local, problems: gf.Problem):
     """Residuals (E, m) and Jacobians (E, m, p) of stacked problems: one vmapped forward-mode linearisation."""
     return jax.vmap(lambda z, pr: linearise(pr.residuals, z))(z_local, problems)
+
+
+@eqx.filter_jit
+def _batched_residuals(z_local, problems: gf.Problem):
+    """Residuals (E, m) of stacked problems, and None for the Jacobian: one vmapped run."""
+    return jax.vmap(lambda z, pr: pr.residuals(z))(z_local, problems), None
+
+
+def _sliced(program, z_local, problems: gf.Problem, size: int):
+    """``program`` over E = ``size`` stacked runs in equal slices, one thread per core (the last slice padded with
+    copies of its last run, so one compiled shape serves every slice); numpy arrays (E, ...) or None."""
+    workers = max(1, min(size, os.cpu_count() or 1))
+    if workers == 1:
+        return tuple(None if x is None else np.asarray(x) for x in program(z_local, problems))
+    width = math.ceil(size / workers)
+    take = [np.minimum(np.arange(k * width, (k + 1) * width), size - 1) for k in range(workers)]
+
+    def one(index):
+        part = jax.tree_util.tree_map(lambda x: x[index] if eqx.is_array(x) else x, problems)
+        return tuple(None if x is None else np.asarray(x) for x in program(z_local[index], part))
+
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        parts = list(pool.map(one, take))
+    return tuple(None if parts[0][j] is None else np.concatenate([p[j] for p in parts])[:size]
+                 for j in range(len(parts[0])))
 
 
 def _stack(problems):
@@ -410,7 +447,8 @@ def _starts(batch: _Batch, layout: _Layout, likelihoods, base, names, n_starts: 
     costs, zs = [], []
     for v in values:
         z = np.log(v[per_name] / layout.refs)
-        r, _ = _weighted(batch.linearised(z, layout), likelihoods, layout)
+        r = np.concatenate([x * np.pad(np.asarray(lik.used, float), (0, x.size - lik.n_len), constant_values=1.0)
+                            for (x, _), lik in zip(batch.residuals(z, layout), likelihoods)])  # as _weighted
         costs.append(float(r @ r) if np.all(np.isfinite(r)) else np.inf)
         zs.append(z)
     order = np.argsort(costs)[:n_starts]
