@@ -14,8 +14,8 @@ What is known: the default fit (``growjax.fit.fit``, the default likelihood) of 
 (b) Replications: ``--replications`` times, a rig drawn from the default tolerance budget and θ at its estimate;
     the design's input and the published pulse train each run by the reference configuration on that rig,
     with fresh white length noise (the fitted noise sd; and 1 kPa pressure noise where ``--sensors`` records it);
-    each fitted alone by ``growjax.fit.fit`` (default likelihood, the rig inferred; ``--relinearise``: the rig's
-    sensitivities taken again where the data put it). Reported per input: the
+    each fitted alone by ``growjax.fit.fit`` (default likelihood, the rig inferred and linearised once at nominal;
+    ``--relinearise``: taken again where the data put it, as ``growjax fit`` does by default). Reported per input: the
     realised sd of ln θ̂ over the replications against the predicted sd of the experiment alone, the fits'
     mean reported sd and the coverage of their 90 % intervals, and the design's realised sd against the
     published pulse train's. ``--workers`` runs replications in parallel processes (spawned; each compiles).
@@ -233,7 +233,8 @@ def main():
     ap.add_argument("--inputs", nargs="+", default=["design", "published pulse train"],
                     choices=["design", "published pulse train"], help="the inputs replicated")
     ap.add_argument("--relinearise", action="store_true",
-                    help="the replications' fits take the rig's sensitivities again where the data put the rig")
+                    help="the replications' fits take the rig's sensitivities again where the data put the rig (the "
+                         "fit's default; without it they linearise once, at nominal)")
     ap.add_argument("--safety-draws", type=int, default=100,
                     help="fresh draws of the rig and θ the design is run on by the reference configuration (0: none)")
     ap.add_argument("--resume", action="store_true",

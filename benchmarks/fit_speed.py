@@ -45,22 +45,27 @@ def main():
         base, config = gj.reference("forward"), gj.Config(t1=10.0)
         inputs = ex.to_inputs(exp, "forward", base, config.t0, config.t1)
         kinds = {"independent": {"discrepancy": "none", "tolerances": {}}, "discrepancy": {},
-                 "rig_fixed": {"rig": "fixed"}}
-        walls = {kind: [] for kind in kinds}
+                 "rig_fixed": {"rig": "fixed"}, "once": {"relinearise": False}}
+        walls, lins = {kind: [] for kind in kinds}, {}
         for _ in range(args.repeat):  # interleaved: a drift of the machine's speed falls on both alike
             for kind, options in kinds.items():
                 clock = time.perf_counter()
-                gf.fit(exp.time, exp["robot_length_m"], inputs, free=["Y"], base=base, config=config, **options)
+                res = gf.fit(exp.time, exp["robot_length_m"], inputs, free=["Y"], base=base, config=config, **options)
                 walls[kind].append(time.perf_counter() - clock)
-        row = {kind: {"first_s": w[0], "warm_s": float(np.median(w[1:]))} for kind, w in walls.items()}
+                lins[kind] = res.linearisations
+        row = {kind: {"first_s": w[0], "warm_s": float(np.median(w[1:])), "linearisations": lins[kind]}
+               for kind, w in walls.items()}
         row["ratio_warm"] = row["discrepancy"]["warm_s"] / row["independent"]["warm_s"]
         row["ratio_first"] = row["discrepancy"]["first_s"] / row["independent"]["first_s"]
         row["ratio_warm_inferred_over_fixed"] = row["discrepancy"]["warm_s"] / row["rig_fixed"]["warm_s"]
+        row["ratio_warm_over_once"] = row["discrepancy"]["warm_s"] / row["once"]["warm_s"]
         out[label] = row
         print(f"{label}: independent {row['independent']['warm_s']:.2f} s, discrepancy {row['discrepancy']['warm_s']:.2f} s "
               f"warm (ratio {row['ratio_warm']:.2f}); first runs {row['independent']['first_s']:.1f} / "
               f"{row['discrepancy']['first_s']:.1f} s; the rig fixed {row['rig_fixed']['warm_s']:.2f} s warm (inferred over "
-              f"fixed {row['ratio_warm_inferred_over_fixed']:.2f})", flush=True)
+              f"fixed {row['ratio_warm_inferred_over_fixed']:.2f}); linearised once {row['once']['warm_s']:.2f} s "
+              f"(default over once {row['ratio_warm_over_once']:.2f}, linearisations {row['discrepancy']['linearisations']})",
+              flush=True)
     path = Path(args.out)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps({"environment": environment(), **out}, indent=1))

@@ -32,7 +32,7 @@ on the machine that writes the page is kept as it was.
 | `benchmarks/discover.py` | the discovery matrix: hidden effects, seeds and verdicts |
 | `benchmarks/control.py` | control designs evaluated on the reference configuration |
 | `benchmarks/windows_public.py` | Y on disjoint windows of the public experiment under each likelihood |
-| `benchmarks/coverage_discrepancy.py` | coverage of the fit's intervals on reference-made data with a discrepancy |
+| `benchmarks/coverage_discrepancy.py` | coverage of the fit's intervals on reference-made data with a discrepancy; `coverage_discrepancy_default_budget`: `--groups smooth correlated --budget default` (the rig nominal, fitted as `growjax fit` fits it, with the default budget); `..._once`: the same with `--no-relinearise` |
 | `benchmarks/predict_public.py` | prediction of a held-out window of the public experiment from a posterior |
 | `benchmarks/fit_speed.py` | the fit's cost under the discrepancy likelihood against independent noise, and with the rig inferred against it fixed |
 | `benchmarks/rig_agreement.py` | Y's interval from the fit (rig inferred; rig fixed) beside the posterior's, coverage and the posterior's band, rig nominal and drawn |
@@ -339,6 +339,8 @@ EXTRACTORS = {"design": rows_design, "design_relinearised": rows_design, "design
               "coverage_discrepancy_nominal": rows_coverage, "predict_public": rows_predict,
               "fit_speed": rows_fit_speed, "discover_discrepancy": rows_discover_discrepancy,
               "discover_discrepancy_3s": rows_discover_discrepancy, "coverage_discrepancy_rig": rows_coverage,
+              "coverage_discrepancy_default_budget": rows_coverage,
+              "coverage_discrepancy_default_budget_once": rows_coverage,
               "discover": rows_discover, "discover_rig_known": rows_discover, "discover_folding_twofold": rows_discover,
               "discover_folding_no_catheter_tolerance": rows_discover,
               "agreement_quick": rows_agreement,

@@ -149,7 +149,8 @@ def main():
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "sets.json"))
     ap.add_argument("--resume", action="store_true", help="keep the sets already in the partial file; run the rest")
     ap.add_argument("--relinearise-singles", action="store_true",
-                    help="fit each experiment alone with the rig linearised again where the data put it")
+                    help="fit each experiment alone with the rig linearised again where the data put it (the fit's "
+                         "default; without it, once at nominal)")
     ap.add_argument("--joint-from", default=None, metavar="SETS.json",
                     help="the joint fits from this earlier results file of the same study; run the single fits only")
     args = ap.parse_args()

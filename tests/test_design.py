@@ -173,9 +173,13 @@ def short_problem():
 
 
 @pytest.mark.slow
-def test_the_criterions_gradient_through_the_model_matches_finite_differences(short_problem):
+@pytest.mark.parametrize("nonlinear_draws", [0, 2])
+def test_the_criterions_gradient_through_the_model_matches_finite_differences(short_problem, nonlinear_draws):
+    """Through the linearised covariances alone and with the remainder's solves at drawn rigs (the objective the
+    search and the table share)."""
     known, space = short_problem
-    problem = gd.make(known, space, points=2, nonlinear_draws=0, config=gj.Config(rtol=1e-7, atol=1e-7))
+    problem = gd.make(known, space, points=2, nonlinear_draws=nonlinear_draws, seed=0,
+                      config=gj.Config(rtol=1e-7, atol=1e-7))
     x = space.unconstrained(np.array([0.0, 90e3, 60e3, 120e3, 80e3]))
     value, grad = (np.asarray(a) for a in gd.value_and_gradient(problem, x))
     assert value == pytest.approx(float(sum(gd.evaluate(problem, x))), rel=1e-5)  # two programs: rounding

@@ -144,27 +144,3 @@ def test_the_shipped_set_fitted_jointly_beats_each_experiment_alone(shipped_set)
                       for r in exps.runs)
     assert together < best_single
 
-
-def test_batched_runs_in_slices_give_each_run_its_own_result(monkeypatch):
-    """The set's stacked runs are solved in equal slices, one thread per core, the last slice padded: every run's
-    result is the one the whole batch gives it, whatever the number of runs and of cores."""
-    import equinox as eqx
-    import jax.numpy as jnp
-
-    from growjax import joint
-
-    class Stacked(eqx.Module):
-        a: jnp.ndarray
-        label: str = eqx.field(static=True, default="runs")
-
-    def program(z, problems):
-        return z[:, None] * problems.a + jnp.sum(problems.a, axis=1, keepdims=True), None
-
-    for cores in (1, 2, 3):
-        monkeypatch.setattr(joint.os, "cpu_count", lambda c=cores: c)
-        for size in (1, 2, 3, 5, 8):
-            a = jnp.arange(size * 4.0).reshape(size, 4) ** 1.5
-            z = jnp.linspace(-1.0, 2.0, size)
-            r, none = joint._sliced(program, z, Stacked(a), size)
-            assert none is None and r.shape == (size, 4)
-            np.testing.assert_array_equal(r, np.asarray(program(z, Stacked(a))[0]))

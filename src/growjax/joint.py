@@ -10,20 +10,16 @@ through its linearised sensitivity g = ∂L/∂ln ψ. Shared errors do not avera
 evidence about the rig's effect (and under-covers where they share one rig).
 
 The runs' simulations and Jacobians run batched: runs with the same drive, sample count and input structure are
-stacked (breaks padded to a common length) and solved by one ``vmap``-ed program, in equal slices on one thread
-per core (a compiled run releases the GIL; each run's solve is its own, whichever runs share its slice); the
-Jacobian of each run is taken in its own parameters and scattered into the set's columns, and the rig's secants
-need the residuals alone.
+stacked (breaks padded to a common length) and solved by one ``vmap``-ed program; the Jacobian of each run is
+taken in its own parameters and scattered into the set's columns, and the rig's secants and the starts' scout run
+the residuals alone.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
-import os
 import time
 from collections.abc import Sequence
-from concurrent.futures import ThreadPoolExecutor
 
 import equinox as eqx
 import jax
@@ -263,8 +259,7 @@ def _gls(batch, layout: _Layout, likelihoods, hypers, z, b, centre, bounds, disc
     cost, converged = np.nan, False
     for _ in range(gf.OUTER_STEPS):
         outs = batch.linearised(z, layout)
-        with ThreadPoolExecutor(max_workers=max(1, min(len(outs), os.cpu_count() or 1))) as pool:  # as _sliced
-            hypers = list(pool.map(lambda a: a[0].estimate(a[1][0], discrepancy, a[2]), zip(likelihoods, outs, hypers)))
+        hypers = [lik.estimate(r, discrepancy, h) for lik, (r, _), h in zip(likelihoods, outs, hypers)]
         w_new, cost, converged, _, jac_w = levenberg_marquardt(
             lambda w, hs=tuple(hypers): _whitened(batch.linearised(w[:p_all], layout), likelihoods, layout, hs,
                                                  w[p_all:], centre),
@@ -336,7 +331,7 @@ class _Batch:
         out = [None] * self.size
         for k, (members, problem) in enumerate(self.groups):
             pr = problem if stacked is None else stacked[k]
-            results = _sliced(program, jnp.asarray(z_local[members]), pr, len(members))
+            results = tuple(None if x is None else np.asarray(x) for x in program(jnp.asarray(z_local[members]), pr))
             for i, e in enumerate(members):
                 out[e] = tuple(None if x is None else x[i] for x in results)
         self.simulate_s += time.perf_counter() - clock
@@ -378,25 +373,6 @@ def _batched(z_local, problems: gf.Problem):
 def _batched_residuals(z_local, problems: gf.Problem):
     """Residuals (E, m) of stacked problems, and None for the Jacobian: one vmapped run."""
     return jax.vmap(lambda z, pr: pr.residuals(z))(z_local, problems), None
-
-
-def _sliced(program, z_local, problems: gf.Problem, size: int):
-    """``program`` over E = ``size`` stacked runs in equal slices, one thread per core (the last slice padded with
-    copies of its last run, so one compiled shape serves every slice); numpy arrays (E, ...) or None."""
-    workers = max(1, min(size, os.cpu_count() or 1))
-    if workers == 1:
-        return tuple(None if x is None else np.asarray(x) for x in program(z_local, problems))
-    width = math.ceil(size / workers)
-    take = [np.minimum(np.arange(k * width, (k + 1) * width), size - 1) for k in range(workers)]
-
-    def one(index):
-        part = jax.tree_util.tree_map(lambda x: x[index] if eqx.is_array(x) else x, problems)
-        return tuple(None if x is None else np.asarray(x) for x in program(z_local[index], part))
-
-    with ThreadPoolExecutor(max_workers=workers) as pool:
-        parts = list(pool.map(one, take))
-    return tuple(None if parts[0][j] is None else np.concatenate([p[j] for p in parts])[:size]
-                 for j in range(len(parts[0])))
 
 
 def _stack(problems):
