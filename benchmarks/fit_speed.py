@@ -6,8 +6,9 @@ On the shipped synthetic experiment and (where present) the public one, 0–10 s
 ``growjax.fit.fit`` with ``discrepancy="none", tolerances={}`` (independent noise, as the fit was) and with the
 defaults (Matérn-3/2 discrepancy, the default tolerance budget, the rig inferred), and with the rig fixed and its
 tolerances propagated (``rig="fixed"``), each run ``--repeat`` times (they alternate, so a drift of the
-machine's speed falls on all alike); the first run of each compiles. Printed: the median warm wall time of each,
-the default's ratio to independent noise (target ≤ 1.5) and to the fixed rig, and the first runs.
+machine's speed falls on all alike), and with the rig linearised once at nominal (``relinearise=False``); the first
+run of each compiles. Printed: the median warm wall time of each, the default's ratio to independent noise
+(target ≤ 1.5), to the fixed rig and to the once-linearised fit, and the first runs.
 """
 
 from __future__ import annotations
