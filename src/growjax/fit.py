@@ -580,8 +580,9 @@ def _result(names, theta, z, cov, parts, info, hyper, likelihood, raw, starts, c
         if evals[k] < tol:
             blind |= np.abs(evecs[:, k]) > 0.1
     sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    interval = {n: (None if blind[i] else (float(theta[i] * np.exp(-Z90 * sd[i])), float(theta[i] * np.exp(Z90 * sd[i]))))
-                for i, n in enumerate(names)}
+    with np.errstate(over="ignore"):  # an sd of ln θ in the hundreds: the interval's ends are 0 and inf
+        interval = {n: (None if blind[i] else (float(theta[i] * np.exp(-Z90 * sd[i])),
+                                               float(theta[i] * np.exp(Z90 * sd[i])))) for i, n in enumerate(names)}
     se = {n: (None if blind[i] else float(theta[i] * sd[i])) for i, n in enumerate(names)}
     budget = {n: {k: float(theta[i] * np.sqrt(max(part[i, i], 0.0))) for k, part in parts.items()}
               for i, n in enumerate(names)}
