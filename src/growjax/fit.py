@@ -344,8 +344,7 @@ def _solve(likelihood, z0s, bounds, max_steps: int, problem, tol: dict, discrepa
 
 def problem_at_rig(problem: Problem, tol: dict, centre) -> Problem:
     """``problem`` with the toleranced parameters of ``tol`` at ψ₀·e^centre (``centre`` (q,) in their order)."""
-    values = {name: gp.get(problem.base, name) * np.exp(centre[j]) for j, name in enumerate(tol)}
-    return eqx.tree_at(lambda pr: pr.base, problem, gp.replace(problem.base, **values))
+    return eqx.tree_at(lambda pr: pr.base, problem, tl.rig_at(problem.base, list(tol), centre))
 
 
 # The smallest change of the whitened cost (nats) that matters: a 90 % interval spans 1.35 nats, and the

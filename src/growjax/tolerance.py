@@ -99,6 +99,14 @@ def sensitivity(length_of, base: gp.Parameters, tol: dict, reference=None, centr
     return g
 
 
+def rig_at(base: gp.Parameters, names, centre) -> gp.Parameters:
+    """``base`` with the toleranced parameters ``names`` (q,) at ψ₀·e^centre (``centre`` (q,) relative errors
+    ln(ψ/ψ₀) in their order; None: ``base`` unchanged)."""
+    if centre is None:
+        return base
+    return gp.replace(base, **{name: gp.get(base, name) * np.exp(centre[j]) for j, name in enumerate(names)})
+
+
 def length_sensitivity(theta: dict, base: gp.Parameters, inputs, config, times, tol: dict,
                        central: bool = False) -> np.ndarray:
     """g (n, q): the model's length change (m) at ``times`` (n,) s per unit ln ψ of each toleranced parameter of

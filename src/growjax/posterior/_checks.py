@@ -12,7 +12,6 @@ from jaxtyping import ArrayLike, Float
 
 from growjax import discrepancy as dc
 from growjax import emulator as em
-from growjax import params as gp
 from growjax import tolerance as tl
 from growjax.emulator import predicted_length
 
@@ -94,8 +93,8 @@ def forecast(result, priors, base, inputs, config, times: Float[ArrayLike, " T"]
     take = np.random.default_rng(seed).choice(sigma.size, size=min(max_draws, sigma.size), replace=False)
     thetas = {p.name: jnp.asarray(np.asarray(post[p.site]).ravel()[take]) for p in priors}
     res = result.residuals
-    if res is not None and res.centre is not None:  # the model runs where the posterior linearised the rig
-        base = gp.replace(base, **{n: gp.get(base, n) * np.exp(c) for n, c in zip(res.tolerance_names, res.centre)})
+    if res is not None:  # the model runs where the posterior linearised the rig
+        base = tl.rig_at(base, res.tolerance_names, res.centre)
     mu = np.asarray(jax.jit(jax.vmap(lambda th: predicted_length(th, base, inputs, config, jnp.asarray(union))))(thetas))
     at_fit, at_new = np.searchsorted(union, t_fit), np.searchsorted(union, t_new)
     rng = np.random.default_rng(seed + 1)

@@ -98,9 +98,9 @@ def sample(
     discrepancy's amplitude and time scale are sampled with the parameters; the rig's tolerances enter through
     the length's sensitivities (linearised), marginalised exactly. The rig is linearised where the fit puts it:
     ``rig_centre`` {tolerance: ln(ψ/ψ₀)}, or None to take it from :func:`growjax.fit.fit` on the same data and
-    likelihood (its ``rig_offset``; nominal unless the model's departure from its linearisation there would move
-    θ, :func:`growjax.fit.linearisation_shift`), so that the fit and the posterior linearise the rig alike. The
-    model runs with the rig there, and the rig's errors keep their prior about nominal.
+    likelihood (its ``rig_offset``; nominal where the fit did not relinearise), so that the fit and the posterior
+    linearise the rig alike. The model runs with the rig there, and the rig's errors keep their prior about
+    nominal.
 
     Returns a DataTree (:func:`inference_data`: the sampled sites in the posterior, the replicated and the
     model's length in the posterior predictive, the pointwise log-likelihood for LOO, the measured length as
@@ -123,7 +123,7 @@ def sample(
     tol = tl.budget(base, tolerances, [p.name for p in priors], use_default=tolerances is None and discrepancy != "none")
     centre, linearisations = _rig_centre(rig_centre, tol, times, length, inputs, priors, base, config, window,
                                          discrepancy, tolerances, seed, progress)
-    base = rig_at(base, tol, centre)
+    base = tl.rig_at(base, tol, centre)
     mean, model_error, emu_info = _mean_length(emulate, priors, base, inputs, config, t, seed, start)
     _progress.note(f"posterior: the likelihood ({discrepancy} discrepancy)", progress)
     residuals, extra_init = _likelihood_terms(discrepancy, tol, t, y, mean, priors, base, inputs, config, seed, centre)
@@ -205,14 +205,6 @@ def _rig_centre(given, tol: dict, times, length, inputs, priors, base, config, w
     if fitted.linearisations == 1 or not np.all(np.isfinite(centre)):  # the rig stayed at nominal
         return None, fitted.linearisations
     return centre, fitted.linearisations
-
-
-def rig_at(base: gp.Parameters, tol: dict, centre) -> gp.Parameters:
-    """``base`` with the toleranced parameters of ``tol`` at ψ₀·e^centre (``centre`` (q,) in their order; None:
-    ``base``)."""
-    if centre is None:
-        return base
-    return gp.replace(base, **{name: gp.get(base, name) * np.exp(centre[j]) for j, name in enumerate(tol)})
 
 
 def _nuts_start(make_model, priors, mean, y, seed: int, emulate, extra_init: dict):
