@@ -423,8 +423,8 @@ def _starts(batch: _Batch, layout: _Layout, likelihoods, base, names, n_starts: 
     costs, zs = [], []
     for v in values:
         z = np.log(v[per_name] / layout.refs)
-        r = np.concatenate([x * np.pad(np.asarray(lik.used, float), (0, x.size - lik.n_len), constant_values=1.0)
-                            for (x, _), lik in zip(batch.residuals(z, layout), likelihoods)])  # as _weighted
+        r = np.concatenate([np.asarray(lik.weighted(jnp.asarray(x), jnp.zeros((x.size, 0)))[0])
+                            for (x, _), lik in zip(batch.residuals(z, layout), likelihoods)])
         costs.append(float(r @ r) if np.all(np.isfinite(r)) else np.inf)
         zs.append(z)
     order = np.argsort(costs)[:n_starts]

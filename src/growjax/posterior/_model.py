@@ -95,7 +95,8 @@ class Residuals:
     def _terms(self, index):
         g = None if self.sensitivity is None else jnp.asarray(np.asarray(self.sensitivity)[index])
         u = None if self.tolerance is None else jnp.asarray(self.tolerance)
-        offset = jnp.asarray(np.asarray(self.rig_mean())[index] if self.centre is not None and g is not None else 0.0)
+        mean = self.rig_mean()
+        offset = jnp.asarray(mean[index] if np.ndim(mean) else mean)
         return jnp.asarray(np.asarray(self.times)[index]), g, u, offset
 
     def distribution(self, mu, hyper):
