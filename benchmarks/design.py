@@ -105,7 +105,7 @@ def replicate(job: dict) -> dict:
             pressure = np.asarray(traj.pressure)[1:] + rng.normal(0.0, job["pressure_noise"], times.size)
         res = gf.fit(times, length, inputs, free=job["names"], base=base, config=config, pressure=pressure,
                      sigma_pressure=job["pressure_noise"], n_starts=1, sweep_n=16,
-                     relinearise=job.get("relinearise", False))
+                     relinearise=job.get("relinearise", False), rig_tangents=job.get("rig_tangents", False))
         row = {"status": res.status, "linearisations": res.linearisations}
         for n in job["names"]:
             true = float(job["estimate"][n])
@@ -135,7 +135,10 @@ def summarise(rows: list, names, predicted: dict) -> dict:
                       "predicted_sd_log_alone": pred,
                       "realised_over_predicted": None if realised is None else realised / pred,
                       "mean_reported_sd_log": float(np.mean(rep)) if rep else None,
-                      "coverage_90": float(np.mean(cov)) if cov else None}
+                      "coverage_90": float(np.mean(cov)) if cov else None,
+                      # fits that settled far from the truth (a side minimum), against their own reported sd
+                      "far_off": int(sum(abs(g[n]["log_error"]) > 5.0 * g[n]["sd_log_reported"] for g in good
+                                         if g[n]["sd_log_reported"] is not None))}
         out[label] = per
     for n in names:
         d, p = out["design"][n]["realised_sd_log"], out["published pulse train"][n]["realised_sd_log"]
@@ -235,6 +238,9 @@ def main():
     ap.add_argument("--relinearise", action="store_true",
                     help="the replications' fits take the rig's sensitivities again where the data put the rig (the "
                          "fit's default; without it they linearise once, at nominal)")
+    ap.add_argument("--rig-tangents", action="store_true",
+                    help="the replications' fits make the rig's errors parameters of the model (exact tangents, "
+                         "growjax.fit.fit(rig_tangents=True)) instead of secants")
     ap.add_argument("--safety-draws", type=int, default=100,
                     help="fresh draws of the rig and θ the design is run on by the reference configuration (0: none)")
     ap.add_argument("--resume", action="store_true",
@@ -311,7 +317,8 @@ def main():
            "times": np.asarray(space.times).tolist(), "catheter_t": t_cath.tolist(), "catheter_m": c_cath.tolist(),
            "knots": np.asarray(knots).tolist(), "demand": np.asarray(demand).tolist(), "duration": args.duration,
            "noise_m": float(known.hyper.noise), "pressure": "pressure" in sensors, "pressure_noise": 1e3,
-           "maker": args.maker, "rig": args.rig, "inputs": args.inputs, "relinearise": args.relinearise}
+           "maker": args.maker, "rig": args.rig, "inputs": args.inputs, "relinearise": args.relinearise,
+           "rig_tangents": args.rig_tangents}
     partial = out.with_suffix(".partial.jsonl")  # replications as they finish
     rows = []
     if args.resume and partial.exists():

@@ -32,7 +32,7 @@ on the machine that writes the page is kept as it was.
 | `benchmarks/discover.py` | the discovery matrix: hidden effects, seeds and verdicts |
 | `benchmarks/control.py` | control designs evaluated on the reference configuration |
 | `benchmarks/windows_public.py` | Y on disjoint windows of the public experiment under each likelihood |
-| `benchmarks/coverage_discrepancy.py` | coverage of the fit's intervals on reference-made data with a discrepancy; `coverage_discrepancy_default_budget`: `--groups smooth correlated --budget default` (the rig nominal, fitted as `growjax fit` fits it, with the default budget); `..._once`: the same with `--no-relinearise` |
+| `benchmarks/coverage_discrepancy.py` | coverage of the fit's intervals on reference-made data with a discrepancy; `coverage_discrepancy_default_budget`: `--groups smooth correlated --budget default` (the rig nominal, fitted as `growjax fit` fits it, with the default budget); `..._once`: the same with `--no-relinearise`; `coverage_discrepancy_tangents`: `--groups smooth correlated rig --budget default --rig-tangents` (the rig's errors as parameters of the model) |
 | `benchmarks/predict_public.py` | prediction of a held-out window of the public experiment from a posterior |
 | `benchmarks/fit_speed.py` | the fit's cost under the discrepancy likelihood against independent noise, with the rig inferred against it fixed, and relinearised (the default) against linearised once |
 | `benchmarks/rig_agreement.py` | Y's interval from the fit (rig inferred; rig fixed) beside the posterior's, coverage and the posterior's band, rig nominal and drawn |
@@ -41,7 +41,7 @@ on the machine that writes the page is kept as it was.
 | `benchmarks/mixed_set.py` | a forward experiment with the pressure recorded and a stepper experiment of one robot, alone and jointly |
 | `benchmarks/population.py` | populations of eight robots on one drawn rig: coverage of the population's median and spread, and of a held-out robot's predictive band |
 | `benchmarks/discover_discrepancy.py` | discovery's answer on data with a discrepancy but no catalogue effect |
-| `benchmarks/design.py` | the designed experiment: the criterion against random admissible inputs and the published pulse train, and replications on drawn rigs, predicted sd against realised; `design_discrimination`: `--discriminate A B` (discovery's verdicts under the discrimination design and the published pulse train); `design_relinearised`: `--design-from design.json --relinearise` (the same replications, fitted with the rig relinearised); `design_landscape`: `--random 1000 --replications 0 --safety-draws 0` (the design against 1 000 random admissible inputs) |
+| `benchmarks/design.py` | the designed experiment: the criterion against random admissible inputs and the published pulse train, and replications on drawn rigs, predicted sd against realised; `design_discrimination`: `--discriminate A B` (discovery's verdicts under the discrimination design and the published pulse train); `design_relinearised`: `--design-from design.json --relinearise` (the same replications, fitted with the rig relinearised); `design_landscape`: `--random 1000 --replications 0 --safety-draws 0` (the design against 1 000 random admissible inputs), then `--design-from` that file `--replications 20 --workers 2 --relinearise` (its replications and safety, the default fit); `design_landscape_tangents`: the same replications fitted with `--rig-tangents` (`growjax.fit.fit(rig_tangents=True)`) |
 | `benchmarks/least_squares.py` | growjax's Levenberg–Marquardt engine against optimistix's solvers on the fit's and the control profile's problems; `least_squares_linearize`: `--cases fit_Y --solvers lm_linearize --out benchmarks/results/least_squares_linearize.json` (optimistix linearising the model itself) |
 """
 
@@ -134,6 +134,11 @@ def rows_fit_speed(r: dict) -> list[tuple[str, str, str]]:
              f"{v['discrepancy']['warm_s']:.2f} s against {v['once']['warm_s']:.2f} s; "
              f"{v['discrepancy']['linearisations']} linearisations")
             for k, v in r.items() if isinstance(v, dict) and "ratio_warm_over_once" in v]
+    out += [(f"fit, {k}: the rig's errors as parameters of the model (--rig-tangents) ÷ linearised once",
+             f"{v['ratio_warm_tangents_over_once']:.2f}",
+             f"{v['tangents']['warm_s']:.2f} s against {v['once']['warm_s']:.2f} s; first run {v['tangents']['first_s']:.1f} s "
+             f"against {v['once']['first_s']:.1f} s")
+            for k, v in r.items() if isinstance(v, dict) and "ratio_warm_tangents_over_once" in v]
     return out
 
 
@@ -312,7 +317,8 @@ def rows_design(r: dict) -> list[tuple[str, str, str]]:
                         f"{100 * g['realised_sd_log']:.2f} % / {100 * g['predicted_sd_log_alone']:.2f} %",
                         f"{g['replications']} replications; ratio {g['realised_over_predicted']:.2f} (target 0.75–1.25); "
                         f"fits' mean reported sd {100 * g['mean_reported_sd_log']:.2f} %; "
-                        f"coverage {g['coverage_90']:.2f} (target 0.80–0.97)"))
+                        f"coverage {g['coverage_90']:.2f} (target 0.80–0.97)"
+                        + (f"; {g['far_off']} settled more than 5 reported sd off" if g.get("far_off") else "")))
     for name, ratio in rep["design_over_published_realised_sd"].items():
         if ratio is not None:
             out.append((f"{name}: design's realised sd / the published pulse train's", f"{ratio:.2f}", "target ≤ 0.5"))
@@ -338,13 +344,14 @@ def rows_design_discrimination(r: dict) -> list[tuple[str, str, str]]:
     return out
 
 
-EXTRACTORS = {"design": rows_design, "design_relinearised": rows_design, "design_landscape": rows_design, "design_discrimination": rows_design_discrimination, "simulate": rows_simulate, "sweep": rows_sweep, "agreement": rows_agreement,
+EXTRACTORS = {"design": rows_design, "design_relinearised": rows_design, "design_landscape": rows_design, "design_landscape_tangents": rows_design, "design_discrimination": rows_design_discrimination, "simulate": rows_simulate, "sweep": rows_sweep, "agreement": rows_agreement,
               "windows_public": rows_windows, "coverage_discrepancy": rows_coverage,
               "coverage_discrepancy_nominal": rows_coverage, "predict_public": rows_predict,
               "fit_speed": rows_fit_speed, "discover_discrepancy": rows_discover_discrepancy,
               "discover_discrepancy_3s": rows_discover_discrepancy, "coverage_discrepancy_rig": rows_coverage,
               "coverage_discrepancy_default_budget": rows_coverage,
               "coverage_discrepancy_default_budget_once": rows_coverage,
+              "coverage_discrepancy_tangents": rows_coverage,
               "discover": rows_discover, "discover_rig_known": rows_discover, "discover_folding_twofold": rows_discover,
               "discover_folding_no_catheter_tolerance": rows_discover,
               "agreement_quick": rows_agreement,

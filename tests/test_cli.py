@@ -213,18 +213,20 @@ def test_posterior_command_writes_inference_data_and_the_issue_keys(tmp_path):
 
 def test_fit_passes_relinearise_to_the_fit(monkeypatch, tmp_path, capsys):
     """``growjax fit`` asks the single experiment's fit to take the rig's sensitivities again where the data put the
-    rig (the default, as the posterior does); ``--no-relinearise`` linearises it once, at nominal."""
+    rig (the default, as the posterior does); ``--no-relinearise`` linearises it once, at nominal; ``--rig-tangents``
+    makes the rig's errors parameters of the model."""
     from growjax import cli
     from growjax import fit as gf
 
     seen = []
 
     def stop(*args, **kwargs):
-        seen.append(kwargs.get("relinearise"))
+        seen.append((kwargs.get("relinearise"), kwargs.get("rig_tangents")))
         raise ValueError("stopped before fitting")
 
     monkeypatch.setattr(gf, "fit", stop)
     data = "src/growjax/datasets/synthetic_forward.csv"
-    for extra in ([], ["--relinearise"], ["--no-relinearise"]):
+    for extra in ([], ["--relinearise"], ["--no-relinearise"], ["--rig-tangents"]):
         assert cli.main(["fit", data, "--out", str(tmp_path), "--quiet", *extra]) == 2
-    assert seen == [True, True, False] and "stopped before fitting" in capsys.readouterr().err
+    assert seen == [(True, False), (True, False), (False, False), (True, True)]
+    assert "stopped before fitting" in capsys.readouterr().err

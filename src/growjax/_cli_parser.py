@@ -230,6 +230,10 @@ def build_parser():
                           "the rig, until it settles, as a set's joint fit and the posterior do (default); "
                           "--no-relinearise: once, at nominal (faster; over-confident where the rig is off by "
                           "a tolerance or more)")
+    fit.add_argument("--rig-tangents", action="store_true",
+                     help="one experiment, the rig inferred: make the rig's errors parameters of the model, their "
+                          "sensitivities its exact tangents, fitted with their priors before the discrepancy (no "
+                          "secants, no relinearisation; reaches a rig far off nominal that the secants can miss)")
 
     post = sub.add_parser("posterior", formatter_class=fmt,
                           help="NUTS posterior of Y, ext, n (or Y, phi_L, n_L) and the noise; of a population of "

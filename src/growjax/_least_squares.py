@@ -17,6 +17,8 @@ transposed, which the fast solver's are not (the benchmark gives it J·v from :f
 
 from __future__ import annotations
 
+from collections import OrderedDict
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -28,6 +30,24 @@ def linearise(residuals, z):
     p = z.shape[0]
     r, jac_t = jax.vmap(lambda v: jax.jvp(residuals, (z,), (v,)), out_axes=(None, 0))(jnp.eye(p, dtype=z.dtype))
     return r, jac_t.T
+
+
+def memoised(model, size: int = 4):
+    """``model(z, *args)`` (args the same at every call) keeping its last ``size`` results by the value of z (p,): a fit asks for the same point again
+    (a solver starts where the last one accepted, the hyperparameters are estimated there) and the model is
+    deterministic, so the repeat costs nothing."""
+    kept = OrderedDict()
+
+    def call(z, *args):
+        key = (np.asarray(z, float).tobytes(), *map(id, args))
+        if key not in kept:
+            kept[key] = model(z, *args)
+            if len(kept) > size:
+                kept.popitem(last=False)
+        kept.move_to_end(key)
+        return kept[key]
+
+    return call
 
 
 def levenberg_marquardt(linearised, z0, max_steps: int = 100, tol: float = 1e-6, gain_tol: float = 1e-5,

@@ -455,7 +455,7 @@ def fit_command(args) -> dict:
     result = gf.fit(exp.time, exp["robot_length_m"], inputs, free=args.free or ["Y"], base=base, config=config,
                     pressure=pressure, n_starts=args.starts, seed=args.seed, window=scored_window(args, config),
                     discrepancy=args.discrepancy, tolerances=tolerances_of(args), rig=args.rig,
-                    relinearise=args.relinearise)
+                    relinearise=args.relinearise, rig_tangents=args.rig_tangents)
     _progress_note(args, f"fit: done in {time.perf_counter() - started:.1f} s")
     out = _out(args)
     fitted = gj.replace(base, **result.rig_estimate, **result.estimate)

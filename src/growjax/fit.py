@@ -28,7 +28,7 @@ from growjax import experiment
 from growjax import params as gp
 from growjax import sweep as sw
 from growjax import tolerance as tl
-from growjax._least_squares import levenberg_marquardt, linearise
+from growjax._least_squares import levenberg_marquardt, linearise, memoised
 from growjax.config import Config
 from growjax.simulate import as_arrays, input_breaks, sample_times, simulate
 from growjax.trajectory import OK
@@ -194,6 +194,7 @@ def fit(
     tolerances: dict | None = None,
     rig: str = "inferred",
     relinearise: bool = True,
+    rig_tangents: bool = False,
 ) -> FitResult:
     """Fit ``free`` parameters to a measured length (m) at ``times`` (s) (and ``pressure``, Pa, if given).
 
@@ -226,6 +227,12 @@ def fit(
     does and as :func:`growjax.posterior.sample` linearises. Where the rig is off by a tolerance or more, the
     secants at nominal bias θ by several standard errors; False linearises once, at nominal: cheaper, and
     over-confident there.
+
+    ``rig_tangents``: with the rig inferred, make the rig's errors parameters of the model beside θ instead: its
+    exact forward-mode tangents in the same solve as θ's, (θ, b) fitted by least squares with b's prior rows b/u
+    before the discrepancy is estimated, then by generalised least squares. No secants and no relinearisation;
+    where the rig is far off nominal (a designed input driving its frictions hard) the secant path can settle in
+    a side minimum whose misfit the discrepancy absorbs, and this one does not. ``relinearise`` is then moot.
     """
     if rig not in RIG_TREATMENTS:
         raise ValueError(f"rig must be one of {RIG_TREATMENTS}, got {rig!r}")
@@ -248,8 +255,15 @@ def fit(
     likelihood = Likelihood(problem.times, jnp.asarray(used), jnp.asarray(np.flatnonzero(used)), sigma_length, n_len)
     bounds = physical_bounds(base, names, refs)
     z0s = jnp.log(jnp.asarray(start_values[order]) / refs)
-    zs, costs, oks, z, b, raw, hyper, converged, likelihood, linearisations = _solve(
-        likelihood, z0s, bounds, max_steps, problem, tol, discrepancy, rig, RELINEARISE_STEPS if relinearise else 1)
+    if rig_tangents and rig == "inferred" and tol:
+        full = make_problem(base, names + tuple(tol), inputs, config, times, length, pressure, window, sigma_length,
+                            sigma_pressure)
+        zs, costs, oks, z, b, raw, hyper, converged, likelihood, linearisations = _solve_tangents(
+            likelihood, z0s, bounds, max_steps, full, tol, discrepancy)
+    else:
+        zs, costs, oks, z, b, raw, hyper, converged, likelihood, linearisations = _solve(
+            likelihood, z0s, bounds, max_steps, problem, tol, discrepancy, rig,
+            RELINEARISE_STEPS if relinearise else 1)
     starts = [{"start": dict(zip(names, map(float, start_values[i]))),
                "estimate": dict(zip(names, map(float, refs * np.exp(zs[k])))),
                "cost": float(costs[k]), "converged": bool(oks[k])} for k, i in enumerate(order)]
@@ -304,7 +318,7 @@ def _solve(likelihood, z0s, bounds, max_steps: int, problem, tol: dict, discrepa
     z, b (q,) the rig's errors from the likelihood's ``centre`` (empty unless inferred), the linearisation at z
     with the rig at that centre, the hyperparameters, converged, the likelihood with its tolerances, the number
     of linearisations)."""
-    model = lambda w, pr=problem: _linearised(w, pr)  # noqa: E731
+    model = nominal = memoised(lambda w, pr=problem: _linearised(w, pr))
     solved = [levenberg_marquardt(lambda w: likelihood.weighted(*model(w)), z0, max_steps, LM_TOLERANCE,
                                   bounds=bounds) for z0 in z0s]
     zs, costs, oks = (np.asarray([s[k] for s in solved]) for k in range(3))
@@ -316,7 +330,7 @@ def _solve(likelihood, z0s, bounds, max_steps: int, problem, tol: dict, discrepa
     at_rig = problem
     for step in range(steps):
         linearisations += 1
-        model = lambda w, pr=at_rig: _linearised(w, pr)  # noqa: E731
+        model = nominal if at_rig is problem else memoised(lambda w, pr=at_rig: _linearised(w, pr))
         raw = model(jnp.asarray(z))
         g = _tolerance_sensitivity(at_rig, z, raw[0], tol, central=step > 0) if tol else None
         if g is not None and rig == "inferred":
@@ -340,6 +354,53 @@ def _solve(likelihood, z0s, bounds, max_steps: int, problem, tol: dict, discrepa
     if g is not None and not likelihood.inferred:  # fixed: propagated after the fit
         likelihood = likelihood.with_tolerances(g, tol)
     return zs, costs, oks, z, b, raw, hyper, converged, likelihood, linearisations
+
+
+def _solve_tangents(likelihood, z0s, bounds, max_steps: int, problem, tol: dict, discrepancy: str):
+    """:func:`_solve` with the rig's errors β = ln(ψ/ψ₀) among the model's parameters (``problem`` frees θ then
+    the toleranced parameters, in ``tol``'s order): least squares from every start with the rig nominal; from the
+    best, least squares of (z, β) with β's prior rows β/u (before any discrepancy is estimated: a misfit is then
+    the model's to remove, not the discrepancy's to absorb); then generalised least squares of (z, β)
+    alternating with the hyperparameters' mode, the rig's sensitivities at every point its exact tangents there.
+    Returns what :func:`_solve` returns, the likelihood linearised at the estimate (its centre β, b = 0)."""
+    q, p = len(tol), z0s.shape[1]
+    u, n, scale = np.asarray(list(tol.values()), float), likelihood.n_len, likelihood.sigma_length
+    model = memoised(lambda w: _linearised(w, problem))
+
+    def nominal(z):
+        r, jac = model(jnp.concatenate([jnp.asarray(z), jnp.zeros(q)]))
+        return likelihood.weighted(r, jac[:, :p])
+
+    solved = [levenberg_marquardt(nominal, z0, max_steps, LM_TOLERANCE, bounds=bounds) for z0 in z0s]
+    zs, costs, oks = (np.asarray([s[k] for s in solved]) for k in range(3))
+    w = np.concatenate([np.asarray(zs[int(np.argmin(costs))]), np.zeros(q)])
+    w_bounds = tuple(np.concatenate([np.asarray(x, float), np.full(q, v)]) for x, v in zip(bounds, (-np.inf, np.inf)))
+    prior = np.concatenate([np.zeros((q, p)), np.diag(1.0 / u)], axis=1)
+
+    def with_prior(v):
+        r, jac = likelihood.weighted(*model(jnp.asarray(v)))
+        return np.concatenate([np.asarray(r), np.asarray(v)[p:] / u]), np.concatenate([np.asarray(jac), prior])
+
+    w, _, converged, _, _ = levenberg_marquardt(with_prior, w, max_steps, LM_TOLERANCE, bounds=w_bounds)
+
+    def at(v):  # the likelihood linearised at v = (z, β), and (r, J_z) there
+        r, jac = model(jnp.asarray(v))
+        g = np.asarray(jac)[:n, p:] * scale
+        return likelihood.with_tolerances(g, tol, inferred=True, centre=np.asarray(v)[p:]), (r, jac[:, :p])
+
+    hyper = None
+    for _ in range(OUTER_STEPS):
+        lik, raw = at(w)
+        hyper = lik.estimate(raw[0], discrepancy, hyper)
+        w_new, _, converged, _, jac_w = levenberg_marquardt(
+            lambda v, h=hyper: (lambda lk, rw: lk.augmented(*rw, h, np.zeros(q)))(*at(v)), w, max_steps,
+            LM_TOLERANCE, bounds=w_bounds, cost_resolution=COST_RESOLUTION)
+        sd = np.sqrt(np.diag(np.linalg.pinv(jac_w.T @ jac_w, rcond=1e-10, hermitian=True)))
+        moved, w = np.abs(w_new - w), np.asarray(w_new)
+        if np.all(moved <= OUTER_TOLERANCE * sd):
+            break
+    lik, raw = at(w)
+    return zs, costs, oks, w[:p], np.zeros(q), raw, hyper, converged, lik, 1
 
 
 def problem_at_rig(problem: Problem, tol: dict, centre) -> Problem:

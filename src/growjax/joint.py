@@ -31,7 +31,7 @@ from growjax import experiment as ex
 from growjax import fit as gf
 from growjax import params as gp
 from growjax import tolerance as tl
-from growjax._least_squares import levenberg_marquardt, linearise
+from growjax._least_squares import levenberg_marquardt, linearise, memoised
 from growjax.config import Config
 from growjax.experiments import ExperimentSet, Scope
 
@@ -316,9 +316,13 @@ class _Batch:
             groups.setdefault(key, []).append(e)
         self.groups = [(members, _stack([problems[e] for e in members])) for members in groups.values()]
         self.simulate_s = 0.0
+        self._at = memoised(lambda z, layout: self._run(_batched, z, layout))
 
     def linearised(self, z, layout: _Layout, stacked=None):
-        """[(r (m_e,), J (m_e, p))] per run at the set's coordinates z (P,)."""
+        """[(r (m_e,), J (m_e, p))] per run at the set's coordinates z (P,) (the last few points kept: the fit asks
+        for a point again where one solver's end is the next one's start)."""
+        if stacked is None:
+            return self._at(z, layout)
         return self._run(_batched, z, layout, stacked)
 
     def residuals(self, z, layout: _Layout, stacked=None):
