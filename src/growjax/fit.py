@@ -335,17 +335,12 @@ def _solve(likelihood, z0s, bounds, max_steps: int, problem, tol: dict, discrepa
         g = _tolerance_sensitivity(at_rig, z, raw[0], tol, central=step > 0) if tol else None
         if g is not None and rig == "inferred":
             likelihood = plain.with_tolerances(g, tol, inferred=True, centre=centre)
-        for _ in range(OUTER_STEPS):
-            hyper = likelihood.estimate(raw[0], discrepancy, hyper)
-            w_new, _, converged, _, jac_w = levenberg_marquardt(
-                lambda w, h=hyper: likelihood.augmented(*model(w[:p]), h, w[p:]), np.concatenate([z, b]),
-                max_steps, LM_TOLERANCE, bounds=likelihood.bounds(bounds), cost_resolution=COST_RESOLUTION)
-            sd = np.sqrt(np.diag(np.linalg.pinv(jac_w.T @ jac_w, rcond=1e-10, hermitian=True)))
-            moved = np.abs(w_new - np.concatenate([z, b]))
-            z, b = np.asarray(w_new[:p]), np.asarray(w_new[p:])
-            raw = model(jnp.asarray(z))
-            if np.all(moved <= OUTER_TOLERANCE * sd):
-                break
+        w, hyper, _, converged = alternate_gls(
+            lambda v, h, lik=likelihood, m=model: lik.augmented(*m(v[:p]), h, v[p:]),
+            lambda v, h, lik=likelihood, m=model: lik.estimate(m(jnp.asarray(v[:p]))[0], discrepancy, h),
+            np.concatenate([z, b]), likelihood.bounds(bounds), max_steps, hyper)
+        z, b = w[:p], w[p:]
+        raw = model(jnp.asarray(z))
         if (not likelihood.inferred or step == steps - 1
                 or np.all(np.abs(b) <= RELINEARISE_TOLERANCE * np.asarray(likelihood.tolerance))):
             break
@@ -388,19 +383,28 @@ def _solve_tangents(likelihood, z0s, bounds, max_steps: int, problem, tol: dict,
         g = np.asarray(jac)[:n, p:] * scale
         return likelihood.with_tolerances(g, tol, inferred=True, centre=np.asarray(v)[p:]), (r, jac[:, :p])
 
-    hyper = None
+    w, hyper, _, converged = alternate_gls(
+        lambda v, h: (lambda lk, rw: lk.augmented(*rw, h, np.zeros(q)))(*at(v)),
+        lambda v, h: (lambda lk, rw: lk.estimate(rw[0], discrepancy, h))(*at(v)), w, w_bounds, max_steps)
+    lik, raw = at(w)
+    return zs, costs, oks, w[:p], np.zeros(q), raw, hyper, converged, lik, 1
+
+
+def alternate_gls(whitened, hyper_at, w, bounds, max_steps: int, hyper=None):
+    """Alternate the hyperparameters' mode at w (``hyper_at(w, hyper) → hyper``) and Gauss–Newton on the whitened
+    residuals (``whitened(w, hyper) → (r, J)``) from w, until a fit moves every coordinate by less than
+    :data:`OUTER_TOLERANCE` of its sd (at most :data:`OUTER_STEPS` fits). Returns (w, hyper, cost, converged)."""
+    w, cost, converged = np.asarray(w, float), np.nan, False
     for _ in range(OUTER_STEPS):
-        lik, raw = at(w)
-        hyper = lik.estimate(raw[0], discrepancy, hyper)
-        w_new, _, converged, _, jac_w = levenberg_marquardt(
-            lambda v, h=hyper: (lambda lk, rw: lk.augmented(*rw, h, np.zeros(q)))(*at(v)), w, max_steps,
-            LM_TOLERANCE, bounds=w_bounds, cost_resolution=COST_RESOLUTION)
+        hyper = hyper_at(w, hyper)
+        w_new, cost, converged, _, jac_w = levenberg_marquardt(
+            lambda v, h=hyper: whitened(v, h), w, max_steps, LM_TOLERANCE, bounds=bounds,
+            cost_resolution=COST_RESOLUTION)
         sd = np.sqrt(np.diag(np.linalg.pinv(jac_w.T @ jac_w, rcond=1e-10, hermitian=True)))
         moved, w = np.abs(w_new - w), np.asarray(w_new)
         if np.all(moved <= OUTER_TOLERANCE * sd):
             break
-    lik, raw = at(w)
-    return zs, costs, oks, w[:p], np.zeros(q), raw, hyper, converged, lik, 1
+    return w, hyper, cost, converged
 
 
 def problem_at_rig(problem: Problem, tol: dict, centre) -> Problem:

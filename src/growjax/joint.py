@@ -256,21 +256,15 @@ def _gls(batch, layout: _Layout, likelihoods, hypers, z, b, centre, bounds, disc
     """Alternate each run's hyperparameter mode and the whitened Gauss–Newton fit of (z, b), b the rig's errors
     from ``centre``. Returns (z, b, hypers, cost, converged)."""
     p_all = z.size
-    cost, converged = np.nan, False
-    for _ in range(gf.OUTER_STEPS):
-        outs = batch.linearised(z, layout)
-        hypers = [lik.estimate(r, discrepancy, h) for lik, (r, _), h in zip(likelihoods, outs, hypers)]
-        w_new, cost, converged, _, jac_w = levenberg_marquardt(
-            lambda w, hs=tuple(hypers): _whitened(batch.linearised(w[:p_all], layout), likelihoods, layout, hs,
-                                                 w[p_all:], centre),
-            np.concatenate([z, b]), max_steps, gf.LM_TOLERANCE, bounds=_with_rig(bounds, b.size),
-            cost_resolution=gf.COST_RESOLUTION)
-        sd = np.sqrt(np.diag(np.linalg.pinv(jac_w.T @ jac_w, rcond=1e-10, hermitian=True)))
-        moved = np.abs(w_new - np.concatenate([z, b]))
-        z, b = np.asarray(w_new[:p_all]), np.asarray(w_new[p_all:])
-        if np.all(moved <= gf.OUTER_TOLERANCE * sd):
-            break
-    return z, b, hypers, cost, converged
+
+    def hyper_at(w, hs):
+        outs = batch.linearised(w[:p_all], layout)
+        return tuple(lik.estimate(r, discrepancy, h) for lik, (r, _), h in zip(likelihoods, outs, hs))
+
+    w, hypers, cost, converged = gf.alternate_gls(
+        lambda w, hs: _whitened(batch.linearised(w[:p_all], layout), likelihoods, layout, hs, w[p_all:], centre),
+        hyper_at, np.concatenate([z, b]), _with_rig(bounds, b.size), max_steps, tuple(hypers))
+    return w[:p_all], w[p_all:], list(hypers), cost, converged
 
 
 def _layout(experiments: ExperimentSet, scopes, bases, problems, tol: dict, rig_errors: str) -> _Layout:
