@@ -369,7 +369,7 @@ def _solve_tangents(likelihood, z0s, bounds, max_steps: int, problem, tol: dict,
     solved = [levenberg_marquardt(nominal, z0, max_steps, LM_TOLERANCE, bounds=bounds) for z0 in z0s]
     zs, costs, oks = (np.asarray([s[k] for s in solved]) for k in range(3))
     w = np.concatenate([np.asarray(zs[int(np.argmin(costs))]), np.zeros(q)])
-    w_bounds = tuple(np.concatenate([np.asarray(x, float), np.full(q, v)]) for x, v in zip(bounds, (-np.inf, np.inf)))
+    w_bounds = with_rig_bounds(bounds, q)
     prior = np.concatenate([np.zeros((q, p)), np.diag(1.0 / u)], axis=1)
 
     def with_prior(v):
@@ -388,6 +388,11 @@ def _solve_tangents(likelihood, z0s, bounds, max_steps: int, problem, tol: dict,
         lambda v, h: (lambda lk, rw: lk.estimate(rw[0], discrepancy, h))(*at(v)), w, w_bounds, max_steps)
     lik, raw = at(w)
     return zs, costs, oks, w[:p], np.zeros(q), raw, hyper, converged, lik, 1
+
+
+def with_rig_bounds(bounds, q: int):
+    """The box (lower, upper) on w = (z, b): ``bounds`` on z, none on the q rig errors b after it."""
+    return tuple(np.concatenate([np.asarray(x, float), np.full(q, v)]) for x, v in zip(bounds, (-np.inf, np.inf)))
 
 
 def alternate_gls(whitened, hyper_at, w, bounds, max_steps: int, hyper=None):
@@ -447,8 +452,7 @@ class Likelihood(eqx.Module):
 
     def bounds(self, bounds):
         """The box on w = (z, b): ``bounds`` on z, none on the rig's errors b."""
-        q = len(self.tolerance_names) if self.inferred else 0
-        return tuple(np.concatenate([np.asarray(x, float), np.full(q, v)]) for x, v in zip(bounds, (-np.inf, np.inf)))
+        return with_rig_bounds(bounds, len(self.tolerance_names) if self.inferred else 0)
 
     def augmented(self, r, jac, hyper, b):
         """Whitened residuals and Jacobian of w = (z, b) under the discrepancy and noise: z alone with the rig at

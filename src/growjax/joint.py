@@ -263,7 +263,7 @@ def _gls(batch, layout: _Layout, likelihoods, hypers, z, b, centre, bounds, disc
 
     w, hypers, cost, converged = gf.alternate_gls(
         lambda w, hs: _whitened(batch.linearised(w[:p_all], layout), likelihoods, layout, hs, w[p_all:], centre),
-        hyper_at, np.concatenate([z, b]), _with_rig(bounds, b.size), max_steps, tuple(hypers))
+        hyper_at, np.concatenate([z, b]), gf.with_rig_bounds(bounds, b.size), max_steps, tuple(hypers))
     return w[:p_all], w[p_all:], list(hypers), cost, converged
 
 
@@ -399,10 +399,6 @@ def _bounds(base, layout: _Layout):
         a, b_ = gf.physical_bounds(base, [n], layout.refs[i:i + 1])
         lo[i], hi[i] = a[0], b_[0]
     return lo, hi
-
-
-def _with_rig(bounds, q: int):
-    return tuple(np.concatenate([x, np.full(q, v)]) for x, v in zip(bounds, (-np.inf, np.inf)))
 
 
 def _starts(batch: _Batch, layout: _Layout, likelihoods, base, names, n_starts: int, sweep_n: int, seed: int):
