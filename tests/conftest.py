@@ -58,6 +58,24 @@ def forward_inputs(amplitude=150e3, catheter=0.02):
 SHORT = gj.Config(t1=3.0)
 
 
+def smooth_perturbation(rng, t, size, scale):
+    """A smooth random curve on ``t`` (s): a draw of a squared-exponential process of time scale ``scale`` (s),
+    scaled to RMS ``size`` (m)."""
+    k = np.exp(-0.5 * ((t[:, None] - t[None, :]) / scale) ** 2) + 1e-9 * np.eye(t.size)
+    d = np.linalg.cholesky(k) @ rng.standard_normal(t.size)
+    return d * size / np.sqrt(np.mean(d**2))
+
+
+def ar1_noise(rng, t, sd, tau):
+    """Correlated sensor noise on a 10 ms grid ``t``: AR(1) of marginal sd ``sd`` (m) and time constant ``tau`` (s)."""
+    phi = np.exp(-0.01 / tau)
+    x = np.empty(t.size)
+    x[0] = rng.normal(0.0, sd)
+    for i in range(1, t.size):
+        x[i] = phi * x[i - 1] + rng.normal(0.0, sd * np.sqrt(1.0 - phi**2))
+    return x
+
+
 def objective_differences(evaluate, x, step=1e-3):
     """Central differences (k,) of ``evaluate(x) → scalar`` along each coordinate of ``x`` (k,), step ``step``."""
     out = []

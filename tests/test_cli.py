@@ -191,6 +191,36 @@ def test_control_gives_the_design_the_fixed_parameters_and_tolerances(tmp_path, 
     assert seen["tolerances"] is None and float(gj.get(seen["base"], "ext")) == float(gj.get(gj.reference(), "ext"))
 
 
+def test_design_takes_the_growth_law_of_what_is_known(tmp_path, monkeypatch):
+    """``growjax design --law lockhart``: what is known and the design are on Lockhart's law; a saved fit that left
+    its rate and exponent undetermined gives them their box (uniform) prior."""
+    from growjax import cli
+    from growjax import design as gd
+
+    seen = {}
+
+    def design(knowledge, space, **kw):
+        seen["knowledge"] = knowledge
+        raise _Designed
+
+    monkeypatch.setattr(gd, "design", design)
+    saved = tmp_path / "fit.json"
+    saved.write_text(json.dumps({"parameters": {
+        "robot.yield_pressure": {"estimate": 9000.0, "standard_error": 200.0},
+        "robot.lockhart_rate": {"estimate": 9.0, "standard_error": None},
+        "robot.lockhart_exponent": {"estimate": 0.05, "standard_error": None}}}))
+    with pytest.raises(_Designed):
+        cli.main(["design", "--law", "lockhart", "--for", "Y", "phi_L", "n_L", "--fit-from", str(saved),
+                  "--out", str(tmp_path / "out")])
+    known = seen["knowledge"]
+    assert known.base.robot.growth_law == "lockhart"
+    assert known.names == ("robot.yield_pressure", "robot.lockhart_rate", "robot.lockhart_exponent")
+    reference = gj.reference(growth_law="lockhart")
+    for name in known.names[1:]:  # undetermined: at the box's centre, with its variance
+        assert float(gj.get(known.base, name)) == pytest.approx(float(gj.get(reference, name)))
+        assert known.covariance[known.names.index(name), known.names.index(name)] == pytest.approx(np.log(4.0) ** 2 / 12)
+
+
 @pytest.mark.slow
 def test_posterior_command_writes_inference_data_and_the_issue_keys(tmp_path):
     cmd = [sys.executable, "-m", "growjax.cli", "posterior", "--t-end", "0.8", "--chains", "2", "--warmup", "40",

@@ -50,3 +50,10 @@ def test_regular_install_runs_simulate_elsewhere(tmp_path):
     assert summary["status"] == "ok" and Path(summary["data"]).is_relative_to(env_dir)  # the installed data
     assert summary["rmse_length_m"] < 4e-4  # simulated with the Y recorded beside the shipped data
     assert (where / "out" / "simulate" / "trajectory.csv").is_file()
+
+
+def test_the_citation_names_the_packages_version():
+    import growjax
+
+    line = next(x for x in (REPO / "CITATION.cff").read_text().splitlines() if x.startswith("version:"))
+    assert line.split(":", 1)[1].strip() == growjax.__version__

@@ -9,6 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import ar1_noise, smooth_perturbation
 from scipy.stats import multivariate_normal
 
 import growjax as gj
@@ -126,21 +127,6 @@ def test_tolerances_parse_and_resolve():
 
 # -- fits of reference-made data (the shipped reference traces, fitted by the fast configuration) ------------
 
-def _smooth(rng, t, size, scale):
-    k = np.exp(-0.5 * ((t[:, None] - t[None, :]) / scale) ** 2) + 1e-9 * np.eye(t.size)
-    d = np.linalg.cholesky(k) @ rng.standard_normal(t.size)
-    return d * size / np.sqrt(np.mean(d**2))
-
-
-def _ar1(rng, t, sd, tau):
-    phi = np.exp(-0.01 / tau)
-    x = np.empty(t.size)
-    x[0] = rng.normal(0.0, sd)
-    for i in range(1, t.size):
-        x[i] = phi * x[i - 1] + rng.normal(0.0, sd * np.sqrt(1.0 - phi**2))
-    return x
-
-
 @pytest.fixture(scope="module")
 def reference():
     t, lengths, cases = mk.read_reference_lengths()
@@ -160,8 +146,8 @@ def test_intervals_cover_y_under_a_discrepancy_the_model_does_not_have(reference
     the perturbation; ``benchmarks/coverage_discrepancy.py --budget default`` measures that coverage.)"""
     t, lengths, cases, _ = reference
     rng = np.random.default_rng(7)
-    for name, extra in (("published_Y10000", _smooth(rng, t, 3e-4, 1.5)),
-                        ("published_Y7920", _ar1(rng, t, 2.5e-4, 0.2))):
+    for name, extra in (("published_Y10000", smooth_perturbation(rng, t, 3e-4, 1.5)),
+                        ("published_Y7920", ar1_noise(rng, t, 2.5e-4, 0.2))):
         truth = cases[name]["parameters"]["Y"]
         data = lengths[name] + extra + rng.normal(0.0, 5e-5, t.size)
         new = _fit(reference, data, tolerances={})
@@ -255,28 +241,6 @@ def test_the_numpyro_model_carries_the_same_likelihood():
     assert np.std(same - mu - np.asarray(mean)) < 0.8 * np.std(draws - mu)
 
 
-@pytest.mark.parametrize("perturbation", ["smooth", "correlated"])
-def test_discovery_leaves_a_small_smooth_discrepancy_to_the_discrepancy_term(perturbation):
-    """The shipped clean reference-made example (0–3 s, noise 0.2 mm) with a smooth perturbation of 0.1 mm RMS
-    from outside the catalogue, or correlated sensor noise (0.2 mm over 0.2 s): no effect is named and nothing
-    is called confounded."""
-    from growjax import discover as gd
-
-    folder = REPO / "src" / "growjax" / "datasets" / "discovery"
-    cfg = gj.Config(t1=3.0)
-    exp = ex.read(folder / "clean.csv").window(3.0 + 1e-9)
-    keep = (exp.time >= cfg.t0) & (exp.time <= cfg.t1)
-    t = exp.time[keep]
-    rng = np.random.default_rng(5)  # one data set: the family-wise false-positive rate is 5 %, see the benchmark
-    extra = _smooth(rng, t, 1e-4, 0.8) if perturbation == "smooth" else _ar1(rng, t, 2e-4, 0.2)
-    data = exp["robot_length_m"][keep] + extra
-    inputs = ex.to_inputs(exp, "forward", gj.reference(), cfg.t0, cfg.t1)
-    res = gd.discover(t, data, inputs, config=cfg, candidates=("active_channel_force", "fluid_leak",
-                                                                 "retraction_folding"))
-    assert res.effect == "none" and not res.confounded_with, gd.summary_text(res)
-    assert json.dumps(res.report(), default=float)  # the report stays serialisable with the discrepancy's fields
-
-
 def test_the_drift_allowance_is_the_independent_noise_one_without_a_discrepancy_and_smaller_with_one():
     """Discovery's allowance for the fitted configuration's drift, tr(K⁻¹K_e): m·e²/σ² under white noise; a slow
     discrepancy that already takes slow structure leaves the drift much less to buy."""
@@ -285,7 +249,7 @@ def test_the_drift_allowance_is_the_independent_noise_one_without_a_discrepancy_
     t = np.arange(1, 501) * 0.02
     rng = np.random.default_rng(0)
     white = rng.normal(0.0, 2e-4, t.size)
-    slow = white + _smooth(rng, t, 4e-4, 3.0)
+    slow = white + smooth_perturbation(rng, t, 4e-4, 3.0)
     iid = gd.Scorer(t, np.sin(t), 2e-4, "none")  # a smooth record: every sample is scored
     assert iid.allowance(white, 1.5e-5, 5.0) == pytest.approx(t.size * 1.5e-5**2 / 2e-4**2)
     scorer = gd.Scorer(t, np.sin(t), 2e-4, "matern32")

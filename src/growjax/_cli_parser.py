@@ -314,6 +314,8 @@ def build_parser():
                      help="sd of the pressure sensor's noise, Pa (with --sensors length,pressure)")
     des.add_argument("--max-pump-speed", type=_positive, default=None, metavar="M_S",
                      help="limit of the pump platform's speed, m/s (the model's ideal torque source has none)")
+    des.add_argument("--law", choices=["reference", "lockhart"], default="reference",
+                     help="growth law of what is known and of the design (lockhart: e.g. --for Y phi_L n_L)")
     _quiet(des)
     _likelihood(des)
 

@@ -599,7 +599,7 @@ def design_command(args) -> dict:
             raise ValueError("--discriminate scores the length alone: drop --sensors")
     elif args.size is not None:
         raise ValueError("--size gives the effects' sizes of --discriminate")
-    data, exp, base, origin = _setup(args, "forward")
+    data, exp, base, origin = _setup(args, "forward", growth_law=args.law)
     names = tuple(dict.fromkeys(gp.resolve_name(base, n) for n in (args.design_for or ["Y"])))
     lim = gd.limits(base, max_speed=args.max_pump_speed)
     p_max = lim.pressure if args.p_max is None else args.p_max
@@ -638,7 +638,8 @@ def design_command(args) -> dict:
     out = _out(args)
     csv = space.write_csv(out / "design.csv", result.x)
     figure = gd.design_figure(result, out / "design.png")
-    summary = {"command": "design", "data": str(data), "fixed_parameters": origin, **result.summary(),
+    summary = {"command": "design", "data": str(data), "fixed_parameters": origin, "growth_law": args.law,
+               **result.summary(),
                "design_csv": str(csv), "figure": str(figure), "summary_json": str(out / "summary.json")}
     (out / "summary.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
     return summary
