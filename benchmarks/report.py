@@ -12,8 +12,9 @@ from __future__ import annotations
 import argparse
 import json
 import re
-import numpy as np
 from pathlib import Path
+
+import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 HEADER = """# Benchmarks
