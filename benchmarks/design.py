@@ -192,16 +192,22 @@ def discriminate(args, known, exp, base) -> dict:
     a, b = args.discriminate
     space = gd.DesignSpace(args.duration, gd.limits(base).pressure, gd.catheter_of(exp, args.duration),
                            knot_spacing=args.knot_spacing)
-    result = gd.discriminate(known, space, (a, b), random=args.random, starts=args.starts, iterations=args.iterations,
-                             seed=args.seed, progress=True)
-    summary = result.summary()
+    if args.design_from:  # an earlier run's design
+        summary = json.loads(Path(args.design_from).read_text())["design"]
+        x = space.unconstrained(np.asarray(summary["design"]["demand_Pa"]))
+    else:
+        result = gd.discriminate(known, space, (a, b), random=args.random, starts=args.starts,
+                                 iterations=args.iterations, seed=args.seed, progress=True)
+        summary, x = result.summary(), result.x
     print(json.dumps({r["input"]: r["T"] for r in summary["table"]}, indent=1), flush=True)
-    inputs = {"design": space.inputs(result.x), "published pulse train": gd.published_inputs(space)}
+    inputs = {"design": space.inputs(x), "published pulse train": gd.published_inputs(space)}
     inputs = {label: inp for label, inp in inputs.items() if label in args.inputs}
     maker = gj.Config(fidelity=args.maker, t1=args.duration)
     times = np.asarray(space.times)
+    base_names = [] if args.hold_base else list(known.names)  # held: at the first experiment's estimate
+    truths = args.truths or (a, b, "none")  # "none": clean data, where naming any effect is a false alarm
     rows = []
-    for truth in (a, b, "none"):  # "none": clean data, where naming any effect is a false alarm
+    for truth in truths:
         params = known.base if truth == "none" else gj.with_effects(known.base, syn.make_effect(truth))
         for index in range(args.replications):
             rng = np.random.default_rng([args.seed, index, 11 if truth != "none" else 13])
@@ -210,12 +216,12 @@ def discriminate(args, known, exp, base) -> dict:
                 traj = gj.simulate(params, inp, maker, ts=np.concatenate([[maker.t0], times]))
                 length = np.asarray(traj.length)[1:] + rng.normal(0.0, float(known.hyper.noise), times.size)
                 found = discover(times, length, inp, base=known.base, config=gj.Config(t1=args.duration),
-                                 base_names=list(known.names), candidates=args.candidates)
+                                 base_names=base_names, candidates=args.candidates)
                 row[label] = {"effect": found.effect, "named": found.effect == truth,
                               "confounded_with": list(found.confounded_with or [])}
             rows.append(row)
             print(json.dumps(row), flush=True)
-    rate = {label: {t: float(np.mean([r[label]["named"] for r in rows if r["truth"] == t])) for t in (a, b, "none")}
+    rate = {label: {t: float(np.mean([r[label]["named"] for r in rows if r["truth"] == t])) for t in truths}
             for label in inputs}
     return {"design": summary, "replications": rows, "named_rate": rate}
 
@@ -260,6 +266,11 @@ def main():
                     help="the growth law of the fit, the design and the replications' data (lockhart: with --for Y "
                          "phi_L n_L, a design for the law's rate and exponent)")
     ap.add_argument("--candidates", nargs="+", default=None, help="with --discriminate: discovery's candidates")
+    ap.add_argument("--truths", nargs="+", default=None, metavar="EFFECT",
+                    help="with --discriminate: the hidden effects replicated ('none': clean data; default A B none)")
+    ap.add_argument("--hold-base", action="store_true",
+                    help="with --discriminate: discovery holds the base parameters at the first experiment's "
+                         "estimate (the designed experiment read with what is known) instead of refitting them")
     ap.add_argument("--out", default=None, help="results file (default benchmarks/results/design.json, "
                                                 "design_discrimination.json with --discriminate)")
     args = ap.parse_args()

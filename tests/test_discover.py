@@ -2,7 +2,6 @@
 
 import json
 import math
-from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -150,19 +149,24 @@ SMALL_CANDIDATES = ("active_channel_force", "fluid_leak", "retraction_folding")
 SMALL_T_END = 3.0  # s: two retractions of the published pulse
 
 
-def _shipped(name, **kw):
-    """A shipped example of growjax/datasets/discovery/ (reference-made, noise 0.2 mm) on 0–3 s, and its truth."""
-    import json
-    from pathlib import Path
+SHIPPED = REPO / "src" / "growjax" / "datasets" / "discovery"
 
-    folder = Path(__file__).resolve().parents[1] / "src" / "growjax" / "datasets" / "discovery"
+
+def _small_example(name):
+    """(sample times (T,) s, length (T,) m, inputs, configuration) of a shipped example of
+    growjax/datasets/discovery/ (reference-made, noise 0.2 mm) on 0–3 s."""
     cfg = gj.Config(t1=SMALL_T_END)
-    exp = ex.read(folder / f"{name}.csv").window(SMALL_T_END + 1e-9)
+    exp = ex.read(SHIPPED / f"{name}.csv").window(SMALL_T_END + 1e-9)
     inputs = ex.to_inputs(exp, "forward", gj.reference(), cfg.t0, cfg.t1)
     keep = (exp.time >= cfg.t0) & (exp.time <= cfg.t1)
-    res = gd.discover(exp.time[keep], exp["robot_length_m"][keep], inputs, config=cfg, candidates=SMALL_CANDIDATES,
-                      **kw)
-    return res, json.loads((folder / f"{name}.json").read_text())
+    return exp.time[keep], exp["robot_length_m"][keep], inputs, cfg
+
+
+def _shipped(name, **kw):
+    """Discovery on a shipped example (:func:`_small_example`) with the small candidates, and its truth."""
+    times, length, inputs, cfg = _small_example(name)
+    res = gd.discover(times, length, inputs, config=cfg, candidates=SMALL_CANDIDATES, **kw)
+    return res, json.loads((SHIPPED / f"{name}.json").read_text())
 
 
 def test_discover_names_a_hidden_folding_and_recovers_its_size():
@@ -213,10 +217,7 @@ def test_candidate_fits_stay_in_their_physical_ranges():
     reference's ~70 s compile would buy nothing here.)"""
     from growjax import effects as fx
 
-    cfg = gj.Config(t1=SMALL_T_END)
-    exp = ex.read(Path(__file__).resolve().parents[1] / "src" / "growjax" / "datasets" / "discovery" / "clean.csv").window(SMALL_T_END + 1e-9)
-    inputs = ex.to_inputs(exp, "forward", gj.reference(), cfg.t0, cfg.t1)
-    times = exp.time[(exp.time >= cfg.t0) & (exp.time <= cfg.t1)]
+    times, _, inputs, cfg = _small_example("clean")
     top = gd.candidate_parameter("fluid_leak")[2][1]
     truth = gj.params.with_effects(gj.reference(), fx.FluidLeak(conductance=3.0 * top))
     length = np.asarray(gj.simulate(truth, inputs, cfg, ts=times).length)
@@ -241,15 +242,9 @@ def test_discovery_leaves_a_small_smooth_discrepancy_to_the_discrepancy_term(per
     """The shipped clean reference-made example (0–3 s, noise 0.2 mm) with a smooth perturbation of 0.1 mm RMS
     from outside the catalogue, or correlated sensor noise (0.2 mm over 0.2 s): no effect is named and nothing
     is called confounded. (The small version's window and candidates: its compiled fits are shared.)"""
-    folder = REPO / "src" / "growjax" / "datasets" / "discovery"
-    cfg = gj.Config(t1=SMALL_T_END)
-    exp = ex.read(folder / "clean.csv").window(SMALL_T_END + 1e-9)
-    keep = (exp.time >= cfg.t0) & (exp.time <= cfg.t1)
-    t = exp.time[keep]
+    t, length, inputs, cfg = _small_example("clean")
     rng = np.random.default_rng(5)  # one data set: the family-wise false-positive rate is 5 %, see the benchmark
     extra = smooth_perturbation(rng, t, 1e-4, 0.8) if perturbation == "smooth" else ar1_noise(rng, t, 2e-4, 0.2)
-    data = exp["robot_length_m"][keep] + extra
-    inputs = ex.to_inputs(exp, "forward", gj.reference(), cfg.t0, cfg.t1)
-    res = gd.discover(t, data, inputs, config=cfg, candidates=SMALL_CANDIDATES)
+    res = gd.discover(t, length + extra, inputs, config=cfg, candidates=SMALL_CANDIDATES)
     assert res.effect == "none" and not res.confounded_with, gd.summary_text(res)
     assert json.dumps(res.report(), default=float)  # the report stays serialisable with the discrepancy's fields

@@ -1,7 +1,6 @@
 """The shared likelihood: Matérn-3/2 discrepancy, sensor noise and rig tolerances (growjax.discrepancy,
 growjax.tolerance) and what fit, posterior and discovery make of data the fitted model does not reproduce."""
 
-import json
 import sys
 from pathlib import Path
 
