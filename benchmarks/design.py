@@ -16,8 +16,9 @@ experiment leaves undetermined, enter with their box's uniform prior). Then:
 (b) Replications: ``--replications`` times, a rig drawn from the default tolerance budget and θ at its estimate;
     the design's input and the published pulse train each run by the reference configuration on that rig,
     with fresh white length noise (the fitted noise sd; and 1 kPa pressure noise where ``--sensors`` records it);
-    each fitted alone by ``growjax.fit.fit`` (default likelihood, the rig inferred and linearised once at nominal;
-    ``--relinearise``: taken again where the data put it, as ``growjax fit`` does by default). Reported per input: the
+    each fitted alone by ``growjax.fit.fit`` (default likelihood, the rig's errors inferred as parameters of the
+    model, as ``growjax fit`` does; ``--no-rig-tangents``: their secants, linearised once at nominal, or with
+    ``--relinearise`` taken again where the data put the rig). Reported per input: the
     realised sd of ln θ̂ over the replications against the predicted sd of the experiment alone, the fits'
     mean reported sd and the coverage of their 90 % intervals, and the design's realised sd against the
     published pulse train's. ``--workers`` runs replications in parallel processes (spawned; each compiles).
@@ -108,7 +109,7 @@ def replicate(job: dict) -> dict:
             pressure = np.asarray(traj.pressure)[1:] + rng.normal(0.0, job["pressure_noise"], times.size)
         res = gf.fit(times, length, inputs, free=job["names"], base=base, config=config, pressure=pressure,
                      sigma_pressure=job["pressure_noise"], n_starts=1, sweep_n=16,
-                     relinearise=job.get("relinearise", False), rig_tangents=job.get("rig_tangents", False))
+                     relinearise=job.get("relinearise", False), rig_tangents=job.get("rig_tangents", True))
         row = {"status": res.status, "linearisations": res.linearisations}
         for n in job["names"]:
             true = float(job["estimate"][n])
@@ -247,12 +248,11 @@ def main():
     ap.add_argument("--inputs", nargs="+", default=["design", "published pulse train"],
                     choices=["design", "published pulse train"],
                     help="the inputs replicated (with --discriminate: whose data discovery reads)")
-    ap.add_argument("--relinearise", action="store_true",
-                    help="the replications' fits take the rig's sensitivities again where the data put the rig (the "
-                         "fit's default; without it they linearise once, at nominal)")
-    ap.add_argument("--rig-tangents", action="store_true",
+    ap.add_argument("--rig-tangents", action=argparse.BooleanOptionalAction, default=True,
                     help="the replications' fits make the rig's errors parameters of the model (exact tangents, "
-                         "growjax.fit.fit(rig_tangents=True)) instead of secants")
+                         "as growjax fit; default); --no-rig-tangents: secants, linearised once at nominal")
+    ap.add_argument("--relinearise", action="store_true",
+                    help="with --no-rig-tangents: the secants taken again where the data put the rig")
     ap.add_argument("--safety-draws", type=int, default=100,
                     help="fresh draws of the rig and θ the design is run on by the reference configuration (0: none)")
     ap.add_argument("--resume", action="store_true",

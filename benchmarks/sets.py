@@ -3,8 +3,9 @@ by the set's experiments (the default) and, for contrast, taken as independent p
 
 Run: ``python benchmarks/sets.py [--sets 30] [--experiments 4] [--workers 1] [--resume]
 [--out benchmarks/results/sets.json]``; ``--resume`` keeps the sets already in the partial file.
-``--relinearise-singles`` fits each experiment alone with ``relinearise=True`` (the rig's sensitivities taken
-again where the data put it, as the joint fit does); ``--joint-from FILE`` takes the joint fits from an earlier
+Each experiment alone is fitted as ``growjax fit`` fits it (the rig's errors in the model's tangents);
+``--relinearise-singles`` fits it with the rig's secants instead, taken again where the data put the rig
+(``rig_tangents=False, relinearise=True``); ``--joint-from FILE`` takes the joint fits from an earlier
 results file of the same study and runs the single fits only.
 
 Each set: one robot (Y uniform on 6–12 kPa) on one rig drawn from the default tolerance budget, run under
@@ -115,7 +116,7 @@ def one_set(task):
         inputs = gj.Inputs(catheter_length=gj.Sampled(TIME, CATHETER),
                            pressure_demand=gj.Sampled(TIME, run.experiment["pressure_demand_Pa"]))
         res = gf.fit(TIME, run.length, inputs, free=["Y"], config=config, n_starts=1, sweep_n=16,
-                     relinearise=relinearise)
+                     **({"rig_tangents": False, "relinearise": True} if relinearise else {}))
         singles.append({**row_of(*res.interval_90[Y], y, res.estimate[Y]), "wall_s": time.perf_counter() - t0,
                         "linearisations": res.linearisations})
     row["single"] = singles
@@ -149,8 +150,8 @@ def main():
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "sets.json"))
     ap.add_argument("--resume", action="store_true", help="keep the sets already in the partial file; run the rest")
     ap.add_argument("--relinearise-singles", action="store_true",
-                    help="fit each experiment alone with the rig linearised again where the data put it (the fit's "
-                         "default; without it, once at nominal)")
+                    help="fit each experiment alone with the rig's secants, linearised again where the data put the "
+                         "rig (without it: as growjax fit, the rig's errors in the model's tangents)")
     ap.add_argument("--joint-from", default=None, metavar="SETS.json",
                     help="the joint fits from this earlier results file of the same study; run the single fits only")
     args = ap.parse_args()

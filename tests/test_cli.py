@@ -241,10 +241,9 @@ def test_posterior_command_writes_inference_data_and_the_issue_keys(tmp_path):
     assert (tmp_path / "posterior.nc").stat().st_size > 10_000
 
 
-def test_fit_passes_relinearise_to_the_fit(monkeypatch, tmp_path, capsys):
-    """``growjax fit`` asks the single experiment's fit to take the rig's sensitivities again where the data put the
-    rig (the default, as the posterior does); ``--no-relinearise`` linearises it once, at nominal; ``--rig-tangents``
-    makes the rig's errors parameters of the model."""
+def test_fit_passes_the_rigs_treatment_to_the_fit(monkeypatch, tmp_path, capsys):
+    """``growjax fit`` makes the rig's errors parameters of the model by default (``--rig-tangents``);
+    ``--no-rig-tangents`` takes secants, relinearised where the data put the rig unless ``--no-relinearise``."""
     from growjax import cli
     from growjax import fit as gf
 
@@ -256,7 +255,7 @@ def test_fit_passes_relinearise_to_the_fit(monkeypatch, tmp_path, capsys):
 
     monkeypatch.setattr(gf, "fit", stop)
     data = "src/growjax/datasets/synthetic_forward.csv"
-    for extra in ([], ["--relinearise"], ["--no-relinearise"], ["--rig-tangents"]):
+    for extra in ([], ["--rig-tangents"], ["--no-rig-tangents"], ["--no-rig-tangents", "--no-relinearise"]):
         assert cli.main(["fit", data, "--out", str(tmp_path), "--quiet", *extra]) == 2
-    assert seen == [(True, False), (True, False), (False, False), (True, True)]
+    assert seen == [(True, True), (True, True), (True, False), (False, False)]
     assert "stopped before fitting" in capsys.readouterr().err

@@ -225,15 +225,14 @@ def build_parser():
     fit.add_argument("--rig-errors", choices=["shared", "experiment"], default="shared",
                      help="with several experiments: one set of rig errors per rig, shared by its experiments, or "
                           "one per experiment (treats them as independent: over-confident on one rig)")
+    fit.add_argument("--rig-tangents", action=argparse.BooleanOptionalAction, default=True,
+                     help="the rig inferred: the rig's errors are parameters of the model, their sensitivities its "
+                          "exact tangents, fitted with their priors before the discrepancy (default; reaches a rig "
+                          "far off nominal); --no-rig-tangents: the rig's secants from nominal, taken apart")
     fit.add_argument("--relinearise", action=argparse.BooleanOptionalAction, default=True,
-                     help="one experiment, the rig inferred: take the rig's sensitivities again where the data put "
-                          "the rig, until it settles, as a set's joint fit and the posterior do (default); "
-                          "--no-relinearise: once, at nominal (faster; over-confident where the rig is off by "
-                          "a tolerance or more)")
-    fit.add_argument("--rig-tangents", action="store_true",
-                     help="one experiment, the rig inferred: make the rig's errors parameters of the model, their "
-                          "sensitivities its exact tangents, fitted with their priors before the discrepancy (no "
-                          "secants, no relinearisation; reaches a rig far off nominal that the secants can miss)")
+                     help="with --no-rig-tangents: take the secants again where the data put the rig, until it "
+                          "settles (default); --no-relinearise: once, at nominal (faster; over-confident where the "
+                          "rig is off by a tolerance or more)")
 
     post = sub.add_parser("posterior", formatter_class=fmt,
                           help="NUTS posterior of Y, ext, n (or Y, phi_L, n_L) and the noise; of a population of "

@@ -141,7 +141,7 @@ def _fit_set(args, paths) -> dict:
     started = _progress_note(args, f"fit: {', '.join(free)} over {len(exps)} experiments from {args.starts} starts")
     result = joint.fit_set(exps, free=scopes, config=config, n_starts=args.starts, seed=args.seed,
                            discrepancy=args.discrepancy, tolerances=tolerances_of(args), rig=args.rig,
-                           rig_errors=args.rig_errors)
+                           rig_errors=args.rig_errors, rig_tangents=args.rig_tangents)
     _progress_note(args, f"fit: done in {time.perf_counter() - started:.1f} s")
     traces = []
     for run, rec in zip(exps, result.runs):

@@ -194,7 +194,7 @@ def fit(
     tolerances: dict | None = None,
     rig: str = "inferred",
     relinearise: bool = True,
-    rig_tangents: bool = False,
+    rig_tangents: bool = True,
 ) -> FitResult:
     """Fit ``free`` parameters to a measured length (m) at ``times`` (s) (and ``pressure``, Pa, if given).
 
@@ -222,17 +222,16 @@ def fit(
     choice, wider where the data do inform the rig. :attr:`FitResult.budget` splits each variance into
     noise, discrepancy and each tolerance (under ``"inferred"``: what is left of each after the data).
 
-    ``relinearise`` (default): with the rig inferred, take the model and the rig's sensitivities again where the
-    data put the rig (slopes there, not secants from nominal), until it settles, as :func:`growjax.joint.fit_set`
-    does and as :func:`growjax.posterior.sample` linearises. Where the rig is off by a tolerance or more, the
-    secants at nominal bias θ by several standard errors; False linearises once, at nominal: cheaper, and
-    over-confident there.
-
-    ``rig_tangents``: with the rig inferred, make the rig's errors parameters of the model beside θ instead: its
-    exact forward-mode tangents in the same solve as θ's, (θ, b) fitted by least squares with b's prior rows b/u
-    before the discrepancy is estimated, then by generalised least squares. No secants and no relinearisation;
-    where the rig is far off nominal (a designed input driving its frictions hard) the secant path can settle in
-    a side minimum whose misfit the discrepancy absorbs, and this one does not. ``relinearise`` is then moot.
+    ``rig_tangents`` (default), with the rig inferred: the rig's errors are parameters of the model beside θ, their
+    sensitivities its exact forward-mode tangents in the same solve as θ's; (θ, b) are fitted by least squares
+    with b's prior rows b/u before the discrepancy is estimated (a misfit is then the model's to remove, not the
+    discrepancy's to absorb), then by generalised least squares, the likelihood linearised at every point where
+    the rig then is. False: the rig's secants from nominal, taken apart from the solve; with ``relinearise``
+    (default) taken again where the data put the rig, until it settles (at most :data:`RELINEARISE_STEPS`
+    linearisations), or with ``relinearise=False`` once, at nominal (cheaper; over-confident where the rig is off
+    by a tolerance or more). Where a designed input drives the frictions hard and the rig is far off nominal, the
+    secant path can settle in a side minimum whose misfit the discrepancy absorbs; the tangents do not, and they
+    cost one solve per point instead of two per tolerance per linearisation.
     """
     if rig not in RIG_TREATMENTS:
         raise ValueError(f"rig must be one of {RIG_TREATMENTS}, got {rig!r}")
@@ -574,7 +573,7 @@ def _hyper_grid(hyper) -> dc.Hyper:
 @eqx.filter_jit
 def _hyper_scan(likelihood: Likelihood, r, jac, grid: dc.Hyper, b):
     """Per grid point: log weight, the Gauss–Newton shift of z, its covariance (p, p)."""
-    n, scale, p = likelihood.n_len, likelihood.sigma_length, jac.shape[1]
+    p = jac.shape[1]
     cols, t = likelihood.length_columns(r, jac, b)
 
     def one(h):

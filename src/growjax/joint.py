@@ -11,8 +11,9 @@ evidence about the rig's effect (and under-covers where they share one rig).
 
 The runs' simulations and Jacobians run batched: runs with the same drive, sample count and input structure are
 stacked (breaks padded to a common length) and solved by one ``vmap``-ed program; the Jacobian of each run is
-taken in its own parameters and scattered into the set's columns, and the rig's secants and the starts' scout run
-the residuals alone.
+taken in its own parameters (by default its θ and its rig's errors, exact tangents of one solve) and scattered into
+the set's columns; the starts' scout (and, with ``rig_tangents=False``, the rig's secants) run the residuals
+alone.
 """
 
 from __future__ import annotations
@@ -36,12 +37,12 @@ from growjax.config import Config
 from growjax.experiments import ExperimentSet, Scope
 
 RIG_ERRORS = ("shared", "experiment")
-# The rig's sensitivities are taken again where the fit puts the rig (at most this many linearisations, until the
-# rig's errors move by less than this share of their tolerance): with three or more runs on one rig the data pull
-# its errors a good part of a tolerance from nominal, where the secants taken at nominal bias every robot's Y alike
-# by several standard errors unless the rig is let settle (benchmarks/sets.py measures the coverage). Taken again,
-# they are central secants, the slope where the rig now is: a one-sided secant's slope belongs half a tolerance
-# away, and the rig would drift past its optimum step after step.
+# With rig_tangents=False the rig's secants are taken again where the fit puts the rig (at most this many
+# linearisations, until its errors move by less than this share of their tolerance): with three or more runs on one
+# rig the data pull its errors a good part of a tolerance from nominal, where the secants taken at nominal bias
+# every robot's Y alike by several standard errors unless the rig is let settle. Taken again, they are central
+# secants, the slope where the rig now is: a one-sided secant's slope belongs half a tolerance away, and the rig
+# would drift past its optimum step after step.
 RELINEARISE_STEPS = 8
 RELINEARISE_TOLERANCE = 0.02
 
@@ -120,6 +121,7 @@ def fit_set(
     rig: str = "inferred",
     rig_errors: str = "shared",
     effects: Sequence = (),
+    rig_tangents: bool = True,
 ) -> SetFitResult:
     """Fit the ``free`` parameters (``NAME`` shared, ``NAME@robot|rig|experiment`` one per robot, rig or run) to
     every run of ``experiments`` at once.
@@ -130,6 +132,12 @@ def fit_set(
     ``rig_errors``: ``"shared"`` (one error vector per rig) or ``"experiment"`` (one per run). ``effects``:
     :class:`growjax.Effect` instances added to every run's parameters at their given values (an effect's parameter
     can then be freed by name, e.g. ``fluid_leak.conductance@robot``, and starts there).
+
+    ``rig_tangents`` (default), with the rig inferred: the rig's errors are parameters of every run's model beside
+    its θ, their sensitivities the solver's exact tangents in the same batched solve (as
+    :func:`growjax.fit.fit`): least squares of z with the rig nominal, then of (z, b) with b's prior rows, then
+    generalised least squares of (z, b). False: secants of the rig taken apart and relinearised where the data put
+    the rig (at most :data:`RELINEARISE_STEPS` linearisations).
     """
     if discrepancy not in dc.KINDS:
         raise ValueError(f"discrepancy must be one of {dc.KINDS}, got {discrepancy!r}")
@@ -146,11 +154,13 @@ def fit_set(
     if len(set(names)) != len(names):
         raise ValueError(f"a parameter is freed twice: {list(free)}")
     tol = tl.budget(bases[0], tolerances, names, use_default=tolerances is None and discrepancy != "none")
+    tangents = rig_tangents and rig == "inferred" and bool(tol)
+    modelled = names + tuple(tol) if tangents else names  # the parameters each run's model is solved in
     problems, likelihoods = [], []
     for run, base in zip(runs, bases):
         cfg = config.replace(drive=run.drive)
         inputs = ex.to_inputs(run.experiment, run.drive, base, cfg.t0, cfg.t1)
-        pr = gf.make_problem(base, names, inputs, cfg, run.times, run.length, run.pressure, run.window,
+        pr = gf.make_problem(base, modelled, inputs, cfg, run.times, run.length, run.pressure, run.window,
                              sigma_length, sigma_pressure)
         if pr.times.size < 2:
             raise ValueError(f"experiment {run.name!r}: fewer than two samples inside the window")
@@ -160,14 +170,18 @@ def fit_set(
         likelihoods.append(gf.Likelihood(pr.times, jnp.asarray(used), jnp.asarray(np.flatnonzero(used)),
                                          sigma_length, n))
     layout = _layout(experiments, scopes, bases, problems, tol, rig_errors)
-    batch = _Batch(problems)
+    batch = _Batch(problems, layout.rig_index if tangents else None)
     bounds = _bounds(bases[0], layout)
     z0s = _starts(batch, layout, likelihoods, bases[0], names, n_starts, sweep_n, seed)
-    solved = [levenberg_marquardt(lambda z: _weighted(batch.linearised(z, layout), likelihoods, layout), z0,
-                                  max_steps, gf.LM_TOLERANCE, bounds=bounds) for z0 in z0s]
+    solved = [levenberg_marquardt(lambda z: _weighted(_on_z(batch.linearised(z, layout), len(names)), likelihoods,
+                                                      layout), z0, max_steps, gf.LM_TOLERANCE, bounds=bounds)
+              for z0 in z0s]
     k_best = int(np.argmin([s[1] for s in solved]))
     z, converged = np.asarray(solved[k_best][0]), bool(solved[k_best][2])
     model_error = gf.default_model_error(config) if model_error is None else model_error
+    if tangents:
+        return _fit_tangents(batch, layout, likelihoods, tol, z, bounds, discrepancy, max_steps, model_error, runs,
+                             rig_errors, clock)
     plain = likelihoods
     centre = np.zeros(len(layout.rig_labels) if tol and rig == "inferred" else 0)  # rig point of linearisation
     b, hypers = centre.copy(), [None] * len(runs)
@@ -203,6 +217,70 @@ def fit_set(
                         for e, ((r, _), lik) in enumerate(zip(outs, likelihoods))]
     if joint is not None:
         result.rig_labels, result.rig_vector, result.joint_covariance = tuple(layout.rig_labels), np.asarray(b), joint
+    return result
+
+
+def _on_z(outs, p: int):
+    """Each run's (r, J) with J's columns cut to its θ (the first ``p``; the rig's errors' tangents after them)."""
+    return [(r, jac[:, :p]) for r, jac in outs]
+
+
+def _fit_tangents(batch: _Batch, layout: _Layout, plain, tol: dict, z, bounds, discrepancy: str, max_steps: int,
+                  model_error: float, runs, rig_errors: str, clock) -> SetFitResult:
+    """The set's fit from z (P,) (least squares with the rig nominal) with the rig's errors b (Q,) among the runs'
+    model parameters: least squares of w = (z, b) with b's prior rows b/u, then generalised least squares of w
+    alternating with each run's hyperparameters, every run linearised at w with its rig's exact tangents there (as
+    :func:`growjax.fit._solve_tangents`, run by run)."""
+    p, p_all, q_all = layout.index.shape[1], len(layout.labels), len(layout.rig_labels)
+    u = np.array([tol[name] for _, name in layout.rig_labels])
+    prior = np.concatenate([np.zeros((q_all, p_all)), np.diag(1.0 / u)], axis=1)
+    w_bounds = gf.with_rig_bounds(bounds, q_all)
+
+    def independent(w):
+        outs = batch.linearised(w, layout)
+        r, jac = _weighted(_on_z(outs, p), plain, layout)
+        cols = np.zeros((r.size, q_all))
+        start = 0
+        for e, ((r_e, jac_e), lik) in enumerate(zip(outs, plain)):
+            wr, wj = (np.asarray(a) for a in lik.weighted(jnp.asarray(r_e), jnp.asarray(jac_e)))
+            np.add.at(cols[start:start + wr.size].T, layout.rig_index[e], wj[:, p:].T)
+            start += wr.size
+        return (np.concatenate([r, np.asarray(w)[p_all:] / u]),
+                np.concatenate([np.concatenate([jac, cols], axis=1), prior]))
+
+    w, _, converged, _, _ = levenberg_marquardt(independent, np.concatenate([z, np.zeros(q_all)]), max_steps,
+                                                gf.LM_TOLERANCE, bounds=w_bounds)
+
+    def at(w):  # each run linearised at w: its likelihood with the rig's tangents there, and (r, J_θ)
+        outs = batch.linearised(w, layout)
+        b = np.asarray(w)[p_all:]
+        liks = [lik.with_tolerances(np.asarray(jac)[: lik.n_len, p:] * lik.sigma_length, tol, inferred=True,
+                                    centre=b[layout.rig_index[e]])
+                for e, (lik, (_, jac)) in enumerate(zip(plain, outs))]
+        return liks, _on_z(outs, p), b
+
+    def whitened(w, hs):
+        liks, outs, b = at(w)
+        return _whitened(outs, liks, layout, hs, np.zeros(q_all), b)
+
+    def hyper_at(w, hs):
+        liks, outs, _ = at(w)
+        return tuple(lik.estimate(r, discrepancy, h) for lik, (r, _), h in zip(liks, outs, hs))
+
+    w, hypers, cost, converged = gf.alternate_gls(whitened, hyper_at, w, w_bounds, max_steps,
+                                                  tuple([None] * len(runs)))
+    hypers = list(hypers)
+    likelihoods, outs, b = at(w)
+    z = np.asarray(w)[:p_all]
+    cov, parts, info, joint = _covariance(outs, likelihoods, layout, hypers, np.zeros(q_all), model_error, tol,
+                                          "inferred", b)
+    result = _result(z, b, cov, parts, info, outs, likelihoods, layout, hypers, runs, tol, "inferred", rig_errors,
+                     cost, converged, clock, batch.simulate_s, b)
+    result.programs = len(batch.groups)
+    result.log_likelihood = _set_log_likelihood(outs, likelihoods, layout, hypers, b, "inferred")
+    result.residuals = [(np.asarray(lik.times), np.asarray(r[: lik.n_len]) * lik.sigma_length)
+                        for (r, _), lik in zip(outs, likelihoods)]
+    result.rig_labels, result.rig_vector, result.joint_covariance = tuple(layout.rig_labels), b.copy(), joint
     return result
 
 
@@ -282,7 +360,7 @@ def _layout(experiments: ExperimentSet, scopes, bases, problems, tol: dict, rig_
     refs = np.asarray(refs)
     if np.any(refs <= 0):
         raise ValueError(f"fitted parameters must be positive, got {dict(zip(labels, refs))}")
-    offset = np.log(refs[index] / np.stack([np.asarray(pr.refs) for pr in problems]))
+    offset = np.log(refs[index] / np.stack([np.asarray(pr.refs)[:p] for pr in problems]))
     rig_keys = experiments.group_of("rig" if rig_errors == "shared" else "experiment")
     rig_labels, rig_index = [], np.zeros((len(runs), len(tol)), int)
     for key in dict.fromkeys(rig_keys):
@@ -298,8 +376,9 @@ class _Batch:
     """The runs' problems stacked in groups that one compiled program solves (same configuration, shapes and input
     structure; the inputs' break lists padded to a common length)."""
 
-    def __init__(self, problems):
+    def __init__(self, problems, rig_index=None):
         self.size = len(problems)
+        self.rig_index = rig_index  # (E, q): the rig's errors among each run's model parameters, after θ
         self.sigma_length = float(problems[0].sigma_length)
         self.n_len = [int(pr.times.size) for pr in problems]
         problems = _pad_breaks(problems)
@@ -314,7 +393,8 @@ class _Batch:
 
     def linearised(self, z, layout: _Layout, stacked=None):
         """[(r (m_e,), J (m_e, p))] per run at the set's coordinates z (P,) (the last few points kept: the fit asks
-        for a point again where one solver's end is the next one's start)."""
+        for a point again where one solver's end is the next one's start). With the rig's errors in the model
+        (``rig_index``), z may be w = (z, b) (P + Q,) and J is (m_e, p + q)."""
         if stacked is None:
             return self._at(z, layout)
         return self._run(_batched, z, layout, stacked)
@@ -325,7 +405,11 @@ class _Batch:
 
     def _run(self, program, z, layout: _Layout, stacked=None):
         clock = time.perf_counter()
-        z_local = np.asarray(z)[layout.index] + layout.offset
+        p_all = len(layout.labels)
+        z_local = np.asarray(z)[:p_all][layout.index] + layout.offset
+        if self.rig_index is not None:  # w = (z, b): each run's rig errors after its θ (b = 0 when only z given)
+            b = np.asarray(z)[p_all:] if np.size(z) > p_all else np.zeros(int(self.rig_index.max()) + 1)
+            z_local = np.concatenate([z_local, b[self.rig_index]], axis=1)
         out = [None] * self.size
         for k, (members, problem) in enumerate(self.groups):
             pr = problem if stacked is None else stacked[k]

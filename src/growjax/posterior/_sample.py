@@ -98,7 +98,7 @@ def sample(
     discrepancy's amplitude and time scale are sampled with the parameters; the rig's tolerances enter through
     the length's sensitivities (linearised), marginalised exactly. The rig is linearised where the fit puts it:
     ``rig_centre`` {tolerance: ln(ψ/ψ₀)}, or None to take it from :func:`growjax.fit.fit` on the same data and
-    likelihood (its ``rig_offset``; nominal where the fit did not relinearise), so that the fit and the posterior
+    likelihood (its ``rig_offset``), so that the fit and the posterior
     linearise the rig alike. The model runs with the rig there, and the rig's errors keep their prior about
     nominal.
 
@@ -202,7 +202,7 @@ def _rig_centre(given, tol: dict, times, length, inputs, priors, base, config, w
     fitted = gf.fit(times, length, inputs, free=[p.name for p in priors], base=base, config=config, window=window,
                     seed=seed, discrepancy=discrepancy, tolerances=tolerances, relinearise=True)
     centre = np.array([fitted.rig_offset.get(name, 0.0) for name in tol])
-    if fitted.linearisations == 1 or not np.all(np.isfinite(centre)):  # the rig stayed at nominal
+    if not np.all(np.isfinite(centre)) or not np.any(centre):  # the rig stayed at nominal
         return None, fitted.linearisations
     return centre, fitted.linearisations
 
