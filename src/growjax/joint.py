@@ -173,9 +173,8 @@ def fit_set(
     batch = _Batch(problems, layout.rig_index if tangents else None)
     bounds = _bounds(bases[0], layout)
     z0s = _starts(batch, layout, likelihoods, bases[0], names, n_starts, sweep_n, seed)
-    solved = [levenberg_marquardt(lambda z: _weighted(_on_z(batch.linearised(z, layout), len(names)), likelihoods,
-                                                      layout), z0, max_steps, gf.LM_TOLERANCE, bounds=bounds)
-              for z0 in z0s]
+    solved = [levenberg_marquardt(lambda z: _weighted(batch.linearised(z, layout), likelihoods, layout), z0,
+                                  max_steps, gf.LM_TOLERANCE, bounds=bounds) for z0 in z0s]
     k_best = int(np.argmin([s[1] for s in solved]))
     z, converged = np.asarray(solved[k_best][0]), bool(solved[k_best][2])
     model_error = gf.default_model_error(config) if model_error is None else model_error
@@ -237,16 +236,8 @@ def _fit_tangents(batch: _Batch, layout: _Layout, plain, tol: dict, z, bounds, d
     w_bounds = gf.with_rig_bounds(bounds, q_all)
 
     def independent(w):
-        outs = batch.linearised(w, layout)
-        r, jac = _weighted(_on_z(outs, p), plain, layout)
-        cols = np.zeros((r.size, q_all))
-        start = 0
-        for e, ((r_e, jac_e), lik) in enumerate(zip(outs, plain)):
-            wr, wj = (np.asarray(a) for a in lik.weighted(jnp.asarray(r_e), jnp.asarray(jac_e)))
-            np.add.at(cols[start:start + wr.size].T, layout.rig_index[e], wj[:, p:].T)
-            start += wr.size
-        return (np.concatenate([r, np.asarray(w)[p_all:] / u]),
-                np.concatenate([np.concatenate([jac, cols], axis=1), prior]))
+        r, jac = _weighted(batch.linearised(w, layout), plain, layout, q_all)
+        return np.concatenate([r, np.asarray(w)[p_all:] / u]), np.concatenate([jac, prior])
 
     w, _, converged, _, _ = levenberg_marquardt(independent, np.concatenate([z, np.zeros(q_all)]), max_steps,
                                                 gf.LM_TOLERANCE, bounds=w_bounds)
@@ -509,14 +500,17 @@ def _starts(batch: _Batch, layout: _Layout, likelihoods, base, names, n_starts: 
     return [zs[k] for k in order if np.isfinite(costs[k])] or [np.zeros(len(layout.labels))]
 
 
-def _weighted(outs, likelihoods, layout: _Layout):
-    """The set's residuals and Jacobian (P columns) under independent noise, unscored samples zeroed."""
-    p_all = len(layout.labels)
+def _weighted(outs, likelihoods, layout: _Layout, q_all: int = 0):
+    """The set's residuals and Jacobian under independent noise, unscored samples zeroed: P columns, or with
+    ``q_all`` the P + Q columns of w = (z, b) (each run's Jacobian then has its rig's errors after its θ)."""
+    p_all, p = len(layout.labels), layout.index.shape[1]
     rs, js = [], []
     for e, ((r, jac), lik) in enumerate(zip(outs, likelihoods)):
         wr, wj = (np.asarray(a) for a in lik.weighted(jnp.asarray(r), jnp.asarray(jac)))
-        full = np.zeros((wr.size, p_all))
-        np.add.at(full.T, layout.index[e], wj.T)
+        full = np.zeros((wr.size, p_all + q_all))
+        np.add.at(full.T, layout.index[e], wj[:, :p].T)
+        if q_all:
+            np.add.at(full.T, p_all + layout.rig_index[e], wj[:, p:].T)
         rs.append(wr)
         js.append(full)
     return np.concatenate(rs), np.concatenate(js)
