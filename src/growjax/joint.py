@@ -170,7 +170,7 @@ def fit_set(
         likelihoods.append(gf.Likelihood(pr.times, jnp.asarray(used), jnp.asarray(np.flatnonzero(used)),
                                          sigma_length, n))
     layout = _layout(experiments, scopes, bases, problems, tol, rig_errors)
-    batch = _Batch(problems, layout.rig_index if tangents else None)
+    batch = _Batch(problems, rig_in_model=tangents)
     bounds = _bounds(bases[0], layout)
     z0s = _starts(batch, layout, likelihoods, bases[0], names, n_starts, sweep_n, seed)
     solved = [levenberg_marquardt(lambda z: _weighted(batch.linearised(z, layout), likelihoods, layout), z0,
@@ -203,13 +203,23 @@ def fit_set(
     outs = batch.linearised(z, layout)
     if tol and rig == "fixed":
         likelihoods = [lik.with_tolerances(g, tol) for lik, g in zip(likelihoods, sensitivities)]
+    result = _finish(z, b, centre, outs, likelihoods, layout, hypers, model_error, tol, rig, rig_errors, runs, cost,
+                     converged, clock, batch)
+    result.linearisations = linearisations
+    result.rig_last_move = move
+    return result
+
+
+def _finish(z, b, centre, outs, likelihoods, layout: _Layout, hypers, model_error: float, tol: dict, rig: str,
+            rig_errors: str, runs, cost, converged, clock, batch) -> SetFitResult:
+    """The result of a joint fit at z (P,) with the rig's errors b (Q,), the runs (``outs``, ``likelihoods``)
+    linearised with the rig at ``centre`` (Q,): covariance and budget, the set's log-likelihood, each run's
+    residual with the rig at b."""
     cov, parts, info, joint = _covariance(outs, likelihoods, layout, hypers, b - centre, model_error, tol, rig,
                                           centre)
     result = _result(z, b, cov, parts, info, outs, likelihoods, layout, hypers, runs, tol, rig, rig_errors, cost,
                      converged, clock, batch.simulate_s, centre)
     result.programs = len(batch.groups)
-    result.linearisations = linearisations
-    result.rig_last_move = move
     result.log_likelihood = _set_log_likelihood(outs, likelihoods, layout, hypers, centre, rig if tol else "none")
     result.residuals = [(np.asarray(lik.times), np.asarray(r[: lik.n_len]) * lik.sigma_length
                          + (np.asarray(lik.sensitivity) @ (b - centre)[layout.rig_index[e]] if lik.inferred else 0.0))
@@ -260,19 +270,9 @@ def _fit_tangents(batch: _Batch, layout: _Layout, plain, tol: dict, z, bounds, d
 
     w, hypers, cost, converged = gf.alternate_gls(whitened, hyper_at, w, w_bounds, max_steps,
                                                   tuple([None] * len(runs)))
-    hypers = list(hypers)
     likelihoods, outs, b = at(w)
-    z = np.asarray(w)[:p_all]
-    cov, parts, info, joint = _covariance(outs, likelihoods, layout, hypers, np.zeros(q_all), model_error, tol,
-                                          "inferred", b)
-    result = _result(z, b, cov, parts, info, outs, likelihoods, layout, hypers, runs, tol, "inferred", rig_errors,
-                     cost, converged, clock, batch.simulate_s, b)
-    result.programs = len(batch.groups)
-    result.log_likelihood = _set_log_likelihood(outs, likelihoods, layout, hypers, b, "inferred")
-    result.residuals = [(np.asarray(lik.times), np.asarray(r[: lik.n_len]) * lik.sigma_length)
-                        for (r, _), lik in zip(outs, likelihoods)]
-    result.rig_labels, result.rig_vector, result.joint_covariance = tuple(layout.rig_labels), b.copy(), joint
-    return result
+    return _finish(np.asarray(w)[:p_all], b, b, outs, likelihoods, layout, list(hypers), model_error, tol, "inferred",
+                   rig_errors, runs, cost, converged, clock, batch)
 
 
 def _set_log_likelihood(outs, likelihoods, layout: _Layout, hypers, centre, rig: str) -> float:
@@ -367,9 +367,9 @@ class _Batch:
     """The runs' problems stacked in groups that one compiled program solves (same configuration, shapes and input
     structure; the inputs' break lists padded to a common length)."""
 
-    def __init__(self, problems, rig_index=None):
+    def __init__(self, problems, rig_in_model: bool = False):
         self.size = len(problems)
-        self.rig_index = rig_index  # (E, q): the rig's errors among each run's model parameters, after θ
+        self.rig_in_model = rig_in_model  # each run's model parameters: its θ, then its rig's errors
         self.sigma_length = float(problems[0].sigma_length)
         self.n_len = [int(pr.times.size) for pr in problems]
         problems = _pad_breaks(problems)
@@ -385,7 +385,7 @@ class _Batch:
     def linearised(self, z, layout: _Layout, stacked=None):
         """[(r (m_e,), J (m_e, p))] per run at the set's coordinates z (P,) (the last few points kept: the fit asks
         for a point again where one solver's end is the next one's start). With the rig's errors in the model
-        (``rig_index``), z may be w = (z, b) (P + Q,) and J is (m_e, p + q)."""
+        (``rig_in_model``), z may be w = (z, b) (P + Q,) and J is (m_e, p + q)."""
         if stacked is None:
             return self._at(z, layout)
         return self._run(_batched, z, layout, stacked)
@@ -398,9 +398,9 @@ class _Batch:
         clock = time.perf_counter()
         p_all = len(layout.labels)
         z_local = np.asarray(z)[:p_all][layout.index] + layout.offset
-        if self.rig_index is not None:  # w = (z, b): each run's rig errors after its θ (b = 0 when only z given)
-            b = np.asarray(z)[p_all:] if np.size(z) > p_all else np.zeros(int(self.rig_index.max()) + 1)
-            z_local = np.concatenate([z_local, b[self.rig_index]], axis=1)
+        if self.rig_in_model:  # w = (z, b): each run's rig errors after its θ (b = 0 when only z given)
+            b = np.asarray(z)[p_all:] if np.size(z) > p_all else np.zeros(len(layout.rig_labels))
+            z_local = np.concatenate([z_local, b[layout.rig_index]], axis=1)
         out = [None] * self.size
         for k, (members, problem) in enumerate(self.groups):
             pr = problem if stacked is None else stacked[k]
