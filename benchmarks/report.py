@@ -163,7 +163,11 @@ def rows_rig_agreement(r: dict) -> list[tuple[str, str, str]]:
 def rows_set_speed(r: dict) -> list[tuple[str, str, str]]:
     return [("joint fit of the set ÷ one experiment's fit", f"{r['ratio_set_over_one_fit']:.1f}",
              f"{r['set']['warm_s']:.1f} s against {r['one_experiment_fit']['warm_s']:.1f} s warm; "
-             f"{100 * r['set_simulate_share']:.0f} % in the batched simulations; target ≤ 3")]
+             f"{100 * r['set_simulate_share']:.0f} % in the batched simulations; target ≤ 3"),
+            *([("one evaluation of the model: the set batched ÷ one experiment",
+                f"{r['ratio_evaluation_set_over_one']:.1f}",
+                f"{r['evaluation']['set_s']:.3f} s against {r['evaluation']['one_s']:.3f} s; residuals and tangents in Y "
+                "and the rig's errors") ] if "evaluation" in r else [])]
 
 
 def rows_population(r: dict) -> list[tuple[str, str, str]]:

@@ -6,7 +6,8 @@ A set of ``--experiments`` reference-made experiments of one robot on one drawn 
 sets), 10 s each: ``growjax.joint.fit_set`` of the whole set, of its first experiment alone, and
 ``growjax.fit.fit`` of that experiment, each ``--repeat`` times, interleaved. Printed: the median warm wall
 times and the ratio of the set's to one experiment's (target ≤ 3), with the share spent in the batched
-simulations.
+simulations; and one evaluation of the fit's model (residuals and tangents in Y and the rig's errors) for the
+whole set in its batched program against that of one experiment.
 """
 
 from __future__ import annotations
@@ -58,10 +59,38 @@ def main():
     row = {k: {"first_s": w[0], "warm_s": float(np.median(w[1:] or w))} for k, w in walls.items()}
     row["ratio_set_over_one_fit"] = row["set"]["warm_s"] / row["one_experiment_fit"]["warm_s"]
     row["set_simulate_share"] = float(np.median(simulate[1:] or simulate) / row["set"]["warm_s"])  # warm runs
+    row["evaluation"] = _evaluation(exps, config, args.repeat)
+    row["ratio_evaluation_set_over_one"] = row["evaluation"]["set_s"] / row["evaluation"]["one_s"]
     print(json.dumps(row, indent=1))
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"environment": environment(), "arguments": vars(args), **row}, indent=1))
+
+
+def _evaluation(exps, config, repeat: int) -> dict:
+    """Median warm wall time, s, of one linearisation of the default fit's model (Y and the default tolerances): the
+    whole set in the joint fit's batched program, and its first experiment alone in the fit's program."""
+    import jax
+    import jax.numpy as jnp
+
+    from growjax import experiment as ex
+    from growjax import tolerance as tl
+
+    base = gj.reference("forward")
+    names = ("robot.yield_pressure", *tl.budget(base, None, ["robot.yield_pressure"], use_default=True))
+    cfg = config.replace(adjoint="forward")
+    problems = [gf.make_problem(base, names, ex.to_inputs(e, "forward", base, cfg.t0, cfg.t1), cfg, e.time,
+                                e["robot_length_m"]) for e in exps]
+    stacked = joint._stack(joint._pad_breaks(problems))
+    z_set, z_one = jnp.zeros((len(exps), len(names))), jnp.zeros(len(names))
+    times = {"set_s": [], "one_s": []}
+    for _ in range(repeat + 1):  # the first call compiles
+        for key, call in (("set_s", lambda: joint._batched(z_set, stacked)),
+                          ("one_s", lambda: gf._linearised(z_one, problems[0]))):
+            clock = time.perf_counter()
+            jax.block_until_ready(call())
+            times[key].append(time.perf_counter() - clock)
+    return {k: float(np.median(v[1:])) for k, v in times.items()}
 
 
 if __name__ == "__main__":
