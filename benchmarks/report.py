@@ -167,7 +167,15 @@ def rows_set_speed(r: dict) -> list[tuple[str, str, str]]:
             *([("one evaluation of the model: the set batched ÷ one experiment",
                 f"{r['ratio_evaluation_set_over_one']:.1f}",
                 f"{r['evaluation']['set_s']:.3f} s against {r['evaluation']['one_s']:.3f} s; residuals and tangents in Y "
-                "and the rig's errors") ] if "evaluation" in r else [])]
+                "and the rig's errors" + _devices(r))] if "evaluation" in r else [])]
+
+
+def _devices(r: dict) -> str:
+    """Where the set's runs were spread over several CPU devices: how many, and the same evaluation on one."""
+    if r.get("devices", 1) < 2 or "set_one_device_s" not in r["evaluation"]:
+        return ""
+    return (f"; spread over {r['devices']} CPU devices (on one device: "
+            f"{r['evaluation']['set_one_device_s']:.3f} s)")
 
 
 def rows_population(r: dict) -> list[tuple[str, str, str]]:

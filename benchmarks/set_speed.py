@@ -7,10 +7,20 @@ sets), 10 s each: ``growjax.joint.fit_set`` of the whole set, of its first exper
 ``growjax.fit.fit`` of that experiment, each ``--repeat`` times, interleaved. Printed: the median warm wall
 times and the ratio of the set's to one experiment's (target ≤ 3), with the share spent in the batched
 simulations; and one evaluation of the fit's model (residuals and tangents in Y and the rig's errors) for the
-whole set in its batched program against that of one experiment.
+whole set in its batched program against that of one experiment, and the set's program on one device.
+
+Every CPU core is a JAX device (``jax_num_cpu_devices``; ``GROWJAX_CPU_DEVICES`` overrides), as in ``growjax fit``,
+so the set's runs spread over them.
 """
 
 from __future__ import annotations
+
+import os
+
+import jax
+
+CPU_DEVICES = int(os.environ.get("GROWJAX_CPU_DEVICES", len(os.sched_getaffinity(0)) or 1))
+jax.config.update("jax_num_cpu_devices", CPU_DEVICES)
 
 import argparse
 import json
@@ -61,6 +71,7 @@ def main():
     row["set_simulate_share"] = float(np.median(simulate[1:] or simulate) / row["set"]["warm_s"])  # warm runs
     row["evaluation"] = _evaluation(exps, config, args.repeat)
     row["ratio_evaluation_set_over_one"] = row["evaluation"]["set_s"] / row["evaluation"]["one_s"]
+    row["devices"] = len(jax.devices())
     print(json.dumps(row, indent=1))
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -69,8 +80,8 @@ def main():
 
 def _evaluation(exps, config, repeat: int) -> dict:
     """Median warm wall time, s, of one linearisation of the default fit's model (Y and the default tolerances): the
-    whole set in the joint fit's batched program, and its first experiment alone in the fit's program."""
-    import jax
+    whole set in the joint fit's program (spread over the devices), the same on one device, and its first
+    experiment alone in the fit's program."""
     import jax.numpy as jnp
 
     from growjax import experiment as ex
@@ -83,9 +94,10 @@ def _evaluation(exps, config, repeat: int) -> dict:
                                 e["robot_length_m"]) for e in exps]
     stacked = joint._stack(joint._pad_breaks(problems))
     z_set, z_one = jnp.zeros((len(exps), len(names))), jnp.zeros(len(names))
-    times = {"set_s": [], "one_s": []}
+    times = {"set_s": [], "set_one_device_s": [], "one_s": []}
     for _ in range(repeat + 1):  # the first call compiles
-        for key, call in (("set_s", lambda: joint._batched(z_set, stacked)),
+        for key, call in (("set_s", lambda: joint._spread(joint._linearise_runs, z_set, stacked)),
+                          ("set_one_device_s", lambda: joint._batched(z_set, stacked)),
                           ("one_s", lambda: gf._linearised(z_one, problems[0]))):
             clock = time.perf_counter()
             jax.block_until_ready(call())

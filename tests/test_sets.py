@@ -156,3 +156,40 @@ def test_the_shipped_set_fitted_jointly_beats_each_experiment_alone(shipped_set)
                       for r in exps.runs)
     assert together < best_single
 
+
+
+_SPREAD = """
+import jax
+jax.config.update("jax_num_cpu_devices", 2)
+jax.config.update("jax_enable_x64", True)
+import numpy as np
+import growjax as gj
+from growjax import fit as gf, joint
+
+cfg = gj.Config(t1=1.0)
+base = gj.reference("forward")
+problems = []
+for k, amplitude in enumerate((100e3, 150e3, 200e3)):
+    inputs = gj.Inputs(catheter_length=gj.Sampled(np.array([0.0, 10.0]), np.full(2, 0.02)),
+                       pressure_demand=gj.PulseTrain(amplitude=amplitude))
+    times = np.arange(1, 101) * 0.01
+    problems.append(gf.make_problem(base, ("robot.yield_pressure",), inputs, cfg, times, np.full(100, 0.01)))
+stacked = joint._stack(joint._pad_breaks(problems))
+z = jax.numpy.asarray([[0.0], [0.1], [-0.1]])
+spread, _ = joint._spread(joint._residuals_runs, z, stacked)
+alone, _ = joint._batched_residuals(z, stacked)
+print(len(jax.devices()), float(np.max(np.abs(np.asarray(spread) - np.asarray(alone)))),
+      float(np.max(np.abs(np.asarray(alone)))))
+"""
+
+
+def test_runs_spread_over_two_devices_give_what_one_device_gives():
+    """Three runs on a process with two CPU devices: the first device solves two, the second one and a padding
+    copy; each run's residuals are those of the one-device vmapped program."""
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", _SPREAD], capture_output=True, text=True, timeout=600, check=True)
+    devices, gap, size = out.stdout.split()
+    assert int(devices) == 2
+    assert float(size) > 1.0 and float(gap) < 1e-6 * float(size)

@@ -44,8 +44,8 @@ def _enable_compile_cache():
 
 
 def _use_all_cpu_cores(at_least: int = 1):
-    """Expose every CPU core (and at least ``at_least``) as a JAX device, so that sweeps shard across them and
-    NUTS chains run one per device (GROWJAX_CPU_DEVICES overrides)."""
+    """Expose every CPU core (and at least ``at_least``) as a JAX device, so that sweeps shard across them, NUTS
+    chains run one per device and a set's runs spread over them (GROWJAX_CPU_DEVICES overrides)."""
     import jax
 
     wanted = os.environ.get("GROWJAX_CPU_DEVICES")
@@ -738,6 +738,8 @@ def main(argv=None) -> int:
 
     if args.command in ("simulate", "fit") and args.fidelity == "fast":  # compile-bound: XLA's quicker emitters
         xla_flags.apply_quick_compile()
+    if args.command in ("fit", "discover"):
+        _use_all_cpu_cores()  # a set's runs spread over the cores (growjax.joint)
     elif args.command == "sweep":
         _use_all_cpu_cores()
     elif args.command == "posterior":

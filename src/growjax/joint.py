@@ -19,6 +19,7 @@ alone.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 from collections.abc import Sequence
 
@@ -380,7 +381,7 @@ class _Batch:
             groups.setdefault(key, []).append(e)
         self.groups = [(members, _stack([problems[e] for e in members])) for members in groups.values()]
         self.simulate_s = 0.0
-        self._at = memoised(lambda z, layout: self._run(_batched, z, layout))
+        self._at = memoised(lambda z, layout: self._run(_linearise_runs, z, layout))
 
     def linearised(self, z, layout: _Layout, stacked=None):
         """[(r (m_e,), J (m_e, p))] per run at the set's coordinates z (P,) (the last few points kept: the fit asks
@@ -388,11 +389,11 @@ class _Batch:
         (``rig_in_model``), z may be w = (z, b) (P + Q,) and J is (m_e, p + q)."""
         if stacked is None:
             return self._at(z, layout)
-        return self._run(_batched, z, layout, stacked)
+        return self._run(_linearise_runs, z, layout, stacked)
 
     def residuals(self, z, layout: _Layout, stacked=None):
         """[(r (m_e,), None)] per run at the set's coordinates z (P,): the runs alone, no tangents."""
-        return self._run(_batched_residuals, z, layout, stacked)
+        return self._run(_residuals_runs, z, layout, stacked)
 
     def _run(self, program, z, layout: _Layout, stacked=None):
         clock = time.perf_counter()
@@ -404,7 +405,7 @@ class _Batch:
         out = [None] * self.size
         for k, (members, problem) in enumerate(self.groups):
             pr = problem if stacked is None else stacked[k]
-            results = tuple(None if x is None else np.asarray(x) for x in program(jnp.asarray(z_local[members]), pr))
+            results = tuple(None if x is None else np.asarray(x) for x in _spread(program, jnp.asarray(z_local[members]), pr))
             for i, e in enumerate(members):
                 out[e] = tuple(None if x is None else x[i] for x in results)
         self.simulate_s += time.perf_counter() - clock
@@ -436,16 +437,50 @@ class _Batch:
         return g
 
 
-@eqx.filter_jit
-def _batched(z_local, problems: gf.Problem):
+def _linearise_runs(z_local, problems: gf.Problem):
     """Residuals (E, m) and Jacobians (E, m, p) of stacked problems: one vmapped forward-mode linearisation."""
     return jax.vmap(lambda z, pr: linearise(pr.residuals, z))(z_local, problems)
 
 
-@eqx.filter_jit
-def _batched_residuals(z_local, problems: gf.Problem):
+def _residuals_runs(z_local, problems: gf.Problem):
     """Residuals (E, m) of stacked problems, and None for the Jacobian: one vmapped run."""
     return jax.vmap(lambda z, pr: pr.residuals(z))(z_local, problems), None
+
+
+_batched = eqx.filter_jit(_linearise_runs)
+_batched_residuals = eqx.filter_jit(_residuals_runs)
+
+
+def _spread(program, z_local, problems: gf.Problem):
+    """``program`` (:func:`_linearise_runs` or :func:`_residuals_runs`) on the E stacked runs, spread over the
+    process's devices: each device solves its share of the runs as one vmapped program (``jax.shard_map``), with
+    its own step count. On a CPU with several cores exposed as devices (``jax_num_cpu_devices``) the shares run on
+    different cores at once; one vmapped program keeps every run in step with the slowest and uses one core.
+    With one device, or one run, it is the vmapped program itself."""
+    n = int(z_local.shape[0])
+    d = min(len(jax.devices()), n)
+    if d < 2:
+        return (_batched if program is _linearise_runs else _batched_residuals)(z_local, problems)
+    size = -(-n // d) * d  # padded with copies of the first run to fill every device's share
+    take = jnp.asarray(np.r_[np.arange(n), np.zeros(size - n, dtype=int)])
+    arrays, static = eqx.partition(problems, eqx.is_array)
+    out = _spread_compiled(program, _mesh(d), static, z_local[take], jax.tree_util.tree_map(lambda x: x[take], arrays))
+    return jax.tree_util.tree_map(lambda x: x[:n], out)
+
+
+@functools.cache
+def _mesh(d: int):
+    return jax.sharding.Mesh(np.asarray(jax.devices()[:d]), ("runs",))
+
+
+@eqx.filter_jit
+def _spread_compiled(program, mesh, static, z_local, arrays):
+    def share(z, a):
+        return program(z, eqx.combine(a, static))
+
+    runs = jax.sharding.PartitionSpec("runs")
+    # check_vma off: the solver's loop starts from constants that are the same on every device
+    return jax.shard_map(share, mesh=mesh, in_specs=runs, out_specs=runs, check_vma=False)(z_local, arrays)
 
 
 def _stack(problems):
