@@ -125,8 +125,6 @@ def _setup(args, drive: str, growth_law: str = "reference"):
 
 def _fit_set(args, paths) -> dict:
     """``growjax fit A.csv B.csv …`` or ``growjax fit SET.toml``: the experiments fitted jointly."""
-    import dataclasses
-
     import growjax as gj
     from growjax import experiment as ex
     from growjax import experiments as xs
@@ -192,7 +190,6 @@ def _read_set(args, paths, config):
 def _population(args, paths) -> dict:
     """``growjax posterior SET.toml --hierarchical NAME``: the joint fit of the set, then the population of its
     robots' NAME, and the predictive for a new robot of the same build."""
-    import growjax as gj
     from growjax import experiment as ex
     from growjax import experiments as xs
     from growjax import joint
