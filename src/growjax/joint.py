@@ -10,7 +10,8 @@ through its linearised sensitivity g = ∂L/∂ln ψ. Shared errors do not avera
 evidence about the rig's effect (and under-covers where they share one rig).
 
 The runs' simulations and Jacobians run batched: runs with the same drive, sample count and input structure are
-stacked (breaks padded to a common length) and solved by one ``vmap``-ed program; the Jacobian of each run is
+stacked (breaks padded to a common length) and solved by one ``vmap``-ed program, its runs spread over the
+process's devices where it has several (:func:`_spread`); the Jacobian of each run is
 taken in its own parameters (by default its θ and its rig's errors, exact tangents of one solve) and scattered into
 the set's columns; the starts' scout (and, with ``rig_tangents=False``, the rig's secants) run the residuals
 alone.
