@@ -97,7 +97,7 @@ def _evaluation(exps, config, repeat: int) -> dict:
     times = {"set_s": [], "set_one_device_s": [], "one_s": []}
     for _ in range(repeat + 1):  # the first call compiles
         for key, call in (("set_s", lambda: joint._spread(joint._linearise_runs, z_set, stacked)),
-                          ("set_one_device_s", lambda: joint._batched(z_set, stacked)),
+                          ("set_one_device_s", lambda: joint._one_device(joint._linearise_runs, z_set, stacked)),
                           ("one_s", lambda: gf._linearised(z_one, problems[0]))):
             clock = time.perf_counter()
             jax.block_until_ready(call())

@@ -177,7 +177,7 @@ for k, amplitude in enumerate((100e3, 150e3, 200e3)):
 stacked = joint._stack(joint._pad_breaks(problems))
 z = jax.numpy.asarray([[0.0], [0.1], [-0.1]])
 spread, _ = joint._spread(joint._residuals_runs, z, stacked)
-alone, _ = joint._batched_residuals(z, stacked)
+alone, _ = joint._one_device(joint._residuals_runs, z, stacked)
 print(len(jax.devices()), float(np.max(np.abs(np.asarray(spread) - np.asarray(alone)))),
       float(np.max(np.abs(np.asarray(alone)))))
 """

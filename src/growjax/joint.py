@@ -448,8 +448,10 @@ def _residuals_runs(z_local, problems: gf.Problem):
     return jax.vmap(lambda z, pr: pr.residuals(z))(z_local, problems), None
 
 
-_batched = eqx.filter_jit(_linearise_runs)
-_batched_residuals = eqx.filter_jit(_residuals_runs)
+@eqx.filter_jit
+def _one_device(program, z_local, problems: gf.Problem):
+    """``program`` on the E stacked runs as one vmapped program on the default device."""
+    return program(z_local, problems)
 
 
 def _spread(program, z_local, problems: gf.Problem):
@@ -461,7 +463,7 @@ def _spread(program, z_local, problems: gf.Problem):
     n = int(z_local.shape[0])
     d = min(len(jax.devices()), n)
     if d < 2:
-        return (_batched if program is _linearise_runs else _batched_residuals)(z_local, problems)
+        return _one_device(program, z_local, problems)
     size = -(-n // d) * d  # padded with copies of the first run to fill every device's share
     take = jnp.asarray(np.r_[np.arange(n), np.zeros(size - n, dtype=int)])
     arrays, static = eqx.partition(problems, eqx.is_array)
