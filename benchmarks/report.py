@@ -189,7 +189,15 @@ def rows_population(r: dict) -> list[tuple[str, str, str]]:
             ("a held-out robot's points inside its 90 % predictive band", f"{s['new_robot_band_coverage']:.3f}",
              "target 0.80–0.97"),
             ("NUTS, 4 × (500 + 500), median", f"{s['median_nuts_s']:.0f} s",
-             f"joint fit of the eight runs {s['median_fit_s']:.0f} s (median); target ≤ 15 min")]
+             f"joint fit of the eight runs {s['median_fit_s']:.0f} s (median); target ≤ 15 min"),
+            *([("NUTS divergences, most in one population", f"{s['max_divergences']}", f"of {_draws(r)} draws; populations with any: "
+               f"{sum(p['diagnostics']['divergences'] > 0 for p in r.get('populations', []))}")]
+              if "max_divergences" in s else [])]
+
+
+def _draws(r: dict) -> str:
+    a = r.get("arguments", {})
+    return f"{a.get('chains', 4) * a.get('samples', 500):,}".replace(",", " ")
 
 
 def rows_sets(r: dict) -> list[tuple[str, str, str]]:
