@@ -169,13 +169,13 @@ from growjax import fit as gf, joint
 cfg = gj.Config(t1=1.0)
 base = gj.reference("forward")
 problems = []
-for k, amplitude in enumerate((100e3, 150e3, 200e3)):
+for k, amplitude in enumerate((100e3, 125e3, 150e3, 175e3, 200e3)):
     inputs = gj.Inputs(catheter_length=gj.Sampled(np.array([0.0, 10.0]), np.full(2, 0.02)),
                        pressure_demand=gj.PulseTrain(amplitude=amplitude))
     times = np.arange(1, 101) * 0.01
     problems.append(gf.make_problem(base, ("robot.yield_pressure",), inputs, cfg, times, np.full(100, 0.01)))
 stacked = joint._stack(joint._pad_breaks(problems))
-z = jax.numpy.asarray([[0.0], [0.1], [-0.1]])
+z = jax.numpy.asarray([[0.0], [0.1], [-0.1], [0.05], [-0.05]])
 spread, _ = joint._spread(joint._residuals_runs, z, stacked)
 alone, _ = joint._one_device(joint._residuals_runs, z, stacked)
 print(len(jax.devices()), float(np.max(np.abs(np.asarray(spread) - np.asarray(alone)))),
@@ -184,7 +184,7 @@ print(len(jax.devices()), float(np.max(np.abs(np.asarray(spread) - np.asarray(al
 
 
 def test_runs_spread_over_two_devices_give_what_one_device_gives():
-    """Three runs on a process with two CPU devices: the first device solves two, the second one and a padding
+    """Five runs on a process with two CPU devices: the first device solves three, the second two and a padding
     copy; each run's residuals are those of the one-device vmapped program."""
     import subprocess
     import sys

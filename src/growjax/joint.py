@@ -456,19 +456,22 @@ def _one_device(program, z_local, problems: gf.Problem):
 
 def _spread(program, z_local, problems: gf.Problem):
     """``program`` (:func:`_linearise_runs` or :func:`_residuals_runs`) on the E stacked runs, spread over the
-    process's devices: each device solves its share of the runs as one vmapped program (``jax.shard_map``), with
-    its own step count. On a CPU with several cores exposed as devices (``jax_num_cpu_devices``) the shares run on
-    different cores at once; one vmapped program keeps every run in step with the slowest and uses one core.
-    With one device, or one run, it is the vmapped program itself."""
+    process's devices: each device solves its share of at least two runs as one vmapped program
+    (``jax.shard_map``), with its own step count. On a CPU with several cores exposed as devices
+    (``jax_num_cpu_devices``) the shares run on different cores at once; one vmapped program keeps every run in step
+    with the slowest and uses one core. A share of one run gains nothing (a vmapped run of one costs about what two
+    do), so with fewer than four runs, or one device, it is the vmapped program itself."""
     n = int(z_local.shape[0])
-    d = min(len(jax.devices()), n)
+    d = min(len(jax.devices()), n // 2)
     if d < 2:
         return _one_device(program, z_local, problems)
-    size = -(-n // d) * d  # padded with copies of the first run to fill every device's share
-    take = jnp.asarray(np.r_[np.arange(n), np.zeros(size - n, dtype=int)])
     arrays, static = eqx.partition(problems, eqx.is_array)
-    out = _spread_compiled(program, _mesh(d), static, z_local[take], jax.tree_util.tree_map(lambda x: x[take], arrays))
-    return jax.tree_util.tree_map(lambda x: x[:n], out)
+    size = -(-n // d) * d
+    if size > n:  # padded with copies of the first run to fill every device's share
+        take = jnp.asarray(np.r_[np.arange(n), np.zeros(size - n, dtype=int)])
+        z_local, arrays = z_local[take], jax.tree_util.tree_map(lambda x: x[take], arrays)
+    out = _spread_compiled(program, _mesh(d), static, z_local, arrays)
+    return out if size == n else jax.tree_util.tree_map(lambda x: x[:n], out)
 
 
 @functools.cache
