@@ -33,3 +33,13 @@ def environment() -> dict:
         "jaxlib": jaxlib.__version__,
         "growjax": growjax.__version__,
     }
+
+
+def use_all_cpu_cores() -> int:
+    """Expose every CPU core (``GROWJAX_CPU_DEVICES`` overrides) as a JAX device, as ``growjax sweep`` and ``fit``
+    do; call before JAX starts its backend. The number of devices asked for."""
+    import jax
+
+    n = int(os.environ.get("GROWJAX_CPU_DEVICES", len(os.sched_getaffinity(0)) or 1))
+    jax.config.update("jax_num_cpu_devices", n)
+    return n

@@ -16,15 +16,17 @@ so the set's runs spread over them.
 from __future__ import annotations
 
 import os
+import sys
 
 import jax
 
-CPU_DEVICES = int(os.environ.get("GROWJAX_CPU_DEVICES", len(os.sched_getaffinity(0)) or 1))
-jax.config.update("jax_num_cpu_devices", CPU_DEVICES)
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from _environment import environment, use_all_cpu_cores  # noqa: E402
+
+use_all_cpu_cores()
 
 import argparse
 import json
-import sys
 import time
 from pathlib import Path
 
@@ -37,7 +39,6 @@ from growjax import joint
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "benchmarks"))
-from _environment import environment
 from sets import CATHETER, TIME, make_set
 
 

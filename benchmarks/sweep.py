@@ -31,11 +31,14 @@ sweep shards across them. Times are wall-clock seconds on this machine, taken in
 from __future__ import annotations
 
 import os
+import sys
 
 import jax
 
-CPU_DEVICES = int(os.environ.get("GROWJAX_CPU_DEVICES", len(os.sched_getaffinity(0)) or 1))
-jax.config.update("jax_num_cpu_devices", CPU_DEVICES)
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from _environment import environment, use_all_cpu_cores  # noqa: E402
+
+CPU_DEVICES = use_all_cpu_cores()
 
 import argparse
 import bisect
@@ -45,13 +48,11 @@ import json
 import math
 import statistics
 import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
-from _environment import environment  # benchmarks/ is on sys.path when run as a script
 from scipy.integrate import solve_ivp
 
 import growjax as gj

@@ -176,7 +176,11 @@ for k, amplitude in enumerate((100e3, 125e3, 150e3, 175e3, 200e3)):
     problems.append(gf.make_problem(base, ("robot.yield_pressure",), inputs, cfg, times, np.full(100, 0.01)))
 stacked = joint._stack(joint._pad_breaks(problems))
 z = jax.numpy.asarray([[0.0], [0.1], [-0.1], [0.05], [-0.05]])
+calls = []
+shared = joint._spread_compiled
+joint._spread_compiled = lambda *a: calls.append(a[1].size) or shared(*a)  # the devices each call spreads over
 spread, _ = joint._spread(joint._residuals_runs, z, stacked)
+assert calls == [2], calls
 alone, _ = joint._one_device(joint._residuals_runs, z, stacked)
 print(len(jax.devices()), float(np.max(np.abs(np.asarray(spread) - np.asarray(alone)))),
       float(np.max(np.abs(np.asarray(alone)))))
