@@ -11,6 +11,8 @@ white length noise; a ninth robot of the same population on the same rig under a
 out. Fitted jointly by the fast configuration (``Y@robot``, rig inferred), then the population posterior
 (NUTS, 4 × (500 + 500)). Targets: exp(μ) covers the true median 8 kPa and s the true 0.1 in 0.80–0.97 of the
 populations; the new robot's 90 % predictive band holds 0.80–0.97 of its points.
+Each population's record keeps the joint fit's linearised likelihood (``likelihood``: ln Ŷ of each robot, the rig's
+errors, their covariance), the input the population's NUTS samples, so samplers can be compared on it.
 """
 
 from __future__ import annotations
@@ -107,7 +109,16 @@ def one_population(task: tuple) -> dict:
             "new_robot_band_coverage": float(np.mean((y9 >= band["lower"]) & (y9 <= band["upper"]))),
             "new_robot_band_width_mm": float(1e3 * np.median(band["upper"] - band["lower"])),
             "diagnostics": post.diagnostics, "fit_status": fit.status,
+            "likelihood": _likelihood(fit, pop),
             "make_s": made, "fit_s": fit_s, "nuts_s": nuts_s}
+
+
+def _likelihood(fit, pop) -> dict:
+    """The joint fit's Gaussian that the population's NUTS samples: each robot's ln Ŷ (SI), the rig's errors and
+    their covariance, so that samplers can be compared on the benchmark's populations without remaking them."""
+    robots, _, z_hat, b_hat, cov = pop.linearised_likelihood(fit, "robot.yield_pressure")
+    return {"robots": list(robots), "ln_y_hat": z_hat.tolist(), "rig_vector": b_hat.tolist(),
+            "covariance": cov.tolist()}
 
 
 def _kept(out: Path, partial: Path, args) -> list[dict]:

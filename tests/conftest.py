@@ -29,6 +29,23 @@ from growjax import experiment as ex
 REPO = Path(__file__).resolve().parents[1]
 DATASETS = REPO / "src" / "growjax" / "datasets"
 
+# The test run spreads whole files over its workers (``--dist loadfile``), except the files that fit the published
+# pulse over 10 s (Y alone, and Y with the rig's errors): they go to one worker, one after another, so that the later
+# ones find those programs compiled in memory instead of compiling them again.
+SHARED_PROGRAMS = {name: "fits_of_the_published_pulse"
+                   for name in ("test_calibration.py", "test_rig.py", "test_uncertainty.py")}
+
+
+def pytest_xdist_make_scheduler(config, log):
+    from xdist.scheduler import LoadScopeScheduling
+
+    class FilesSharingPrograms(LoadScopeScheduling):
+        def _split_scope(self, nodeid):
+            file = nodeid.split("::", 1)[0]
+            return SHARED_PROGRAMS.get(Path(file).name, file)
+
+    return FilesSharingPrograms(config, log)
+
 
 @pytest.fixture(scope="session")
 def shared_experiment():

@@ -210,8 +210,7 @@ def _population(args, paths) -> dict:
     if fit.status != "converged":
         raise RunFailed(f"the joint fit did not converge ({fit.status})", {"command": "posterior", **fit.summary()})
     _progress_note(args, f"posterior: joint fit done in {time.perf_counter() - started:.1f} s; NUTS on the population")
-    post = pop.sample(fit, name, chains=args.chains, warmup=args.warmup, samples=args.samples, seed=args.seed,
-                      progress=not args.quiet)
+    post = pop.sample(fit, name, chains=args.chains, warmup=args.warmup, samples=args.samples, seed=args.seed)
     if args.predict:
         new = ex.read(Path(args.predict), catheter=args.catheter)
         run = xs.Run("new robot", new, drive=exps.runs[0].drive, robot="new robot", rig=exps.runs[0].rig,
