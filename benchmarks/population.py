@@ -109,13 +109,15 @@ def one_population(task: tuple) -> dict:
             "new_robot_band_coverage": float(np.mean((y9 >= band["lower"]) & (y9 <= band["upper"]))),
             "new_robot_band_width_mm": float(1e3 * np.median(band["upper"] - band["lower"])),
             "diagnostics": post.diagnostics, "fit_status": fit.status,
-            "likelihood": _likelihood(fit, pop),
+            "likelihood": _likelihood(fit),
             "make_s": made, "fit_s": fit_s, "nuts_s": nuts_s}
 
 
-def _likelihood(fit, pop) -> dict:
+def _likelihood(fit) -> dict:
     """The joint fit's Gaussian that the population's NUTS samples: each robot's ln Ŷ (SI), the rig's errors and
     their covariance, so that samplers can be compared on the benchmark's populations without remaking them."""
+    from growjax import population as pop
+
     robots, _, z_hat, b_hat, cov = pop.linearised_likelihood(fit, "robot.yield_pressure")
     return {"robots": list(robots), "ln_y_hat": z_hat.tolist(), "rig_vector": b_hat.tolist(),
             "covariance": cov.tolist()}

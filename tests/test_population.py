@@ -81,7 +81,9 @@ def test_a_new_robot_band_centres_on_the_population_and_widens_with_its_spread()
     hyper = {"amplitude_m": 2e-5, "time_scale_s": 1.0, "noise_m": 2e-4, "noise_time_s": 0.0}
     fit = _set_fit(np.log([7.5e3, 8e3, 8.5e3]), ("a", "b", "c"), runs=[{"discrepancy": hyper}] * 3)
     post = pop.sample(fit, "Y", chains=2, warmup=200, samples=100, seed=0)
-    assert post.mu.size == 200 and post.diagnostics["mu"]["r_hat"] < 1.05  # two chains, each from its own start
+    # two chains from their own starts sample one posterior (R-hat 1.02–1.07 over seeds 0–3 at 100 draws; a chain
+    # stuck in the funnel gives several)
+    assert post.mu.size == 200 and post.diagnostics["mu"]["r_hat"] < 1.2
     with pytest.raises(ValueError, match="chains"):
         pop.sample(fit, "Y", chains=0)
     config = gj.Config(t1=3.0)
