@@ -38,6 +38,7 @@ from growjax import params as gp
 from growjax.config import Config
 from growjax.experiments import Run
 from growjax.joint import SetFitResult
+from growjax.posterior import nuts_chain
 from growjax.simulate import input_breaks, simulate
 
 SPREAD_SCALE = 0.3  # s₀: half-normal scale of the population's sd of ln θ (robots within ~±60 % a priori)
@@ -167,27 +168,18 @@ def _sampler(robots: int, chains: int, warmup: int, samples: int):
     ``(keys (chains, 2), model arguments) → ({site: (chains, samples, ...)}, divergences (chains,))``, compiled
     once per shape and reused across data sets (``numpyro.infer.MCMC`` compiles its sampling loop again on every
     run: ~0.6 s, more than a run of this model takes)."""
-    from numpyro.infer.hmc import hmc
     from numpyro.infer.util import initialize_model
 
     shape = (jnp.zeros(robots), jnp.eye(robots), 0.0, 1.0, SPREAD_SCALE)
     info = initialize_model(jax.random.PRNGKey(0), model, model_args=shape, dynamic_args=True)
-    init_kernel, sample_kernel = hmc(potential_fn_gen=info.potential_fn, algo="NUTS")
+    run = nuts_chain(info, warmup, samples, target_accept_prob=0.95)
 
     def chain(key, args):
         k_start, k_run = jax.random.split(key)
         names = sorted(info.param_info.z)
         start = {n: jax.random.uniform(k, jnp.shape(info.param_info.z[n]), minval=-2.0, maxval=2.0)
                  for n, k in zip(names, jax.random.split(k_start, len(names)))}
-        state = init_kernel(start, warmup, model_args=args, rng_key=k_run, target_accept_prob=0.95)
-
-        def step(state, _):
-            state = sample_kernel(state, model_args=args)
-            return state, (state.z, state.diverging)
-
-        _, (zs, diverging) = jax.lax.scan(step, state, None, length=warmup + samples)
-        kept = jax.tree_util.tree_map(lambda a: a[warmup:], zs)
-        return jax.vmap(info.postprocess_fn(*args))(kept), jnp.sum(diverging[warmup:])
+        return run(start, k_run, args)
 
     return jax.jit(jax.vmap(chain, in_axes=(0, None)))
 

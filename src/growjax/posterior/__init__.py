@@ -28,6 +28,7 @@ from ._checks import (
     diagnostics,
     forecast,
     laplace,
+    nuts_chain,
     predict,
     predictive_band,
     sbc,
@@ -74,7 +75,7 @@ __all__ = [
     "DirectMean", "PosteriorResult", "Prior", "Residuals", "RidgePrior", "SoftplusPrior",
     "bound_coordinates", "bound_start", "build_emulator", "build_residuals", "compare_loo", "coordinate",
     "diagnostics", "direct_mean", "emulated_mean", "forecast", "fraction", "growth_model", "inference_data",
-    "laplace", "laplace_unconstrained", "lockhart_priors", "observation_draws", "paper_priors", "precondition", "predict",
+    "laplace", "laplace_unconstrained", "lockhart_priors", "nuts_chain", "observation_draws", "paper_priors", "precondition", "predict",
     "predictive_band", "ridge_coordinates", "sample", "sbc", "value_and_jacobian",
     "with_model_tangents",
 ]

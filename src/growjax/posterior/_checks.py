@@ -124,6 +124,29 @@ def forecast(result, priors, base, inputs, config, times: Float[ArrayLike, " T"]
     return mu[:, at_new] + np.asarray(mean)[:, at_new] + scale * rng.standard_normal(scale.shape)
 
 
+def nuts_chain(info, warmup: int, samples: int, target_accept_prob: float):
+    """One NUTS chain of a model set up by ``numpyro.infer.util.initialize_model(..., dynamic_args=True)`` as a pure
+    function ``(start {site: unconstrained value}, key, model arguments) → ({site: (samples, …)} constrained,
+    divergences)``: NumPyro's functional kernel in a ``lax.scan``, for ``jax.vmap`` over chains or data sets and one
+    ``jit`` by the caller (``numpyro.infer.MCMC`` compiles its sampling loop again on every run)."""
+    from numpyro.infer.hmc import hmc
+
+    init_kernel, sample_kernel = hmc(potential_fn_gen=info.potential_fn, algo="NUTS")
+
+    def chain(start, key, args):
+        state = init_kernel(start, warmup, model_args=args, rng_key=key, target_accept_prob=target_accept_prob)
+
+        def step(state, _):
+            state = sample_kernel(state, model_args=args)
+            return state, (state.z, state.diverging)
+
+        _, (zs, diverging) = jax.lax.scan(step, state, None, length=warmup + samples)
+        kept = jax.tree_util.tree_map(lambda a: a[warmup:], zs)
+        return jax.vmap(info.postprocess_fn(*args))(kept), jnp.sum(diverging[warmup:])
+
+    return chain
+
+
 def sbc(emulator: em.Emulator, priors: Sequence[Prior], replicates: int = 100, warmup: int = 200,
         samples: int = 200, seed: int = 0, noise_scale: float = 1e-3, level: float = 0.9,
         truth_model=None, model_error: float = 0.0) -> dict:
@@ -145,7 +168,6 @@ def sbc(emulator: em.Emulator, priors: Sequence[Prior], replicates: int = 100, w
     ``divergences`` (total) and ``draws`` (samples per replicate).
     """
     from numpyro.infer import Predictive
-    from numpyro.infer.hmc import hmc
     from numpyro.infer.util import initialize_model
 
     if truth_model is not None:
@@ -163,19 +185,11 @@ def sbc(emulator: em.Emulator, priors: Sequence[Prior], replicates: int = 100, w
         truth = {**truth, "length": clean + noise}
     sites = [p.site for p in priors] + ["sigma"]
     info = initialize_model(k_init, model, model_args=(truth["length"][0],), dynamic_args=True)
-    init_kernel, sample_kernel = hmc(potential_fn_gen=info.potential_fn, algo="NUTS")
+    chain = nuts_chain(info, warmup, samples, target_accept_prob=0.9)
 
     def run(key, data):
-        state = init_kernel(info.param_info.z, warmup, model_args=(data,), rng_key=key, target_accept_prob=0.9)
-
-        def step(state, _):
-            state = sample_kernel(state, model_args=(data,))
-            return state, (state.z, state.diverging)
-
-        _, (zs, div) = jax.lax.scan(step, state, None, length=warmup + samples)
-        kept = jax.tree_util.tree_map(lambda a: a[warmup:], zs)
-        values = jax.vmap(info.postprocess_fn(data))(kept)
-        return {s: values[s] for s in sites}, jnp.sum(div[warmup:])
+        values, div = chain(info.param_info.z, key, (data,))
+        return {s: values[s] for s in sites}, div
 
     draws, div = jax.jit(jax.vmap(run))(jax.random.split(k_run, replicates), truth["length"])
     a = 0.5 * (1.0 - level)
