@@ -188,7 +188,7 @@ def rows_population(r: dict) -> list[tuple[str, str, str]]:
             ("coverage of each robot's 90 % interval", f"{s['robot_coverage_90']:.2f}", n),
             ("a held-out robot's points inside its 90 % predictive band", f"{s['new_robot_band_coverage']:.3f}",
              "target 0.80–0.97"),
-            ("NUTS, 4 × (500 + 500), median", f"{s['median_nuts_s']:.0f} s",
+            ("NUTS, 4 × (500 + 500), median", f"{s['median_nuts_s']:.2g} s",
              f"joint fit of the eight runs {s['median_fit_s']:.0f} s (median); target ≤ 15 min"),
             *([("NUTS divergences, most in one population", f"{s['max_divergences']}", f"of {_draws(r)} draws; populations with any: "
                f"{sum(p['diagnostics']['divergences'] > 0 for p in r.get('populations', []))}")]

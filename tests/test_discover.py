@@ -169,10 +169,16 @@ def _shipped(name, **kw):
     return res, json.loads((SHIPPED / f"{name}.json").read_text())
 
 
-def test_discover_names_a_hidden_folding_and_recovers_its_size():
+@pytest.fixture(scope="module")
+def folding_on_two_threads():
+    """Discovery on the shipped retraction-folding example, its fits two at a time."""
+    return _shipped("retraction_folding", workers=2)
+
+
+def test_discover_names_a_hidden_folding_and_recovers_its_size(folding_on_two_threads):
     """Retraction folding (30 % of the returning volume) hidden by the reference configuration: named, its
     90 % interval covers 0.3, and the misfit falls to the noise."""
-    res, truth = _shipped("retraction_folding")
+    res, truth = folding_on_two_threads
     assert res.effect == "retraction_folding", gd.summary_text(res)
     lo, hi = res.parameters[truth["parameter"]]["interval_90"]
     assert lo <= truth["magnitude"] <= hi, gd.summary_text(res)
@@ -193,9 +199,9 @@ def test_discover_reports_none_on_clean_data():
     assert res.rmse_after_m < 1.2 * truth["noise_sd"]["robot_length_m"]
 
 
-def test_the_answer_does_not_depend_on_how_many_fits_run_at_a_time():
-    """Fits on threads (one per core) and one after another give the same report: each fit is deterministic."""
-    threaded, _ = _shipped("retraction_folding", workers=2)
+def test_the_answer_does_not_depend_on_how_many_fits_run_at_a_time(folding_on_two_threads):
+    """Fits on threads and one after another give the same report: each fit is deterministic."""
+    threaded, _ = folding_on_two_threads
     serial, _ = _shipped("retraction_folding", workers=1)
     a, b = threaded.report(), serial.report()
     a.pop("wall_s"), b.pop("wall_s")

@@ -274,42 +274,58 @@ def test_fast_agrees_with_a_live_reference_run(traces, inputs, name):
 
 # -- differentiability ----------------------------------------------------------------------------------------
 
-CLASSES = tuple(sy.ALL_EFFECTS.values())  # the superset's effects, in its order
+ALL_CLASSES = tuple(sy.ALL_EFFECTS.values())  # the superset's effects, in its order
+# The default run's model: a force, a flow and an effect with a state of its own (the whole superset compiles
+# for ~40 s more: the slow test below takes every effect through it).
+FEW = ("active_channel_force", "fluid_leak", "retraction_folding")
+FEW_CLASSES = tuple(sy.ALL_EFFECTS[n] for n in FEW)
 
 
 @eqx.filter_jit
-def _length_and_tangent(values, tangent, inputs, breaks):
-    """(length on TS, its jvp) of the superset model with effect magnitudes ``values`` (one per CLASSES), along
-    ``tangent``: one compiled program for every effect and every value."""
+def _length_and_tangent(values, tangent, inputs, breaks, classes=FEW_CLASSES):
+    """(length on TS, its jvp) of the model carrying the effects ``classes`` with magnitudes ``values`` (one per
+    class), along ``tangent``: one compiled program for every effect and every value."""
 
     def length(v):
-        effects = tuple(cls(**{sy.magnitude_field(cls): v[i]}) for i, cls in enumerate(CLASSES))
+        effects = tuple(cls(**{sy.magnitude_field(cls): v[i]}) for i, cls in enumerate(classes))
         params = dataclasses.replace(gj.reference(), effects=effects)
         return gj.simulate(params, inputs, FAST, ts=TS, breaks=breaks).length
 
     return jax.jvp(length, (values,), (tangent,))
 
 
-def _unit(k, scale=1.0):
-    e = np.zeros(len(CLASSES))
+def _unit(k, scale=1.0, size=len(FEW)):
+    e = np.zeros(size)
     e[k] = scale
     return jnp.asarray(e)
 
 
-@pytest.mark.parametrize("name", list(sy.ALL_EFFECTS))
-def test_the_effect_parameter_is_a_differentiable_leaf(inputs, name):
-    """d(final length)/dθ by forward mode (``jax.jvp`` along a unit tangent on θ in SI units, i.e. one column
-    of ``jax.jacfwd``) through the fast configuration matches central differences (±5 % of θ) within 3 %, at the
-    moderate magnitude θ = m (SI sizes from 3e-18 to 350)."""
-    k = list(sy.ALL_EFFECTS).index(name)
+def _leaf_against_differences(inputs, name, classes):
+    """d(final length)/dθ by forward mode along a unit tangent on θ in SI units (one column of ``jax.jacfwd``)
+    against central differences (±5 % of θ), at the moderate magnitude θ = m."""
+    k = list(classes).index(sy.effect_class(name))
     m = sy.moderate_magnitude(name)
     breaks = gj.input_breaks(inputs, FAST)
-    at = _unit(k, m)
-    grad = float(_length_and_tangent(at, _unit(k), inputs, breaks)[1][-1])
-    final = lambda rel: float(_length_and_tangent(at * rel, _unit(k), inputs, breaks)[0][-1])
-    fd = (final(1.05) - final(0.95)) / (0.1 * m)
+    at = _unit(k, m, len(classes))
+    run = lambda v: _length_and_tangent(v, _unit(k, 1.0, len(classes)), inputs, breaks, classes)
+    grad = float(run(at)[1][-1])
+    fd = (float(run(at * 1.05)[0][-1]) - float(run(at * 0.95)[0][-1])) / (0.1 * m)
     assert abs(fd * m) > 1e-5  # the final length depends on it (> 10 µm per 100 %)
     assert grad == pytest.approx(fd, rel=3e-2)
+
+
+@pytest.mark.parametrize("name", FEW)
+def test_the_effect_parameter_is_a_differentiable_leaf(inputs, name):
+    """d(final length)/dθ by forward mode through the fast configuration matches central differences within 3 %,
+    at the moderate magnitude (SI sizes from 3e-13 to 0.3), for a force, a flow and an effect with a state."""
+    _leaf_against_differences(inputs, name, FEW_CLASSES)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", list(sy.ALL_EFFECTS))
+def test_every_effect_parameter_is_a_differentiable_leaf_of_the_superset(inputs, name):
+    """The same for every effect, through the superset model (SI sizes from 3e-18 to 350)."""
+    _leaf_against_differences(inputs, name, ALL_CLASSES)
 
 
 @pytest.mark.parametrize("name", ["fluid_leak", "active_channel_force"])
@@ -318,10 +334,10 @@ def test_the_derivative_at_an_absent_effect_is_finite_and_right(inputs, name):
     step: the effect's range sets it (a leak's 1e-12 m³/(s·Pa), not 1); a step of ε^⅓ in SI would make the
     shifted solve fail and every derivative NaN. d(final length)/dθ matches the forward
     difference to 10 % of the moderate magnitude within 5 % (both effects are nearly linear there)."""
-    k = list(sy.ALL_EFFECTS).index(name)
+    k = FEW.index(name)
     m = sy.moderate_magnitude(name)
     breaks = gj.input_breaks(inputs, FAST)
-    zero = jnp.zeros(len(CLASSES))
+    zero = jnp.zeros(len(FEW))
     length0, tangent = _length_and_tangent(zero, _unit(k), inputs, breaks)
     grad = float(tangent[-1])
     assert np.isfinite(grad)

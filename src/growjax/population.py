@@ -3,7 +3,7 @@ population predictive for a new robot of the same build.
 
     μ ~ Normal(m₀, w₀)                       ln SI units; m₀, w₀ from the parameter's default box
     s ~ HalfNormal(s₀)
-    η_i ~ Normal(0, 1),  ln θ_i = μ + s η_i   (non-centred), i = 1..R robots
+    ln θ_i ~ Normal(μ, s²),  i = 1..R robots
     (ln θ̂, b̂) ~ Normal((ln θ, b), F)           the set's data, through its joint fit
 
 The data enter through the joint fit of the set (:func:`growjax.joint.fit_set` with ``NAME@robot``): its
@@ -15,7 +15,12 @@ robots' intervals (each is a few per cent wide) and keeps NUTS off the ODE: a fe
 rig's errors are shared by the robots on it, so the robots' estimates are correlated through F and the
 population's median cannot be known better than the rig allows, however many robots are run.
 
-Given ln θ, b is Gaussian; it is drawn exactly beside each posterior draw, for the predictive.
+The likelihood being Gaussian, the robots' ln θ are integrated out in closed form:
+ln θ̂ ~ Normal(μ·1, s²I + F_θθ). NUTS samples (μ, s) alone, a smooth two-dimensional posterior, and each draw's ln θ is then drawn exactly from
+its Gaussian given (μ, s) and the data (:func:`robots_given`). Neither the centred nor the non-centred
+parametrisation of ln θ is needed: both put a funnel in front of NUTS as s → 0 (the non-centred one where the
+data pin each robot more tightly than the population does, the centred one where they pin it less), and a few
+draws diverge or a chain sticks. Given ln θ, b is Gaussian too, and is drawn beside each draw for the predictive.
 """
 
 from __future__ import annotations
@@ -96,23 +101,36 @@ def linearised_likelihood(set_fit: SetFitResult, name: str):
 
 
 def model(z_hat, cov, mu_loc: float, mu_scale: float, spread_scale: float = SPREAD_SCALE):
-    """The population model above, with the data's rig block already conditioned out: ``z_hat`` (R,) ln SI,
-    ``cov`` (R, R) its covariance."""
+    """The population model above, with the robots' ln θ and the data's rig block integrated out: ``z_hat`` (R,)
+    ln SI, ``cov`` (R, R) its covariance given ln θ."""
     mu = numpyro.sample("mu", dist.Normal(mu_loc, mu_scale))
     s = numpyro.sample("s", dist.HalfNormal(spread_scale))
-    with numpyro.plate("robot", z_hat.shape[0]):
-        eta = numpyro.sample("eta", dist.Normal(0.0, 1.0))
-    ln_theta = numpyro.deterministic("ln_theta", mu + s * eta)
-    numpyro.sample("z_hat", dist.MultivariateNormal(ln_theta, covariance_matrix=cov), obs=z_hat)
+    marginal = cov + s**2 * jnp.eye(z_hat.shape[0])
+    numpyro.sample("z_hat", dist.MultivariateNormal(mu * jnp.ones_like(z_hat), covariance_matrix=marginal), obs=z_hat)
+
+
+def robots_given(mu, s, z_hat, cov, rng: np.random.Generator) -> np.ndarray:
+    """Exact draws of the robots' ln θ (D, R) given each draw's (μ, s) (D,) and the data ``z_hat`` (R,) with
+    covariance ``cov`` (R, R). In the eigenbasis of ``cov`` (eigenvalues λ) the prior N(μ·1, s²I) and the data
+    are independent per axis: mean s²/(s² + λ) of the data's offset from μ, variance s²λ/(s² + λ); exact at
+    s = 0 (every robot at μ)."""
+    lam, vec = np.linalg.eigh(0.5 * (cov + cov.T))
+    lam = np.maximum(lam, 0.0)
+    mu, s2 = np.asarray(mu, float)[:, None], np.asarray(s, float)[:, None] ** 2
+    offset = (np.asarray(z_hat, float)[None, :] - mu) @ vec  # (D, R) in the eigenbasis
+    shrink = s2 / (s2 + lam)
+    x = shrink * offset + np.sqrt(shrink * lam) * rng.standard_normal(offset.shape)
+    return mu + x @ vec.T
 
 
 def sample(set_fit: SetFitResult, name: str = "Y", *, chains: int = 4, warmup: int = 500, samples: int = 500,
            seed: int = 0, spread_scale: float = SPREAD_SCALE, mu_prior: tuple | None = None) -> PopulationResult:
-    """NUTS over (μ, s, η) of the population of ``name`` (as freed ``name@robot`` in ``set_fit``); b drawn
-    given each draw's ln θ. ``mu_prior``: (m₀, w₀) of μ, ln SI (None: centred on the parameter's default box
-    in log scale, half its log width as sd). The ``chains`` run side by side in one compiled program
-    (:func:`_sampler`), each from its own start drawn uniformly in (−2, 2) in unconstrained space (NumPyro's
-    default) and with its own step size and diagonal mass adapted over ``warmup``."""
+    """NUTS over (μ, s) of the population of ``name`` (as freed ``name@robot`` in ``set_fit``), the robots'
+    ln θ drawn exactly given each draw (:func:`robots_given`) and b given ln θ. ``mu_prior``: (m₀, w₀) of μ,
+    ln SI (None: centred on the parameter's default box in log scale, half its log width as sd). The ``chains``
+    run side by side in one compiled program (:func:`_sampler`), each from its own start drawn uniformly in
+    (−2, 2) in unconstrained space (NumPyro's default) and with its own step size and diagonal mass adapted over
+    ``warmup``."""
     base = gp.reference()
     full = gp.resolve_name(base, name)
     robots, _, z_hat, b_hat, cov = linearised_likelihood(set_fit, full)
@@ -125,7 +143,10 @@ def sample(set_fit: SetFitResult, name: str = "Y", *, chains: int = 4, warmup: i
         raise ValueError(f"need chains >= 1, warmup >= 1 and samples >= 2, got {chains}, {warmup}, {samples}")
     args = tuple(jnp.asarray(a, float) for a in (z_hat, czz, mu_prior[0], mu_prior[1], spread_scale))
     values, diverging = _sampler(r, chains, warmup, samples)(jax.random.split(jax.random.PRNGKey(seed), chains), args)
-    draws = {k: np.asarray(values[k]) for k in ("mu", "s", "ln_theta")}  # (chains, samples, ...)
+    draws = {k: np.asarray(values[k]) for k in ("mu", "s")}  # (chains, samples)
+    rng = np.random.default_rng(seed)
+    draws["ln_theta"] = robots_given(draws["mu"].reshape(-1), draws["s"].reshape(-1), z_hat, czz, rng).reshape(
+        chains, samples, r)
     diagnostics = {}
     for site in ("mu", "s", "ln_theta"):
         x = draws[site]
@@ -135,7 +156,6 @@ def sample(set_fit: SetFitResult, name: str = "Y", *, chains: int = 4, warmup: i
     ln_theta = draws["ln_theta"].reshape(-1, r)
     gain = np.linalg.solve(czz, czb).T  # (Q, R)
     cond = cbb - czb.T @ np.linalg.solve(czz, czb)
-    rng = np.random.default_rng(seed)
     chol = np.linalg.cholesky(0.5 * (cond + cond.T) + 1e-14 * np.eye(cond.shape[0]))
     b = b_hat + (ln_theta - z_hat) @ gain.T + rng.standard_normal((ln_theta.shape[0], b_hat.size)) @ chol.T
     return PopulationResult(full, robots, draws["mu"].reshape(-1), draws["s"].reshape(-1), ln_theta, b,
