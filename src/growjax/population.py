@@ -16,11 +16,12 @@ rig's errors are shared by the robots on it, so the robots' estimates are correl
 population's median cannot be known better than the rig allows, however many robots are run.
 
 The likelihood being Gaussian, the robots' ln θ are integrated out in closed form:
-ln θ̂ ~ Normal(μ·1, s²I + F_θθ). NUTS samples (μ, s) alone, a smooth two-dimensional posterior, and each draw's ln θ is then drawn exactly from
-its Gaussian given (μ, s) and the data (:func:`robots_given`). Neither the centred nor the non-centred
-parametrisation of ln θ is needed: both put a funnel in front of NUTS as s → 0 (the non-centred one where the
-data pin each robot more tightly than the population does, the centred one where they pin it less), and a few
-draws diverge or a chain sticks. Given ln θ, b is Gaussian too, and is drawn beside each draw for the predictive.
+ln θ̂ ~ Normal(μ·1, s²I + F_θθ). NUTS samples (μ, s) alone, a smooth two-dimensional posterior, and each
+draw's ln θ is then drawn exactly from its Gaussian given (μ, s) and the data (:func:`robots_given`). Neither
+the centred nor the non-centred parametrisation of ln θ is needed: both put a funnel in front of NUTS as
+s → 0 (the non-centred one where the data pin each robot more tightly than the population does, the centred
+one where they pin it less), and a few draws diverge or a chain sticks. Given ln θ, b is Gaussian too, and is
+drawn beside each draw for the predictive.
 """
 
 from __future__ import annotations
