@@ -13,6 +13,12 @@ xla_flags.apply_quick_compile()
 # rounding moves as under the quick emitters (no assertion here rests on the last bits).
 if "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
     os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_backend_optimization_level=0").strip()
+# and without XLA's loop-invariant code motion and while-loop simplification, which run to a fixed point on the
+# solver's nested loops: a gradient program of the solver compiles in 6 s instead of 14 s, the suite about 11 %
+# quicker; rounding moves as above.
+if "xla_disable_hlo_passes" not in os.environ.get("XLA_FLAGS", ""):
+    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "")
+                               + " --xla_disable_hlo_passes=while-loop-invariant-code-motion,simplify-while-loops")
 
 import jax
 import numpy as np
