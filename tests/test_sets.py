@@ -189,7 +189,7 @@ print(len(jax.devices()), float(np.max(np.abs(np.asarray(spread) - np.asarray(al
 
 def test_runs_spread_over_two_devices_give_what_one_device_gives():
     """Five runs on a process with two CPU devices: the first device solves three, the second two and a padding
-    copy; each run's residuals are those of the one-device vmapped program."""
+    copy; each run's residuals are those of the one-device program."""
     import subprocess
     import sys
 

@@ -268,13 +268,18 @@ def _fit_tangents(batch: _Batch, layout: _Layout, plain, tol: dict, z, bounds, d
 
     def hyper_at(w, hs):
         liks, outs, _ = at(w)
-        return tuple(lik.estimate(r, discrepancy, h) for lik, (r, _), h in zip(liks, outs, hs))
+        return _estimates(liks, outs, discrepancy, hs)
 
     w, hypers, cost, converged = gf.alternate_gls(whitened, hyper_at, w, w_bounds, max_steps,
                                                   tuple([None] * len(runs)))
     likelihoods, outs, b = at(w)
     return _finish(np.asarray(w)[:p_all], b, b, outs, likelihoods, layout, list(hypers), model_error, tol, "inferred",
                    rig_errors, runs, cost, converged, clock, batch)
+
+
+def _estimates(likelihoods, outs, discrepancy: str, hypers) -> tuple:
+    """Each run's hyperparameters at their mode given its residuals in ``outs``, from ``hypers``."""
+    return tuple(lik.estimate(r, discrepancy, h) for lik, (r, _), h in zip(likelihoods, outs, hypers))
 
 
 def _set_log_likelihood(outs, likelihoods, layout: _Layout, hypers, centre, rig: str) -> float:
@@ -329,8 +334,7 @@ def _gls(batch, layout: _Layout, likelihoods, hypers, z, b, centre, bounds, disc
     p_all = z.size
 
     def hyper_at(w, hs):
-        outs = batch.linearised(w[:p_all], layout)
-        return tuple(lik.estimate(r, discrepancy, h) for lik, (r, _), h in zip(likelihoods, outs, hs))
+        return _estimates(likelihoods, batch.linearised(w[:p_all], layout), discrepancy, hs)
 
     w, hypers, cost, converged = gf.alternate_gls(
         lambda w, hs: _whitened(batch.linearised(w[:p_all], layout), likelihoods, layout, hs, w[p_all:], centre),
@@ -396,13 +400,35 @@ class _Batch:
         """[(r (m_e,), None)] per run at the set's coordinates z (P,): the runs alone, no tangents."""
         return self._run(_residuals_runs, z, layout, stacked)
 
-    def _run(self, program, z, layout: _Layout, stacked=None):
+    def residuals_at(self, zs, layout: _Layout):
+        """[[(r (m_e,), None)] per run] per point of ``zs`` (K, P): every run at every point in one call of the
+        runs' program per group (K copies of each run)."""
         clock = time.perf_counter()
+        k = len(zs)
+        z_local = [self._local(z, layout) for z in zs]
+        out = [[None] * self.size for _ in range(k)]
+        for members, problem in self.groups:
+            copies = jax.tree_util.tree_map(lambda x: jnp.concatenate([x] * k), problem)
+            z_all = np.concatenate([z[members] for z in z_local])
+            r = np.asarray(_spread(_residuals_runs, jnp.asarray(z_all), copies)[0])
+            for j in range(k):
+                for i, e in enumerate(members):
+                    out[j][e] = (r[j * len(members) + i], None)
+        self.simulate_s += time.perf_counter() - clock
+        return out
+
+    def _local(self, z, layout: _Layout) -> np.ndarray:
+        """Each run's model coordinates (E, p) (with the rig in the model, (E, p + q)) at the set's z (P,) or w."""
         p_all = len(layout.labels)
         z_local = np.asarray(z)[:p_all][layout.index] + layout.offset
         if self.rig_in_model:  # w = (z, b): each run's rig errors after its θ (b = 0 when only z given)
             b = np.asarray(z)[p_all:] if np.size(z) > p_all else np.zeros(len(layout.rig_labels))
             z_local = np.concatenate([z_local, b[layout.rig_index]], axis=1)
+        return z_local
+
+    def _run(self, program, z, layout: _Layout, stacked=None):
+        clock = time.perf_counter()
+        z_local = self._local(z, layout)
         out = [None] * self.size
         for k, (members, problem) in enumerate(self.groups):
             pr = problem if stacked is None else stacked[k]
@@ -438,31 +464,36 @@ class _Batch:
         return g
 
 
+# The runs of a program follow one another (``jax.lax.map``), each with its own adaptive steps: vmapped, every run
+# would take the step count of the slowest and pay for the lockstep (eight 10 s runs of the published pulse trains on
+# one core: 1.25× the cost of eight single runs vmapped, against 1.05× mapped).
+
+
 def _linearise_runs(z_local, problems: gf.Problem):
-    """Residuals (E, m) and Jacobians (E, m, p) of stacked problems: one vmapped forward-mode linearisation."""
-    return jax.vmap(lambda z, pr: linearise(pr.residuals, z))(z_local, problems)
+    """Residuals (E, m) and Jacobians (E, m, p) of stacked problems: each run's forward-mode linearisation, one run
+    after another in one program."""
+    return jax.lax.map(lambda a: linearise(a[1].residuals, a[0]), (z_local, problems))
 
 
 def _residuals_runs(z_local, problems: gf.Problem):
-    """Residuals (E, m) of stacked problems, and None for the Jacobian: one vmapped run."""
-    return jax.vmap(lambda z, pr: pr.residuals(z))(z_local, problems), None
+    """Residuals (E, m) of stacked problems, and None for the Jacobian: the runs one after another in one
+    program."""
+    return jax.lax.map(lambda a: a[1].residuals(a[0]), (z_local, problems)), None
 
 
 @eqx.filter_jit
 def _one_device(program, z_local, problems: gf.Problem):
-    """``program`` on the E stacked runs as one vmapped program on the default device."""
+    """``program`` on the E stacked runs as one program on the default device."""
     return program(z_local, problems)
 
 
 def _spread(program, z_local, problems: gf.Problem):
     """``program`` (:func:`_linearise_runs` or :func:`_residuals_runs`) on the E stacked runs, spread over the
-    process's devices: each device solves its share of at least two runs as one vmapped program
-    (``jax.shard_map``), with its own step count. On a CPU with several cores exposed as devices
-    (``jax_num_cpu_devices``) the shares run on different cores at once; one vmapped program keeps every run in step
-    with the slowest and uses one core. A share of one run gains nothing (a vmapped run of one costs about what two
-    do), so with fewer than four runs, or one device, it is the vmapped program itself."""
+    process's devices: each device solves its share of the runs in one program (``jax.shard_map``). On a CPU with
+    several cores exposed as devices (``jax_num_cpu_devices``) the shares run on different cores at once. With one
+    run, or one device, it is the program itself."""
     n = int(z_local.shape[0])
-    d = min(len(jax.devices()), n // 2)
+    d = min(len(jax.devices()), n)
     if d < 2:
         return _one_device(program, z_local, problems)
     arrays, static = eqx.partition(problems, eqx.is_array)
@@ -530,13 +561,12 @@ def _starts(batch: _Batch, layout: _Layout, likelihoods, base, names, n_starts: 
     unit = qmc.LatinHypercube(d=len(names), seed=seed).random(sweep_n)
     values = np.exp(boxes[:, 0] + unit * (boxes[:, 1] - boxes[:, 0]))  # (k, p) SI
     per_name = [names.index(lab.split("@")[0]) for lab in layout.labels]  # each coordinate's free name
-    costs, zs = [], []
-    for v in values:
-        z = np.log(v[per_name] / layout.refs)
+    zs = [np.log(v[per_name] / layout.refs) for v in values]
+    costs = []
+    for outs in batch.residuals_at(zs, layout):
         r = np.concatenate([np.asarray(lik.weighted(jnp.asarray(x), jnp.zeros((x.size, 0)))[0])
-                            for (x, _), lik in zip(batch.residuals(z, layout), likelihoods)])
+                            for (x, _), lik in zip(outs, likelihoods)])
         costs.append(float(r @ r) if np.all(np.isfinite(r)) else np.inf)
-        zs.append(z)
     order = np.argsort(costs)[:n_starts]
     return [zs[k] for k in order if np.isfinite(costs[k])] or [np.zeros(len(layout.labels))]
 
