@@ -119,7 +119,7 @@ def robots_given(mu, s, z_hat, cov, rng: np.random.Generator) -> np.ndarray:
     lam = np.maximum(lam, 0.0)
     mu, s2 = np.asarray(mu, float)[:, None], np.asarray(s, float)[:, None] ** 2
     offset = (np.asarray(z_hat, float)[None, :] - mu) @ vec  # (D, R) in the eigenbasis
-    shrink = s2 / (s2 + lam)
+    shrink = np.divide(s2, s2 + lam, out=np.zeros(offset.shape), where=s2 + lam > 0)  # 0 where s = λ = 0
     x = shrink * offset + np.sqrt(shrink * lam) * rng.standard_normal(offset.shape)
     return mu + x @ vec.T
 
