@@ -6,7 +6,9 @@ A set of ``--experiments`` reference-made experiments of one robot on one drawn 
 sets), 10 s each: ``growjax.joint.fit_set`` of the whole set, of its first experiment alone, and
 ``growjax.fit.fit`` of that experiment, each ``--repeat`` times, interleaved. Printed: the median warm wall
 times and the ratio of the set's to one experiment's (target ≤ 3), with the share spent in the batched
-simulations; and one evaluation of the fit's model (residuals and tangents in Y and the rig's errors) for the
+simulations; with ``--each`` (default), ``growjax.fit.fit`` of every experiment of the set alone, warm, and the
+ratio of the set's fit to their mean (the eight experiments' single runs differ up to fourfold in cost, and the
+first is one of the cheapest); and one evaluation of the fit's model (residuals and tangents in Y and the rig's errors) for the
 whole set in its batched program against that of one experiment, and the set's program on one device.
 
 Every CPU core is a JAX device (``jax_num_cpu_devices``; ``GROWJAX_CPU_DEVICES`` overrides), as in ``growjax fit``,
@@ -47,6 +49,8 @@ def main():
     ap.add_argument("--experiments", type=int, default=8)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--each", action=argparse.BooleanOptionalAction, default=True,
+                    help="also fit every experiment of the set alone (one compile each)")
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "set_speed.json"))
     args = ap.parse_args()
     _, _, exps, status = make_set(np.random.default_rng(args.seed), args.experiments, 1e-6)
@@ -69,6 +73,9 @@ def main():
                 simulate.append(res.simulate_s)
     row = {k: {"first_s": w[0], "warm_s": float(np.median(w[1:] or w))} for k, w in walls.items()}
     row["ratio_set_over_one_fit"] = row["set"]["warm_s"] / row["one_experiment_fit"]["warm_s"]
+    if args.each:
+        row["each_experiment_fit"] = _each(exps, config, args.repeat)
+        row["ratio_set_over_mean_fit"] = row["set"]["warm_s"] / row["each_experiment_fit"]["mean_warm_s"]
     row["set_simulate_share"] = float(np.median(simulate[1:] or simulate) / row["set"]["warm_s"])  # warm runs
     row["evaluation"] = _evaluation(exps, config, args.repeat)
     row["ratio_evaluation_set_over_one"] = row["evaluation"]["set_s"] / row["evaluation"]["one_s"]
@@ -77,6 +84,23 @@ def main():
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"environment": environment(), "arguments": vars(args), **row}, indent=1))
+
+
+def _each(exps, config, repeat: int) -> dict:
+    """Median warm wall time, s, of ``growjax.fit.fit`` of each experiment of the set alone (its first call
+    compiles and is not counted), and their mean: the cost of fitting the set one experiment at a time is
+    ``len(exps)`` × that mean."""
+    warm = []
+    for e in exps:
+        inputs = gj.Inputs(catheter_length=gj.Sampled(TIME, CATHETER),
+                           pressure_demand=gj.Sampled(TIME, e["pressure_demand_Pa"]))
+        walls = []
+        for _ in range(repeat + 1):
+            clock = time.perf_counter()
+            gf.fit(TIME, e["robot_length_m"], inputs, config=config)
+            walls.append(time.perf_counter() - clock)
+        warm.append(float(np.median(walls[1:])))
+    return {"warm_s": warm, "mean_warm_s": float(np.mean(warm))}
 
 
 def _evaluation(exps, config, repeat: int) -> dict:

@@ -302,7 +302,7 @@ def build_parser():
     des.add_argument("--p-max", type=_positive, default=None, metavar="PA",
                      help="top of the demand, Pa (default: the sensed-pressure ceiling, the membrane limit × 0.9)")
     des.add_argument("--random", type=_count(), default=64, help="random admissible inputs drawn and scored")
-    des.add_argument("--starts", type=_count(), default=2, help="descents, from the best random inputs")
+    des.add_argument("--starts", type=_count(), default=1, help="descents, from the best random inputs")
     des.add_argument("--iterations", type=_count(), default=15, help="gradient steps per descent")
     des.add_argument("--draws", type=_count(2), default=32, help="draws of the rig and θ every design is checked on")
     des.add_argument("--points", type=_count(), default=4,

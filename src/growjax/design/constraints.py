@@ -121,11 +121,13 @@ def check(inputs, knowledge: Knowledge, config, ts, breaks, lim: Limits, drawn: 
     values = np.stack([np.asarray(drawn[k], float) for k in names], axis=1)  # (D, r)
     idx_c, idx_d = np.repeat(np.arange(c), d), np.tile(np.arange(d), c)
     total = idx_c.size
-    size = min(CHUNK, total)
+    # one batch size from a quarter of a chunk up (short ones padded by wrapping round): the check of one design over
+    # the default draws reuses the random batch's program
+    size = CHUNK if total >= CHUNK // 4 else total
     out = {k: [] for k in ("length", "pressure", "syringe", "ok")}
     base = as_arrays(knowledge.base)
     for start in range(0, total, size):
-        sl = np.arange(start, start + size) % total  # the last chunk padded by wrapping round
+        sl = np.arange(start, start + size) % total
         batch = jax.tree_util.tree_map(lambda a: a[idx_c[sl]], inputs)
         res = _runs(base, names, batch, jnp.asarray(values[idx_d[sl]]), config, jnp.asarray(ts), breaks)
         n_real = min(size, total - start)

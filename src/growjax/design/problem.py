@@ -157,20 +157,27 @@ def value_and_gradient(problem: Problem, x):
     return jnp.where(jnp.isfinite(value), value, jnp.inf), tangent
 
 
-@eqx.filter_jit
 def information(problem: Problem, inputs, breaks):
     """At every point (P of them): the information of the length rows (P, m, m) and of the pressure rows (P, m, m);
     at the estimate, the whitened cross term J̃ᵀK⁻¹V (m, D) of what the rig's linearisation misses
     (:func:`growjax.design.criterion.posterior`), the run's length (n,) m and pressure (n,) Pa. One compiled
-    program per inputs' structure."""
-    def at(z):
-        s = problem.sensitivities(inputs, breaks, z)
+    program per inputs' structure, the one :func:`evaluate` runs."""
+    return _information(problem, inputs, breaks)[:5]
+
+
+@eqx.filter_jit
+def _information(problem: Problem, inputs, breaks):
+    """:func:`information`'s outputs and the limits' penalty at the estimate (:func:`growjax.design.constraints.penalty`).
+    The first point is the estimate (:func:`make`), so its sensitivities serve the penalty and the cross term too."""
+    def info(s):
         w = dc.whiten(s.jac_length, problem.times, problem.hyper)
         jp = s.jac_pressure / problem.pressure_noise
         return w.T @ w, jp.T @ jp
 
-    info_l, info_p = jax.lax.map(at, problem.points)
     s = problem.sensitivities(inputs, breaks)
+    first = info(s)
+    rest = jax.lax.map(lambda z: info(problem.sensitivities(inputs, breaks, z)), problem.points[1:])
+    info_l, info_p = (jnp.concatenate([a[None], b]) for a, b in zip(first, rest))
     m, d = s.jac_length.shape[1], problem.offsets.shape[0]
     cross = jnp.zeros((m, 0))
     if d:
@@ -178,7 +185,8 @@ def information(problem: Problem, inputs, breaks):
                                     breaks, s, problem.offsets)
         w = dc.whiten(jnp.concatenate([s.jac_length, rem / jnp.sqrt(d)], axis=1), problem.times, problem.hyper)
         cross = w[:, :m].T @ w[:, m:]
-    return info_l, info_p, cross, s.length, s.pressure
+    return info_l, info_p, cross, s.length, s.pressure, dcon.penalty(s, problem.prior_covariance, problem.limits,
+                                                                      problem.spread)
 
 
 def covariances(problem: Problem, info_length, info_pressure, cross, sensors) -> dict:
@@ -198,9 +206,21 @@ def covariances(problem: Problem, info_length, info_pressure, cross, sensors) ->
     return out
 
 
+def evaluate(problem, x):
+    """(criterion, penalty) of design x (K − 1,): the objective's two parts (:meth:`Problem.parts`). For a
+    :class:`Problem`, through :func:`information`'s compiled program, the one the design's table reports from
+    (the same numbers to rounding); NaN where the model failed."""
+    if not isinstance(problem, Problem):
+        return _parts(problem, x)
+    info_l, info_p, cross, _, _, pen = (np.asarray(a) for a in _information(problem, problem.inputs(x), problem.breaks))
+    if not all(np.all(np.isfinite(a)) for a in (info_l, info_p, cross)):
+        return np.float64(np.nan), pen
+    cov = covariances(problem, info_l, info_p, cross, problem.sensors)["known"]
+    return np.asarray(problem.criterion.of_covariance(cov)), pen
+
+
 @eqx.filter_jit
-def evaluate(problem: Problem, x):
-    """(criterion, penalty) of design x (K − 1,): the objective's two parts (:meth:`Problem.parts`)."""
+def _parts(problem, x):
     return problem.parts(problem.inputs(x))
 
 

@@ -79,6 +79,5 @@ def remainder(base: gp.Parameters, inputs, names: tuple, rig: tuple, config, ts,
         return simulate(moved(base, names, rig, point), inputs, config, ts=ts, breaks=breaks).length
 
     offsets = jnp.asarray(offsets)
-    lengths = jax.lax.map(run, offsets)  # (D, n)
-    nominal = run(jnp.zeros(q))
-    return (lengths - nominal).T - s.jac_length[:, p:] @ offsets.T
+    lengths = jax.vmap(run)(jnp.concatenate([jnp.zeros((1, q)), offsets]))  # (1 + D, n)
+    return (lengths[1:] - lengths[0]).T - s.jac_length[:, p:] @ offsets.T

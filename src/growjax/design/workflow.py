@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 import jax
 import numpy as np
@@ -85,7 +86,7 @@ def published_inputs(space: DesignSpace) -> Inputs:
 
 
 def design(knowledge: Knowledge, space: DesignSpace, criterion: str = "A", sensors=("length",), random: int = 64,
-           starts: int = 2, iterations: int = dopt.ITERATIONS, n_draws: int = dcon.DRAWS, seed: int = 0,
+           starts: int = 1, iterations: int = dopt.ITERATIONS, n_draws: int = dcon.DRAWS, seed: int = 0,
            points: int = dprob.POINTS, pressure_noise: float = dcrit.PRESSURE_NOISE, limits: dcon.Limits | None = None,
            learning_rate: float = dopt.LEARNING_RATE, nonlinear_draws: int = dprob.NONLINEAR_DRAWS,
            gradient: str = "differences", progress: bool = False) -> DesignResult:
@@ -110,15 +111,18 @@ def design(knowledge: Knowledge, space: DesignSpace, criterion: str = "A", senso
     if space.p_max > lim.pressure + 1e-9:
         raise ValueError(f"p_max {space.p_max / 1e3:.1f} kPa is above the sensed-pressure ceiling "
                          f"{lim.pressure / 1e3:.1f} kPa (the membrane limit {lim.membrane / 1e3:.1f} kPa × the margin)")
-    batch, descents, x, scaled, checks, wall = _search(problem, knowledge, space, random, starts, iterations, n_draws,
-                                                       seed, learning_rate, gradient, progress)
-    best_random = batch.designs[batch.best]
+    sets = [sensors] if sensors == ("length",) else [("length",), sensors]
+    drawn = dcon.draws(knowledge, n_draws, seed)
     base_inputs = published_inputs(space)
     base_breaks = input_breaks(base_inputs, space.config())
-    sets = [sensors] if sensors == ("length",) else [("length",), sensors]
-    rows = []
-    for label, inputs, breaks in (("published pulse train", base_inputs, base_breaks),
-                                  ("best random input", space.inputs(best_random), problem.breaks),
+    with ThreadPoolExecutor(max_workers=1) as pool:  # the baseline's programs compile beside the search
+        baseline = pool.submit(lambda: (_row(problem, knowledge, "published pulse train", base_inputs, base_breaks, sets),
+                                        _published_check(knowledge, space, lim, drawn)))
+        batch, descents, x, scaled, checks, wall = _search(problem, knowledge, space, random, starts, iterations, drawn,
+                                                           seed, learning_rate, gradient, progress)
+        rows, checks["published pulse train"] = baseline.result()
+    best_random = batch.designs[batch.best]
+    for label, inputs, breaks in (("best random input", space.inputs(best_random), problem.breaks),
                                   ("design", space.inputs(x), problem.breaks)):
         rows += _row(problem, knowledge, label, inputs, breaks, sets)
     wall["total_s"] = time.perf_counter() - clock
@@ -126,7 +130,7 @@ def design(knowledge: Knowledge, space: DesignSpace, criterion: str = "A", senso
                         rows, checks, batch, descents, lim, criterion, sensors, knowledge.summary(), wall, scaled)
 
 
-def discriminate(knowledge: Knowledge, space: DesignSpace, effects, sizes=None, random: int = 64, starts: int = 2,
+def discriminate(knowledge: Knowledge, space: DesignSpace, effects, sizes=None, random: int = 64, starts: int = 1,
                  iterations: int = dopt.ITERATIONS, n_draws: int = dcon.DRAWS, seed: int = 0,
                  limits: dcon.Limits | None = None, learning_rate: float = dopt.LEARNING_RATE,
                  gradient: str = "differences", false_positive_rate: float = 0.05,
@@ -149,15 +153,21 @@ def discriminate(knowledge: Knowledge, space: DesignSpace, effects, sizes=None, 
         raise ValueError(f"p_max {space.p_max / 1e3:.1f} kPa is above the sensed-pressure ceiling "
                          f"{lim.pressure / 1e3:.1f} kPa (the membrane limit {lim.membrane / 1e3:.1f} kPa × the margin)")
     threshold = boundary_threshold(false_positive_rate / len(fx.CATALOGUE))
-    batch, descents, x, scaled, checks, wall = _search(problem, knowledge, space, random, starts, iterations, n_draws,
-                                                       seed, learning_rate, gradient, progress)
+    drawn = dcon.draws(knowledge, n_draws, seed)
     base_inputs = published_inputs(space)
+    base_breaks = input_breaks(base_inputs, space.config())
+    with ThreadPoolExecutor(max_workers=1) as pool:  # the baseline's programs compile beside the search
+        baseline = pool.submit(lambda: (ddis.statistics(problem, base_inputs, base_breaks),
+                                        _published_check(knowledge, space, lim, drawn)))
+        batch, descents, x, scaled, checks, wall = _search(problem, knowledge, space, random, starts, iterations, drawn,
+                                                           seed, learning_rate, gradient, progress)
+        base_t, checks["published pulse train"] = baseline.result()
     a, b = problem.effects
     rows = []
-    for label, inputs, breaks in (("published pulse train", base_inputs, input_breaks(base_inputs, space.config())),
-                                  ("best random input", space.inputs(batch.designs[batch.best]), problem.breaks),
-                                  ("design", space.inputs(x), problem.breaks)):
-        t_ab, t_ba = (max(float(v), 0.0) for v in ddis.statistics(problem, inputs, breaks))
+    for label, t in (("published pulse train", base_t),
+                     ("best random input", ddis.statistics(problem, space.inputs(batch.designs[batch.best]), problem.breaks)),
+                     ("design", ddis.statistics(problem, space.inputs(x), problem.breaks))):
+        t_ab, t_ba = (max(float(v), 0.0) for v in t)
         rows.append({"input": label, "sensors": ["length"], "criterion": -float(np.log(max(min(t_ab, t_ba), ddis.FLOOR))),
                      "T": {f"{a} real, {b} fitted": t_ab, f"{b} real, {a} fitted": t_ba}, "T_min": min(t_ab, t_ba),
                      "expected_to_separate": bool(min(t_ab, t_ba) > threshold)})
@@ -169,12 +179,12 @@ def discriminate(knowledge: Knowledge, space: DesignSpace, effects, sizes=None, 
                         batch, descents, lim, "discrimination", ("length",), knowledge.summary(), wall, scaled, record)
 
 
-def _search(problem, knowledge, space, random, starts, iterations, n_draws, seed, learning_rate, gradient, progress):
-    """The random batch, the descent from its best, the check of the result and of the two baselines over the
-    draws: (batch, descents, design, the share of its demand kept, checks, wall times)."""
+def _search(problem, knowledge, space, random, starts, iterations, drawn, seed, learning_rate, gradient, progress):
+    """The random batch, the descent from its best, the check of the result and of the best random input over the
+    draws ``drawn``: (batch, descents, design, the share of its demand kept, checks, wall times)."""
     wall = {}
     lim = problem.limits
-    drawn = dcon.draws(knowledge, n_draws, seed)
+    n_draws = len(next(iter(drawn.values())))
     _progress.note(f"design: {random} random admissible inputs, each checked over {n_draws} draws", progress)
     batch = dopt.random_admissible(problem, space, knowledge, random, seed, drawn, progress=progress)
     wall["random_s"] = batch.wall_s
@@ -186,15 +196,15 @@ def _search(problem, knowledge, space, random, starts, iterations, n_draws, seed
     x, scaled, check = _admissible(problem, space, knowledge, _by_reported(problem, space, descents, batch, starts),
                                    drawn, lim)
     wall["check_s"] = time.perf_counter() - t
-    best_random = batch.designs[batch.best]
-    base_inputs = published_inputs(space)
-    base_breaks = input_breaks(base_inputs, space.config())
-    checks = {"design": check,
-              "best random input": dcon.check(dcon.stack([space.inputs(best_random)]), knowledge, space.config(),
-                                              space.times, space.breaks(), lim, drawn, keep_runs=True),
-              "published pulse train": dcon.check(dcon.stack([base_inputs]), knowledge, space.config(), space.times,
-                                                  base_breaks, lim, drawn, keep_runs=True)}
+    checks = {"design": check, "best random input": _one(space, knowledge, batch.designs[batch.best], drawn, lim)}
     return batch, descents, x, scaled, checks, wall
+
+
+def _published_check(knowledge, space, lim, drawn):
+    """The published pulse train's check over the draws, its runs kept."""
+    inputs = published_inputs(space)
+    return dcon.check(dcon.stack([inputs]), knowledge, space.config(), space.times, input_breaks(inputs, space.config()),
+                      lim, drawn, keep_runs=True)
 
 
 def _by_reported(problem, space, descents, batch, starts: int) -> np.ndarray:
