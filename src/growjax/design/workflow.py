@@ -112,15 +112,9 @@ def design(knowledge: Knowledge, space: DesignSpace, criterion: str = "A", senso
         raise ValueError(f"p_max {space.p_max / 1e3:.1f} kPa is above the sensed-pressure ceiling "
                          f"{lim.pressure / 1e3:.1f} kPa (the membrane limit {lim.membrane / 1e3:.1f} kPa × the margin)")
     sets = [sensors] if sensors == ("length",) else [("length",), sensors]
-    drawn = dcon.draws(knowledge, n_draws, seed)
-    base_inputs = published_inputs(space)
-    base_breaks = input_breaks(base_inputs, space.config())
-    with ThreadPoolExecutor(max_workers=1) as pool:  # the baseline's programs compile beside the search
-        baseline = pool.submit(lambda: (_row(problem, knowledge, "published pulse train", base_inputs, base_breaks, sets),
-                                        _published_check(knowledge, space, lim, drawn)))
-        batch, descents, x, scaled, checks, wall = _search(problem, knowledge, space, random, starts, iterations, drawn,
-                                                           seed, learning_rate, gradient, progress)
-        rows, checks["published pulse train"] = baseline.result()
+    rows, batch, descents, x, scaled, checks, wall = _search(
+        problem, knowledge, space, random, starts, iterations, n_draws, seed, learning_rate, gradient, progress,
+        lambda inputs, breaks: _row(problem, knowledge, "published pulse train", inputs, breaks, sets))
     best_random = batch.designs[batch.best]
     for label, inputs, breaks in (("best random input", space.inputs(best_random), problem.breaks),
                                   ("design", space.inputs(x), problem.breaks)):
@@ -153,15 +147,9 @@ def discriminate(knowledge: Knowledge, space: DesignSpace, effects, sizes=None, 
         raise ValueError(f"p_max {space.p_max / 1e3:.1f} kPa is above the sensed-pressure ceiling "
                          f"{lim.pressure / 1e3:.1f} kPa (the membrane limit {lim.membrane / 1e3:.1f} kPa × the margin)")
     threshold = boundary_threshold(false_positive_rate / len(fx.CATALOGUE))
-    drawn = dcon.draws(knowledge, n_draws, seed)
-    base_inputs = published_inputs(space)
-    base_breaks = input_breaks(base_inputs, space.config())
-    with ThreadPoolExecutor(max_workers=1) as pool:  # the baseline's programs compile beside the search
-        baseline = pool.submit(lambda: (ddis.statistics(problem, base_inputs, base_breaks),
-                                        _published_check(knowledge, space, lim, drawn)))
-        batch, descents, x, scaled, checks, wall = _search(problem, knowledge, space, random, starts, iterations, drawn,
-                                                           seed, learning_rate, gradient, progress)
-        base_t, checks["published pulse train"] = baseline.result()
+    base_t, batch, descents, x, scaled, checks, wall = _search(
+        problem, knowledge, space, random, starts, iterations, n_draws, seed, learning_rate, gradient, progress,
+        lambda inputs, breaks: ddis.statistics(problem, inputs, breaks))
     a, b = problem.effects
     rows = []
     for label, t in (("published pulse train", base_t),
@@ -179,32 +167,35 @@ def discriminate(knowledge: Knowledge, space: DesignSpace, effects, sizes=None, 
                         batch, descents, lim, "discrimination", ("length",), knowledge.summary(), wall, scaled, record)
 
 
-def _search(problem, knowledge, space, random, starts, iterations, drawn, seed, learning_rate, gradient, progress):
-    """The random batch, the descent from its best, the check of the result and of the best random input over the
-    draws ``drawn``: (batch, descents, design, the share of its demand kept, checks, wall times)."""
+def _search(problem, knowledge, space, random, starts, iterations, n_draws, seed, learning_rate, gradient, progress,
+            baseline):
+    """The random batch, the descent from its best, the check of the result and of the two baselines over the
+    draws; beside them (its programs compile while the search runs) ``baseline(inputs, breaks)`` of the published
+    pulse train, the table's row: (that row, batch, descents, design, the share of its demand kept, checks, wall
+    times)."""
     wall = {}
     lim = problem.limits
-    n_draws = len(next(iter(drawn.values())))
-    _progress.note(f"design: {random} random admissible inputs, each checked over {n_draws} draws", progress)
-    batch = dopt.random_admissible(problem, space, knowledge, random, seed, drawn, progress=progress)
-    wall["random_s"] = batch.wall_s
-    t = time.perf_counter()
-    order = batch.order()[: max(starts, 1)]
-    descents = dopt.multistart(problem, batch.designs[order], iterations, learning_rate, gradient, progress)
-    wall["descent_s"] = time.perf_counter() - t
-    t = time.perf_counter()
-    x, scaled, check = _admissible(problem, space, knowledge, _by_reported(problem, space, descents, batch, starts),
-                                   drawn, lim)
-    wall["check_s"] = time.perf_counter() - t
-    checks = {"design": check, "best random input": _one(space, knowledge, batch.designs[batch.best], drawn, lim)}
-    return batch, descents, x, scaled, checks, wall
-
-
-def _published_check(knowledge, space, lim, drawn):
-    """The published pulse train's check over the draws, its runs kept."""
-    inputs = published_inputs(space)
-    return dcon.check(dcon.stack([inputs]), knowledge, space.config(), space.times, input_breaks(inputs, space.config()),
-                      lim, drawn, keep_runs=True)
+    drawn = dcon.draws(knowledge, n_draws, seed)
+    base_inputs = published_inputs(space)
+    base_breaks = input_breaks(base_inputs, space.config())
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        published = pool.submit(lambda: (baseline(base_inputs, base_breaks),
+                                         dcon.check(dcon.stack([base_inputs]), knowledge, space.config(), space.times,
+                                                    base_breaks, lim, drawn, keep_runs=True)))
+        _progress.note(f"design: {random} random admissible inputs, each checked over {n_draws} draws", progress)
+        batch = dopt.random_admissible(problem, space, knowledge, random, seed, drawn, progress=progress)
+        wall["random_s"] = batch.wall_s
+        t = time.perf_counter()
+        order = batch.order()[: max(starts, 1)]
+        descents = dopt.multistart(problem, batch.designs[order], iterations, learning_rate, gradient, progress)
+        wall["descent_s"] = time.perf_counter() - t
+        t = time.perf_counter()
+        x, scaled, check = _admissible(problem, space, knowledge, _by_reported(problem, space, descents, batch, starts),
+                                       drawn, lim)
+        wall["check_s"] = time.perf_counter() - t
+        checks = {"design": check, "best random input": _one(space, knowledge, batch.designs[batch.best], drawn, lim)}
+        row, checks["published pulse train"] = published.result()
+    return row, batch, descents, x, scaled, checks, wall
 
 
 def _by_reported(problem, space, descents, batch, starts: int) -> np.ndarray:
