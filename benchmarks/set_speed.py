@@ -57,8 +57,7 @@ def main():
     runs = xs.ExperimentSet(tuple(xs.Run(e.source, e) for e in exps))
     first = xs.ExperimentSet(runs.runs[:1])
     config = gj.Config(t1=10.0)
-    inputs = gj.Inputs(catheter_length=gj.Sampled(TIME, CATHETER),
-                       pressure_demand=gj.Sampled(TIME, exps[0]["pressure_demand_Pa"]))
+    inputs = _inputs(exps[0])
     jobs = {"set": lambda: joint.fit_set(runs, config=config),
             "one_experiment_as_a_set": lambda: joint.fit_set(first, config=config),
             "one_experiment_fit": lambda: gf.fit(TIME, exps[0]["robot_length_m"], inputs, config=config)}
@@ -86,14 +85,18 @@ def main():
     out.write_text(json.dumps({"environment": environment(), "arguments": vars(args), **row}, indent=1))
 
 
+def _inputs(exp):
+    """The inputs of one experiment of the set: its recorded demand, the sets' catheter."""
+    return gj.Inputs(catheter_length=gj.Sampled(TIME, CATHETER), pressure_demand=gj.Sampled(TIME, exp["pressure_demand_Pa"]))
+
+
 def _each(exps, config, repeat: int) -> dict:
     """Median warm wall time, s, of ``growjax.fit.fit`` of each experiment of the set alone (its first call
     compiles and is not counted), and their mean: the cost of fitting the set one experiment at a time is
     ``len(exps)`` × that mean."""
     warm = []
     for e in exps:
-        inputs = gj.Inputs(catheter_length=gj.Sampled(TIME, CATHETER),
-                           pressure_demand=gj.Sampled(TIME, e["pressure_demand_Pa"]))
+        inputs = _inputs(e)
         walls = []
         for _ in range(repeat + 1):
             clock = time.perf_counter()
