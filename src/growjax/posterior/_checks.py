@@ -13,6 +13,7 @@ from jaxtyping import ArrayLike, Float
 from growjax import discrepancy as dc
 from growjax import emulator as em
 from growjax import tolerance as tl
+from growjax import xla_flags
 from growjax.emulator import predicted_length
 
 from ._model import Residuals, emulated_mean, growth_model
@@ -191,7 +192,9 @@ def sbc(emulator: em.Emulator, priors: Sequence[Prior], replicates: int = 100, w
         values, div = chain(info.param_info.z, key, (data,))
         return {s: values[s] for s in sites}, div
 
-    draws, div = jax.jit(jax.vmap(run))(jax.random.split(k_run, replicates), truth["length"])
+    # a long loop of a small model: XLA's full backend optimisation whatever the process's level
+    program = jax.jit(jax.vmap(run), compiler_options=xla_flags.FULL_BACKEND)
+    draws, div = program(jax.random.split(k_run, replicates), truth["length"])
     a = 0.5 * (1.0 - level)
     ranks, coverage = {}, {}
     for s in sites:
