@@ -33,6 +33,10 @@ alarm), run by ``--maker`` (default the reference configuration) on
 the nominal rig with fresh white length noise under the design and under the published pulse train, each given
 to ``growjax.discover.discover`` (``--candidates``, default the whole catalogue); reported: how often discovery
 names the true effect (for the clean data: "none") under each input, beside each input's predicted min T.
+``--with-first`` also reads each seed's designed experiment together with the first experiment made again on the
+same robot (the published pulse train over the shipped record, fresh noise): ``growjax.discover.discover_set``
+over the two, one Y for the robot (``--design-from`` the pair's results file ``--truths retraction_folding
+trapped_air none --inputs design --with-first``).
 
 Targets (the issue): realised sd within ±25 % of the prediction; coverage 0.80–0.97; the design's realised
 interval ≤ 0.5× the published pulse train's; the design beats the best random input; no run of the design crosses
@@ -183,12 +187,48 @@ def safety(known, space, knots, demand, n: int, seed: int) -> dict:
     return out
 
 
+def first_run(params, exp, base, maker, rng, noise: float):
+    """The first experiment again, on the robot with the hidden effect: the shipped experiment's inputs (the
+    published pulse train, its catheter) run by ``maker`` over its record, with fresh white length noise."""
+    import growjax as gj
+    from growjax import experiment as ex
+    from growjax.experiments import Run
+
+    t = np.asarray(exp.time, float)
+    inputs = ex.to_inputs(exp, "forward", base, 0.0, float(t[-1]))
+    config = gj.Config(fidelity=maker.fidelity, t1=float(t[-1]))
+    length = np.asarray(gj.simulate(params, inputs, config, ts=np.concatenate([[config.t0], t])).length)[1:]
+    series = {"robot_length_m": length + rng.normal(0.0, noise, t.size), "catheter_length_m": exp["catheter_length_m"]}
+    return Run("first", ex.Experiment(t, series))
+
+
+def designed_run(params, space, x, exp, base, maker, rng, noise: float):
+    """The designed experiment as a run of the set: its demand, then at rest (0 Pa) to the first experiment's end
+    (the set's runs share one simulated span), run by ``maker`` with fresh white length noise; scored over the
+    design's duration only (its window)."""
+    import growjax as gj
+    from growjax import experiment as ex
+    from growjax.experiments import Run
+
+    t_end = float(exp.time[-1])
+    t = np.round(space.sample_interval * np.arange(1, int(round(t_end / space.sample_interval)) + 1), 12)
+    demand = np.where(t <= space.duration + 1e-9, np.interp(t, space.knots, np.asarray(space.demand(x))), 0.0)
+    catheter = np.interp(t, np.asarray(exp.time), np.asarray(exp["catheter_length_m"]))
+    record = ex.Experiment(t, {"pressure_demand_Pa": demand, "catheter_length_m": catheter})
+    inputs = ex.to_inputs(record, "forward", base, 0.0, t_end)
+    config = gj.Config(fidelity=maker.fidelity, t1=t_end)
+    length = np.asarray(gj.simulate(params, inputs, config, ts=np.concatenate([[config.t0], t])).length)[1:]
+    series = {**record.series, "robot_length_m": length + rng.normal(0.0, noise, t.size)}
+    return Run("designed", ex.Experiment(t, series), window=(0.0, space.duration))
+
+
 def discriminate(args, known, exp, base) -> dict:
     """The model-discrimination check of ``--discriminate A B`` (see the module docstring)."""
     import growjax as gj
     from growjax import design as gd
     from growjax import synthetic as syn
-    from growjax.discover import discover
+    from growjax.discover import discover, discover_set
+    from growjax.experiments import ExperimentSet
 
     a, b = args.discriminate
     space = gd.DesignSpace(args.duration, gd.limits(base).pressure, gd.catheter_of(exp, args.duration),
@@ -220,10 +260,18 @@ def discriminate(args, known, exp, base) -> dict:
                                  base_names=base_names, candidates=args.candidates)
                 row[label] = {"effect": found.effect, "named": found.effect == truth,
                               "confounded_with": list(found.confounded_with or [])}
+                if args.with_first and label == "design":
+                    runs = (first_run(params, exp, base, maker, rng, float(known.hyper.noise)),
+                            designed_run(params, space, x, exp, base, maker, rng, float(known.hyper.noise)))
+                    both = discover_set(ExperimentSet(runs), config=gj.Config(t1=float(exp.time[-1])),
+                                        candidates=args.candidates)
+                    row["design with the first"] = {"effect": both.effect, "named": both.effect == truth,
+                                                    "confounded_with": list(both.confounded_with or [])}
             rows.append(row)
             print(json.dumps(row), flush=True)
+    labels = list(inputs) + (["design with the first"] if args.with_first and "design" in inputs else [])
     rate = {label: {t: float(np.mean([r[label]["named"] for r in rows if r["truth"] == t])) for t in truths}
-            for label in inputs}
+            for label in labels}
     return {"design": summary, "replications": rows, "named_rate": rate}
 
 
@@ -271,6 +319,10 @@ def main():
     ap.add_argument("--hold-base", action="store_true",
                     help="with --discriminate: discovery holds the base parameters at the first experiment's "
                          "estimate (the designed experiment read with what is known) instead of refitting them")
+    ap.add_argument("--with-first", action="store_true",
+                    help="with --discriminate: also read each designed experiment together with the first one made "
+                         "again on the same robot (the published pulse train, fresh noise): discovery over the set "
+                         "of the two (growjax.discover.discover_set, one Y for the robot)")
     ap.add_argument("--out", default=None, help="results file (default benchmarks/results/design.json, "
                                                 "design_discrimination.json with --discriminate)")
     args = ap.parse_args()

@@ -128,6 +128,20 @@ def _rows(path, header, times):
     return path
 
 
+def test_a_failure_of_the_computation_is_not_reported_as_bad_input(monkeypatch, tmp_path):
+    """A singular matrix is a ValueError to NumPy, but the input was fine: it is raised, not exit 2."""
+    from growjax import cli
+
+    def singular(args):
+        raise np.linalg.LinAlgError("Singular matrix")
+
+    monkeypatch.setitem(cli.COMMANDS, "simulate", singular)
+    with pytest.raises(np.linalg.LinAlgError, match="Singular matrix"):
+        cli.main(["simulate", "--out", str(tmp_path / "out")])
+    monkeypatch.setitem(cli.COMMANDS, "simulate", lambda args: (_ for _ in ()).throw(ValueError("bad --x")))
+    assert cli.main(["simulate", "--out", str(tmp_path / "out")]) == 2
+
+
 def test_bad_experiments_exit_2_with_one_line_naming_the_file(tmp_path, capsys):
     from growjax import cli
 

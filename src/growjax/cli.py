@@ -751,6 +751,8 @@ def main(argv=None) -> int:
         if args.command == "sweep":
             start_distributed(args)
         summary = COMMANDS[args.command](args)
+    except np.linalg.LinAlgError:  # a ValueError, but a failure of the computation, not of the input
+        raise
     except (ExperimentError, ValueError, FileNotFoundError, DatasetError) as err:
         print(f"growjax {args.command}: error: {err}", file=sys.stderr)
         return BAD_INPUT

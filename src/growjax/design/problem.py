@@ -209,13 +209,17 @@ def covariances(problem: Problem, info_length, info_pressure, cross, sensors) ->
 def evaluate(problem, x):
     """(criterion, penalty) of design x (K − 1,): the objective's two parts (:meth:`Problem.parts`). For a
     :class:`Problem`, through :func:`information`'s compiled program, the one the design's table reports from
-    (the same numbers to rounding); NaN where the model failed."""
+    (the same numbers to rounding); NaN where the model failed or the information is singular (a design that
+    informs nothing where the prior is flat: flagged like a failed run, not allowed to sink its batch)."""
     if not isinstance(problem, Problem):
         return _parts(problem, x)
     info_l, info_p, cross, _, _, pen = (np.asarray(a) for a in _information(problem, problem.inputs(x), problem.breaks))
     if not all(np.all(np.isfinite(a)) for a in (info_l, info_p, cross)):
         return np.float64(np.nan), pen
-    cov = covariances(problem, info_l, info_p, cross, problem.sensors)["known"]
+    try:
+        cov = covariances(problem, info_l, info_p, cross, problem.sensors)["known"]
+    except np.linalg.LinAlgError:
+        return np.float64(np.nan), pen
     return np.asarray(problem.criterion.of_covariance(cov)), pen
 
 
