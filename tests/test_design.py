@@ -121,6 +121,24 @@ def test_a_design_is_written_in_the_rigs_terms(tmp_path):
             gd.DesignSpace(**{"duration": 3.0, "p_max": 1e5, "catheter": gj.Constant(0.0), **bad})
 
 
+def test_the_random_batchs_summary_counts_apart_the_inputs_without_a_criterion():
+    """A random input without a criterion (inf or NaN: the model failed, or the input informs nothing where the
+    prior is flat) is counted apart, and is never the best; the quantiles are those of the others."""
+    from types import SimpleNamespace
+
+    from growjax.design import optimise as dopt
+    from growjax.design.workflow import DesignResult
+
+    batch = dopt.RandomBatch(np.zeros((5, 2)), np.array([np.nan, -3.0, np.inf, -1.0, -2.0]), drawn=9, wall_s=1.0)
+    result = DesignResult(("robot.yield_pressure",), np.ones(1), gd.DesignSpace(1.0, 1e5, gj.Constant(0.0)),
+                          np.zeros(2), np.zeros(3), np.zeros(3), rows=[], checks={}, random=batch, descents=[],
+                          limits=SimpleNamespace(summary=dict), criterion="A", sensors=("length",), knowledge={},
+                          wall_s={})
+    r = result.summary()["random"]
+    assert r["criterion_undefined"] == 2 and r["criterion_best"] == -3.0 and batch.best == 1
+    assert r["criterion_quantiles"] == {"0.1": pytest.approx(-2.8), "0.5": -2.0, "0.9": pytest.approx(-1.2)}
+
+
 def test_the_check_flags_exactly_the_inputs_that_cross_a_limit_on_simulation():
     known = _knowledge()
     space = gd.DesignSpace(2.0, 336e3, _catheter(), knot_spacing=1.0)

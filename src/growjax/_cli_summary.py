@@ -226,8 +226,10 @@ def _design_tail(s: dict) -> list[str]:
                  f"{_kpa(lim['pressure_ceiling_Pa'])}), peak length {_mm(check['peak_length_m'])} (ceiling "
                  f"{_mm(lim['length_ceiling_m'])}): {'admissible' if check['admissible'] else 'NOT admissible'}")
     r = s["random"]
-    lines.append(f"  {r['admissible']} random admissible inputs (of {r['drawn']} drawn); "
-                 f"{s['wall_s']['total_s']:.0f} s")
+    undefined = r.get("criterion_undefined", 0)
+    lines.append(f"  {r['admissible']} random admissible inputs (of {r['drawn']} drawn"
+                 + (f"; {undefined} with no criterion: the model failed or they inform nothing" if undefined else "")
+                 + f"); {s['wall_s']['total_s']:.0f} s")
     lines.append(f"  wrote {s['design_csv']}, {s['figure']}, {s['summary_json']}")
     return lines
 

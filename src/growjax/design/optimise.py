@@ -108,8 +108,8 @@ class RandomBatch:
 
     @property
     def best(self) -> int:
-        """Index of the best (lowest criterion) admissible input."""
-        return int(np.argmin(self.criterion))
+        """Index of the best (lowest criterion) admissible input; one without a criterion (NaN) is never the best."""
+        return int(np.argmin(np.where(np.isfinite(self.criterion), self.criterion, np.inf)))
 
     def order(self) -> np.ndarray:
         return np.argsort(self.criterion)

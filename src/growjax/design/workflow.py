@@ -61,6 +61,7 @@ class DesignResult:
 
     def summary(self) -> dict:
         random = self.random
+        defined = np.asarray(random.criterion)[np.isfinite(random.criterion)]  # NaN: the model failed, or no information
         return {
             "parameters": list(self.names), "criterion": self.criterion, "sensors": list(self.sensors),
             "duration_s": self.space.duration, "knot_spacing_s": self.space.knot_spacing,
@@ -71,8 +72,9 @@ class DesignResult:
             "limits": self.limits.summary(),
             "random": {"admissible": int(len(random.designs)), "drawn": random.drawn,
                        "criterion_best": float(random.criterion[random.best]),
-                       "criterion_quantiles": {q: float(np.quantile(random.criterion, float(q)))
-                                               for q in ("0.1", "0.5", "0.9")}},
+                       "criterion_quantiles": {q: float(np.quantile(defined, float(q))) if defined.size else None
+                                               for q in ("0.1", "0.5", "0.9")},
+                       "criterion_undefined": int(np.sum(~np.isfinite(random.criterion)))},
             "descents": [{"start_criterion": float(d.history[0]), "best": float(d.value), "history": d.history}
                          for d in self.descents],
             "knowledge": self.knowledge, "wall_s": self.wall_s,
