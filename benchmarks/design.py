@@ -187,6 +187,17 @@ def safety(known, space, knots, demand, n: int, seed: int) -> dict:
     return out
 
 
+def landscape_of(summary: dict, sensors, wall_s) -> dict:
+    """The landscape's record of a design's summary: the random batch against the design and the published pulse."""
+    crit = {r["input"]: r["criterion"] for r in summary["table"] if tuple(r["sensors"]) == sensors}
+    return {"random_admissible": summary["random"]["admissible"], "random_drawn": summary["random"]["drawn"],
+            "random_best_criterion": summary["random"]["criterion_best"],
+            "random_quantiles": summary["random"]["criterion_quantiles"],
+            "design_criterion": crit["design"], "published_criterion": crit["published pulse train"],
+            "design_beats_best_random": bool(crit["design"] < summary["random"]["criterion_best"]),
+            "design_wall_s": wall_s}
+
+
 def first_run(params, exp, base, maker, rng, noise: float):
     """The first experiment again, on the robot with the hidden effect: the shipped experiment's inputs (the
     published pulse train, its catheter) run by ``maker`` over its record, with fresh white length noise."""
@@ -352,8 +363,10 @@ def main():
     sensors = tuple(args.sensors.split(","))
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    if args.design_from:  # an earlier run's design and landscape
+    if args.design_from:  # an earlier run's design and landscape (or a `growjax design` summary.json)
         earlier = json.loads(Path(args.design_from).read_text())
+        if "landscape" not in earlier:
+            earlier = {"design": earlier, "landscape": landscape_of(earlier, sensors, None)}
         summary, landscape = earlier["design"], earlier["landscape"]
         knots, demand = np.asarray(summary["design"]["knots_s"]), np.asarray(summary["design"]["demand_Pa"])
     else:
@@ -365,14 +378,7 @@ def main():
         gd.design_figure(result, out.with_suffix(".png"))
         summary = result.summary()
         knots, demand = result.knots, result.demand
-        crit = {r["input"]: r["criterion"] for r in summary["table"] if tuple(r["sensors"]) == sensors}
-        landscape = {"random_admissible": summary["random"]["admissible"], "random_drawn": summary["random"]["drawn"],
-                     "random_best_criterion": summary["random"]["criterion_best"],
-                     "random_quantiles": summary["random"]["criterion_quantiles"],
-                     "random_criterion": result.random.criterion.tolist(),
-                     "design_criterion": crit["design"], "published_criterion": crit["published pulse train"],
-                     "design_beats_best_random": bool(crit["design"] < summary["random"]["criterion_best"]),
-                     "design_wall_s": design_wall}
+        landscape = {**landscape_of(summary, sensors, design_wall), "random_criterion": result.random.criterion.tolist()}
     if not args.design_from:  # the design alone, so that ``--design-from`` can take it up if the replications stop
         out.write_text(json.dumps({"environment": environment(), "arguments": vars(args), "knowledge": known.summary(),
                                    "design": summary, "landscape": landscape, "growjax": gj.__version__},
