@@ -187,7 +187,7 @@ def _discrimination_rows(s: dict) -> list[str]:
     d = s["discrimination"]
     a, b = d["effects"]
     keys = (f"{a} real, {b} fitted", f"{b} real, {a} fitted")
-    lines = [f"  T: the expected 2ΔlogL by which the data reject the wrong effect (linearised; sizes "
+    lines = ["  T: the expected 2ΔlogL by which the data reject the wrong effect (linearised; sizes "
              + ", ".join(f"{p} = {v:g}" for p, v in zip(d["parameters"], d["sizes"]))
              + f"); separates where min T > {d['threshold']:.2f}, the discovery's threshold",
              f"  {'input':24s} {'T (' + a + ' real)':>30s} {'T (' + b + ' real)':>30s} {'min T':>9s}  expected to separate"]
