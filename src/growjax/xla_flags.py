@@ -44,7 +44,7 @@ QUICK_COMPILE = {"xla_cpu_use_fusion_emitters": False}
 QUICK_COMPILE_VERIFIED = ("0.10.",)  # jaxlib release series known to have the option
 # XLA:CPU's own default backend optimisation, for a program whose run is a long loop of a small model (a batch of
 # NUTS chains on an emulator), which a process at a lower level (the test run's 0) would run 2-3x slower
-# (simulation-based calibration, 100 chains of 300 steps, compile included: 23 s at level 0, 10-14 s at 3).
+# (simulation-based calibration, 100 chains of 300 steps, compile included: 23 s at level 0, 10-15 s at 3).
 FULL_BACKEND = {"xla_backend_optimization_level": 3}
 
 

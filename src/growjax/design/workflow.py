@@ -61,7 +61,7 @@ class DesignResult:
 
     def summary(self) -> dict:
         random = self.random
-        defined = np.asarray(random.criterion)[np.isfinite(random.criterion)]  # NaN: the model failed, or no information
+        defined = np.asarray(random.criterion)[np.isfinite(random.criterion)]  # inf or NaN: the model failed, or no information
         return {
             "parameters": list(self.names), "criterion": self.criterion, "sensors": list(self.sensors),
             "duration_s": self.space.duration, "knot_spacing_s": self.space.knot_spacing,
