@@ -139,6 +139,23 @@ def test_the_random_batchs_summary_counts_apart_the_inputs_without_a_criterion()
     assert r["criterion_quantiles"] == {"0.1": pytest.approx(-2.8), "0.5": -2.0, "0.9": pytest.approx(-1.2)}
 
 
+def test_a_singular_precision_gives_no_covariance_instead_of_an_error():
+    """Information on one direction only, and a flat prior on the other: the precision cannot be inverted, and the
+    covariances are NaN (the criterion then NaN, the input flagged), not a LinAlgError that sinks the batch."""
+    from types import SimpleNamespace
+
+    from growjax.design import problem as dprob
+
+    info = np.zeros((3, 2, 2))
+    info[:, 0, 0] = 1.0
+    none = np.zeros((2, 0))
+    flat = SimpleNamespace(precision_known=np.zeros((2, 2)), precision_alone=np.zeros((2, 2)))
+    out = dprob.covariances(flat, info, info, none, ("length",))
+    assert all(np.all(np.isnan(c)) for c in out.values())
+    prior = SimpleNamespace(precision_known=np.eye(2), precision_alone=np.eye(2))
+    np.testing.assert_allclose(dprob.covariances(prior, info, info, none, ("length",))["known"], np.diag([0.5, 1.0]))
+
+
 def test_the_check_flags_exactly_the_inputs_that_cross_a_limit_on_simulation():
     known = _knowledge()
     space = gd.DesignSpace(2.0, 336e3, _catheter(), knot_spacing=1.0)

@@ -193,13 +193,16 @@ def covariances(problem: Problem, info_length, info_pressure, cross, sensors) ->
     """Covariances (m, m) of the estimate of w under ``sensors``, from :func:`information`'s output:
     ``"known"`` (with what is known) and ``"alone"`` (the next experiment alone), each averaged over the points
     plus what the rig's linearisation misses (at the estimate); ``"known_local"``, ``"alone_local"``: at the
-    estimate on the nominal rig, linearised (the classical local prediction)."""
+    estimate on the nominal rig, linearised (the classical local prediction); NaN where the precision is singular."""
     info = np.asarray(info_length) + (np.asarray(info_pressure) if "pressure" in sensors else 0.0)
     c = np.asarray(cross)
     out = {}
     for key, prec in (("known", problem.precision_known), ("alone", problem.precision_alone)):
         a = np.asarray(prec)[None] + info
-        covs = np.linalg.inv(0.5 * (a + np.swapaxes(a, -1, -2)))
+        try:
+            covs = np.linalg.inv(0.5 * (a + np.swapaxes(a, -1, -2)))
+        except np.linalg.LinAlgError:  # the input informs nothing where the prior is flat: no covariance
+            covs = np.full_like(a, np.nan)
         local = covs[0]
         out[key + "_local"] = local
         out[key] = covs.mean(axis=0) + local @ c @ c.T @ local
@@ -216,10 +219,7 @@ def evaluate(problem, x):
     info_l, info_p, cross, _, _, pen = (np.asarray(a) for a in _information(problem, problem.inputs(x), problem.breaks))
     if not all(np.all(np.isfinite(a)) for a in (info_l, info_p, cross)):
         return np.float64(np.nan), pen
-    try:
-        cov = covariances(problem, info_l, info_p, cross, problem.sensors)["known"]
-    except np.linalg.LinAlgError:
-        return np.float64(np.nan), pen
+    cov = covariances(problem, info_l, info_p, cross, problem.sensors)["known"]
     return np.asarray(problem.criterion.of_covariance(cov)), pen
 
 
