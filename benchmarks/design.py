@@ -200,37 +200,40 @@ def landscape_of(summary: dict, sensors, wall_s) -> dict:
 
 def first_run(params, exp, base, maker, rng, noise: float):
     """The first experiment again, on the robot with the hidden effect: the shipped experiment's inputs (the
-    published pulse train, its catheter) run by ``maker`` over its record, with fresh white length noise."""
-    import growjax as gj
+    published pulse train, its catheter) over its record."""
     from growjax import experiment as ex
-    from growjax.experiments import Run
 
     t = np.asarray(exp.time, float)
-    inputs = ex.to_inputs(exp, "forward", base, 0.0, float(t[-1]))
-    config = gj.Config(fidelity=maker.fidelity, t1=float(t[-1]))
-    length = np.asarray(gj.simulate(params, inputs, config, ts=np.concatenate([[config.t0], t])).length)[1:]
-    series = {"robot_length_m": length + rng.normal(0.0, noise, t.size), "catheter_length_m": exp["catheter_length_m"]}
-    return Run("first", ex.Experiment(t, series))
+    return _measured_run("first", ex.Experiment(t, {"catheter_length_m": exp["catheter_length_m"]}), params, base,
+                         maker, rng, noise)
 
 
 def designed_run(params, space, x, exp, base, maker, rng, noise: float):
     """The designed experiment as a run of the set: its demand, then at rest (0 Pa) to the first experiment's end
-    (the set's runs share one simulated span), run by ``maker`` with fresh white length noise; scored over the
-    design's duration only (its window)."""
-    import growjax as gj
+    (the set's runs share one simulated span); scored over the design's duration only (its window)."""
     from growjax import experiment as ex
-    from growjax.experiments import Run
 
     t_end = float(exp.time[-1])
     t = np.round(space.sample_interval * np.arange(1, int(round(t_end / space.sample_interval)) + 1), 12)
     demand = np.where(t <= space.duration + 1e-9, np.interp(t, space.knots, np.asarray(space.demand(x))), 0.0)
     catheter = np.interp(t, np.asarray(exp.time), np.asarray(exp["catheter_length_m"]))
     record = ex.Experiment(t, {"pressure_demand_Pa": demand, "catheter_length_m": catheter})
-    inputs = ex.to_inputs(record, "forward", base, 0.0, t_end)
-    config = gj.Config(fidelity=maker.fidelity, t1=t_end)
+    return _measured_run("designed", record, params, base, maker, rng, noise, window=(0.0, space.duration))
+
+
+def _measured_run(name, record, params, base, maker, rng, noise: float, window=None):
+    """A run of the set named ``name``: the inputs of ``record`` (its columns, as a lab's CSV gives them) run on
+    ``params`` by ``maker``'s configuration over the record, its length with fresh white noise of sd ``noise`` (m)."""
+    import growjax as gj
+    from growjax import experiment as ex
+    from growjax.experiments import Run
+
+    t = np.asarray(record.time, float)
+    inputs = ex.to_inputs(record, "forward", base, 0.0, float(t[-1]))
+    config = gj.Config(fidelity=maker.fidelity, t1=float(t[-1]))
     length = np.asarray(gj.simulate(params, inputs, config, ts=np.concatenate([[config.t0], t])).length)[1:]
     series = {**record.series, "robot_length_m": length + rng.normal(0.0, noise, t.size)}
-    return Run("designed", ex.Experiment(t, series), window=(0.0, space.duration))
+    return Run(name, ex.Experiment(t, series), window=window)
 
 
 def discriminate(args, known, exp, base) -> dict:
