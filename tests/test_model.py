@@ -254,7 +254,7 @@ def test_a_batch_saves_in_its_loop_what_single_runs_interpolate_afterwards():
     """A vmapped ``simulate`` steps its members in one loop, takes the state's Jacobian in forward mode and
     interpolates each save time as its step is taken (``_rosenbrock.integrate(save_ts=…)``, no step records);
     a single run keeps every step and interpolates after the loop. The two agree at the solver's tolerance on
-    a grid through every demand edge, on a grid denser than one step may cover (1 ms: ``SAVE_WINDOW`` then
+    a grid through every demand edge and denser than one step may cover (1 ms: ``SAVE_WINDOW`` then
     shortens the batch's steps), at a stop on the pressure limit (a 10 µm membrane: limit 107 kPa), and for a
     member whose field is not finite at t0 (it fails at once, beside the others)."""
     members = [gj.reference(), gj.replace(gj.reference(), Y=12e3, n=1.05), gj.replace(gj.reference(), t=1e-5),
@@ -263,18 +263,19 @@ def test_a_batch_saves_in_its_loop_what_single_runs_interpolate_afterwards():
     stacked = jax.tree_util.tree_map(lambda *leaves: jnp.stack([jnp.asarray(x) for x in leaves]), *members)
     inputs = forward_inputs()
     dense = np.arange(1, 3001) * 1e-3
-    for ts in (EDGE_TIMES, dense):
-        batch = jax.vmap(lambda p, ts=ts: gj.simulate(p, inputs, SHORT, ts=ts))(stacked)
-        for i, params in enumerate(members):
-            single = gj.simulate(params, inputs, SHORT, ts=ts)
-            assert int(batch.status[i]) == int(single.status) == expected[i]
-            assert float(batch.t_final[i]) == pytest.approx(float(single.t_final), abs=1e-4)
-            if expected[i] == gj.SOLVER_FAILED:  # every sample after t0 NaN (at t0 the batch reports y0)
-                assert np.all(np.isnan(batch.length[i][1:])) and np.all(np.isnan(single.length[1:]))
-                continue
-            np.testing.assert_array_equal(np.isnan(batch.length[i]), np.isnan(single.length))
-            np.testing.assert_allclose(batch.length[i], single.length, rtol=0, atol=5e-6, equal_nan=True)  # measured ≤ 0.6 µm
-            np.testing.assert_allclose(batch.pressure[i], single.pressure, rtol=2e-3, atol=500.0, equal_nan=True)  # ≤ 83 Pa
+    edges = EDGE_TIMES[np.min(np.abs(EDGE_TIMES[:, None] - dense[None, :]), axis=1) > 1e-9]
+    ts = np.sort(np.concatenate([dense, edges]))  # one grid: one compiled program
+    batch = jax.vmap(lambda p: gj.simulate(p, inputs, SHORT, ts=ts))(stacked)
+    for i, params in enumerate(members):
+        single = gj.simulate(params, inputs, SHORT, ts=ts)
+        assert int(batch.status[i]) == int(single.status) == expected[i]
+        assert float(batch.t_final[i]) == pytest.approx(float(single.t_final), abs=1e-4)
+        if expected[i] == gj.SOLVER_FAILED:  # every sample after t0 NaN (at t0 the batch reports y0)
+            assert np.all(np.isnan(batch.length[i][1:])) and np.all(np.isnan(single.length[1:]))
+            continue
+        np.testing.assert_array_equal(np.isnan(batch.length[i]), np.isnan(single.length))
+        np.testing.assert_allclose(batch.length[i], single.length, rtol=0, atol=5e-6, equal_nan=True)  # measured ≤ 0.6 µm
+        np.testing.assert_allclose(batch.pressure[i], single.pressure, rtol=2e-3, atol=500.0, equal_nan=True)  # ≤ 83 Pa
     assert float(batch.limit_time[2]) < 1.0 and np.all(np.isfinite(batch.length[:2]))
 
 

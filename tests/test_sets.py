@@ -4,6 +4,7 @@ import json
 from importlib.resources import files
 from pathlib import Path
 
+import jax
 import numpy as np
 import pytest
 
@@ -99,7 +100,7 @@ def test_a_set_of_one_is_the_single_fit(shipped_set):
 
 def test_the_shipped_set_fitted_jointly_covers(shipped_set):
     """Reference-made, one robot on one drawn rig, three demands: the joint interval covers the true Y, comes from
-    two batched programs (the experiment with the pressure sensor has more rows than the two without), and the
+    one batched program (the experiment with the pressure sensor and the two without, padded alike), and the
     rig's errors, fitted in the model's own tangents, read the catheter friction (made 32 % low) as low and the
     screw friction (made 21 % high) as high."""
     exps, truth, config = shipped_set
@@ -107,7 +108,7 @@ def test_the_shipped_set_fitted_jointly_covers(shipped_set):
     together = joint.fit_set(exps, config=config, sweep_n=0)
     lo, hi = together.interval_90[label]
     assert lo <= truth["truth"]["Y"] <= hi and together.status == "converged"
-    assert together.programs == 2 and len(together.runs) == 3
+    assert together.programs == 1 and len(together.runs) == 3
     assert all(r["rmse_length_m"] < 3e-4 for r in together.runs)
     read = together.rig_offset["bench"]
     assert read["robot.catheter_friction"] < -0.2 and read["pump.screw_viscous_friction"] > 0.1
@@ -119,6 +120,32 @@ def test_the_shipped_set_fitted_jointly_covers(shipped_set):
                                "linearisations": joint.RELINEARISE_STEPS, "rig_last_move": 0.12})
     assert any("had not settled after 8 linearisations" in line and "0.12 of a tolerance" in line
                for line in unsettled)
+
+
+def test_runs_of_different_lengths_and_sensors_pad_to_one_program_and_keep_their_own_rows():
+    """Three runs on one configuration, 80 and 50 samples, one with the pressure: padded to one tree of one shape
+    (one compiled program), the padded samples repeat a run's last one, and each run's kept rows of the padded
+    measurements are its own measurements, in order (its residuals, cut back, are the unpadded run's)."""
+    from growjax import fit as gf
+
+    cfg, base = gj.Config(t1=1.0), gj.reference("forward")
+    inputs = gj.Inputs(catheter_length=gj.Constant(0.02), pressure_demand=gj.PulseTrain(amplitude=150e3))
+    rng = np.random.default_rng(0)
+    sizes, sensed = (80, 50, 50), (False, True, False)
+    problems = []
+    for m, p in zip(sizes, sensed):
+        t = np.arange(1, m + 1) * 0.01
+        problems.append(gf.make_problem(base, (Y,), inputs, cfg, t, rng.normal(size=m),
+                                        rng.normal(size=m) if p else None))
+    padded, rows = joint._pad_samples(problems)
+    shapes = {(jax.tree_util.tree_structure(pr), tuple(np.shape(x) for x in jax.tree_util.tree_leaves(pr)))
+              for pr in padded}
+    assert len(shapes) == 1
+    for pr, pad, keep, m in zip(problems, padded, rows, sizes):
+        own = np.concatenate([pr.length] + ([] if pr.pressure is None else [pr.pressure]))
+        np.testing.assert_array_equal(np.concatenate([pad.length, pad.pressure])[keep], own)
+        assert np.all(np.asarray(pad.times)[m:] == np.asarray(pr.times)[-1])
+        np.testing.assert_array_equal(np.asarray(pad.times)[:m], pr.times)
 
 
 @pytest.mark.slow

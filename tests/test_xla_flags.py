@@ -83,12 +83,7 @@ def test_quick_compile_for_a_process_leaves_a_users_setting_and_a_started_backen
     assert not xla_flags.apply_quick_compile() and "XLA_FLAGS" not in os.environ
 
 
-CHILD = """
-import json, os, sys
-import growjax.xla_flags as xf
-if sys.argv[1] == "quick":
-    os.environ["XLA_FLAGS"] = xf.quick_compile_flags("")
-applied = xf.apply() if sys.argv[1] == "on" else xf.applied()
+RUN = """
 import growjax as gj
 cfg = gj.Config(t1=2.0)
 inputs = gj.Inputs(catheter_length=gj.Constant(0.02), pressure_demand=gj.published_pulse())
@@ -96,31 +91,43 @@ traj = gj.simulate(gj.reference(), inputs, cfg)
 # The same compiled solver under a demand beyond the membrane limit: the stop must not depend on the emitters.
 over = gj.simulate(gj.reference(), gj.Inputs(catheter_length=gj.Constant(0.02),
                                              pressure_demand=gj.PulseTrain(amplitude=600e3)), cfg)
-print(json.dumps({"applied": applied, "length": [float(x) for x in traj.length], "status": int(traj.status),
-                  "over_status": int(over.status), "limit_time": float(over.limit_time)}))
+result = {"length": [float(x) for x in traj.length], "status": int(traj.status),
+          "over_status": int(over.status), "limit_time": float(over.limit_time)}
+"""
+CHILD = """
+import json, os, sys
+import growjax.xla_flags as xf
+if sys.argv[1] == "quick":
+    os.environ["XLA_FLAGS"] = xf.quick_compile_flags("")
+applied = xf.apply() if sys.argv[1] == "on" else xf.applied()
+""" + RUN + """
+print(json.dumps({"applied": applied, **result}))
 """
 
 
-@pytest.mark.parametrize("modes", [("off", "quick"), pytest.param(("on", "off", "quick"), marks=pytest.mark.slow)],
-                         ids=["default-quick", "all"])
+@pytest.mark.parametrize("modes", [("off",), pytest.param(("on", "off", "quick"), marks=pytest.mark.slow)],
+                         ids=["default", "all"])
 def test_a_simulation_under_each_option_gives_the_same_solution(modes):
     """The same 2 s run in one process per option: XLA's default (which the test run itself does not use,
-    conftest.py), the quick compile and (slow) the small loops: the same length to within the solver's tolerance
-    (the elementwise inverse and other emitters round differently, which can move an adaptive step); and a
-    600 kPa pulse stops at the pressure limit in each, at the same time."""
+    conftest.py), and (slow) the quick compile alone and the small loops; and in this process, under the test
+    run's own options (quick compile, backend level 0): the same length to within the solver's tolerance (the
+    elementwise inverse and other emitters round differently, which can move an adaptive step); and a 600 kPa
+    pulse stops at the pressure limit in each, at the same time."""
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
-    out = {}
+    here: dict = {}
+    exec(RUN, here)
+    out = {"test run": {"applied": False, **here["result"]}}
     for mode in modes:
         run = subprocess.run([sys.executable, "-c", CHILD, mode], capture_output=True, text=True, env=env, timeout=300,
                              check=False)
         assert run.returncode == 0, run.stderr[-2000:]
         out[mode] = json.loads(run.stdout.strip().splitlines()[-1])
     assert not out["off"]["applied"] and out.get("on", {"applied": True})["applied"]
-    assert all(out[m]["status"] == 0 for m in modes)
+    assert all(out[m]["status"] == 0 for m in out)
     off = np.asarray(out["off"]["length"])
     assert np.ptp(off) > 1e-3  # millimetres of growth
-    for m in modes:
+    for m in out:
         assert np.max(np.abs(np.asarray(out[m]["length"]) - off)) < 2e-6  # 2 µm
-    stops = [out[m]["limit_time"] for m in modes]
+    stops = [out[m]["limit_time"] for m in out]
     assert all(out[m]["over_status"] == 1 for m in out), out  # status 1 (pressure limit), never 2
     assert 0.26 < min(stops) and max(stops) - min(stops) < 1e-4, stops  # after the first rise; 0.1 ms

@@ -370,15 +370,16 @@ def _layout(experiments: ExperimentSet, scopes, bases, problems, tol: dict, rig_
 
 
 class _Batch:
-    """The runs' problems stacked in groups that one compiled program solves (same configuration, shapes and input
-    structure; the inputs' break lists padded to a common length)."""
+    """The runs' problems stacked in groups that one compiled program solves (same configuration and input
+    structure): the inputs' break lists padded to a common length, and the samples to a common count with a pressure
+    record for every run where one run has it; each run's outputs cut back to its own rows."""
 
     def __init__(self, problems, rig_in_model: bool = False):
         self.size = len(problems)
         self.rig_in_model = rig_in_model  # each run's model parameters: its θ, then its rig's errors
         self.sigma_length = float(problems[0].sigma_length)
         self.n_len = [int(pr.times.size) for pr in problems]
-        problems = _pad_breaks(problems)
+        problems, self.rows = _pad_samples(_pad_breaks(problems))
         groups: dict = {}
         for e, pr in enumerate(problems):
             leaves, tree = jax.tree_util.tree_flatten(pr)
@@ -413,7 +414,7 @@ class _Batch:
             r = np.asarray(_spread(_residuals_runs, jnp.asarray(z_all), copies)[0])
             for j in range(k):
                 for i, e in enumerate(members):
-                    out[j][e] = (r[j * len(members) + i], None)
+                    out[j][e] = (r[j * len(members) + i][self.rows[e]], None)
         self.simulate_s += time.perf_counter() - clock
         return out
 
@@ -434,7 +435,7 @@ class _Batch:
             pr = problem if stacked is None else stacked[k]
             results = tuple(None if x is None else np.asarray(x) for x in _spread(program, jnp.asarray(z_local[members]), pr))
             for i, e in enumerate(members):
-                out[e] = tuple(None if x is None else x[i] for x in results)
+                out[e] = tuple(None if x is None else x[i][self.rows[e]] for x in results)
         self.simulate_s += time.perf_counter() - clock
         return out
 
@@ -537,6 +538,31 @@ def _pad_breaks(problems):
             padded = tuple(jnp.concatenate([b, jnp.full(s - b.size, cfg.t1 + 1.0)]) for b, s in zip(pr.breaks, sizes))
             out[e] = eqx.tree_at(lambda p: p.breaks, pr, padded)
     return out
+
+
+def _pad_samples(problems):
+    """Problems of one configuration padded to one row layout, and the rows (indices) each keeps of it.
+
+    The samples are padded to the most of any run (the last one repeated: a copy of a saved point), and where one
+    run records the pressure every run gets a pressure record (zeros where it has none). A padded run's residuals
+    are (M,) or (2M,): its own rows are its first m_e, then (with the pressure) M to M + m_e. Runs measured alike
+    and runs with and without the pressure sensor are then one compiled program instead of one per shape.
+    """
+    out, rows = list(problems), [np.arange(np.size(pr.times) * (1 if pr.pressure is None else 2)) for pr in problems]
+    by_config: dict = {}
+    for e, pr in enumerate(problems):
+        by_config.setdefault(pr.config, []).append(e)
+    for members in by_config.values():
+        size = max(int(np.size(problems[e].times)) for e in members)
+        sensed = any(problems[e].pressure is not None for e in members)
+        for e in members:
+            pr, m = problems[e], int(np.size(problems[e].times))
+            pad = lambda a: jnp.concatenate([jnp.asarray(a), jnp.repeat(jnp.asarray(a)[-1:], size - m)])  # noqa: E731
+            pressure = pad(pr.pressure) if pr.pressure is not None else jnp.zeros(size) if sensed else None
+            out[e] = eqx.tree_at(lambda p: (p.times, p.length, p.pressure), pr, (pad(pr.times), pad(pr.length), pressure),
+                                 is_leaf=lambda x: x is None)
+            rows[e] = np.r_[np.arange(m), size + np.arange(m)] if pr.pressure is not None else np.arange(m)
+    return out, rows
 
 
 def _bounds(base, layout: _Layout):
