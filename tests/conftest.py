@@ -44,8 +44,10 @@ SHARED_PROGRAMS = {name: "fits_of_the_published_pulse"
 
 # The longest scopes first (seconds of a cold run on a 2-core CPU, roughly), so that no worker is left with a long
 # file while the other is idle; the rest follow in xdist's order (most tests first).
-LONGEST_FIRST = ("fits_of_the_published_pulse", "test_model.py", "test_sweep.py", "test_sets.py", "test_discover.py",
-                 "test_effects.py", "test_control.py", "test_population.py", "test_api.py")
+LONGEST_FIRST = ("fits_of_the_published_pulse", "test_sweep.py", "test_model.py", "test_discover.py", "test_sets.py",
+                 "test_control.py", "test_effects.py", "test_population.py", "test_fidelity.py", "test_xla_flags.py",
+                 "test_cli.py", "test_inference_data.py", "test_growth_law.py", "test_api.py", "test_design.py",
+                 "test_install.py")
 
 
 def pytest_xdist_make_scheduler(config, log):
