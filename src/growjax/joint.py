@@ -528,16 +528,22 @@ def _stack(problems):
 def _pad_breaks(problems):
     """Problems of one configuration with their break lists padded to the longest (beyond t1: never reached)."""
     out = list(problems)
-    by_config: dict = {}
-    for e, pr in enumerate(problems):
-        by_config.setdefault(pr.config, []).append(e)
-    for cfg, members in by_config.items():
+    for members in _by_config(problems):
         sizes = [max(problems[e].breaks[k].size for e in members) for k in range(2)]
         for e in members:
             pr = problems[e]
-            padded = tuple(jnp.concatenate([b, jnp.full(s - b.size, cfg.t1 + 1.0)]) for b, s in zip(pr.breaks, sizes))
+            padded = tuple(jnp.concatenate([b, jnp.full(s - b.size, pr.config.t1 + 1.0)])
+                           for b, s in zip(pr.breaks, sizes))
             out[e] = eqx.tree_at(lambda p: p.breaks, pr, padded)
     return out
+
+
+def _by_config(problems) -> list:
+    """The indices of the problems, grouped by configuration (a group may share one compiled program)."""
+    groups: dict = {}
+    for e, pr in enumerate(problems):
+        groups.setdefault(pr.config, []).append(e)
+    return list(groups.values())
 
 
 def _pad_samples(problems):
@@ -548,11 +554,8 @@ def _pad_samples(problems):
     are (M,) or (2M,): its own rows are its first m_e, then (with the pressure) M to M + m_e. Runs measured alike
     and runs with and without the pressure sensor are then one compiled program instead of one per shape.
     """
-    out, rows = list(problems), [np.arange(np.size(pr.times) * (1 if pr.pressure is None else 2)) for pr in problems]
-    by_config: dict = {}
-    for e, pr in enumerate(problems):
-        by_config.setdefault(pr.config, []).append(e)
-    for members in by_config.values():
+    out, rows = list(problems), [None] * len(problems)
+    for members in _by_config(problems):
         size = max(int(np.size(problems[e].times)) for e in members)
         sensed = any(problems[e].pressure is not None for e in members)
         for e in members:
