@@ -116,7 +116,7 @@ def test_a_simulation_under_each_option_gives_the_same_solution(modes):
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
     here: dict = {}
     exec(RUN, here)
-    out = {"test run": {"applied": False, **here["result"]}}
+    out = {"test run": here["result"]}
     for mode in modes:
         run = subprocess.run([sys.executable, "-c", CHILD, mode], capture_output=True, text=True, env=env, timeout=300,
                              check=False)
