@@ -25,6 +25,11 @@ experiment leaves undetermined, enter with their box's uniform prior). Then:
 (c) Safety: the design and the published pulse train run by the reference configuration over ``--safety-draws``
     fresh draws of the rig and θ (:func:`safety`), the runs over the membrane limit and the stroke counted.
 
+With ``--next-drive inverse`` the designed experiment is the stepper's: its step schedule
+(``growjax.design.StepperSpace``, what is known carried over from the forward fit), and its baseline in place of
+the published pulse train is the stepper driven by the shipped experiment's recorded length (what the shipped
+stepper model does); the replications run both on the stepper drive.
+
 With ``--discriminate A B`` (``python benchmarks/design.py --discriminate retraction_folding trapped_air
 --duration 3 --knot-spacing 0.1 --random 16 --replications 4``) it checks the design for model discrimination
 instead: ``growjax.design.discriminate`` for the pair, then on ``--replications`` seeds data from "base + A" at
@@ -88,21 +93,28 @@ def replicate(job: dict) -> dict:
 
     clock = time.perf_counter()
     rng = np.random.default_rng([job["seed"], job["index"]])
-    base = gj.replace(gj.reference("forward", growth_law=job.get("growth_law", "reference")), **job["recorded"])
+    drive = job.get("drive", "forward")
+    base = gj.replace(gj.reference(drive, growth_law=job.get("growth_law", "reference")), **job["recorded"])
     offsets = {n: float(rng.normal(0.0, u)) if job["rig"] == "drawn" else 0.0 for n, u in job["tolerances"].items()}
     truth = gj.replace(base, **job["estimate"], **{n: gj.get(base, n) * np.exp(b) for n, b in offsets.items()})
     times = np.asarray(job["times"])
     catheter = gj.Sampled(jnp.asarray(job["catheter_t"]), jnp.asarray(job["catheter_m"]))
-    demands = {"design": KnotProfile(jnp.asarray(job["knots"]), jnp.asarray(job["demand"])),
-               "published pulse train": gj.published_pulse()}
+    if drive == "inverse":
+        edges = jnp.asarray(job["edges"])
+        inputs_of = {label: gj.Inputs(catheter_length=catheter,
+                                      steps=gj.StepSchedule(edges, jnp.cumsum(jnp.asarray(job["steps"][label]))))
+                     for label in job["steps"]}
+    else:
+        inputs_of = {"design": gj.Inputs(catheter_length=catheter, pressure_demand=KnotProfile(
+                         jnp.asarray(job["knots"]), jnp.asarray(job["demand"]))),
+                     "published pulse train": gj.Inputs(catheter_length=catheter, pressure_demand=gj.published_pulse())}
     duration = float(job["duration"])
-    reference = gj.Config(fidelity=job["maker"], t1=duration)
-    config = gj.Config(t1=duration)
+    reference = gj.Config(fidelity=job["maker"], drive=drive, t1=duration)
+    config = gj.Config(drive=drive, t1=duration)
     out = {"index": job["index"], "rig_offsets": offsets}
-    for label, demand in demands.items():
+    for label, inputs in inputs_of.items():
         if label not in job["inputs"]:
             continue
-        inputs = gj.Inputs(catheter_length=catheter, pressure_demand=demand)
         traj = gj.simulate(truth, inputs, reference, ts=np.concatenate([[reference.t0], times]))
         if int(traj.status) != gj.OK:
             out[label] = {"status": gj.status_name(traj.status)}
@@ -126,9 +138,9 @@ def replicate(job: dict) -> dict:
     return out
 
 
-def summarise(rows: list, names, predicted: dict) -> dict:
+def summarise(rows: list, names, predicted: dict, baseline: str = "published pulse train") -> dict:
     out = {}
-    for label in ("design", "published pulse train"):
+    for label in ("design", baseline):
         good = [r[label] for r in rows if r.get(label, {}).get("status") in ("converged", "max_steps")]
         per = {}
         for n in names:
@@ -149,31 +161,26 @@ def summarise(rows: list, names, predicted: dict) -> dict:
                                          if g[n]["sd_log_reported"] is not None))}
         out[label] = per
     for n in names:
-        d, p = out["design"][n]["realised_sd_log"], out["published pulse train"][n]["realised_sd_log"]
+        d, p = out["design"][n]["realised_sd_log"], out[baseline][n]["realised_sd_log"]
         out.setdefault("design_over_published_realised_sd", {})[n] = None if not (d and p) else d / p
     return out
 
 
-def safety(known, space, knots, demand, n: int, seed: int) -> dict:
-    """The designed input and the published pulse train on the reference configuration over ``n`` fresh draws of
+def safety(known, space, designed, n: int, seed: int) -> dict:
+    """The designed input ``designed`` and the space's baseline on the reference configuration over ``n`` fresh draws of
     the rig from its budget and θ from its uncertainty (seeded apart from the design's own check): per input, how
     many runs cross the membrane limit, the sensed-pressure ceiling (the limit × the margin), the length ceiling
     and the robot's stroke, and the worst of each."""
-    import jax.numpy as jnp
-
     import growjax as gj
     from growjax import design as gd
-    from growjax.control.profile import KnotProfile
 
     clock = time.perf_counter()
-    config = gj.Config(fidelity="reference", t1=space.duration)
+    config = gj.Config(fidelity="reference", drive=space.drive, t1=space.duration)
     lim = gd.limits(known.base)
     stroke = float(known.base.robot.stroke)
     drawn = gd.draws(known, n, seed=seed + 1000)
-    designed = gj.Inputs(catheter_length=space.catheter,
-                         pressure_demand=KnotProfile(jnp.asarray(knots, float), jnp.asarray(demand, float)))
     out = {"draws": n, "configuration": "reference", "limits": lim.summary(), "stroke_m": stroke}
-    for label, inputs in (("design", designed), ("published pulse train", gd.published_inputs(space))):
+    for label, inputs in (("design", designed), (space.baseline_label, space.baseline_inputs())):
         res = gd.check(gd.stack([inputs]), known, config, space.times, gj.input_breaks(inputs, config), lim, drawn,
                        keep_runs=True)
         pressure, length = np.max(res.pressure[0], axis=-1), np.max(res.length[0], axis=-1)
@@ -187,13 +194,13 @@ def safety(known, space, knots, demand, n: int, seed: int) -> dict:
     return out
 
 
-def landscape_of(summary: dict, sensors, wall_s) -> dict:
-    """The landscape's record of a design's summary: the random batch against the design and the published pulse."""
+def landscape_of(summary: dict, sensors, wall_s, baseline: str = "published pulse train") -> dict:
+    """The landscape's record of a design's summary: the random batch against the design and the baseline."""
     crit = {r["input"]: r["criterion"] for r in summary["table"] if tuple(r["sensors"]) == sensors}
     return {"random_admissible": summary["random"]["admissible"], "random_drawn": summary["random"]["drawn"],
             "random_best_criterion": summary["random"]["criterion_best"],
             "random_quantiles": summary["random"]["criterion_quantiles"],
-            "design_criterion": crit["design"], "published_criterion": crit["published pulse train"],
+            "design_criterion": crit["design"], "published_criterion": crit[baseline],
             "design_beats_best_random": bool(crit["design"] < summary["random"]["criterion_best"]),
             "design_wall_s": wall_s}
 
@@ -307,8 +314,10 @@ def main():
                     help="the configuration that makes the replications' data (fast: no model error, a diagnostic)")
     ap.add_argument("--rig", choices=["drawn", "nominal"], default="drawn",
                     help="the replications' rig: drawn from the tolerance budget, or nominal (a diagnostic)")
+    ap.add_argument("--next-drive", choices=["forward", "inverse"], default="forward",
+                    help="the designed experiment's drive (inverse: the stepper's schedule; see the docstring)")
     ap.add_argument("--inputs", nargs="+", default=["design", "published pulse train"],
-                    choices=["design", "published pulse train"],
+                    choices=["design", "published pulse train", "recorded length as demand"],
                     help="the inputs replicated (with --discriminate: whose data discovery reads)")
     ap.add_argument("--rig-tangents", action=argparse.BooleanOptionalAction, default=True,
                     help="the replications' fits make the rig's errors parameters of the model (exact tangents, "
@@ -361,17 +370,27 @@ def main():
         Path(args.out).write_text(json.dumps(record, indent=1, default=str) + "\n")
         print(f"wrote {args.out}")
         return
-    space = gd.DesignSpace(args.duration, gd.limits(base).pressure, gd.catheter_of(exp, args.duration),
-                           knot_spacing=args.knot_spacing)
+    if args.next_drive == "inverse":
+        base = gj.replace(gj.reference("inverse", growth_law=args.growth_law), **recorded_parameters(Path(args.data)))
+        known = known.on(base)
+        space = gd.stepper_space(base, args.duration, exp)
+        args.inputs = [space.baseline_label if i == "published pulse train" else i for i in args.inputs]
+    else:
+        space = gd.DesignSpace(args.duration, gd.limits(base).pressure, gd.catheter_of(exp, args.duration),
+                               knot_spacing=args.knot_spacing)
+    baseline = space.baseline_label
     sensors = tuple(args.sensors.split(","))
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     if args.design_from:  # an earlier run's design and landscape (or a `growjax design` summary.json)
         earlier = json.loads(Path(args.design_from).read_text())
         if "landscape" not in earlier:
-            earlier = {"design": earlier, "landscape": landscape_of(earlier, sensors, None)}
+            earlier = {"design": earlier, "landscape": landscape_of(earlier, sensors, None, baseline)}
         summary, landscape = earlier["design"], earlier["landscape"]
-        knots, demand = np.asarray(summary["design"]["knots_s"]), np.asarray(summary["design"]["demand_Pa"])
+        if args.next_drive == "inverse":
+            x = np.asarray(summary["design"]["steps"], float)
+        else:
+            x = space.unconstrained(np.asarray(summary["design"]["demand_Pa"]))
     else:
         t = time.perf_counter()
         result = gd.design(known, space, sensors=sensors, random=args.random, starts=args.starts,
@@ -380,27 +399,32 @@ def main():
         space.write_csv(out.with_suffix(".csv"), result.x)
         gd.design_figure(result, out.with_suffix(".png"))
         summary = result.summary()
-        knots, demand = result.knots, result.demand
-        landscape = {**landscape_of(summary, sensors, design_wall), "random_criterion": result.random.criterion.tolist()}
+        x = result.x
+        landscape = {**landscape_of(summary, sensors, design_wall, baseline),
+                     "random_criterion": result.random.criterion.tolist()}
     if not args.design_from:  # the design alone, so that ``--design-from`` can take it up if the replications stop
         out.write_text(json.dumps({"environment": environment(), "arguments": vars(args), "knowledge": known.summary(),
                                    "design": summary, "landscape": landscape, "growjax": gj.__version__},
                                   indent=1, default=str) + "\n")
     table = {r["input"]: r["parameters"] for r in summary["table"] if tuple(r["sensors"]) == sensors}
     print(json.dumps({k: v for k, v in landscape.items() if k != "random_criterion"}, indent=1), flush=True)
-    safe = safety(known, space, knots, demand, args.safety_draws, args.seed) if args.safety_draws else None
+    safe = safety(known, space, space.inputs(x), args.safety_draws, args.seed) if args.safety_draws else None
     print(json.dumps(safe, indent=1), flush=True)
     names = list(known.names)
-    predicted = {label: {n: table[label][n]["sd_log_alone"] for n in names} for label in ("design", "published pulse train")}
+    predicted = {label: {n: table[label][n]["sd_log_alone"] for n in names} for label in ("design", baseline)}
     t_cath = np.asarray(space.catheter.times) if hasattr(space.catheter, "times") else np.array([0.0, 1.0])
     c_cath = np.asarray(space.catheter.values) if hasattr(space.catheter, "values") else np.zeros(2)
     job = {"seed": args.seed, "recorded": recorded_parameters(Path(args.data)), "tolerances": dict(known.tolerances),
            "estimate": dict(zip(names, map(float, known.estimate))), "names": names,
            "times": np.asarray(space.times).tolist(), "catheter_t": t_cath.tolist(), "catheter_m": c_cath.tolist(),
-           "knots": np.asarray(knots).tolist(), "demand": np.asarray(demand).tolist(), "duration": args.duration,
+           "drive": space.drive, "duration": args.duration,
            "noise_m": float(known.hyper.noise), "pressure": "pressure" in sensors, "pressure_noise": 1e3,
            "maker": args.maker, "rig": args.rig, "inputs": args.inputs, "relinearise": args.relinearise,
            "rig_tangents": args.rig_tangents, "growth_law": args.growth_law}
+    if space.drive == "inverse":
+        job.update(edges=space.edges.tolist(), steps={"design": np.asarray(x).tolist(), baseline: space.baseline().tolist()})
+    else:
+        job.update(knots=space.knots.tolist(), demand=np.asarray(space.demand(x)).tolist())
     partial = out.with_suffix(".partial.jsonl")  # replications as they finish
     rows = []
     if args.resume and partial.exists():
@@ -426,7 +450,7 @@ def main():
         for j in jobs:
             keep(replicate(j))
     rows.sort(key=lambda r: r["index"])
-    replications = summarise(rows, names, predicted)
+    replications = summarise(rows, names, predicted, baseline)
     print(json.dumps(replications, indent=1), flush=True)
     record = {"environment": environment(), "arguments": vars(args), "knowledge": known.summary(),
               "design": summary, "landscape": landscape, "safety": safe, "replications": replications, "rows": rows,

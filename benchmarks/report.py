@@ -43,7 +43,7 @@ on the machine that writes the page is kept as it was.
 | `benchmarks/mixed_set.py` | a forward experiment with the pressure recorded and a stepper experiment of one robot, alone and jointly |
 | `benchmarks/population.py` | populations of eight robots on one drawn rig: coverage of the population's median and spread, and of a held-out robot's predictive band |
 | `benchmarks/discover_discrepancy.py` | discovery's answer on data with a discrepancy but no catalogue effect |
-| `benchmarks/design.py` | the designed experiment: the criterion against random admissible inputs and the published pulse train, and replications on drawn rigs, predicted sd against realised; `design_discrimination`: `--discriminate A B --duration 3 --knot-spacing 0.1 --random 16 --replications 10` (discovery's verdicts under the discrimination design and the published pulse train, on data from each effect and on clean data); `design_discrimination_pair`: the same with `--candidates retraction_folding trapped_air --inputs design --random 16 --starts 1 --iterations 10` (discovery choosing between the two rivals, under the design); `design_discrimination_pair_held`: `--design-from` that file `--truths retraction_folding --hold-base` (the same design's data, discovery holding Y at the first experiment's estimate); `design_discrimination_pair_first`: `--design-from` that file `--truths retraction_folding none --with-first` (each seed's designed experiment read together with the first one made again on the same robot: `growjax.discover.discover_set` over the two, one Y); `design_discrimination_pair_first_air`: the same with `--truths trapped_air`; `design_discrimination_catalogue_first`: the same with every catalogue effect as a candidate (`--candidates` the eight), `--truths retraction_folding none --replications 2 --workers 2`; `design_lockhart`: `--growth-law lockhart --for Y phi_L n_L --random 64 --starts 2 --iterations 20` then `--design-from` it `--replications 20` (the design under Lockhart's law, its rate's and exponent's intervals against their prior box); `design_lockhart_20s`: the same law's design over 20 s by `growjax design --law lockhart --for Y phi_L n_L --duration 20`, then `--design-from` its `summary.json` `--duration 20 --replications 10 --inputs design --safety-draws 0`; `design_relinearised`: `--design-from design.json --relinearise` (the same replications, fitted with the rig relinearised); `design_landscape`: `--random 1000 --replications 0 --safety-draws 0` (the design against 1 000 random admissible inputs), then `--design-from` that file `--replications 20 --workers 2 --relinearise` (its replications and safety, the default fit); `design_landscape_tangents`: the same replications fitted with `--rig-tangents` (`growjax.fit.fit(rig_tangents=True)`) |
+| `benchmarks/design.py` | the designed experiment: the criterion against random admissible inputs and the published pulse train, and replications on drawn rigs, predicted sd against realised; `design_discrimination`: `--discriminate A B --duration 3 --knot-spacing 0.1 --random 16 --replications 10` (discovery's verdicts under the discrimination design and the published pulse train, on data from each effect and on clean data); `design_discrimination_pair`: the same with `--candidates retraction_folding trapped_air --inputs design --random 16 --starts 1 --iterations 10` (discovery choosing between the two rivals, under the design); `design_discrimination_pair_held`: `--design-from` that file `--truths retraction_folding --hold-base` (the same design's data, discovery holding Y at the first experiment's estimate); `design_discrimination_pair_first`: `--design-from` that file `--truths retraction_folding none --with-first` (each seed's designed experiment read together with the first one made again on the same robot: `growjax.discover.discover_set` over the two, one Y); `design_discrimination_pair_first_air`: the same with `--truths trapped_air`; `design_discrimination_catalogue_first`: the same with every catalogue effect as a candidate (`--candidates` the eight), `--truths retraction_folding none --replications 2 --workers 2`; `design_lockhart`: `--growth-law lockhart --for Y phi_L n_L --random 64 --starts 2 --iterations 20` then `--design-from` it `--replications 20` (the design under Lockhart's law, its rate's and exponent's intervals against their prior box); `design_lockhart_20s`: the same law's design over 20 s by `growjax design --law lockhart --for Y phi_L n_L --duration 20`, then `--design-from` its `summary.json` `--duration 20 --replications 10 --inputs design --safety-draws 0`; `design_relinearised`: `--design-from design.json --relinearise` (the same replications, fitted with the rig relinearised); `design_landscape`: `--random 1000 --replications 0 --safety-draws 0` (the design against 1 000 random admissible inputs), then `--design-from` that file `--replications 20 --workers 2 --relinearise` (its replications and safety, the default fit); `design_landscape_tangents`: the same replications fitted with `--rig-tangents` (`growjax.fit.fit(rig_tangents=True)`); `design_stepper`: `--next-drive inverse --design-from` the `summary.json` of `growjax design src/growjax/datasets/synthetic_forward.csv --next-drive inverse --for Y` `--replications 20 --workers 2` (the stepper's designed schedule against the stepper driven by the recorded length) |
 | `benchmarks/least_squares.py` | growjax's Levenberg–Marquardt engine against optimistix's solvers on the fit's and the control profile's problems; `least_squares_linearize`: `--cases fit_Y --solvers lm_linearize --out benchmarks/results/least_squares_linearize.json` (optimistix linearising the model itself) |
 """
 
@@ -331,13 +331,14 @@ def rows_sweep_resume(r: dict) -> list[tuple[str, str, str]]:
 
 def rows_design(r: dict) -> list[tuple[str, str, str]]:
     land, rep = r["landscape"], r["replications"]
+    baseline = next(label for label in rep if label not in ("design", "design_over_published_realised_sd"))
     out = [("criterion, ln of the predicted variance of ln θ (lower is better): design / best random input / "
-            "published pulse train",
+            f"{baseline}",
             f"{land['design_criterion']:.4f} / {land['random_best_criterion']:.4f} / {land['published_criterion']:.4f}",
             f"{land['random_admissible']} admissible of {land['random_drawn']} random inputs (their criterion's 10/50/90 % "
             f"quantiles {' / '.join(f'{v:.2f}' for v in land['random_quantiles'].values())}); design beats the best: "
             f"{'yes' if land['design_beats_best_random'] else 'no'}")]
-    for label in ("design", "published pulse train"):
+    for label in ("design", baseline):
         for name, g in rep[label].items():
             if g["realised_sd_log"] is None:
                 continue
@@ -349,9 +350,9 @@ def rows_design(r: dict) -> list[tuple[str, str, str]]:
                         + (f"; {g['far_off']} settled more than 5 reported sd off" if g.get("far_off") else "")))
     for name, ratio in rep["design_over_published_realised_sd"].items():
         if ratio is not None:
-            out.append((f"{name}: design's realised sd / the published pulse train's", f"{ratio:.2f}", "target ≤ 0.5"))
+            out.append((f"{name}: design's realised sd / the {baseline}'s", f"{ratio:.2f}", "target ≤ 0.5"))
     safe = r.get("safety")
-    for label in ("design", "published pulse train") if safe else ():
+    for label in ("design", baseline) if safe else ():
         g = safe[label]
         out.append((f"{label}: runs over the membrane limit / over the stroke (reference configuration)",
                     f"{g['over_membrane_limit']} / {g['over_stroke']} of {safe['draws']}",
@@ -397,7 +398,7 @@ def rows_design_lockhart(r: dict) -> list[tuple[str, str, str]]:
     return out
 
 
-EXTRACTORS = {"design": rows_design, "design_relinearised": rows_design, "design_landscape": rows_design, "design_landscape_tangents": rows_design, "design_discrimination": rows_design_discrimination,
+EXTRACTORS = {"design": rows_design, "design_stepper": rows_design, "design_relinearised": rows_design, "design_landscape": rows_design, "design_landscape_tangents": rows_design, "design_discrimination": rows_design_discrimination,
               "design_discrimination_pair": rows_design_discrimination,
               "design_discrimination_pair_held": rows_design_discrimination,
               "design_discrimination_pair_first": rows_design_discrimination,

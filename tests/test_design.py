@@ -187,7 +187,9 @@ def test_design_command_refuses_bad_input_with_exit_2(capsys, tmp_path):
     for argv, message in ((["--for", "Y", "no_such_parameter"], "no_such_parameter"),
                           (["--duration", "0"], "--duration"),
                           (["--p-max", "400e3"], "above the sensed-pressure ceiling"),
-                          (["--drive", "inverse"], "forward drive"),
+                          (["--next-drive", "inverse", "--p-max", "200e3"], "the stepper's schedule has neither"),
+                          (["--next-drive", "inverse", "--discriminate", "retraction_folding", "trapped_air"],
+                           "drop --next-drive inverse"),
                           (["--knot-spacing", "20", "--duration", "5"], "knot spacing"),
                           (["--fit-from", "/nonexistent/fit.json"], "cannot read the saved fit")):
         try:
@@ -198,6 +200,33 @@ def test_design_command_refuses_bad_input_with_exit_2(capsys, tmp_path):
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and message in err, (argv, err)
     assert not (tmp_path / "never").exists()  # refused before any work
+
+
+def test_a_stepper_schedule_is_written_as_the_desired_length_the_controller_turns_back_into_it(tmp_path):
+    """The stepper's design space: every schedule steps at most once per controller period, never below a count of
+    0; its CSV, read back and run through the shipped position controller, issues exactly the designed steps; the
+    baseline is the controller's own schedule for the recorded length."""
+    base = gj.reference("inverse")
+    exp = ex.read(DATA, catheter=True)
+    space = gd.stepper_space(base, 4.0, exp)
+    assert space.size == 12 and np.allclose(np.diff(space.edges)[1:], 1 / 3)  # 3 Hz, the first edge after t0
+    rng = np.random.default_rng(0)
+    xs = space.random(6, rng)
+    baseline = space.baseline()
+    scaled = space.scaled(xs[0], 0.7)
+    moved = gd.neighbours(space, baseline)
+    for x in [baseline, *xs, scaled, *moved[:5]]:
+        assert set(np.unique(x)) <= {-1.0, 0.0, 1.0} and np.all(np.cumsum(x) >= 0)
+        space.write_csv(tmp_path / "s.csv", x)
+        inputs = ex.to_inputs(ex.read(tmp_path / "s.csv", catheter=True), "inverse", base, 0.001, 4.0)
+        after = jnp.asarray(np.append(space.edges + 1e-6, 3.999))
+        issued, designed = (np.asarray(jax.vmap(i.steps)(after)) for i in (inputs, space.inputs(x)))
+        np.testing.assert_array_equal(issued, designed)
+    # the recorded length as the desired length: what the shipped model's stepper does with it
+    shipped = ex.to_inputs(exp, "inverse", base, 0.001, 4.0).steps
+    np.testing.assert_array_equal(np.asarray(jax.vmap(shipped)(after)), np.asarray(jax.vmap(space.inputs(baseline).steps)(after)))
+    assert np.sum(baseline) > 0 and np.all(np.cumsum(scaled) <= np.cumsum(xs[0]))
+    assert len(moved) == len({m.tobytes() for m in moved}) and np.all(np.sum(moved != baseline, axis=1) <= 2)
 
 
 @pytest.fixture(scope="module")
@@ -278,3 +307,25 @@ def test_design_command_writes_a_csv_that_simulate_reads(tmp_path, capsys):
     assert cli.main(["simulate", str(out / "design.csv"), "--t-end", "2", "--out", str(tmp_path / "sim")]) == 0
     traj = ex.read(tmp_path / "sim" / "trajectory.csv")
     assert np.max(traj["pressure_Pa"]) <= summary["limits"]["pressure_ceiling_Pa"]
+
+
+@pytest.mark.slow
+def test_a_stepper_design_beats_the_recorded_length_and_the_best_random_schedule_and_is_admissible(tmp_path):
+    """The stepper's schedule designed for Y (what is known carried over from a forward fit); its CSV runs through
+    ``growjax simulate --drive inverse`` inside the limits."""
+    base = gj.reference("inverse")
+    known = _knowledge(sd=0.02, tolerances={"robot.catheter_friction": 0.2, "pump.screw_viscous_friction": 0.2}).on(base)
+    assert float(gj.get(known.base, Y)) == 9000.0 and known.base.motor.controller_rate == base.motor.controller_rate
+    space = gd.stepper_space(base, 3.0, ex.read(DATA, catheter=True))
+    res = gd.design(known, space, random=6, iterations=3, n_draws=4, seed=0, points=2, nonlinear_draws=2)
+    crit = {r["input"]: r["criterion"] for r in res.rows}
+    assert crit["design"] < crit["best random input"] and crit["design"] < crit["recorded length as demand"], crit
+    assert res.descents[0].value < res.descents[0].history[0]  # the local search moved off its start
+    assert set(np.unique(res.x)) <= {-1.0, 0.0, 1.0} and res.checks["design"].row(0)["admissible"]
+    summary = res.summary()
+    assert summary["drive"] == "inverse" and len(summary["design"]["steps"]) == space.size
+    space.write_csv(tmp_path / "design.csv", res.x)
+    assert cli.main(["simulate", str(tmp_path / "design.csv"), "--drive", "inverse", "--t-end", "3",
+                     "--out", str(tmp_path / "sim")]) == 0
+    traj = ex.read(tmp_path / "sim" / "trajectory.csv")
+    assert np.max(traj["pressure_Pa"]) <= res.limits.pressure and np.max(traj["robot_length_m"]) <= res.limits.length

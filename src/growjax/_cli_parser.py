@@ -282,7 +282,8 @@ def build_parser():
     _quiet(ctl)
 
     des = sub.add_parser("design", formatter_class=fmt,
-                         help="design the next experiment: the forward drive's demand that most shrinks the intervals")
+                         help="design the next experiment: the forward drive's demand (or the stepper's schedule) "
+                              "that most shrinks the intervals")
     _shared(des, "design")
     des.add_argument("--for", dest="design_for", action="extend", nargs="+", default=[], metavar="NAME",
                      help="parameters whose precision the design is for (repeat or list; none: Y)")
@@ -297,13 +298,18 @@ def build_parser():
                      help="what the next experiment records (length,pressure: the table also shows the length alone)")
     des.add_argument("--criterion", choices=["A", "D"], default="A",
                      help="A: the sum of the relative variances; D: their generalised variance (log det)")
+    des.add_argument("--next-drive", choices=DRIVES, default="forward",
+                     help="the drive of the experiment to design: forward (its pressure demand) or inverse (the "
+                          "stepper's step schedule, written as its desired length); DATA is read with --drive")
     des.add_argument("--duration", type=_positive, default=10.0, metavar="S", help="length of the designed run, s")
-    des.add_argument("--knot-spacing", type=_positive, default=0.5, metavar="S", help="s between the demand's knots")
+    des.add_argument("--knot-spacing", type=_positive, default=None, metavar="S",
+                     help="s between the demand's knots (forward drive; default 0.5)")
     des.add_argument("--p-max", type=_positive, default=None, metavar="PA",
                      help="top of the demand, Pa (default: the sensed-pressure ceiling, the membrane limit × 0.9)")
     des.add_argument("--random", type=_count(), default=64, help="random admissible inputs drawn and scored")
     des.add_argument("--starts", type=_count(), default=1, help="descents, from the best random inputs")
-    des.add_argument("--iterations", type=_count(), default=15, help="gradient steps per descent")
+    des.add_argument("--iterations", type=_count(), default=15,
+                     help="gradient steps per descent (the stepper: moves of its local search)")
     des.add_argument("--draws", type=_count(2), default=32, help="draws of the rig and θ every design is checked on")
     des.add_argument("--points", type=_count(), default=4,
                      help="points of θ and the rig the criterion is averaged over (1: the local design at the estimate)")

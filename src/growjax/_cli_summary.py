@@ -204,9 +204,14 @@ def _design(s: dict, name: str) -> list[str]:
         lines = [f"design: {name}, to tell {a} from {b}, {s['duration_s']:g} s, demand in 0–{_kpa(s['p_max_Pa'])} on "
                  f"knots every {s['knot_spacing_s']:g} s", *_origin_lines(s["fixed_parameters"]), *_discrimination_rows(s)]
         return lines + _design_tail(s)
-    lines = [f"design: {name}, {s['criterion']}-optimal for {', '.join(names)}, {s['duration_s']:g} s, demand in "
-             f"0–{_kpa(s['p_max_Pa'])} on knots every {s['knot_spacing_s']:g} s", *_origin_lines(s["fixed_parameters"])]
-    head = f"  {'input':24s} {'sensors':16s}" + "".join(f" {n.split('.')[-1][:14]:>14s} sd  90 % width" for n in names)
+    if s.get("drive") == "inverse":
+        space = (f"the stepper's schedule, up to one step of {_mm(s['metres_per_step'])} of length every "
+                 f"{1 / s['controller_rate_Hz']:.3g} s")
+    else:
+        space = f"demand in 0–{_kpa(s['p_max_Pa'])} on knots every {s['knot_spacing_s']:g} s"
+    lines = [f"design: {name}, {s['criterion']}-optimal for {', '.join(names)}, {s['duration_s']:g} s, {space}",
+             *_origin_lines(s["fixed_parameters"])]
+    head = f"  {'input':26s} {'sensors':16s}" + "".join(f" {n.split('.')[-1][:14]:>14s} sd  90 % width" for n in names)
     lines += [head + "   alone sd"]
     for row in s["table"]:
         cells = ""
@@ -214,7 +219,7 @@ def _design(s: dict, name: str) -> list[str]:
             p = row["parameters"][n]
             cells += f" {100 * p['sd_log']:16.2f} %  {_value(n, p['width_90']):>10s}"
         alone = ", ".join(f"{100 * row['parameters'][n]['sd_log_alone']:.2f} %" for n in names)
-        lines.append(f"  {row['input']:24s} {'+'.join(row['sensors']):16s}{cells}   {alone}")
+        lines.append(f"  {row['input']:26s} {'+'.join(row['sensors']):16s}{cells}   {alone}")
     return lines + _design_tail(s)
 
 

@@ -575,8 +575,12 @@ def design_command(args) -> dict:
     from growjax import fit as gf
     from growjax import params as gp
 
-    if args.drive != "forward":
-        raise ValueError("growjax design designs the forward drive's pressure demand: --drive inverse is not designed")
+    stepper = args.next_drive == "inverse"
+    if stepper and args.discriminate is not None:
+        raise ValueError("--discriminate designs the forward drive's demand: drop --next-drive inverse")
+    if stepper and (args.knot_spacing is not None or args.p_max is not None):
+        raise ValueError("--knot-spacing and --p-max shape the forward drive's demand; the stepper's schedule has "
+                         "neither (its steps are the controller's, at most one per period)")
     if args.fidelity != "fast":
         raise ValueError("growjax design runs the fast configuration (its sensitivities are differentiated again)")
     if args.discriminate is not None:
@@ -595,22 +599,27 @@ def design_command(args) -> dict:
             raise ValueError("--discriminate scores the length alone: drop --sensors")
     elif args.size is not None:
         raise ValueError("--size gives the effects' sizes of --discriminate")
-    data, exp, base, origin = _setup(args, "forward", growth_law=args.law)
+    data, exp, base, origin = _setup(args, args.drive, growth_law=args.law)
     names = tuple(dict.fromkeys(gp.resolve_name(base, n) for n in (args.design_for or ["Y"])))
-    lim = gd.limits(base, max_speed=args.max_pump_speed)
-    p_max = lim.pressure if args.p_max is None else args.p_max
-    if p_max > lim.pressure + 1e-9:
-        raise ValueError(f"--p-max {p_max / 1e3:.1f} kPa is above the sensed-pressure ceiling {lim.pressure / 1e3:.1f} kPa "
-                         f"(the membrane limit {lim.membrane / 1e3:.1f} kPa × the margin)")
-    space = gd.DesignSpace(args.duration, p_max, gd.catheter_of(exp, args.duration), args.knot_spacing)
+    base_next = base if args.next_drive == args.drive else _setup(args, args.next_drive, growth_law=args.law)[2]
+    lim = gd.limits(base_next, max_speed=args.max_pump_speed)
+    if stepper:
+        space = gd.stepper_space(base_next, args.duration, exp)
+    else:
+        p_max = lim.pressure if args.p_max is None else args.p_max
+        if p_max > lim.pressure + 1e-9:
+            raise ValueError(f"--p-max {p_max / 1e3:.1f} kPa is above the sensed-pressure ceiling "
+                             f"{lim.pressure / 1e3:.1f} kPa (the membrane limit {lim.membrane / 1e3:.1f} kPa × the margin)")
+        space = gd.DesignSpace(args.duration, p_max, gd.catheter_of(exp, args.duration),
+                               0.5 if args.knot_spacing is None else args.knot_spacing)
     tolerances = tolerances_of(args)
     if args.fit_from:
         known = gd.from_summary(args.fit_from, base, names, tolerances)
     else:
         if "robot_length_m" not in exp:
             raise ValueError(f"{data} has no robot_length_m column to fit: give what is known with --fit-from")
-        config = make_config(args, "forward", adjoint="forward")
-        inputs = ex.to_inputs(exp, "forward", base, config.t0, config.t1)
+        config = make_config(args, args.drive, adjoint="forward")
+        inputs = ex.to_inputs(exp, args.drive, base, config.t0, config.t1)
         pressure = exp["pressure_Pa"] if "pressure_Pa" in exp else None  # noqa: SIM401 (Experiment is not a dict)
         started = _progress_note(args, f"design: what is known, a fit of {', '.join(names)} to {data.name}")
         fitted = gf.fit(exp.time, exp["robot_length_m"], inputs, free=names, base=base, config=config,
@@ -618,14 +627,17 @@ def design_command(args) -> dict:
                         discrepancy=args.discrepancy, tolerances=tolerances)
         _progress_note(args, f"design: fitted in {time.perf_counter() - started:.1f} s")
         known = gd.from_fit(fitted, base, tolerances)
+    if base_next is not base:
+        known = known.on(base_next)  # θ as fitted, on the next experiment's drive
     if args.discriminate is not None:
         started = _progress_note(args, f"design: to tell {' from '.join(args.discriminate)}, {args.duration:g} s")
         result = gd.discriminate(known, space, args.discriminate, args.size, random=args.random, starts=args.starts,
                                  iterations=args.iterations, n_draws=args.draws, seed=args.seed, limits=lim,
                                  progress=not args.quiet)
     else:
-        started = _progress_note(args, f"design: {args.criterion}-optimal for {', '.join(names)}, {args.duration:g} s, "
-                                       f"sensors {args.sensors}")
+        what = "step schedule" if stepper else "demand"
+        started = _progress_note(args, f"design: {args.criterion}-optimal {what} for {', '.join(names)}, "
+                                       f"{args.duration:g} s, sensors {args.sensors}")
         result = gd.design(known, space, criterion=args.criterion, sensors=tuple(args.sensors.split(",")),
                            random=args.random, starts=args.starts, iterations=args.iterations, n_draws=args.draws,
                            seed=args.seed, points=args.points, pressure_noise=args.pressure_noise, limits=lim,
@@ -634,7 +646,8 @@ def design_command(args) -> dict:
     out = _out(args)
     csv = space.write_csv(out / "design.csv", result.x)
     figure = gd.design_figure(result, out / "design.png")
-    summary = {"command": "design", "data": str(data), "fixed_parameters": origin, "growth_law": args.law,
+    summary = {"command": "design", "data": str(data), "data_drive": args.drive, "fixed_parameters": origin,
+               "growth_law": args.law,
                **result.summary(),
                "design_csv": str(csv), "figure": str(figure), "summary_json": str(out / "summary.json")}
     (out / "summary.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")

@@ -1,5 +1,5 @@
-"""Design of the next experiment: the forward drive's pressure demand that makes the next fit most precise about
-the parameters of interest, safe on every plausible rig.
+"""Design of the next experiment: the forward drive's pressure demand, or the stepper's step schedule, that makes
+the next fit most precise about the parameters of interest, safe on every plausible rig.
 
 What is here, in the order a design uses it:
 
@@ -7,7 +7,9 @@ What is here, in the order a design uses it:
   estimate, their covariance of ln θ, the rig's tolerances and the residual model (:mod:`.knowledge`).
 * :class:`DesignSpace` — the demand as a piecewise-linear profile on fixed knots in (0, p_max), a smooth map
   of unconstrained design variables; the catheter as in the experiment already run; the CSV in the rig's
-  terms (:mod:`.space`).
+  terms. :class:`StepperSpace` (:func:`stepper_space`) — the stepper drive's schedule: −1, 0 or +1 step at each
+  of its position controller's edges, written as the desired length the controller turns back into it
+  (:mod:`.space`).
 * :func:`solve` — the length and pressure with their sensitivities to (ln θ, the rig's errors), one forward
   sensitivity solve that forward mode differentiates again (:mod:`.sensitivity`).
 * :class:`Precision`, :func:`posterior` — the expected posterior covariance under the discrepancy, the noise and
@@ -20,7 +22,8 @@ What is here, in the order a design uses it:
 * :class:`Discrimination`, :func:`discrimination.make`, :func:`discrimination.statistic` — the criterion of model
   discrimination between two rival effects: min(T_AB, T_BA), the linearised expected 2ΔlogL by which the data
   reject the wrong one (:mod:`.discrimination`).
-* :func:`random_admissible`, :func:`multistart` — the random baseline and the descent (:mod:`.optimise`).
+* :func:`random_admissible`, :func:`multistart`, :func:`local_search` — the random baseline, the descent, and
+  the stepper's search over its schedule's choices (:mod:`.optimise`).
 * :func:`design` — all of it end to end (:mod:`.workflow`; the ``growjax design`` command), :func:`discriminate`
   its sibling for two rival effects (``growjax design --discriminate A B``), and :func:`design_figure`.
 
@@ -33,7 +36,7 @@ from growjax.design import discrimination
 from growjax.design.discrimination import Discrimination
 from growjax.design.figure import design_figure
 from growjax.design.knowledge import Knowledge, from_fit, from_summary
-from growjax.design.optimise import Descent, RandomBatch, adam, multistart, random_admissible
+from growjax.design.optimise import Descent, RandomBatch, adam, local_search, multistart, neighbours, random_admissible
 from growjax.design.problem import (
     Problem,
     covariances,
@@ -45,7 +48,7 @@ from growjax.design.problem import (
     values,
 )
 from growjax.design.sensitivity import Sensitivities, solve
-from growjax.design.space import DesignSpace, catheter_of
+from growjax.design.space import DesignSpace, StepperSpace, catheter_of, stepper_space
 from growjax.design.workflow import DesignError, DesignResult, design, discriminate, published_inputs
 
 __all__ = [
@@ -62,6 +65,7 @@ __all__ = [
     "Problem",
     "RandomBatch",
     "Sensitivities",
+    "StepperSpace",
     "adam",
     "catheter_of",
     "check",
@@ -77,8 +81,10 @@ __all__ = [
     "from_summary",
     "information",
     "limits",
+    "local_search",
     "make",
     "multistart",
+    "neighbours",
     "penalty",
     "posterior",
     "published_inputs",
@@ -86,6 +92,7 @@ __all__ = [
     "smoothed_gradient",
     "solve",
     "stack",
+    "stepper_space",
     "value_and_gradient",
     "values",
 ]

@@ -1,34 +1,36 @@
-"""The figure of a design: its demand beside the published pulse train's and the best random input's, and the
-length and sensed pressure each gives over the draws of the rig and θ (bands: the range over the draws)."""
+"""The figure of a design: its demand beside the baseline's (the published pulse train; for the stepper, the
+recorded length as its demand) and the best random input's, and the length and sensed pressure each gives over
+the draws of the rig and θ (bands: the range over the draws)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
-STYLE = {"design": "C3", "best random input": "C0", "published pulse train": "0.45"}
+STYLE = {"design": "C3", "best random input": "C0"}
+BASELINE_COLOUR = "0.45"
 
 
 def design_figure(result, path) -> Path:
-    """Three panels over the run: demand (kPa), sensed pressure (kPa) with the ceiling and the membrane limit, and
-    length (mm) with the stroke's ceiling; ``result`` a :class:`growjax.design.DesignResult`."""
+    """Three panels over the run: demand (kPa; for the stepper, the commanded length, mm), sensed pressure (kPa)
+    with the ceiling and the membrane limit, and length (mm) with the stroke's ceiling; ``result`` a
+    :class:`growjax.design.DesignResult`."""
     import matplotlib.pyplot as plt
 
     space, lim = result.space, result.limits
     t = np.asarray(space.times)
     fine = np.linspace(0.0, space.duration, 2001)
     fig, (ax_d, ax_p, ax_l) = plt.subplots(3, 1, figsize=(8, 8), sharex=True, constrained_layout=True)
-    from growjax.design.workflow import published_inputs
-
-    demands = {"published pulse train": np.asarray(jax.vmap(published_inputs(space).pressure_demand)(jnp.asarray(fine))),
-               "best random input": np.interp(fine, space.knots, np.asarray(space.demand(result.random.designs[result.random.best]))),
-               "design": np.interp(fine, space.knots, result.demand)}
-    for label in ("published pulse train", "best random input", "design"):
-        color = STYLE[label]
-        ax_d.plot(fine, demands[label] / 1e3, color=color, lw=1.6 if label == "design" else 1.0, label=label)
+    stepper = space.drive == "inverse"
+    scale_d = 1e3 if stepper else 1e-3  # mm of commanded length, or kPa of demand
+    baseline = space.baseline_label
+    demands = {baseline: space.baseline_command(fine),
+               "best random input": space.command(result.random.designs[result.random.best], fine),
+               "design": space.command(result.x, fine)}
+    for label in (baseline, "best random input", "design"):
+        color = STYLE.get(label, BASELINE_COLOUR)
+        ax_d.plot(fine, demands[label] * scale_d, color=color, lw=1.6 if label == "design" else 1.0, label=label)
         check = result.checks[label]
         for ax, runs, scale in ((ax_p, check.pressure, 1e-3), (ax_l, check.length, 1e3)):
             if runs is None:
@@ -36,11 +38,12 @@ def design_figure(result, path) -> Path:
             runs = np.asarray(runs)[0] * scale  # (D, n)
             ax.fill_between(t, np.nanmin(runs, axis=0), np.nanmax(runs, axis=0), color=color, alpha=0.25, lw=0)
             ax.plot(t, np.nanmedian(runs, axis=0), color=color, lw=1.4 if label == "design" else 0.9, label=label)
-    for ax in (ax_d, ax_p):
+    for ax in (ax_p,) if stepper else (ax_d, ax_p):
         ax.axhline(lim.pressure / 1e3, color="C1", ls="--", lw=1, label="ceiling (limit × margin)")
         ax.axhline(lim.membrane / 1e3, color="C3", ls=":", lw=1, label="membrane limit")
-    ax_l.axhline(lim.length * 1e3, color="C1", ls="--", lw=1, label="length ceiling (stroke × margin)")
-    ax_d.set_ylabel("demand (kPa)")
+    for ax in (ax_d, ax_l) if stepper else (ax_l,):
+        ax.axhline(lim.length * 1e3, color="C1", ls="--", lw=1, label="length ceiling (stroke × margin)")
+    ax_d.set_ylabel("commanded length (mm)" if stepper else "demand (kPa)")
     ax_p.set_ylabel("sensed pressure (kPa)")
     ax_l.set_ylabel("length (mm)")
     ax_l.set_xlabel("time (s)")
@@ -53,7 +56,8 @@ def design_figure(result, path) -> Path:
                        f"{result.discrimination['threshold']:.1f}) (bands: range over the rig and θ draws)", fontsize=9)
     else:
         sds = ", ".join(f"{n.split('.')[-1]} ±{100 * p['sd_log']:.2f} %" for n, p in row["parameters"].items())
-        ax_d.set_title(f"designed input ({result.criterion}-optimal; {', '.join(result.sensors)}): {sds} "
+        what = "designed step schedule" if stepper else "designed input"
+        ax_d.set_title(f"{what} ({result.criterion}-optimal; {', '.join(result.sensors)}): {sds} "
                        "(bands: range over the rig and θ draws)", fontsize=9)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -77,6 +77,11 @@ class Knowledge:
         out[p:, p:] = np.diag(1.0 / u**2)
         return out
 
+    def on(self, base: gp.Parameters) -> "Knowledge":
+        """What is known, carried to other parameters ``base`` (another drive's, say): θ at its estimate there,
+        the rest as here."""
+        return dataclasses.replace(self, base=gp.replace(base, **dict(zip(self.names, self.estimate))))
+
     def summary(self) -> dict:
         sd = np.sqrt(np.diag(self.covariance))
         return {"source": self.source,

@@ -1,5 +1,6 @@
 """Search of the design space: a batch of random admissible inputs, and gradient descent (Adam) through the model
-from several starts.
+from several starts (the forward drive's demand) or a local search over the choices (the stepper's schedule, whose
+criterion is piecewise constant: no gradient to follow).
 
 The random batch is the baseline a design must beat and the source of the starts: n random designs
 (:meth:`growjax.design.space.DesignSpace.random`) are simulated over every draw of the rig and θ in batches
@@ -93,6 +94,61 @@ def multistart(problem: dprob.Problem, starts, iterations: int = ITERATIONS, lea
     with _progress.bar(len(starts) * (iterations + 1), "design: descent", "step", progress) as bar:
         for x0 in starts:
             runs.append(adam(vg, x0, iterations, learning_rate, progress=bar))
+    return sorted(runs, key=lambda r: r.value)
+
+
+def neighbours(space, x) -> np.ndarray:
+    """The stepper schedules one change from x (N,): one edge's choice set to either of the other two, or two
+    neighbouring edges' different choices swapped (a step moved by one period); those whose count stays ≥ 0,
+    each once (M, N)."""
+    x = np.asarray(x, float)
+    out = []
+    for k in range(x.size):
+        for e in (-1.0, 0.0, 1.0):
+            if e != x[k]:
+                y = x.copy()
+                y[k] = e
+                out.append(y)
+        if k + 1 < x.size and x[k] != x[k + 1]:
+            y = x.copy()
+            y[k], y[k + 1] = x[k + 1], x[k]
+            out.append(y)
+    out = [y for y in out if np.all(np.cumsum(y) >= 0)]
+    return np.unique(np.asarray(out), axis=0) if out else np.zeros((0, x.size))
+
+
+BATCH = 8  # neighbours scored together in the local search (one compiled evaluation each, a thread per core)
+
+
+def local_search(problem: dprob.Problem, space, starts, moves: int = ITERATIONS, seed: int = 0,
+                 batch: int = BATCH, progress: bool = False) -> list[Descent]:
+    """From each row of ``starts`` (S, N), at most ``moves`` moves of a first-improvement search over the stepper's
+    :func:`neighbours`: they are scored ``batch`` at a time in a seeded random order
+    (:func:`growjax.design.problem.values`), and the first batch holding one better than the incumbent moves the
+    search to the best of that batch. A move costs a batch or two while most neighbours improve, where a
+    steepest step would score all ~3N; when no neighbour improves, the schedule is a local optimum and the search
+    stops. Best first."""
+    starts = np.atleast_2d(np.asarray(starts, float))
+    rng = np.random.default_rng([seed, 5])
+    runs = []
+    with _progress.bar(len(starts) * moves, "design: local search", "move", progress) as bar:
+        for x0 in starts:
+            x, f = x0.copy(), float(dprob.values(problem, x0[None])[0])
+            history = [f]
+            for _ in range(moves):
+                cands = neighbours(space, x)
+                cands = cands[rng.permutation(len(cands))]
+                for lo in range(0, len(cands), batch):
+                    v = dprob.values(problem, cands[lo: lo + batch])
+                    i = int(np.argmin(v))
+                    if v[i] < f:
+                        x, f = cands[lo + i], float(v[i])
+                        break
+                else:  # no neighbour improves: a local optimum
+                    break
+                history.append(f)
+                bar.update(1)
+            runs.append(Descent(x, f, history, x0))
     return sorted(runs, key=lambda r: r.value)
 
 

@@ -37,7 +37,7 @@ from growjax.design import criterion as dcrit
 from growjax.design import sensitivity
 from growjax.design.knowledge import Knowledge
 from growjax.design.space import DesignSpace, demand_at_knots
-from growjax.signals import Inputs
+from growjax.signals import Inputs, StepSchedule
 from growjax.simulate import as_arrays
 
 POINTS = 4  # points of (θ, rig) the criterion is averaged over
@@ -49,8 +49,8 @@ class Problem(eqx.Module):
     """The design problem (see the module docstring). Build it with :func:`make`."""
 
     base: object  # Parameters at the estimate on the nominal rig, numbers as arrays
-    knots: jax.Array  # (K,) s
-    p_max: jax.Array  # Pa
+    knots: jax.Array  # (K,) s: the demand's knots (forward drive) or the step controller's edges (stepper)
+    p_max: jax.Array  # Pa (forward drive; unused by the stepper)
     catheter: object  # signal, m
     times: jax.Array  # (n,) s, the sensors' samples
     hyper: dc.Hyper
@@ -68,9 +68,12 @@ class Problem(eqx.Module):
     criterion: dcrit.Precision = eqx.field(static=True)
     config: object = eqx.field(static=True)
     spread: float = eqx.field(static=True, default=dcon.SPREAD)
+    drive: str = eqx.field(static=True, default="forward")
 
     def inputs(self, x) -> Inputs:
-        """The inputs of design x (K,) (traceable)."""
+        """The inputs of design x (traceable): the demand's logits (K − 1,) or the stepper's steps (N,)."""
+        if self.drive == "inverse":
+            return Inputs(catheter_length=self.catheter, steps=StepSchedule(self.knots, jnp.cumsum(jnp.asarray(x))))
         return Inputs(catheter_length=self.catheter, pressure_demand=KnotProfile(self.knots, demand_at_knots(x, self.p_max)))
 
     def sensitivities(self, inputs, breaks=None, z=None) -> sensitivity.Sensitivities:
@@ -121,6 +124,8 @@ def make(knowledge: Knowledge, space: DesignSpace, criterion: str = "A", sensors
     ``nonlinear_draws``: draws of the rig (seeded) on which what its linearisation misses is measured, in the
     objective and the reports alike (0: none, the linearised criterion)."""
     sensors = dcrit.check_sensors(sensors)
+    if config is not None and config.drive != space.drive:
+        raise ValueError(f"the configuration's drive is {config.drive!r}, the design space's {space.drive!r}")
     if points < 1:
         raise ValueError(f"points must be at least 1, got {points}")
     prior = knowledge.prior_covariance()
@@ -132,15 +137,18 @@ def make(knowledge: Knowledge, space: DesignSpace, criterion: str = "A", sensors
     offsets = np.zeros((0, len(knowledge.rig)))
     if drawn:
         offsets = np.stack([np.log(drawn[n] / float(gp.get(knowledge.base, n))) for n in knowledge.rig], axis=1)
+    stepper = space.drive == "inverse"
     return Problem(
-        base=as_arrays(knowledge.base), knots=jnp.asarray(space.knots), p_max=jnp.asarray(float(space.p_max)),
+        base=as_arrays(knowledge.base), knots=jnp.asarray(space.edges if stepper else space.knots),
+        p_max=jnp.asarray(0.0 if stepper else float(space.p_max)),
         catheter=space.catheter, times=jnp.asarray(space.times), hyper=knowledge.hyper,
         precision_known=jnp.asarray(knowledge.prior_precision(True)),
         precision_alone=jnp.asarray(knowledge.prior_precision(False)),
         prior_covariance=jnp.asarray(prior), points=jnp.asarray(zs), offsets=jnp.asarray(offsets),
         breaks=space.breaks(), limits=lim, names=tuple(knowledge.names), rig=knowledge.rig, sensors=sensors,
         pressure_noise=float(pressure_noise), criterion=dcrit.Precision(len(knowledge.names), criterion),
-        config=(config or space.config()).replace(t1=float(space.duration), adjoint="forward").resolved())
+        config=(config or space.config()).replace(t1=float(space.duration), adjoint="forward").resolved(),
+        drive=space.drive)
 
 
 @eqx.filter_jit

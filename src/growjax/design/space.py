@@ -1,4 +1,7 @@
-"""The design space of the forward drive: a piecewise-linear pressure demand on fixed knots over the run.
+"""The design spaces: the forward drive's pressure demand (:class:`DesignSpace`) and the stepper's step schedule
+(:class:`StepperSpace`).
+
+The forward drive's demand is a piecewise-linear profile on fixed knots over the run.
 
 A design is a vector x (K − 1,) of unconstrained numbers, one per knot after the first; the demand at knot k is
 p_max·σ(x_k) (σ the logistic function), so every x is a demand inside (0, p_max) and the map is smooth for the
@@ -7,6 +10,13 @@ demand already high when the run starts sends the fast configuration through a s
 reference does not have). Between knots the demand is linear (:class:`growjax.control.KnotProfile`: every interior knot is a
 declared slope break, so the solver's breaks do not depend on the values). The catheter is an input the rig
 gives, not a design variable: its length is the one of the experiment already run (held after its end).
+
+The stepper's input is discrete. Its position controller samples the desired length every 1/f s and issues at
+most one step per period, half a period later (:func:`growjax.motor.step_schedule`), so every schedule it can
+issue is a choice of −1, 0 or +1 step at each of the same edge times. A design is that vector of choices; the
+schedule's count is its running sum, never below 0 (the robot starts at rest). All schedules share their edges,
+hence the solver's breaks and one compiled program; the criterion is piecewise constant in them, so the search
+is over the choices themselves (:func:`growjax.design.optimise.local_search`), not along a gradient.
 SI units: s, Pa, m.
 """
 
@@ -22,7 +32,8 @@ import numpy as np
 from growjax import experiment as ex
 from growjax.config import Config
 from growjax.control.profile import KnotProfile
-from growjax.signals import Constant, Inputs, Sampled
+from growjax.motor import step_schedule
+from growjax.signals import Constant, Inputs, Sampled, StepSchedule, published_pulse
 from growjax.simulate import input_breaks
 
 KNOT_SPACING = 0.5  # s between the demand's knots
@@ -41,6 +52,9 @@ class DesignSpace:
     catheter: object
     knot_spacing: float = KNOT_SPACING
     sample_interval: float = SAMPLE_INTERVAL
+
+    drive = "forward"
+    baseline_label = "published pulse train"
 
     def __post_init__(self):
         if not np.isfinite(self.duration) or self.duration <= 0:
@@ -116,6 +130,29 @@ class DesignSpace:
         ex.write_csv(path, t, series)
         return Path(path)
 
+    def baseline_inputs(self) -> Inputs:
+        """The baseline: the published pulse train with the design's catheter."""
+        return Inputs(catheter_length=self.catheter, pressure_demand=published_pulse())
+
+    def scaled(self, x, share: float) -> np.ndarray:
+        """Design x with its demand scaled by ``share`` (a design that fails its check, turned down)."""
+        return self.unconstrained(share * np.asarray(self.demand(x)))
+
+    def command(self, x, t) -> np.ndarray:
+        """The demand (Pa) of design x at times ``t`` (T,) s, for figures."""
+        return np.interp(t, self.knots, np.asarray(self.demand(x)))
+
+    def baseline_command(self, t) -> np.ndarray:
+        return np.asarray(jax.vmap(self.baseline_inputs().pressure_demand)(jnp.asarray(t)))
+
+    def describe(self, x) -> dict:
+        """Design x in the summary's terms."""
+        return {"knots_s": self.knots.tolist(), "demand_Pa": np.asarray(self.demand(x)).tolist()}
+
+    def settings(self) -> dict:
+        return {"drive": self.drive, "duration_s": self.duration, "knot_spacing_s": self.knot_spacing,
+                "p_max_Pa": self.p_max, "sample_interval_s": self.sample_interval}
+
 
 def demand_at_knots(x, p_max):
     """(K,) Pa: 0, then p_max·σ(x) for design x (K − 1,) (traceable)."""
@@ -133,3 +170,164 @@ def catheter_of(experiment: ex.Experiment | None, duration: float):
     if t[-1] < duration:  # held after the record ends
         t, c = np.append(t, duration + 1.0), np.append(c, c[-1])
     return Sampled(jnp.asarray(t), jnp.asarray(c))
+
+
+@dataclasses.dataclass(frozen=True)
+class StepperSpace:
+    """The stepper (inverse) drive's schedule over ``duration`` s: at each of the position controller's edges
+    (:attr:`edges`, every 1/``rate`` s) −1, 0 or +1 step, each step ``metres_per_step`` m of commanded robot length
+    (:func:`growjax.experiment.demand_steps`); the catheter length ``catheter`` (a signal, m); the baseline
+    ``recorded`` (a desired length, m, as a signal: the length the experiment already run recorded, which is what the
+    shipped stepper model is driven by); the sensors sampled every ``sample_interval`` s. Build it with
+    :func:`stepper_space`."""
+
+    duration: float
+    metres_per_step: float
+    rate: float
+    catheter: object
+    recorded: object = None
+    t0: float = 0.001
+    sample_interval: float = SAMPLE_INTERVAL
+
+    drive = "inverse"
+    baseline_label = "recorded length as demand"
+
+    def __post_init__(self):
+        for name in ("duration", "metres_per_step", "rate"):
+            v = getattr(self, name)
+            if not np.isfinite(v) or v <= 0:
+                raise ValueError(f"the stepper space's {name} must be positive, got {v}")
+        if self.edges.size == 0:
+            raise ValueError(f"a {self.duration} s run holds no edge of the {self.rate} Hz step controller")
+
+    @property
+    def edges(self) -> np.ndarray:
+        """(N,) s: the times at which the controller can issue a step (those inside the run)."""
+        ramp = np.array([0.0, self.duration + 1.0])
+        t, _ = step_schedule(2.0 * self.rate * ramp + 2.0, ramp, self.rate, self.t0, self.duration)
+        return t
+
+    @property
+    def size(self) -> int:
+        """N, the number of design variables (one per edge)."""
+        return int(self.edges.size)
+
+    @property
+    def times(self) -> np.ndarray:
+        """(n,) s: the sensors' sample times."""
+        n = int(np.floor(self.duration / self.sample_interval + 1e-9))
+        return np.round(self.sample_interval * np.arange(1, n + 1), 12)
+
+    def config(self, **changes) -> Config:
+        """The fast configuration of the stepper drive over the run, forward-mode derivatives."""
+        return Config(drive="inverse", t1=float(self.duration), adjoint="forward", **changes)
+
+    def counts(self, x):
+        """(N,) the driver's step count after each edge of design x (N,) (traceable)."""
+        return jnp.cumsum(jnp.asarray(x), axis=-1)
+
+    def demand(self, x):
+        """(N,) m: the commanded length after each edge of design x."""
+        return self.metres_per_step * self.counts(x)
+
+    def inputs(self, x) -> Inputs:
+        """The model's inputs under design x (N,) (traceable)."""
+        return Inputs(catheter_length=self.catheter, steps=StepSchedule(jnp.asarray(self.edges), self.counts(x)))
+
+    def breaks(self):
+        """The inputs' jump times (every edge) the solver steps onto: the same for every design."""
+        return input_breaks(self.inputs(np.zeros(self.size)), self.config())
+
+    def admissible_counts(self, x) -> np.ndarray:
+        """Design x with every step that would take the count below 0 dropped."""
+        x = np.asarray(np.rint(x), float).copy()
+        c = 0.0
+        for k, e in enumerate(x):
+            if c + e < 0:
+                x[k] = 0.0
+            c += x[k]
+        return x
+
+    def random(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        """n random schedules (n, N): per schedule a share a ~ U(0, 1) of edges stepping forward and r ~ U(0, ½)(1 − a)
+        stepping back (so slow, fast and retracting schedules are all drawn), the count kept ≥ 0."""
+        a = rng.uniform(0.0, 1.0, (n, 1))
+        r = rng.uniform(0.0, 0.5, (n, 1)) * (1.0 - a)
+        u = rng.uniform(0.0, 1.0, (n, self.size))
+        x = np.where(u < a, 1.0, np.where(u < a + r, -1.0, 0.0))
+        return np.stack([self.admissible_counts(row) for row in x])
+
+    def from_length(self, desired) -> np.ndarray:
+        """The design (N,) the shipped position controller issues for a desired length ``desired`` (a signal, m)."""
+        grid = np.arange(0.0, self.duration + 1.0 / self.rate, 0.25 / self.rate)
+        d = np.asarray(jax.vmap(desired)(jnp.asarray(grid)), float) / self.metres_per_step
+        t, counts = step_schedule(d, grid, self.rate, self.t0, self.duration)
+        x = np.zeros(self.size)
+        idx = np.searchsorted(self.edges, t - 1e-9)
+        x[idx] = np.diff(np.concatenate([[0.0], counts]))
+        return x
+
+    def baseline(self) -> np.ndarray:
+        """The baseline design: the recorded length as the desired length (0 steps where none is given)."""
+        return np.zeros(self.size) if self.recorded is None else self.from_length(self.recorded)
+
+    def baseline_inputs(self) -> Inputs:
+        return self.inputs(self.baseline())
+
+    def scaled(self, x, share: float) -> np.ndarray:
+        """Design x with its count scaled by ``share`` ≤ 1 (rounded down): still at most one step per edge."""
+        counts = np.floor(share * np.asarray(self.counts(x), float) + 1e-9)
+        return np.diff(np.concatenate([[0.0], counts]))
+
+    def command(self, x, t) -> np.ndarray:
+        """The commanded length (m) of design x at times ``t`` (T,) s (held between edges), for figures."""
+        c = np.asarray(self.demand(x), float)
+        j = np.searchsorted(self.edges, np.asarray(t), side="right") - 1
+        return np.where(j >= 0, c[np.maximum(j, 0)], 0.0)
+
+    def baseline_command(self, t) -> np.ndarray:
+        return self.command(self.baseline(), t)
+
+    def table(self, x) -> tuple[np.ndarray, dict]:
+        """(time (T,) s, {column: (T,)}) of design x in the experiment CSV's columns: the desired length the shipped
+        controller turns back into exactly this schedule (the count after each edge, reached at the controller's
+        sample before it, linear between samples) and the catheter length, every sample interval and at each of
+        the controller's samples."""
+        n = int(np.floor(self.duration / self.sample_interval + 1e-9))
+        grid = np.round(self.sample_interval * np.arange(0, n + 1), 12)
+        samples = self.edges - 0.5 / self.rate
+        t = np.unique(np.concatenate([grid, samples, [self.duration]]))
+        counts = np.asarray(self.counts(x), float)
+        desired = self.metres_per_step * np.interp(t, samples, counts)
+        catheter = np.asarray(jax.vmap(self.catheter)(jnp.asarray(t)), float)
+        return t, {"desired_length_m": desired, "catheter_length_m": catheter}
+
+    def write_csv(self, path, x) -> Path:
+        """Write design x as an experiment CSV (time_s, desired_length_m, catheter_length_m), which ``growjax
+        simulate --drive inverse`` and ``growjax fit --drive inverse`` (once the length is measured) take."""
+        t, series = self.table(x)
+        ex.write_csv(path, t, series)
+        return Path(path)
+
+    def describe(self, x) -> dict:
+        return {"edges_s": self.edges.tolist(), "steps": np.asarray(x, float).tolist(),
+                "commanded_length_m": np.asarray(self.demand(x)).tolist()}
+
+    def settings(self) -> dict:
+        return {"drive": self.drive, "duration_s": self.duration, "controller_rate_Hz": self.rate,
+                "metres_per_step": self.metres_per_step, "sample_interval_s": self.sample_interval}
+
+
+def stepper_space(base, duration: float, experiment: ex.Experiment | None = None) -> StepperSpace:
+    """The :class:`StepperSpace` of the stepper drive's parameters ``base`` over ``duration`` s, with the catheter
+    and the baseline (its recorded length as the desired length) of an experiment already run, if given."""
+    recorded = None
+    if experiment is not None and "robot_length_m" in experiment:
+        t = np.asarray(experiment.time, float)
+        y = np.asarray(experiment["robot_length_m"], float)
+        if t[-1] < duration:
+            t, y = np.append(t, duration + 1.0), np.append(y, y[-1])
+        recorded = Sampled(jnp.asarray(t), jnp.asarray(y))
+    per_metre = float(ex.demand_steps(base, 1.0))
+    return StepperSpace(float(duration), 1.0 / per_metre, float(base.motor.controller_rate),
+                        catheter_of(experiment, duration), recorded, t0=Config().t0)

@@ -1,5 +1,7 @@
-"""One design end to end: the random admissible batch, the descent from its best, the check of the result over
-every draw, and the table that sets the design beside the published pulse train and the best random input."""
+"""One design end to end: the random admissible batch, the search from its best (a descent for the forward drive's
+demand, a local search over the stepper's schedule), the check of the result over every draw, and the table that
+sets the design beside the baseline (the published pulse train; for the stepper, the recorded length as its
+demand) and the best random input."""
 
 from __future__ import annotations
 
@@ -19,8 +21,8 @@ from growjax.design import discrimination as ddis
 from growjax.design import optimise as dopt
 from growjax.design import problem as dprob
 from growjax.design.knowledge import Knowledge
-from growjax.design.space import DesignSpace
-from growjax.signals import Inputs, published_pulse
+from growjax.design.space import DesignSpace, StepperSpace
+from growjax.signals import Inputs
 from growjax.simulate import input_breaks
 
 SHRINK = (0.97, 0.93, 0.88, 0.8, 0.7)  # demand scalings tried on a design that fails its check
@@ -34,8 +36,9 @@ class DesignError(ValueError):
 class DesignResult:
     """A designed input and what it is predicted to give.
 
-    ``x`` (K − 1,) the design, ``knots`` (K,) s and ``demand`` (K,) Pa its demand; ``rows``: the table, one row per
-    input ("published pulse train", "best random input", "design") and sensor set, each parameter's predicted sd
+    ``x`` the design, ``knots`` (K,) s and ``demand`` (K,) its demand there (Pa at the knots; for the stepper, the
+    commanded length, m, after each edge); ``rows``: the table, one row per input (the space's baseline, "best
+    random input", "design") and sensor set, each parameter's predicted sd
     of ln θ with what is known (``sd_log``: averaged over the points, with what the fit's linearised rig misses),
     from the next experiment alone (``sd_log_alone``), the classical local prediction at the estimate
     (``sd_log_local``) and its 90 % interval (SI); ``checks``: {input: :class:`growjax.design.constraints.Check`
@@ -43,7 +46,7 @@ class DesignResult:
 
     names: tuple
     estimate: np.ndarray
-    space: DesignSpace
+    space: DesignSpace | StepperSpace
     x: np.ndarray
     knots: np.ndarray
     demand: np.ndarray
@@ -64,9 +67,8 @@ class DesignResult:
         defined = np.asarray(random.criterion)[np.isfinite(random.criterion)]  # inf or NaN: the model failed, or no information
         return {
             "parameters": list(self.names), "criterion": self.criterion, "sensors": list(self.sensors),
-            "duration_s": self.space.duration, "knot_spacing_s": self.space.knot_spacing,
-            "p_max_Pa": self.space.p_max, "sample_interval_s": self.space.sample_interval,
-            "design": {"knots_s": self.knots.tolist(), "demand_Pa": self.demand.tolist(), "demand_scaled": self.scaled},
+            **self.space.settings(),
+            "design": {**self.space.describe(self.x), "demand_scaled": self.scaled},
             "table": self.rows,
             "checks": {k: c.row(0) for k, c in self.checks.items()},
             "limits": self.limits.summary(),
@@ -82,12 +84,13 @@ class DesignResult:
         }
 
 
-def published_inputs(space: DesignSpace) -> Inputs:
-    """The baseline: the published pulse train with the design's catheter."""
-    return Inputs(catheter_length=space.catheter, pressure_demand=published_pulse())
+def published_inputs(space: DesignSpace | StepperSpace) -> Inputs:
+    """The baseline: the published pulse train with the design's catheter (for the stepper: the recorded length
+    as its demand)."""
+    return space.baseline_inputs()
 
 
-def design(knowledge: Knowledge, space: DesignSpace, criterion: str = "A", sensors=("length",), random: int = 64,
+def design(knowledge: Knowledge, space: DesignSpace | StepperSpace, criterion: str = "A", sensors=("length",), random: int = 64,
            starts: int = 1, iterations: int = dopt.ITERATIONS, n_draws: int = dcon.DRAWS, seed: int = 0,
            points: int = dprob.POINTS, pressure_noise: float = dcrit.PRESSURE_NOISE, limits: dcon.Limits | None = None,
            learning_rate: float = dopt.LEARNING_RATE, nonlinear_draws: int = dprob.NONLINEAR_DRAWS,
@@ -95,14 +98,16 @@ def design(knowledge: Knowledge, space: DesignSpace, criterion: str = "A", senso
     """Design the next experiment's input for the precision of ``knowledge``'s parameters.
 
     ``random`` random admissible inputs are drawn and scored (:func:`growjax.design.optimise.random_admissible`);
-    the optimiser descends from the ``starts`` best of them (``iterations`` Adam steps each); the best result that
-    passes the check over ``n_draws`` draws of the rig and θ (scaled down a little where it does not) is the design.
+    the optimiser descends from the ``starts`` best of them (``iterations`` Adam steps each; for a
+    :class:`growjax.design.StepperSpace`, ``iterations`` moves of :func:`growjax.design.optimise.local_search`);
+    the best result that passes the check over ``n_draws`` draws of the rig and θ (scaled down a little where it
+    does not) is the design.
     ``points``: the points of (θ, rig) the criterion is averaged over (1: the local design at the estimate; the
     criterion's cost grows with each point);
     ``nonlinear_draws``: draws of the rig on which what its linearisation misses is measured (0: none);
     ``gradient``: the descent's slope, ``"differences"`` over a step of the demand or ``"jax"``, exact
     (:func:`growjax.design.optimise.multistart`). The
-    table reports the design, the best random input and the published pulse train under ``sensors`` and, where
+    table reports the design, the best random input and the space's baseline under ``sensors`` and, where
     the pressure is recorded, under the length alone. DesignError where nothing admissible is found.
     """
     clock, wall = time.perf_counter(), {}
@@ -110,19 +115,20 @@ def design(knowledge: Knowledge, space: DesignSpace, criterion: str = "A", senso
     problem = dprob.make(knowledge, space, criterion, sensors, pressure_noise, limits, points, seed,
                          nonlinear_draws=nonlinear_draws)
     lim = problem.limits
-    if space.p_max > lim.pressure + 1e-9:
+    if space.drive == "forward" and space.p_max > lim.pressure + 1e-9:
         raise ValueError(f"p_max {space.p_max / 1e3:.1f} kPa is above the sensed-pressure ceiling "
                          f"{lim.pressure / 1e3:.1f} kPa (the membrane limit {lim.membrane / 1e3:.1f} kPa × the margin)")
     sets = [sensors] if sensors == ("length",) else [("length",), sensors]
     rows, batch, descents, x, scaled, checks, wall = _search(
         problem, knowledge, space, random, starts, iterations, n_draws, seed, learning_rate, gradient, progress,
-        lambda inputs, breaks: _row(problem, knowledge, "published pulse train", inputs, breaks, sets))
+        lambda inputs, breaks: _row(problem, knowledge, space.baseline_label, inputs, breaks, sets))
     best_random = batch.designs[batch.best]
     for label, inputs, breaks in (("best random input", space.inputs(best_random), problem.breaks),
                                   ("design", space.inputs(x), problem.breaks)):
         rows += _row(problem, knowledge, label, inputs, breaks, sets)
     wall["total_s"] = time.perf_counter() - clock
-    return DesignResult(tuple(knowledge.names), knowledge.estimate, space, x, space.knots, np.asarray(space.demand(x)),
+    knots = space.edges if space.drive == "inverse" else space.knots
+    return DesignResult(tuple(knowledge.names), knowledge.estimate, space, x, knots, np.asarray(space.demand(x)),
                         rows, checks, batch, descents, lim, criterion, sensors, knowledge.summary(), wall, scaled)
 
 
@@ -142,6 +148,8 @@ def discriminate(knowledge: Knowledge, space: DesignSpace, effects, sizes=None, 
     effects; DesignError where nothing admissible is found."""
     from growjax.discover import boundary_threshold
 
+    if space.drive != "forward":
+        raise ValueError("the discrimination design is built for the forward drive's demand, not the stepper's schedule")
     clock = time.perf_counter()
     problem = ddis.make(knowledge, space, effects, sizes, limits)
     lim = problem.limits
@@ -171,14 +179,14 @@ def discriminate(knowledge: Knowledge, space: DesignSpace, effects, sizes=None, 
 
 def _search(problem, knowledge, space, random, starts, iterations, n_draws, seed, learning_rate, gradient, progress,
             baseline):
-    """The random batch, the descent from its best, the check of the result and of the two baselines over the
-    draws; beside them (its programs compile while the search runs) ``baseline(inputs, breaks)`` of the published
-    pulse train, the table's row: (that row, batch, descents, design, the share of its demand kept, checks, wall
+    """The random batch, the search from its best, the check of the result and of the two baselines over the
+    draws; beside them (its programs compile while the search runs) ``baseline(inputs, breaks)`` of the space's
+    baseline, the table's row: (that row, batch, descents, design, the share of its demand kept, checks, wall
     times)."""
     wall = {}
     lim = problem.limits
     drawn = dcon.draws(knowledge, n_draws, seed)
-    base_inputs = published_inputs(space)
+    base_inputs = space.baseline_inputs()
     base_breaks = input_breaks(base_inputs, space.config())
     with ThreadPoolExecutor(max_workers=1) as pool:
         published = pool.submit(lambda: (baseline(base_inputs, base_breaks),
@@ -189,14 +197,17 @@ def _search(problem, knowledge, space, random, starts, iterations, n_draws, seed
         wall["random_s"] = batch.wall_s
         t = time.perf_counter()
         order = batch.order()[: max(starts, 1)]
-        descents = dopt.multistart(problem, batch.designs[order], iterations, learning_rate, gradient, progress)
+        if space.drive == "inverse":
+            descents = dopt.local_search(problem, space, batch.designs[order], iterations, seed, progress=progress)
+        else:
+            descents = dopt.multistart(problem, batch.designs[order], iterations, learning_rate, gradient, progress)
         wall["descent_s"] = time.perf_counter() - t
         t = time.perf_counter()
         x, scaled, check = _admissible(problem, space, knowledge, _by_reported(problem, space, descents, batch, starts),
                                        drawn, lim)
         wall["check_s"] = time.perf_counter() - t
         checks = {"design": check, "best random input": _one(space, knowledge, batch.designs[batch.best], drawn, lim)}
-        row, checks["published pulse train"] = published.result()
+        row, checks[space.baseline_label] = published.result()
     return row, batch, descents, x, scaled, checks, wall
 
 
@@ -223,8 +234,7 @@ def _admissible(problem, space, knowledge, xs, drawn, lim):
                        lim, drawn)
     for i in np.flatnonzero(check.admissible):
         return xs[i], 1.0, _one(space, knowledge, xs[i], drawn, lim)
-    best = np.asarray(space.demand(xs[0]))
-    scaled = [space.unconstrained(f * best) for f in SHRINK]
+    scaled = [space.scaled(xs[0], f) for f in SHRINK]
     check = dcon.check(dcon.stack([space.inputs(x) for x in scaled]), knowledge, space.config(), space.times,
                        space.breaks(), lim, drawn)
     for i in np.flatnonzero(check.admissible):
