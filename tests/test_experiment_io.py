@@ -27,6 +27,7 @@ def test_good_file_reads(tmp_path):
         (GOOD.replace("0.011,", "nan,"), "NaN"),
         (GOOD.replace("0.1,", "0.3,"), "not sorted"),
         (GOOD.replace("0.2,", "0.1,"), "duplicate"),
+        (GOOD.replace("0.2,", "0.10000000000000009,"), "duplicate times .two samples within 1e-09 s"),
         (GOOD.replace("0.010,", "10.0,").replace("0.011,", "11.0,").replace("0.012,", "12.0,"), "millimetres"),
         (GOOD.replace("0.011,", "-0.011,"), "negative"),
         (GOOD.replace("time_s", "time"), "no time_s"),

@@ -24,6 +24,7 @@ from growjax.signals import Constant, Inputs, Sampled, StepSchedule, published_p
 COLUMNS = ("robot_length_m", "pressure_Pa", "catheter_length_m", "pressure_demand_Pa", "desired_length_m")
 LENGTH_COLUMNS = ("robot_length_m", "catheter_length_m", "desired_length_m")
 MAX_PLAUSIBLE_LENGTH_M = 2.0  # a robot or catheter longer than this is almost surely in millimetres
+MIN_SAMPLE_SPACING_S = 1e-9  # s: samples closer than this are one instant read twice
 
 
 class ExperimentError(ValueError):
@@ -59,10 +60,11 @@ def validate_series(time, series: dict, source: str = "") -> None:
     if not np.all(np.isfinite(time)):
         raise ExperimentError(f"time_s{where} contains NaN or infinite values (row {int(np.argmin(np.isfinite(time))) + 1})")
     dt = np.diff(time)
-    if np.any(dt == 0):
-        raise ExperimentError(f"time_s{where} has duplicate times (first at t = {time[1:][dt == 0][0]} s)")
     if np.any(dt < 0):
         raise ExperimentError(f"time_s{where} is not sorted: it decreases at t = {time[1:][dt < 0][0]} s")
+    if np.any(dt < MIN_SAMPLE_SPACING_S):  # two readings of one instant: no noise model can tell them apart
+        raise ExperimentError(f"time_s{where} has duplicate times (two samples within "
+                              f"{MIN_SAMPLE_SPACING_S:g} s, first at t = {time[1:][dt < MIN_SAMPLE_SPACING_S][0]} s)")
     for name, values in series.items():
         values = np.asarray(values, float)
         if values.shape != time.shape:

@@ -295,7 +295,7 @@ class StepperSpace:
         the controller's samples."""
         n = int(np.floor(self.duration / self.sample_interval + 1e-9))
         grid = np.round(self.sample_interval * np.arange(0, n + 1), 12)
-        samples = self.edges - 0.5 / self.rate
+        samples = np.round(self.edges - 0.5 / self.rate, 12)  # the controller's samples (the first at t0)
         t = np.unique(np.concatenate([grid, samples, [self.duration]]))
         counts = np.asarray(self.counts(x), float)
         desired = self.metres_per_step * np.interp(t, samples, counts)
