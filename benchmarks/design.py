@@ -422,7 +422,8 @@ def main():
            "maker": args.maker, "rig": args.rig, "inputs": args.inputs, "relinearise": args.relinearise,
            "rig_tangents": args.rig_tangents, "growth_law": args.growth_law}
     if space.drive == "inverse":
-        job.update(edges=space.edges.tolist(), steps={"design": np.asarray(x).tolist(), baseline: space.baseline().tolist()})
+        job.update(edges=space.edges.tolist(),
+                   steps={"design": np.asarray(x).tolist(), baseline: space.baseline().tolist()})
     else:
         job.update(knots=space.knots.tolist(), demand=np.asarray(space.demand(x)).tolist())
     partial = out.with_suffix(".partial.jsonl")  # replications as they finish

@@ -224,7 +224,8 @@ def test_a_stepper_schedule_is_written_as_the_desired_length_the_controller_turn
         np.testing.assert_array_equal(issued, designed)
     # the recorded length as the desired length: what the shipped model's stepper does with it
     shipped = ex.to_inputs(exp, "inverse", base, 0.001, 4.0).steps
-    np.testing.assert_array_equal(np.asarray(jax.vmap(shipped)(after)), np.asarray(jax.vmap(space.inputs(baseline).steps)(after)))
+    np.testing.assert_array_equal(np.asarray(jax.vmap(shipped)(after)),
+                                  np.asarray(jax.vmap(space.inputs(baseline).steps)(after)))
     assert np.sum(baseline) > 0 and np.all(np.cumsum(scaled) <= np.cumsum(xs[0]))
     assert len(moved) == len({m.tobytes() for m in moved}) and np.all(np.sum(moved != baseline, axis=1) <= 2)
 
@@ -314,7 +315,8 @@ def test_a_stepper_design_beats_the_recorded_length_and_the_best_random_schedule
     """The stepper's schedule designed for Y (what is known carried over from a forward fit); its CSV runs through
     ``growjax simulate --drive inverse`` inside the limits."""
     base = gj.reference("inverse")
-    known = _knowledge(sd=0.02, tolerances={"robot.catheter_friction": 0.2, "pump.screw_viscous_friction": 0.2}).on(base)
+    tolerances = {"robot.catheter_friction": 0.2, "pump.screw_viscous_friction": 0.2}
+    known = _knowledge(sd=0.02, tolerances=tolerances).on(base)
     assert float(gj.get(known.base, Y)) == 9000.0 and known.base.motor.controller_rate == base.motor.controller_rate
     space = gd.stepper_space(base, 3.0, ex.read(DATA, catheter=True))
     res = gd.design(known, space, random=6, iterations=3, n_draws=4, seed=0, points=2, nonlinear_draws=2)

@@ -249,8 +249,8 @@ class StepperSpace:
         return x
 
     def random(self, n: int, rng: np.random.Generator) -> np.ndarray:
-        """n random schedules (n, N): per schedule a share a ~ U(0, 1) of edges stepping forward and r ~ U(0, ½)(1 − a)
-        stepping back (so slow, fast and retracting schedules are all drawn), the count kept ≥ 0."""
+        """n random schedules (n, N): per schedule a share a ~ U(0, 1) of edges stepping forward and
+        r ~ U(0, ½)(1 − a) stepping back (so slow, fast and retracting schedules are all drawn), the count kept ≥ 0."""
         a = rng.uniform(0.0, 1.0, (n, 1))
         r = rng.uniform(0.0, 0.5, (n, 1)) * (1.0 - a)
         u = rng.uniform(0.0, 1.0, (n, self.size))

@@ -90,8 +90,8 @@ def published_inputs(space: DesignSpace | StepperSpace) -> Inputs:
     return space.baseline_inputs()
 
 
-def design(knowledge: Knowledge, space: DesignSpace | StepperSpace, criterion: str = "A", sensors=("length",), random: int = 64,
-           starts: int = 1, iterations: int = dopt.ITERATIONS, n_draws: int = dcon.DRAWS, seed: int = 0,
+def design(knowledge: Knowledge, space: DesignSpace | StepperSpace, criterion: str = "A", sensors=("length",),
+           random: int = 64, starts: int = 1, iterations: int = dopt.ITERATIONS, n_draws: int = dcon.DRAWS, seed: int = 0,
            points: int = dprob.POINTS, pressure_noise: float = dcrit.PRESSURE_NOISE, limits: dcon.Limits | None = None,
            learning_rate: float = dopt.LEARNING_RATE, nonlinear_draws: int = dprob.NONLINEAR_DRAWS,
            gradient: str = "differences", progress: bool = False) -> DesignResult:
