@@ -15,7 +15,9 @@ experiment leaves undetermined, enter with their box's uniform prior). Then:
     the batch.
 (b) Replications: ``--replications`` times, a rig drawn from the default tolerance budget and θ at its estimate;
     the design's input and the published pulse train each run by the reference configuration on that rig,
-    with fresh white length noise (the fitted noise sd; and 1 kPa pressure noise where ``--sensors`` records it);
+    with fresh white length noise (the fitted noise sd; and 1 kPa pressure noise where ``--sensors`` records it;
+    with ``--discrepancy-in-data``, also a fresh draw of the Matérn-3/2 discrepancy the first fit found, the
+    residual model the prediction assumes);
     each fitted alone by ``growjax.fit.fit`` (default likelihood, the rig's errors inferred as parameters of the
     model, as ``growjax fit`` does; ``--no-rig-tangents``: their secants, linearised once at nominal, or with
     ``--relinearise`` taken again where the data put the rig). Reported per input: the
@@ -120,6 +122,14 @@ def replicate(job: dict) -> dict:
             out[label] = {"status": gj.status_name(traj.status)}
             continue
         length = np.asarray(traj.length)[1:] + rng.normal(0.0, job["noise_m"], times.size)
+        if job.get("discrepancy"):  # δ ~ GP(0, Matérn-3/2), a fresh draw per input
+            import jax
+
+            from growjax import discrepancy as dc
+
+            a, ell = job["discrepancy"]
+            key = jax.random.PRNGKey(int(rng.integers(2**31)))
+            length = length + np.asarray(dc.sample(key, times, dc.Hyper.of(a, ell, 0.0, 0.0)))
         pressure = None
         if job["pressure"]:
             pressure = np.asarray(traj.pressure)[1:] + rng.normal(0.0, job["pressure_noise"], times.size)
@@ -324,6 +334,8 @@ def main():
                          "as growjax fit; default); --no-rig-tangents: secants, linearised once at nominal")
     ap.add_argument("--relinearise", action="store_true",
                     help="with --no-rig-tangents: the secants taken again where the data put the rig")
+    ap.add_argument("--discrepancy-in-data", action="store_true",
+                    help="the replications' data also carry a fresh draw of the discrepancy the first fit found")
     ap.add_argument("--safety-draws", type=int, default=100,
                     help="fresh draws of the rig and θ the design is run on by the reference configuration (0: none)")
     ap.add_argument("--resume", action="store_true",
@@ -420,7 +432,9 @@ def main():
            "drive": space.drive, "duration": args.duration,
            "noise_m": float(known.hyper.noise), "pressure": "pressure" in sensors, "pressure_noise": 1e3,
            "maker": args.maker, "rig": args.rig, "inputs": args.inputs, "relinearise": args.relinearise,
-           "rig_tangents": args.rig_tangents, "growth_law": args.growth_law}
+           "rig_tangents": args.rig_tangents, "growth_law": args.growth_law,
+           "discrepancy": [float(known.hyper.amplitude), float(known.hyper.time_scale)] if args.discrepancy_in_data
+           else None}
     if space.drive == "inverse":
         job.update(edges=space.edges.tolist(),
                    steps={"design": np.asarray(x).tolist(), baseline: space.baseline().tolist()})
