@@ -57,6 +57,18 @@ def test_fit_intervals_cover_the_truth_on_data_made_by_the_reference(grid, least
     assert np.max(np.abs(errors)) < 3.5, errors  # no estimate far outside its interval
 
 
+def test_a_direction_the_data_do_not_inform_is_undetermined_even_alone():
+    """Relative to the best-informed direction, and in absolute terms: a single free parameter whose information on
+    ln θ is ~0 (Y run to ~0 Pa, where it no longer acts) gets no interval, rather than the pseudo-inverse's zero."""
+    names = ("robot.yield_pressure", "robot.extensibility")
+    assert gf.undetermined_directions(np.array([[3e-13]]), names[:1])[1].tolist() == [True]
+    assert gf.undetermined_directions(np.array([[2e3]]), names[:1])[1].tolist() == [False]  # ±2.2 % of Y
+    assert gf.undetermined_directions(np.array([[2 * gf.INFORMATION_FLOOR]]), names[:1])[1].tolist() == [False]
+    rotated, blind = gf.undetermined_directions(np.array([[4e4, 0.0], [0.0, 1e-8]]), names)
+    assert blind.tolist() == [False, True] and len(rotated) == 1
+    assert abs(rotated[0]["direction"]["robot.extensibility"]) == pytest.approx(1.0)
+
+
 @pytest.mark.slow
 def test_fit_names_ext_and_n_as_undetermined():
     cfg, inputs, times, length = _synthetic(2.0, seed=12)

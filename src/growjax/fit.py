@@ -52,6 +52,10 @@ def default_model_error(config: Config) -> float:
     return FAST_MODEL_ERROR if config.fidelity == "fast" else 0.0
 
 LM_TOLERANCE = 1e-6  # rtol = atol of the Levenberg–Marquardt stop, on ln θ and the cost
+# Information on ln θ below this (the data alone put its sd above 10: a factor e^±16 at 90 %) leaves a direction
+# undetermined, whatever the other directions hold: no interval is reported along it. (A relative test alone
+# cannot see a single free parameter the data do not inform, such as Y driven to ~0 Pa where it no longer acts.)
+INFORMATION_FLOOR = 1e-2
 
 
 def default_range(base: gp.Parameters, name: str) -> tuple[float, float]:
@@ -257,8 +261,9 @@ def fit(
     if rig_tangents and rig == "inferred" and tol:
         full = make_problem(base, names + tuple(tol), inputs, config, times, length, pressure, window, sigma_length,
                             sigma_pressure)
+        box = np.log(np.array([default_range(base, n) for n in names]).T / refs)  # (2, p): the starts' box in z
         zs, costs, oks, z, b, raw, hyper, converged, likelihood, linearisations = _solve_tangents(
-            likelihood, z0s, bounds, max_steps, full, tol, discrepancy)
+            likelihood, z0s, bounds, max_steps, full, tol, discrepancy, box)
     else:
         zs, costs, oks, z, b, raw, hyper, converged, likelihood, linearisations = _solve(
             likelihood, z0s, bounds, max_steps, problem, tol, discrepancy, rig,
@@ -350,12 +355,16 @@ def _solve(likelihood, z0s, bounds, max_steps: int, problem, tol: dict, discrepa
     return zs, costs, oks, z, b, raw, hyper, converged, likelihood, linearisations
 
 
-def _solve_tangents(likelihood, z0s, bounds, max_steps: int, problem, tol: dict, discrepancy: str):
+def _solve_tangents(likelihood, z0s, bounds, max_steps: int, problem, tol: dict, discrepancy: str, box=None):
     """:func:`_solve` with the rig's errors β = ln(ψ/ψ₀) among the model's parameters (``problem`` frees θ then
     the toleranced parameters, in ``tol``'s order): least squares from every start with the rig nominal; from the
     best, least squares of (z, β) with β's prior rows β/u (before any discrepancy is estimated: a misfit is then
     the model's to remove, not the discrepancy's to absorb); then generalised least squares of (z, β)
     alternating with the hyperparameters' mode, the rig's sensitivities at every point its exact tangents there.
+    Where the best start left the sampling ``box`` (lower, upper) of z, the (z, β) least squares also starts from
+    it brought back into the box, and the lower cost wins: with the rig held nominal a misfit that is the rig's can
+    drive θ where it stops acting (Y to ~0 Pa on a stepper run from a rig far off nominal), and from there the
+    rig's errors cannot pull it back.
     Returns what :func:`_solve` returns, the likelihood linearised at the estimate (its centre β, b = 0)."""
     q, p = len(tol), z0s.shape[1]
     u, n, scale = np.asarray(list(tol.values()), float), likelihood.n_len, likelihood.sigma_length
@@ -367,7 +376,7 @@ def _solve_tangents(likelihood, z0s, bounds, max_steps: int, problem, tol: dict,
 
     solved = [levenberg_marquardt(nominal, z0, max_steps, LM_TOLERANCE, bounds=bounds) for z0 in z0s]
     zs, costs, oks = (np.asarray([s[k] for s in solved]) for k in range(3))
-    w = np.concatenate([np.asarray(zs[int(np.argmin(costs))]), np.zeros(q)])
+    z1 = np.asarray(zs[int(np.argmin(costs))])
     w_bounds = with_rig_bounds(bounds, q)
     prior = np.concatenate([np.zeros((q, p)), np.diag(1.0 / u)], axis=1)
 
@@ -375,7 +384,10 @@ def _solve_tangents(likelihood, z0s, bounds, max_steps: int, problem, tol: dict,
         r, jac = likelihood.weighted(*model(jnp.asarray(v)))
         return np.concatenate([np.asarray(r), np.asarray(v)[p:] / u]), np.concatenate([np.asarray(jac), prior])
 
-    w, _, converged, _, _ = levenberg_marquardt(with_prior, w, max_steps, LM_TOLERANCE, bounds=w_bounds)
+    firsts = [z1] if box is None or np.all((z1 >= box[0]) & (z1 <= box[1])) else [z1, np.clip(z1, *box)]
+    runs = [levenberg_marquardt(with_prior, np.concatenate([z, np.zeros(q)]), max_steps, LM_TOLERANCE,
+                                bounds=w_bounds) for z in firsts]
+    w, _, converged, _, _ = min(runs, key=lambda run: run[1])
 
     def at(v):  # the likelihood linearised at v = (z, β), and (r, J_z) there
         r, jac = model(jnp.asarray(v))
@@ -635,17 +647,24 @@ def _check_window(window, config: Config):
     return t0, t1
 
 
+def undetermined_directions(info, names) -> tuple[list, np.ndarray]:
+    """The directions of z = ln θ the information ``info`` (p, p) leaves undetermined, as
+    [{"eigenvalue", "direction": {name: loading}}], and which parameters (p,) bool load on any of them (> 0.1): an
+    eigenvalue below 1e-10 of the largest, or below :data:`INFORMATION_FLOOR`."""
+    evals, evecs = np.linalg.eigh(np.asarray(info, float))
+    tol = max(1e-10 * float(evals[-1]), INFORMATION_FLOOR)
+    low = [k for k in range(len(names)) if evals[k] < tol]
+    blind = np.zeros(len(names), bool)
+    for k in low:
+        blind |= np.abs(evecs[:, k]) > 0.1
+    return [{"eigenvalue": float(evals[k]), "direction": dict(zip(names, map(float, evecs[:, k])))} for k in low], blind
+
+
 def _result(names, theta, z, cov, parts, info, hyper, likelihood, raw, starts, converged, bounds, start_clock,
             samples_used, kind) -> FitResult:
     p = len(names)
     evals, evecs = np.linalg.eigh(info)
-    tol = 1e-10 * max(float(evals[-1]), 1e-300)
-    undetermined = [{"eigenvalue": float(evals[k]), "direction": dict(zip(names, map(float, evecs[:, k])))}
-                    for k in range(p) if evals[k] < tol]
-    blind = np.zeros(p, bool)
-    for k in range(p):
-        if evals[k] < tol:
-            blind |= np.abs(evecs[:, k]) > 0.1
+    undetermined, blind = undetermined_directions(info, names)
     sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     with np.errstate(over="ignore"):  # an sd of ln θ in the hundreds: the interval's ends are 0 and inf
         interval = {n: (None if blind[i] else (float(theta[i] * np.exp(-Z90 * sd[i])),
