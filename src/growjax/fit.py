@@ -662,7 +662,6 @@ def undetermined_directions(info, names) -> tuple[list, np.ndarray]:
 
 def _result(names, theta, z, cov, parts, info, hyper, likelihood, raw, starts, converged, bounds, start_clock,
             samples_used, kind) -> FitResult:
-    p = len(names)
     evals, evecs = np.linalg.eigh(info)
     undetermined, blind = undetermined_directions(info, names)
     sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
