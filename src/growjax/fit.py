@@ -261,9 +261,8 @@ def fit(
     if rig_tangents and rig == "inferred" and tol:
         full = make_problem(base, names + tuple(tol), inputs, config, times, length, pressure, window, sigma_length,
                             sigma_pressure)
-        box = np.log(np.array([default_range(base, n) for n in names]).T / refs)  # (2, p): the starts' box in z
         zs, costs, oks, z, b, raw, hyper, converged, likelihood, linearisations = _solve_tangents(
-            likelihood, z0s, bounds, max_steps, full, tol, discrepancy, box)
+            likelihood, z0s, bounds, max_steps, full, tol, discrepancy, sampling_box(base, names, refs))
     else:
         zs, costs, oks, z, b, raw, hyper, converged, likelihood, linearisations = _solve(
             likelihood, z0s, bounds, max_steps, problem, tol, discrepancy, rig,
@@ -361,10 +360,8 @@ def _solve_tangents(likelihood, z0s, bounds, max_steps: int, problem, tol: dict,
     best, least squares of (z, β) with β's prior rows β/u (before any discrepancy is estimated: a misfit is then
     the model's to remove, not the discrepancy's to absorb); then generalised least squares of (z, β)
     alternating with the hyperparameters' mode, the rig's sensitivities at every point its exact tangents there.
-    Where the best start left the sampling ``box`` (lower, upper) of z, the (z, β) least squares also starts from
-    it brought back into the box, and the lower cost wins: with the rig held nominal a misfit that is the rig's can
-    drive θ where it stops acting (Y to ~0 Pa on a stepper run from a rig far off nominal), and from there the
-    rig's errors cannot pull it back.
+    The (z, β) least squares starts from :func:`rig_stage_starts` (the best start, and where it left the sampling
+    ``box`` also its clip into it), the lower cost winning.
     Returns what :func:`_solve` returns, the likelihood linearised at the estimate (its centre β, b = 0)."""
     q, p = len(tol), z0s.shape[1]
     u, n, scale = np.asarray(list(tol.values()), float), likelihood.n_len, likelihood.sigma_length
@@ -384,9 +381,8 @@ def _solve_tangents(likelihood, z0s, bounds, max_steps: int, problem, tol: dict,
         r, jac = likelihood.weighted(*model(jnp.asarray(v)))
         return np.concatenate([np.asarray(r), np.asarray(v)[p:] / u]), np.concatenate([np.asarray(jac), prior])
 
-    firsts = [z1] if box is None or np.all((z1 >= box[0]) & (z1 <= box[1])) else [z1, np.clip(z1, *box)]
     runs = [levenberg_marquardt(with_prior, np.concatenate([z, np.zeros(q)]), max_steps, LM_TOLERANCE,
-                                bounds=w_bounds) for z in firsts]
+                                bounds=w_bounds) for z in rig_stage_starts(z1, box)]
     w, _, converged, _, _ = min(runs, key=lambda run: run[1])
 
     def at(v):  # the likelihood linearised at v = (z, β), and (r, J_z) there
@@ -399,6 +395,22 @@ def _solve_tangents(likelihood, z0s, bounds, max_steps: int, problem, tol: dict,
         lambda v, h: (lambda lk, rw: lk.estimate(rw[0], discrepancy, h))(*at(v)), w, w_bounds, max_steps)
     lik, raw = at(w)
     return zs, costs, oks, w[:p], np.zeros(q), raw, hyper, converged, lik, 1
+
+
+def sampling_box(base: gp.Parameters, names, refs) -> np.ndarray:
+    """(2, p): the starts' sampling box (:func:`default_range`) in z = ln(θ/θ_ref), lower then upper."""
+    return np.log(np.array([default_range(base, n) for n in names]).T / np.asarray(refs, float))
+
+
+def rig_stage_starts(z, box=None) -> list:
+    """The starts of the least squares that fits the rig's errors beside z: the nominal-rig stage's best z, and
+    where z left the sampling ``box`` (2, p), z brought back into it too (the lower cost is kept). With the rig
+    held nominal, a misfit that is the rig's can run θ to where it stops acting (Y to ~0 Pa on a stepper run from
+    a rig far off nominal), and from there the rig's errors cannot pull it back; from the box's edge they can."""
+    z = np.asarray(z, float)
+    if box is None or np.all((z >= box[0]) & (z <= box[1])):
+        return [z]
+    return [z, np.clip(z, box[0], box[1])]
 
 
 def with_rig_bounds(bounds, q: int):

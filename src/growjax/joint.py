@@ -182,7 +182,7 @@ def fit_set(
     model_error = gf.default_model_error(config) if model_error is None else model_error
     if tangents:
         return _fit_tangents(batch, layout, likelihoods, tol, z, bounds, discrepancy, max_steps, model_error, runs,
-                             rig_errors, clock)
+                             rig_errors, clock, bases[0])
     plain = likelihoods
     centre = np.zeros(len(layout.rig_labels) if tol and rig == "inferred" else 0)  # rig point of linearisation
     b, hypers = centre.copy(), [None] * len(runs)
@@ -237,9 +237,10 @@ def _on_z(outs, p: int):
 
 
 def _fit_tangents(batch: _Batch, layout: _Layout, plain, tol: dict, z, bounds, discrepancy: str, max_steps: int,
-                  model_error: float, runs, rig_errors: str, clock) -> SetFitResult:
+                  model_error: float, runs, rig_errors: str, clock, base) -> SetFitResult:
     """The set's fit from z (P,) (least squares with the rig nominal) with the rig's errors b (Q,) among the runs'
-    model parameters: least squares of w = (z, b) with b's prior rows b/u, then generalised least squares of w
+    model parameters: least squares of w = (z, b) with b's prior rows b/u (from
+    :func:`growjax.fit.rig_stage_starts` in ``base``'s sampling box), then generalised least squares of w
     alternating with each run's hyperparameters, every run linearised at w with its rig's exact tangents there (as
     :func:`growjax.fit._solve_tangents`, run by run)."""
     p, p_all, q_all = layout.index.shape[1], len(layout.labels), len(layout.rig_labels)
@@ -251,8 +252,10 @@ def _fit_tangents(batch: _Batch, layout: _Layout, plain, tol: dict, z, bounds, d
         r, jac = _weighted(batch.linearised(w, layout), plain, layout, q_all)
         return np.concatenate([r, np.asarray(w)[p_all:] / u]), np.concatenate([jac, prior])
 
-    w, _, converged, _, _ = levenberg_marquardt(independent, np.concatenate([z, np.zeros(q_all)]), max_steps,
-                                                gf.LM_TOLERANCE, bounds=w_bounds)
+    box = gf.sampling_box(base, [lab.split("@")[0] for lab in layout.labels], layout.refs)
+    w, _, converged, _, _ = min((levenberg_marquardt(independent, np.concatenate([z0, np.zeros(q_all)]), max_steps,
+                                                     gf.LM_TOLERANCE, bounds=w_bounds)
+                                 for z0 in gf.rig_stage_starts(z, box)), key=lambda run: run[1])
 
     def at(w):  # each run linearised at w: its likelihood with the rig's tangents there, and (r, J_θ)
         outs = batch.linearised(w, layout)
