@@ -87,9 +87,11 @@ def knowledge_of(args):
 
 def replicate(job: dict) -> dict:
     """One replication: a drawn rig, both inputs run by the reference configuration with fresh noise, each fitted."""
+    import jax
     import jax.numpy as jnp
 
     import growjax as gj
+    from growjax import discrepancy as dc
     from growjax import fit as gf
     from growjax.control.profile import KnotProfile
 
@@ -102,10 +104,9 @@ def replicate(job: dict) -> dict:
     times = np.asarray(job["times"])
     catheter = gj.Sampled(jnp.asarray(job["catheter_t"]), jnp.asarray(job["catheter_m"]))
     if drive == "inverse":
-        edges = jnp.asarray(job["edges"])
-        inputs_of = {label: gj.Inputs(catheter_length=catheter,
-                                      steps=gj.StepSchedule(edges, jnp.cumsum(jnp.asarray(job["steps"][label]))))
-                     for label in job["steps"]}
+        from growjax.design.space import stepper_inputs
+
+        inputs_of = {label: stepper_inputs(catheter, job["edges"], steps) for label, steps in job["steps"].items()}
     else:
         inputs_of = {"design": gj.Inputs(catheter_length=catheter, pressure_demand=KnotProfile(
                          jnp.asarray(job["knots"]), jnp.asarray(job["demand"]))),
@@ -123,10 +124,6 @@ def replicate(job: dict) -> dict:
             continue
         length = np.asarray(traj.length)[1:] + rng.normal(0.0, job["noise_m"], times.size)
         if job.get("discrepancy"):  # δ ~ GP(0, Matérn-3/2), a fresh draw per input
-            import jax
-
-            from growjax import discrepancy as dc
-
             a, ell = job["discrepancy"]
             key = jax.random.PRNGKey(int(rng.integers(2**31)))
             length = length + np.asarray(dc.sample(key, times, dc.Hyper.of(a, ell, 0.0, 0.0)))

@@ -36,8 +36,8 @@ from growjax.design import constraints as dcon
 from growjax.design import criterion as dcrit
 from growjax.design import sensitivity
 from growjax.design.knowledge import Knowledge
-from growjax.design.space import DesignSpace, demand_at_knots
-from growjax.signals import Inputs, StepSchedule
+from growjax.design.space import DesignSpace, demand_at_knots, stepper_inputs
+from growjax.signals import Inputs
 from growjax.simulate import as_arrays
 
 POINTS = 4  # points of (θ, rig) the criterion is averaged over
@@ -73,7 +73,7 @@ class Problem(eqx.Module):
     def inputs(self, x) -> Inputs:
         """The inputs of design x (traceable): the demand's logits (K − 1,) or the stepper's steps (N,)."""
         if self.drive == "inverse":
-            return Inputs(catheter_length=self.catheter, steps=StepSchedule(self.knots, jnp.cumsum(jnp.asarray(x))))
+            return stepper_inputs(self.catheter, self.knots, x)
         return Inputs(catheter_length=self.catheter, pressure_demand=KnotProfile(self.knots, demand_at_knots(x, self.p_max)))
 
     def sensitivities(self, inputs, breaks=None, z=None) -> sensitivity.Sensitivities:

@@ -23,6 +23,7 @@ SI units: s, Pa, m.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from pathlib import Path
 
 import jax
@@ -80,8 +81,7 @@ class DesignSpace:
     @property
     def times(self) -> np.ndarray:
         """(n,) s: the sensors' sample times."""
-        n = int(np.floor(self.duration / self.sample_interval + 1e-9))
-        return np.round(self.sample_interval * np.arange(1, n + 1), 12)
+        return sample_times(self.duration, self.sample_interval)
 
     def config(self, **changes) -> Config:
         """The fast configuration over the design's run, forward-mode derivatives (``changes``: other fields)."""
@@ -160,16 +160,33 @@ def demand_at_knots(x, p_max):
     return jnp.concatenate([jnp.zeros(x.shape[:-1] + (1,)), p_max * jax.nn.sigmoid(x)], axis=-1)
 
 
+def sample_times(duration: float, interval: float) -> np.ndarray:
+    """(n,) s: every ``interval`` s from the first interval to ``duration``."""
+    n = int(np.floor(duration / interval + 1e-9))
+    return np.round(interval * np.arange(1, n + 1), 12)
+
+
+def held(experiment: ex.Experiment, column: str, duration: float) -> Sampled:
+    """An experiment's ``column`` as a signal over [0, ``duration``] s: its samples, held at their last value after
+    the record ends."""
+    t = np.asarray(experiment.time, float)
+    v = np.asarray(experiment[column], float)
+    if t[-1] < duration:
+        t, v = np.append(t, duration + 1.0), np.append(v, v[-1])
+    return Sampled(jnp.asarray(t), jnp.asarray(v))
+
+
 def catheter_of(experiment: ex.Experiment | None, duration: float):
     """The catheter length (m) of an experiment already run, as a signal over [0, ``duration``] s: its samples,
     held at their last value after its end (a constant 0 where it had no catheter, or none is given)."""
     if experiment is None or "catheter_length_m" not in experiment:
         return Constant(0.0)
-    t = np.asarray(experiment.time, float)
-    c = np.asarray(experiment["catheter_length_m"], float)
-    if t[-1] < duration:  # held after the record ends
-        t, c = np.append(t, duration + 1.0), np.append(c, c[-1])
-    return Sampled(jnp.asarray(t), jnp.asarray(c))
+    return held(experiment, "catheter_length_m", duration)
+
+
+def stepper_inputs(catheter, edges, x) -> Inputs:
+    """The stepper's inputs under design x (N,): the count after each edge (N,) s its running sum (traceable)."""
+    return Inputs(catheter_length=catheter, steps=StepSchedule(jnp.asarray(edges), jnp.cumsum(jnp.asarray(x), axis=-1)))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -200,7 +217,7 @@ class StepperSpace:
         if self.edges.size == 0:
             raise ValueError(f"a {self.duration} s run holds no edge of the {self.rate} Hz step controller")
 
-    @property
+    @functools.cached_property
     def edges(self) -> np.ndarray:
         """(N,) s: the times at which the controller can issue a step (those inside the run)."""
         ramp = np.array([0.0, self.duration + 1.0])
@@ -215,8 +232,7 @@ class StepperSpace:
     @property
     def times(self) -> np.ndarray:
         """(n,) s: the sensors' sample times."""
-        n = int(np.floor(self.duration / self.sample_interval + 1e-9))
-        return np.round(self.sample_interval * np.arange(1, n + 1), 12)
+        return sample_times(self.duration, self.sample_interval)
 
     def config(self, **changes) -> Config:
         """The fast configuration of the stepper drive over the run, forward-mode derivatives."""
@@ -232,7 +248,7 @@ class StepperSpace:
 
     def inputs(self, x) -> Inputs:
         """The model's inputs under design x (N,) (traceable)."""
-        return Inputs(catheter_length=self.catheter, steps=StepSchedule(jnp.asarray(self.edges), self.counts(x)))
+        return stepper_inputs(self.catheter, self.edges, x)
 
     def breaks(self):
         """The inputs' jump times (every edge) the solver steps onto: the same for every design."""
@@ -323,11 +339,7 @@ def stepper_space(base, duration: float, experiment: ex.Experiment | None = None
     and the baseline (its recorded length as the desired length) of an experiment already run, if given."""
     recorded = None
     if experiment is not None and "robot_length_m" in experiment:
-        t = np.asarray(experiment.time, float)
-        y = np.asarray(experiment["robot_length_m"], float)
-        if t[-1] < duration:
-            t, y = np.append(t, duration + 1.0), np.append(y, y[-1])
-        recorded = Sampled(jnp.asarray(t), jnp.asarray(y))
+        recorded = held(experiment, "robot_length_m", duration)
     per_metre = float(ex.demand_steps(base, 1.0))
     return StepperSpace(float(duration), 1.0 / per_metre, float(base.motor.controller_rate),
                         catheter_of(experiment, duration), recorded, t0=Config().t0)
