@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import growjax as gj
-from growjax import experiment as ex
+from growjax.data import experiment as ex
 
 
 def public_experiment(data: str | None = None):

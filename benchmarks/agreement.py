@@ -38,11 +38,15 @@ from _environment import environment  # benchmarks/ is on sys.path when run as a
 
 import growjax as gj
 from growjax import sweep as sw
-from growjax.fluid import bulk_modulus
+from growjax.model.fluid import bulk_modulus
 
 BOXES = {
     "reference": (sw.Dimension("n", 0.9, 1.1), sw.Dimension("Y", 5e3, 15e3), sw.Dimension("ext", 4000.0, 10000.0)),
-    "lockhart": (sw.Dimension("Y", 5e3, 15e3), sw.Dimension("phi_L", 3e-4, 3e-3, log=True), sw.Dimension("n_L", 0.25, 1.0)),
+    "lockhart": (
+        sw.Dimension("Y", 5e3, 15e3),
+        sw.Dimension("phi_L", 3e-4, 3e-3, log=True),
+        sw.Dimension("n_L", 0.25, 1.0),
+    ),
 }
 
 
@@ -65,7 +69,9 @@ def volume_balance(params, traj) -> float:
     grown = params.robot.area * (np.asarray(traj.length) - params.robot.initial_length)
     volume = params.pump.n_syringes * params.tube.volume + params.tank.volume
     p = np.asarray(traj.pressure)
-    stored = np.array([quad(lambda q: volume / float(bulk_modulus(params.fluid, q)), p[0], pk, limit=200)[0] for pk in p])
+    stored = np.array(
+        [quad(lambda q: volume / float(bulk_modulus(params.fluid, q)), p[0], pk, limit=200)[0] for pk in p]
+    )
     return float(np.max(np.abs(delivered - grown - stored)) / max(np.max(np.abs(delivered)), 1e-30))
 
 
@@ -76,8 +82,13 @@ def main(argv=None) -> dict:
     ap.add_argument("--resume", action="store_true", help="keep the rows already in --out; run the missing cases")
     ap.add_argument("--laws", nargs="+", choices=list(BOXES), default=list(BOXES))
     ap.add_argument("--inputs", nargs="+", choices=list(mk.DEMANDS), default=None)
-    ap.add_argument("--merge", nargs="+", default=(), metavar="JSON",
-                    help="add the rows of other runs' files (e.g. one law per process) before resuming")
+    ap.add_argument(
+        "--merge",
+        nargs="+",
+        default=(),
+        metavar="JSON",
+        help="add the rows of other runs' files (e.g. one law per process) before resuming",
+    )
     ap.add_argument("--summary-only", action="store_true", help="run nothing: summarise the rows already there")
     args = ap.parse_args(argv)
     demands = args.inputs or (["published", "sampled", "step"] if args.quick else list(mk.DEMANDS))
@@ -111,18 +122,26 @@ def main(argv=None) -> dict:
                 ref = gj.simulate(params, inputs, ref_cfg.replace(rtol=ref_rtol), ts=ts)
             rigid = gj.replace(params, **{"tube.diameter_compliance": 0.0})
             vol = volume_balance(rigid, gj.simulate(rigid, inputs, fast_cfg, ts=ts))
-            row = {"law": law, "point": point, "input": demand, "fast_status": gj.status_name(fast.status),
-                   "reference_status": gj.status_name(ref.status), "reference_rtol": ref_rtol,
-                   "volume_defect_share": vol,
-                   "wall_s": time.perf_counter() - start}
+            row = {
+                "law": law,
+                "point": point,
+                "input": demand,
+                "fast_status": gj.status_name(fast.status),
+                "reference_status": gj.status_name(ref.status),
+                "reference_rtol": ref_rtol,
+                "volume_defect_share": vol,
+                "wall_s": time.perf_counter() - start,
+            }
             if int(fast.status) == gj.OK and int(ref.status) == gj.OK:
                 d = np.asarray(fast.length - ref.length)
                 row.update(rmse_mm=1e3 * float(np.sqrt(np.mean(d**2))), max_mm=1e3 * float(np.max(np.abs(d))))
             rows.append(row)
             label = ", ".join(f"{k}={v:.4g}" for k, v in overrides.items())
-            print(f"{law:9s} {point['kind'] + ' ' + label:42s} {demand:10s} {row.get('rmse_mm', np.nan):8.4f} "
-                  f"{row.get('max_mm', np.nan):8.4f} {vol:9.2e}  fast {row['fast_status']}, reference {row['reference_status']}",
-                  flush=True)
+            print(
+                f"{law:9s} {point['kind'] + ' ' + label:42s} {demand:10s} {row.get('rmse_mm', np.nan):8.4f} "
+                f"{row.get('max_mm', np.nan):8.4f} {vol:9.2e}  fast {row['fast_status']}, reference {row['reference_status']}",
+                flush=True,
+            )
             out.write_text(json.dumps({"rows": rows}, indent=1) + "\n")
     return summarise(rows, out)
 
@@ -135,21 +154,34 @@ def summarise(rows: list[dict], out: Path) -> dict:
     """The table's worst figures against the targets; writes summary and rows to ``out``."""
     done = [r for r in rows if "rmse_mm" in r]
     summary = {
-        "n": len(rows), "n_compared": len(done),
+        "n": len(rows),
+        "n_compared": len(done),
         "rmse_mm_max": max((r["rmse_mm"] for r in done), default=None),
         "max_mm_max": max((r["max_mm"] for r in done), default=None),
         "volume_defect_share_max": max((r["volume_defect_share"] for r in rows), default=None),
         "targets": {"rmse_mm": 0.05, "max_mm": 0.15, "volume_defect_share": 1e-3},
         "reference_failures": [r for r in rows if r["reference_status"] != "ok"],
     }
-    summary["pass"] = bool(done) and len(done) == len(rows) and summary["rmse_mm_max"] <= 0.05 and summary["max_mm_max"] <= 0.15 \
+    summary["pass"] = (
+        bool(done)
+        and len(done) == len(rows)
+        and summary["rmse_mm_max"] <= 0.05
+        and summary["max_mm_max"] <= 0.15
         and summary["volume_defect_share_max"] <= 1e-3
+    )
     per = {}
     for r in done:
         per.setdefault((r["law"], r["input"]), []).append(r)
-    summary["per_law_and_input"] = [{"law": law, "input": demand, "n": len(rs),
-                                     "rmse_mm_max": max(r["rmse_mm"] for r in rs),
-                                     "max_mm_max": max(r["max_mm"] for r in rs)} for (law, demand), rs in per.items()]
+    summary["per_law_and_input"] = [
+        {
+            "law": law,
+            "input": demand,
+            "n": len(rs),
+            "rmse_mm_max": max(r["rmse_mm"] for r in rs),
+            "max_mm_max": max(r["max_mm"] for r in rs),
+        }
+        for (law, demand), rs in per.items()
+    ]
     print(json.dumps({k: v for k, v in summary.items() if k != "reference_failures"}, indent=1))
     out.write_text(json.dumps({"summary": summary, "rows": rows, "environment": environment()}, indent=1) + "\n")
     return summary

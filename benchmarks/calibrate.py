@@ -23,9 +23,9 @@ import jax.numpy as jnp
 import numpy as np
 
 import growjax as gj
-from growjax import experiment as ex
-from growjax import fit as gf
 from growjax import posterior as gpost
+from growjax.calibration import fit as gf
+from growjax.data import experiment as ex
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -40,7 +40,11 @@ def main():
     parser.add_argument("--direct-iterations", type=int, default=20, help="warm-up = draws of the direct baseline")
     args = parser.parse_args()
     folder = ex.shared_experiment_dir()
-    exp = ex.read(folder / "experiment.csv") if folder else ex.read(REPO / "src" / "growjax" / "datasets" / "synthetic_forward.csv")
+    exp = (
+        ex.read(folder / "experiment.csv")
+        if folder
+        else ex.read(REPO / "src" / "growjax" / "data" / "datasets" / "synthetic_forward.csv")
+    )
     base = gj.reference()
     cfg = gj.Config(t1=args.t_end)
     inputs = ex.to_inputs(exp, "forward", base, cfg.t0, cfg.t1)
@@ -51,8 +55,11 @@ def main():
     first = time.perf_counter() - start
     start = time.perf_counter()
     res = gf.fit(exp.time, exp["robot_length_m"], inputs, free=["Y"], base=base, config=cfg)
-    out["fit"] = {"wall_s_first_call_with_compile": first, "wall_s_compiled": time.perf_counter() - start,
-                  **res.summary()}
+    out["fit"] = {
+        "wall_s_first_call_with_compile": first,
+        "wall_s_compiled": time.perf_counter() - start,
+        **res.summary(),
+    }
     out["laplace"] = gpost.laplace(res)
 
     keep = exp.time <= args.t_end
@@ -70,22 +77,49 @@ def main():
         jax.block_until_ready(grad(theta))
     out["gradient_s_forward_mode"] = (time.perf_counter() - start) / 3
 
-    post = gpost.sample(exp.time, exp["robot_length_m"], inputs, base, cfg, chains=args.chains, warmup=args.warmup,
-                        samples=args.samples, progress=True)
+    post = gpost.sample(
+        exp.time,
+        exp["robot_length_m"],
+        inputs,
+        base,
+        cfg,
+        chains=args.chains,
+        warmup=args.warmup,
+        samples=args.samples,
+        progress=True,
+    )
     s = post.summary
     steps = np.asarray(post.idata.sample_stats["n_steps"]) if "n_steps" in post.idata.sample_stats else None
     lap = out["laplace"]["robot.yield_pressure"]
-    out["nuts"] = {**s, "ess_bulk_per_s": s["ess_bulk_min"] / post.wall_s,
-                   "mean_leapfrog_steps": None if steps is None else float(steps.mean()),
-                   "laplace_mean_difference_in_sd": (lap["mean"] - s["parameters"]["Y"]["mean"]) / s["parameters"]["Y"]["sd"],
-                   "laplace_sd_ratio": lap["sd"] / s["parameters"]["Y"]["sd"]}
+    out["nuts"] = {
+        **s,
+        "ess_bulk_per_s": s["ess_bulk_min"] / post.wall_s,
+        "mean_leapfrog_steps": None if steps is None else float(steps.mean()),
+        "laplace_mean_difference_in_sd": (lap["mean"] - s["parameters"]["Y"]["mean"]) / s["parameters"]["Y"]["sd"],
+        "laplace_sd_ratio": lap["sd"] / s["parameters"]["Y"]["sd"],
+    }
     if args.direct_iterations > 0:
         k = args.direct_iterations
-        direct = gpost.sample(exp.time, exp["robot_length_m"], inputs, base, cfg, chains=args.chains, warmup=k,
-                              samples=k, progress=True, emulate=False)
-        out["nuts_direct"] = {"wall_s": direct.wall_s, "chains": args.chains, "warmup": k, "samples": k,
-                              "extrapolated_wall_s": direct.wall_s * (args.warmup + args.samples) / (2 * k),
-                              "Y_mean": direct.summary["parameters"]["Y"]["mean"]}
+        direct = gpost.sample(
+            exp.time,
+            exp["robot_length_m"],
+            inputs,
+            base,
+            cfg,
+            chains=args.chains,
+            warmup=k,
+            samples=k,
+            progress=True,
+            emulate=False,
+        )
+        out["nuts_direct"] = {
+            "wall_s": direct.wall_s,
+            "chains": args.chains,
+            "warmup": k,
+            "samples": k,
+            "extrapolated_wall_s": direct.wall_s * (args.warmup + args.samples) / (2 * k),
+            "Y_mean": direct.summary["parameters"]["Y"]["mean"],
+        }
         out["speedup_emulated_over_direct"] = out["nuts_direct"]["extrapolated_wall_s"] / post.wall_s
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(out, indent=2, default=str) + "\n")

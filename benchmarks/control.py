@@ -25,8 +25,8 @@ import numpy as np
 
 import growjax as gj
 from growjax import control as gc
-from growjax import experiment as ex
 from growjax.cli import default_data_path
+from growjax.data import experiment as ex
 
 HERE = Path(__file__).resolve().parent
 from _environment import environment  # the script's folder is on the path
@@ -40,8 +40,11 @@ def main():
     ap.add_argument("--test-draws", type=int, default=32)
     ap.add_argument("--posterior", default=None, help="ArviZ posterior (.nc); default Gaussian Y ± 5 %% (seeded)")
     ap.add_argument("--skip-reference", action="store_true")
-    ap.add_argument("--robust-only", action="store_true",
-                    help="only the profile, the point and the robust PID tuning and their held-out evaluation")
+    ap.add_argument(
+        "--robust-only",
+        action="store_true",
+        help="only the profile, the point and the robust PID tuning and their held-out evaluation",
+    )
     ap.add_argument("--stepper-only", action="store_true", help="only the stepper designs (open-loop and closed-loop)")
     args = ap.parse_args()
     T = args.t_end
@@ -52,10 +55,17 @@ def main():
     res: dict = {"data": str(data), "t_end_s": T, "evaluated_on": ev, "methods": {}}
 
     def record(name, r: gc.ClosedLoopResult, **extra):
-        res["methods"][name] = {"tracking_rmse_m": r.rmse_m, "pressure_limit_crossed": r.pressure_limit_crossed,
-                                "peak_pressure_Pa": float(np.nanmax(r.pressure)), **extra}
-        print(f"{name:38s} RMSE {1e3 * r.rmse_m:6.3f} mm  peak {np.nanmax(r.pressure) / 1e3:6.1f} kPa  "
-              f"limit crossed {r.pressure_limit_crossed}  {extra}", flush=True)
+        res["methods"][name] = {
+            "tracking_rmse_m": r.rmse_m,
+            "pressure_limit_crossed": r.pressure_limit_crossed,
+            "peak_pressure_Pa": float(np.nanmax(r.pressure)),
+            **extra,
+        }
+        print(
+            f"{name:38s} RMSE {1e3 * r.rmse_m:6.3f} mm  peak {np.nanmax(r.pressure) / 1e3:6.1f} kPa  "
+            f"limit crossed {r.pressure_limit_crossed}  {extra}",
+            flush=True,
+        )
 
     if args.stepper_only:
         stepper_methods(res, target, T, ev)
@@ -68,11 +78,21 @@ def main():
     t0 = time.perf_counter()
     prof = gc.optimize_profile(p, target, T, knot_dt=0.2, iterations=args.iterations, lim=lim)
     res["profile_optimisation_s"] = time.perf_counter() - t0
-    print(f"profile optimised in {res['profile_optimisation_s']:.1f} s, fast RMSE {1e3 * prof.rmse_m:.3f} mm", flush=True)
+    print(
+        f"profile optimised in {res['profile_optimisation_s']:.1f} s, fast RMSE {1e3 * prof.rmse_m:.3f} mm", flush=True
+    )
     cfg_ev = gj.Config(fidelity=ev, t1=T)
     tr = gc.simulate_profile(p, target, prof, cfg_ev)
-    r = gc.score(np.asarray(tr.time), np.asarray(tr.length), np.asarray(tr.pressure), prof.demand, prof.knots,
-                  target, lim, int(tr.status))
+    r = gc.score(
+        np.asarray(tr.time),
+        np.asarray(tr.length),
+        np.asarray(tr.pressure),
+        prof.demand,
+        prof.knots,
+        target,
+        lim,
+        int(tr.status),
+    )
     record("forward open-loop profile", r, knots=int(prof.knots.size))
 
     # forward drive: length PID, tuned (point estimate)
@@ -94,7 +114,9 @@ def main():
 
 def write(res, name):
     (HERE / "results").mkdir(exist_ok=True)
-    (HERE / "results" / name).write_text(json.dumps({"environment": environment(), **res}, indent=2, default=float) + "\n")
+    (HERE / "results" / name).write_text(
+        json.dumps({"environment": environment(), **res}, indent=2, default=float) + "\n"
+    )
     print("wrote", HERE / "results" / name)
 
 
@@ -111,15 +133,21 @@ def other_methods(res, record, target, T, ev, p, cfg_ev, lim):
 def stepper_methods(res, target, T, ev):
     """The open-loop step schedule, the closed-loop full-step controller and the 1/16-microstep controller,
     designed on the fast configuration and evaluated on ``ev``: :func:`growjax.control.design`, as the CLI runs them."""
-    for name, method, microsteps in (("inverse open-loop steps", "open-loop", 1),
-                                     ("inverse feedback (step controller)", "feedback", 1),
-                                     ("inverse feedback, 1/16 microstep", "feedback", 16)):
+    for name, method, microsteps in (
+        ("inverse open-loop steps", "open-loop", 1),
+        ("inverse feedback (step controller)", "feedback", 1),
+        ("inverse feedback, 1/16 microstep", "feedback", 16),
+    ):
         s = gc.design(target, "inverse", method, T, microsteps=microsteps, evaluate_on=ev)
         setting = s.get("gains") or {k: s["profile"][k] for k in ("planned_by", "model_rmse_m", "controller")}
-        res["methods"][name] = {k: s[k] for k in ("tracking_rmse_m", "pressure_limit_crossed", "peak_pressure_Pa",
-                                                  "design_s")} | setting
-        print(f"{name:38s} RMSE {1e3 * s['tracking_rmse_m']:6.3f} mm  peak {s['peak_pressure_Pa'] / 1e3:6.1f} kPa  "
-              f"limit crossed {s['pressure_limit_crossed']}  {setting}  design {s['design_s']:.0f} s", flush=True)
+        res["methods"][name] = {
+            k: s[k] for k in ("tracking_rmse_m", "pressure_limit_crossed", "peak_pressure_Pa", "design_s")
+        } | setting
+        print(
+            f"{name:38s} RMSE {1e3 * s['tracking_rmse_m']:6.3f} mm  peak {s['peak_pressure_Pa'] / 1e3:6.1f} kPa  "
+            f"limit crossed {s['pressure_limit_crossed']}  {setting}  design {s['design_s']:.0f} s",
+            flush=True,
+        )
 
 
 def robust_study(args, res, target, T, p, lim, prof, pid0, tuned):
@@ -140,8 +168,11 @@ def robust_study(args, res, target, T, p, lim, prof, pid0, tuned):
             e.append(gc.run_closed_loop(gc.Plant.make(pd, gj.Config(t1=T)), c, target, T, lim).rmse_m)
         e = np.asarray(e)
         held[name] = {"median_m": float(np.median(e)), "p95_m": float(np.percentile(e, 95)), "max_m": float(e.max())}
-        print(f"held-out {name:6s} tuning: median {1e3 * held[name]['median_m']:.3f} mm, "
-              f"95th {1e3 * held[name]['p95_m']:.3f} mm", flush=True)
+        print(
+            f"held-out {name:6s} tuning: median {1e3 * held[name]['median_m']:.3f} mm, "
+            f"95th {1e3 * held[name]['p95_m']:.3f} mm",
+            flush=True,
+        )
     e = []
     for i in range(args.test_draws):
         pd = gj.replace(p, **{k: float(v[i]) for k, v in test.items()})
@@ -151,8 +182,13 @@ def robust_study(args, res, target, T, p, lim, prof, pid0, tuned):
     held["open_loop"] = {"median_m": float(np.median(e)), "p95_m": float(np.percentile(e, 95))}
     print(f"held-out open-loop profile: median {1e3 * np.median(e):.3f} mm, 95th {1e3 * np.percentile(e, 95):.3f} mm")
     res["held_out"] = held
-    res["draws"] = {"source": args.posterior or "Gaussian, Y relative s.d. 5 % (seeded)", "train": args.train_draws,
-                    "test": args.test_draws, "train_seed": 0, "test_seed": 1}
+    res["draws"] = {
+        "source": args.posterior or "Gaussian, Y relative s.d. 5 % (seeded)",
+        "train": args.train_draws,
+        "test": args.test_draws,
+        "train_seed": 0,
+        "test_seed": 1,
+    }
 
 
 if __name__ == "__main__":

@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from growjax import control as gc
-from growjax import experiment as ex
+from growjax.data import experiment as ex
 
 REPO = Path(__file__).resolve().parents[1]
 TUNED_GAINS = (6.47e8, 8.22e6, 2.24e4)  # Kp Pa/m, Ki Pa/(m·s), Kd Pa·s/m: tune_pid's result on the public data
@@ -36,7 +36,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "control_gradient.json"))
     args = ap.parse_args(argv)
     folder = ex.shared_experiment_dir()
-    data = folder / "experiment.csv" if folder else REPO / "src" / "growjax" / "datasets" / "synthetic_forward.csv"
+    data = folder / "experiment.csv" if folder else REPO / "src" / "growjax" / "data" / "datasets" / "synthetic_forward.csv"
     t_end = args.t_end
     target = gc.target_from_experiment(ex.read(data), t_end)
     params = gc.plant_params("forward", target)
@@ -50,15 +50,24 @@ def main(argv=None) -> dict:
         start = time.perf_counter()
         g = np.asarray(forward(x))
         wall = time.perf_counter() - start
-        row = {"point": label, "log10_gains": np.asarray(x).tolist(), "cost": float(cost(x)),
-               "forward_mode": g.tolist(), "forward_mode_s": wall}
+        row = {
+            "point": label,
+            "log10_gains": np.asarray(x).tolist(),
+            "cost": float(cost(x)),
+            "forward_mode": g.tolist(),
+            "forward_mode_s": wall,
+        }
         for h in (0.02, 1e-4):
-            row[f"central_{h:g}"] = [(float(cost(x.at[i].add(h))) - float(cost(x.at[i].add(-h)))) / (2 * h)
-                                     for i in range(x.size)]
+            row[f"central_{h:g}"] = [
+                (float(cost(x.at[i].add(h))) - float(cost(x.at[i].add(-h)))) / (2 * h) for i in range(x.size)
+            ]
         rows.append(row)
-        print(f"{label:8s} J = {row['cost']:.5f} mm²   forward mode {np.array2string(g, precision=5)} ({wall:.2f} s)\n"
-              f"{'':8s} central 0.02 {np.array2string(np.asarray(row['central_0.02']), precision=5)}   "
-              f"central 1e-4 {np.array2string(np.asarray(row['central_0.0001']), precision=5)}", flush=True)
+        print(
+            f"{label:8s} J = {row['cost']:.5f} mm²   forward mode {np.array2string(g, precision=5)} ({wall:.2f} s)\n"
+            f"{'':8s} central 0.02 {np.array2string(np.asarray(row['central_0.02']), precision=5)}   "
+            f"central 1e-4 {np.array2string(np.asarray(row['central_0.0001']), precision=5)}",
+            flush=True,
+        )
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps({"data": str(data), "t_end_s": t_end, "rows": rows}, indent=1) + "\n")
     return {"rows": rows}

@@ -8,8 +8,8 @@ is fed the demand in steps from kings_ts (0–10 s); printed are the steps issue
 import numpy as np
 
 import growjax as gj
-from growjax import experiment as ex
-from growjax.motor import step_schedule
+from growjax.data import experiment as ex
+from growjax.model.motor import step_schedule
 
 
 def main():

@@ -35,8 +35,8 @@ import jax.numpy as jnp
 import numpy as np
 
 import growjax as gj
-from growjax import fit as gf
-from growjax import tolerance as tl
+from growjax.calibration import fit as gf
+from growjax.calibration import tolerance as tl
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "benchmarks"))
@@ -91,23 +91,45 @@ def fit_row(t, data, inputs, truth, **options):
     res = gf.fit(t, data, inputs, free=["Y"], config=gj.Config(t1=10.0), n_starts=1, sweep_n=16, **options)
     extra = {"linearisations": res.linearisations} if res.rig == "inferred" else {}
     lo, hi = res.interval_90[Y]
-    return {"truth_Pa": truth, "estimate_Pa": res.estimate[Y], "se_Pa": res.standard_error[Y],
-            "interval_90_Pa": [lo, hi], "covered": bool(lo <= truth <= hi), "width_Pa": hi - lo,
-            "discrepancy": res.discrepancy, "rmse_m": res.rmse_length_m, "wall_s": res.wall_s, **extra}
+    return {
+        "truth_Pa": truth,
+        "estimate_Pa": res.estimate[Y],
+        "se_Pa": res.standard_error[Y],
+        "interval_90_Pa": [lo, hi],
+        "covered": bool(lo <= truth <= hi),
+        "width_Pa": hi - lo,
+        "discrepancy": res.discrepancy,
+        "rmse_m": res.rmse_length_m,
+        "wall_s": res.wall_s,
+        **extra,
+    }
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--per-group", type=int, default=30, help="data sets per perturbed group (the clean group: a third)")
+    ap.add_argument(
+        "--per-group", type=int, default=30, help="data sets per perturbed group (the clean group: a third)"
+    )
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--groups", nargs="+", default=["none", "smooth", "correlated", "rig"])
-    ap.add_argument("--budget", choices=["group", "default"], default="group",
-                    help="group: the tolerances the group's rig was made with; default: the default budget for all")
-    ap.add_argument("--rig-tangents", action=argparse.BooleanOptionalAction, default=True,
-                    help="the rig's errors as parameters of the model (default, as growjax fit); "
-                         "--no-rig-tangents: its secants")
-    ap.add_argument("--relinearise", action=argparse.BooleanOptionalAction, default=True,
-                    help="with --no-rig-tangents: the fit's relinearise (default on, as growjax fit)")
+    ap.add_argument(
+        "--budget",
+        choices=["group", "default"],
+        default="group",
+        help="group: the tolerances the group's rig was made with; default: the default budget for all",
+    )
+    ap.add_argument(
+        "--rig-tangents",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="the rig's errors as parameters of the model (default, as growjax fit); --no-rig-tangents: its secants",
+    )
+    ap.add_argument(
+        "--relinearise",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="with --no-rig-tangents: the fit's relinearise (default on, as growjax fit)",
+    )
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "coverage_discrepancy.json"))
     args = ap.parse_args()
     clock = time.perf_counter()
@@ -138,19 +160,29 @@ def main():
             else:
                 extra, noise = 0.0, rng.normal(0.0, NOISE, t.size)
             data = clean + extra + noise
-            row = {"size_m": size if g in ("smooth", "correlated") else 0.0,
-                   "default": fit_row(t, data, inputs, truth, relinearise=args.relinearise,
-                                      rig_tangents=args.rig_tangents,
-                                      **({} if g == "rig" or args.budget == "default" else {"tolerances": {}}))}
+            row = {
+                "size_m": size if g in ("smooth", "correlated") else 0.0,
+                "default": fit_row(
+                    t,
+                    data,
+                    inputs,
+                    truth,
+                    relinearise=args.relinearise,
+                    rig_tangents=args.rig_tangents,
+                    **({} if g == "rig" or args.budget == "default" else {"tolerances": {}}),
+                ),
+            }
             if g == "none":
                 row["independent"] = fit_row(t, data, inputs, truth, discrepancy="none")
             if g == "rig":
                 row["offsets"] = {name: float(v[k]) for name, v in offsets.items()}
             rows[g].append(row)
             d = row["default"]
-            print(f"{g:10s} {k:3d} size {1e3 * row['size_m']:.2f} mm: Y {d['estimate_Pa']:7.0f} for {truth:7.0f} Pa, "
-                  f"90 % [{d['interval_90_Pa'][0]:7.0f}, {d['interval_90_Pa'][1]:7.0f}] covered {d['covered']}",
-                  flush=True)
+            print(
+                f"{g:10s} {k:3d} size {1e3 * row['size_m']:.2f} mm: Y {d['estimate_Pa']:7.0f} for {truth:7.0f} Pa, "
+                f"90 % [{d['interval_90_Pa'][0]:7.0f}, {d['interval_90_Pa'][1]:7.0f}] covered {d['covered']}",
+                flush=True,
+            )
     summary = {}
     for g, rs in rows.items():
         cov = float(np.mean([r["default"]["covered"] for r in rs])) if rs else float("nan")
@@ -162,8 +194,18 @@ def main():
         print(g, summary[g], flush=True)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"environment": environment(), "arguments": vars(args), "summary": summary, "rows": rows,
-                               "wall_s": time.perf_counter() - clock}, indent=1))
+    out.write_text(
+        json.dumps(
+            {
+                "environment": environment(),
+                "arguments": vars(args),
+                "summary": summary,
+                "rows": rows,
+                "wall_s": time.perf_counter() - clock,
+            },
+            indent=1,
+        )
+    )
 
 
 if __name__ == "__main__":

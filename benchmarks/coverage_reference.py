@@ -2,9 +2,9 @@
 
 Run: ``python benchmarks/coverage_reference.py [--seeds 1] [--out benchmarks/results/coverage_reference.json]``.
 
-For each of the five shipped reference-made experiments (``growjax/datasets/reference_lengths.csv``: the published pulse
+For each of the five shipped reference-made experiments (``growjax/data/datasets/reference_lengths.csv``: the published pulse
 train, 0–10 s, Y from 6 to 14 kPa) plus Gaussian noise of 0.2 mm (seeds 100 + k, as the default test run draws
-them, then further seeds), ``growjax.fit`` estimates Y on the fast configuration twice: with the noise alone in
+them, then further seeds), ``growjax.calibration.fit`` estimates Y on the fast configuration twice: with the noise alone in
 its covariance, and with the fast configuration's measured model error added (the default). Printed per case:
 the estimate's error in standard errors of each, and whether each 90 % interval covers the truth.
 """
@@ -21,7 +21,7 @@ import jax
 import numpy as np
 
 import growjax as gj
-from growjax import fit as gf
+from growjax.calibration import fit as gf
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "data"))
@@ -47,20 +47,42 @@ def main():
             data = lengths[name] + np.random.default_rng(100 + k + 5 * s).normal(0.0, NOISE, t.size)
             row = {"case": name, "seed": 100 + k + 5 * s, "truth_Pa": truth}
             for label, error in (("noise_only", 0.0), ("with_model_error", None)):
-                res = gf.fit(t, data, inputs, free=["Y"], config=gj.Config(t1=10.0), n_starts=1, sweep_n=0,
-                             sigma_length=NOISE, model_error=error)
+                res = gf.fit(
+                    t,
+                    data,
+                    inputs,
+                    free=["Y"],
+                    config=gj.Config(t1=10.0),
+                    n_starts=1,
+                    sweep_n=0,
+                    sigma_length=NOISE,
+                    model_error=error,
+                )
                 est, se = res.estimate["robot.yield_pressure"], res.standard_error["robot.yield_pressure"]
                 lo, hi = res.interval_90["robot.yield_pressure"]
-                row[label] = {"estimate_Pa": est, "se_Pa": se, "error_in_se": (est - truth) / se,
-                              "covered": bool(lo < truth < hi), "rmse_m": res.rmse_length_m}
+                row[label] = {
+                    "estimate_Pa": est,
+                    "se_Pa": se,
+                    "error_in_se": (est - truth) / se,
+                    "covered": bool(lo < truth < hi),
+                    "rmse_m": res.rmse_length_m,
+                }
             rows.append(row)
-            print(f"{name:18s} seed {row['seed']}: Y {row['noise_only']['estimate_Pa']:8.1f} for {truth:7.1f} Pa; "
-                  f"error {row['noise_only']['error_in_se']:+.2f} se (noise only, covered "
-                  f"{row['noise_only']['covered']}), {row['with_model_error']['error_in_se']:+.2f} se "
-                  f"(with model error, covered {row['with_model_error']['covered']})", flush=True)
-    out = {"noise_m": NOISE, "model_error_m": gf.FAST_MODEL_ERROR, "cases": rows,
-           "covered": {label: sum(r[label]["covered"] for r in rows) for label in ("noise_only", "with_model_error")},
-           "n": len(rows), "wall_s": time.perf_counter() - clock}
+            print(
+                f"{name:18s} seed {row['seed']}: Y {row['noise_only']['estimate_Pa']:8.1f} for {truth:7.1f} Pa; "
+                f"error {row['noise_only']['error_in_se']:+.2f} se (noise only, covered "
+                f"{row['noise_only']['covered']}), {row['with_model_error']['error_in_se']:+.2f} se "
+                f"(with model error, covered {row['with_model_error']['covered']})",
+                flush=True,
+            )
+    out = {
+        "noise_m": NOISE,
+        "model_error_m": gf.FAST_MODEL_ERROR,
+        "cases": rows,
+        "covered": {label: sum(r[label]["covered"] for r in rows) for label in ("noise_only", "with_model_error")},
+        "n": len(rows),
+        "wall_s": time.perf_counter() - clock,
+    }
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(out, indent=2) + "\n")
     print(f"covered: {out['covered']} of {out['n']}")

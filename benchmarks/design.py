@@ -5,7 +5,7 @@ Run: ``python benchmarks/design.py [--random 1000] [--replications 20] [--worker
 The design is written to ``--out`` as soon as it is made and each replication to its partial file as it finishes:
 ``--design-from OUT --resume`` completes a run that stopped.
 
-What is known: the default fit (``growjax.fit.fit``, the default likelihood) of the shipped synthetic experiment
+What is known: the default fit (``growjax.calibration.fit.fit``, the default likelihood) of the shipped synthetic experiment
 (or ``--data``) for ``--for`` (default Y), under ``--growth-law`` (``lockhart``: Lockhart's law for the fit, the
 design and the replications' data; with ``--for Y phi_L n_L`` the law's rate and exponent, which the shipped
 experiment leaves undetermined, enter with their box's uniform prior). Then:
@@ -18,7 +18,7 @@ experiment leaves undetermined, enter with their box's uniform prior). Then:
     with fresh white length noise (the fitted noise sd; and 1 kPa pressure noise where ``--sensors`` records it;
     with ``--discrepancy-in-data``, also a fresh draw of the Matérn-3/2 discrepancy the first fit found, the
     residual model the prediction assumes);
-    each fitted alone by ``growjax.fit.fit`` (default likelihood, the rig's errors inferred as parameters of the
+    each fitted alone by ``growjax.calibration.fit.fit`` (default likelihood, the rig's errors inferred as parameters of the
     model, as ``growjax fit`` does; ``--no-rig-tangents``: their secants, linearised once at nominal, or with
     ``--relinearise`` taken again where the data put the rig). Reported per input: the
     realised sd of ln θ̂ over the replications against the predicted sd of the experiment alone, the fits'
@@ -70,9 +70,9 @@ def knowledge_of(args):
     """(Knowledge, experiment, base) from the default fit of ``args.data``."""
     import growjax as gj
     from growjax import design as gd
-    from growjax import experiment as ex
-    from growjax import fit as gf
+    from growjax.calibration import fit as gf
     from growjax.cli import recorded_parameters
+    from growjax.data import experiment as ex
 
     path = Path(args.data)
     exp = ex.read(path)
@@ -80,8 +80,16 @@ def knowledge_of(args):
     config = gj.Config(t1=float(min(exp.time[-1], 10.0)), adjoint="forward")
     inputs = ex.to_inputs(exp, "forward", base, config.t0, config.t1)
     pressure = exp["pressure_Pa"] if "pressure_Pa" in exp else None
-    res = gf.fit(exp.time, exp["robot_length_m"], inputs, free=args.design_for, base=base, config=config,
-                 pressure=pressure, seed=args.seed)
+    res = gf.fit(
+        exp.time,
+        exp["robot_length_m"],
+        inputs,
+        free=args.design_for,
+        base=base,
+        config=config,
+        pressure=pressure,
+        seed=args.seed,
+    )
     return gd.from_fit(res, base), exp, base
 
 
@@ -91,8 +99,8 @@ def replicate(job: dict) -> dict:
     import jax.numpy as jnp
 
     import growjax as gj
-    from growjax import discrepancy as dc
-    from growjax import fit as gf
+    from growjax.calibration import discrepancy as dc
+    from growjax.calibration import fit as gf
     from growjax.control.profile import KnotProfile
 
     clock = time.perf_counter()
@@ -108,9 +116,13 @@ def replicate(job: dict) -> dict:
 
         inputs_of = {label: stepper_inputs(catheter, job["edges"], steps) for label, steps in job["steps"].items()}
     else:
-        inputs_of = {"design": gj.Inputs(catheter_length=catheter, pressure_demand=KnotProfile(
-                         jnp.asarray(job["knots"]), jnp.asarray(job["demand"]))),
-                     "published pulse train": gj.Inputs(catheter_length=catheter, pressure_demand=gj.published_pulse())}
+        inputs_of = {
+            "design": gj.Inputs(
+                catheter_length=catheter,
+                pressure_demand=KnotProfile(jnp.asarray(job["knots"]), jnp.asarray(job["demand"])),
+            ),
+            "published pulse train": gj.Inputs(catheter_length=catheter, pressure_demand=gj.published_pulse()),
+        }
     duration = float(job["duration"])
     reference = gj.Config(fidelity=job["maker"], drive=drive, t1=duration)
     config = gj.Config(drive=drive, t1=duration)
@@ -130,16 +142,32 @@ def replicate(job: dict) -> dict:
         pressure = None
         if job["pressure"]:
             pressure = np.asarray(traj.pressure)[1:] + rng.normal(0.0, job["pressure_noise"], times.size)
-        res = gf.fit(times, length, inputs, free=job["names"], base=base, config=config, pressure=pressure,
-                     sigma_pressure=job["pressure_noise"], n_starts=1, sweep_n=16,
-                     relinearise=job.get("relinearise", False), rig_tangents=job.get("rig_tangents", True))
+        res = gf.fit(
+            times,
+            length,
+            inputs,
+            free=job["names"],
+            base=base,
+            config=config,
+            pressure=pressure,
+            sigma_pressure=job["pressure_noise"],
+            n_starts=1,
+            sweep_n=16,
+            relinearise=job.get("relinearise", False),
+            rig_tangents=job.get("rig_tangents", True),
+        )
         row = {"status": res.status, "linearisations": res.linearisations}
         for n in job["names"]:
             true = float(job["estimate"][n])
             est, iv = res.estimate[n], res.interval_90[n]
-            row[n] = {"truth": true, "estimate": est, "log_error": float(np.log(est / true)),
-                      "sd_log_reported": None if res.standard_error[n] is None else res.standard_error[n] / est,
-                      "interval_90": iv, "covered": None if iv is None else bool(iv[0] <= true <= iv[1])}
+            row[n] = {
+                "truth": true,
+                "estimate": est,
+                "log_error": float(np.log(est / true)),
+                "sd_log_reported": None if res.standard_error[n] is None else res.standard_error[n] / est,
+                "interval_90": iv,
+                "covered": None if iv is None else bool(iv[0] <= true <= iv[1]),
+            }
         out[label] = row
     out["wall_s"] = time.perf_counter() - clock
     return out
@@ -156,16 +184,24 @@ def summarise(rows: list, names, predicted: dict, baseline: str = "published pul
             cov = [g[n]["covered"] for g in good if g[n]["covered"] is not None]
             realised = float(np.std(err, ddof=1)) if err.size > 1 else None
             pred = predicted[label][n]
-            per[n] = {"replications": int(err.size), "realised_sd_log": realised,
-                      "rms_log_error": float(np.sqrt(np.mean(err**2))) if err.size else None,
-                      "mean_log_error": float(np.mean(err)) if err.size else None,
-                      "predicted_sd_log_alone": pred,
-                      "realised_over_predicted": None if realised is None else realised / pred,
-                      "mean_reported_sd_log": float(np.mean(rep)) if rep else None,
-                      "coverage_90": float(np.mean(cov)) if cov else None,
-                      # fits that settled far from the truth (a side minimum), against their own reported sd
-                      "far_off": int(sum(abs(g[n]["log_error"]) > 5.0 * g[n]["sd_log_reported"] for g in good
-                                         if g[n]["sd_log_reported"] is not None))}
+            per[n] = {
+                "replications": int(err.size),
+                "realised_sd_log": realised,
+                "rms_log_error": float(np.sqrt(np.mean(err**2))) if err.size else None,
+                "mean_log_error": float(np.mean(err)) if err.size else None,
+                "predicted_sd_log_alone": pred,
+                "realised_over_predicted": None if realised is None else realised / pred,
+                "mean_reported_sd_log": float(np.mean(rep)) if rep else None,
+                "coverage_90": float(np.mean(cov)) if cov else None,
+                # fits that settled far from the truth (a side minimum), against their own reported sd
+                "far_off": int(
+                    sum(
+                        abs(g[n]["log_error"]) > 5.0 * g[n]["sd_log_reported"]
+                        for g in good
+                        if g[n]["sd_log_reported"] is not None
+                    )
+                ),
+            }
         out[label] = per
     for n in names:
         d, p = out["design"][n]["realised_sd_log"], out[baseline][n]["realised_sd_log"]
@@ -188,15 +224,19 @@ def safety(known, space, designed, n: int, seed: int) -> dict:
     drawn = gd.draws(known, n, seed=seed + 1000)
     out = {"draws": n, "configuration": "reference", "limits": lim.summary(), "stroke_m": stroke}
     for label, inputs in (("design", designed), (space.baseline_label, space.baseline_inputs())):
-        res = gd.check(gd.stack([inputs]), known, config, space.times, gj.input_breaks(inputs, config), lim, drawn,
-                       keep_runs=True)
+        res = gd.check(
+            gd.stack([inputs]), known, config, space.times, gj.input_breaks(inputs, config), lim, drawn, keep_runs=True
+        )
         pressure, length = np.max(res.pressure[0], axis=-1), np.max(res.length[0], axis=-1)
-        out[label] = {"runs_completed": int(np.sum(np.all(np.isfinite(res.length[0]), axis=-1))),
-                      "over_membrane_limit": int(np.sum(pressure > lim.membrane)),
-                      "over_pressure_ceiling": int(np.sum(pressure > lim.pressure)),
-                      "over_length_ceiling": int(np.sum(length > lim.length)),
-                      "over_stroke": int(np.sum(length > stroke)),
-                      "peak_pressure_Pa": float(np.max(pressure)), "peak_length_m": float(np.max(length))}
+        out[label] = {
+            "runs_completed": int(np.sum(np.all(np.isfinite(res.length[0]), axis=-1))),
+            "over_membrane_limit": int(np.sum(pressure > lim.membrane)),
+            "over_pressure_ceiling": int(np.sum(pressure > lim.pressure)),
+            "over_length_ceiling": int(np.sum(length > lim.length)),
+            "over_stroke": int(np.sum(length > stroke)),
+            "peak_pressure_Pa": float(np.max(pressure)),
+            "peak_length_m": float(np.max(length)),
+        }
     out["wall_s"] = time.perf_counter() - clock
     return out
 
@@ -204,28 +244,33 @@ def safety(known, space, designed, n: int, seed: int) -> dict:
 def landscape_of(summary: dict, sensors, wall_s, baseline: str = "published pulse train") -> dict:
     """The landscape's record of a design's summary: the random batch against the design and the baseline."""
     crit = {r["input"]: r["criterion"] for r in summary["table"] if tuple(r["sensors"]) == sensors}
-    return {"random_admissible": summary["random"]["admissible"], "random_drawn": summary["random"]["drawn"],
-            "random_best_criterion": summary["random"]["criterion_best"],
-            "random_quantiles": summary["random"]["criterion_quantiles"],
-            "design_criterion": crit["design"], "published_criterion": crit[baseline],
-            "design_beats_best_random": bool(crit["design"] < summary["random"]["criterion_best"]),
-            "design_wall_s": wall_s}
+    return {
+        "random_admissible": summary["random"]["admissible"],
+        "random_drawn": summary["random"]["drawn"],
+        "random_best_criterion": summary["random"]["criterion_best"],
+        "random_quantiles": summary["random"]["criterion_quantiles"],
+        "design_criterion": crit["design"],
+        "published_criterion": crit[baseline],
+        "design_beats_best_random": bool(crit["design"] < summary["random"]["criterion_best"]),
+        "design_wall_s": wall_s,
+    }
 
 
 def first_run(params, exp, base, maker, rng, noise: float):
     """The first experiment again, on the robot with the hidden effect: the shipped experiment's inputs (the
     published pulse train, its catheter) over its record."""
-    from growjax import experiment as ex
+    from growjax.data import experiment as ex
 
     t = np.asarray(exp.time, float)
-    return _measured_run("first", ex.Experiment(t, {"catheter_length_m": exp["catheter_length_m"]}), params, base,
-                         maker, rng, noise)
+    return _measured_run(
+        "first", ex.Experiment(t, {"catheter_length_m": exp["catheter_length_m"]}), params, base, maker, rng, noise
+    )
 
 
 def designed_run(params, space, x, exp, base, maker, rng, noise: float):
     """The designed experiment as a run of the set: its demand, then at rest (0 Pa) to the first experiment's end
     (the set's runs share one simulated span); scored over the design's duration only (its window)."""
-    from growjax import experiment as ex
+    from growjax.data import experiment as ex
 
     t_end = float(exp.time[-1])
     t = np.round(space.sample_interval * np.arange(1, int(round(t_end / space.sample_interval)) + 1), 12)
@@ -239,8 +284,8 @@ def _measured_run(name, record, params, base, maker, rng, noise: float, window=N
     """A run of the set named ``name``: the inputs of ``record`` (its columns, as a lab's CSV gives them) run on
     ``params`` by ``maker``'s configuration over the record, its length with fresh white noise of sd ``noise`` (m)."""
     import growjax as gj
-    from growjax import experiment as ex
-    from growjax.experiments import Run
+    from growjax.data import experiment as ex
+    from growjax.data.sets import Run
 
     t = np.asarray(record.time, float)
     inputs = ex.to_inputs(record, "forward", base, 0.0, float(t[-1]))
@@ -254,19 +299,28 @@ def discriminate(args, known, exp, base) -> dict:
     """The model-discrimination check of ``--discriminate A B`` (see the module docstring)."""
     import growjax as gj
     from growjax import design as gd
-    from growjax import synthetic as syn
+    from growjax.data import synthetic as syn
+    from growjax.data.sets import ExperimentSet
     from growjax.discover import discover, discover_set
-    from growjax.experiments import ExperimentSet
 
     a, b = args.discriminate
-    space = gd.DesignSpace(args.duration, gd.limits(base).pressure, gd.catheter_of(exp, args.duration),
-                           knot_spacing=args.knot_spacing)
+    space = gd.DesignSpace(
+        args.duration, gd.limits(base).pressure, gd.catheter_of(exp, args.duration), knot_spacing=args.knot_spacing
+    )
     if args.design_from:  # an earlier run's design
         summary = json.loads(Path(args.design_from).read_text())["design"]
         x = space.unconstrained(np.asarray(summary["design"]["demand_Pa"]))
     else:
-        result = gd.discriminate(known, space, (a, b), random=args.random, starts=args.starts,
-                                 iterations=args.iterations, seed=args.seed, progress=True)
+        result = gd.discriminate(
+            known,
+            space,
+            (a, b),
+            random=args.random,
+            starts=args.starts,
+            iterations=args.iterations,
+            seed=args.seed,
+            progress=True,
+        )
         summary, x = result.summary(), result.x
     print(json.dumps({r["input"]: r["T"] for r in summary["table"]}, indent=1), flush=True)
     inputs = {"design": space.inputs(x), "published pulse train": gd.published_inputs(space)}
@@ -284,30 +338,48 @@ def discriminate(args, known, exp, base) -> dict:
             for label, inp in inputs.items():
                 traj = gj.simulate(params, inp, maker, ts=np.concatenate([[maker.t0], times]))
                 length = np.asarray(traj.length)[1:] + rng.normal(0.0, float(known.hyper.noise), times.size)
-                found = discover(times, length, inp, base=known.base, config=gj.Config(t1=args.duration),
-                                 base_names=base_names, candidates=args.candidates)
-                row[label] = {"effect": found.effect, "named": found.effect == truth,
-                              "confounded_with": list(found.confounded_with or [])}
+                found = discover(
+                    times,
+                    length,
+                    inp,
+                    base=known.base,
+                    config=gj.Config(t1=args.duration),
+                    base_names=base_names,
+                    candidates=args.candidates,
+                )
+                row[label] = {
+                    "effect": found.effect,
+                    "named": found.effect == truth,
+                    "confounded_with": list(found.confounded_with or []),
+                }
                 if args.with_first and label == "design":
-                    runs = (first_run(params, exp, base, maker, rng, float(known.hyper.noise)),
-                            designed_run(params, space, x, exp, base, maker, rng, float(known.hyper.noise)))
-                    both = discover_set(ExperimentSet(runs), config=gj.Config(t1=float(exp.time[-1])),
-                                        candidates=args.candidates)
-                    row["design with the first"] = {"effect": both.effect, "named": both.effect == truth,
-                                                    "confounded_with": list(both.confounded_with or [])}
+                    runs = (
+                        first_run(params, exp, base, maker, rng, float(known.hyper.noise)),
+                        designed_run(params, space, x, exp, base, maker, rng, float(known.hyper.noise)),
+                    )
+                    both = discover_set(
+                        ExperimentSet(runs), config=gj.Config(t1=float(exp.time[-1])), candidates=args.candidates
+                    )
+                    row["design with the first"] = {
+                        "effect": both.effect,
+                        "named": both.effect == truth,
+                        "confounded_with": list(both.confounded_with or []),
+                    }
             rows.append(row)
             print(json.dumps(row), flush=True)
     labels = list(inputs) + (["design with the first"] if args.with_first and "design" in inputs else [])
-    rate = {label: {t: float(np.mean([r[label]["named"] for r in rows if r["truth"] == t])) for t in truths}
-            for label in labels}
+    rate = {
+        label: {t: float(np.mean([r[label]["named"] for r in rows if r["truth"] == t])) for t in truths}
+        for label in labels
+    }
     return {"design": summary, "replications": rows, "named_rate": rate}
 
 
 def main():
-    from growjax.experiment import shared_experiment_dir  # noqa: F401 (import check before the long run)
+    from growjax.data.experiment import shared_experiment_dir  # noqa: F401 (import check before the long run)
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--data", default=str(REPO / "src" / "growjax" / "datasets" / "synthetic_forward.csv"))
+    ap.add_argument("--data", default=str(REPO / "src" / "growjax" / "data" / "datasets" / "synthetic_forward.csv"))
     ap.add_argument("--for", dest="design_for", nargs="+", default=["Y"])
     ap.add_argument("--sensors", default="length", choices=["length", "length,pressure"])
     ap.add_argument("--duration", type=float, default=10.0)
@@ -317,51 +389,112 @@ def main():
     ap.add_argument("--replications", type=int, default=20)
     ap.add_argument("--workers", type=int, default=1, help="replications run at a time (spawned processes)")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--maker", choices=["reference", "fast"], default="reference",
-                    help="the configuration that makes the replications' data (fast: no model error, a diagnostic)")
-    ap.add_argument("--rig", choices=["drawn", "nominal"], default="drawn",
-                    help="the replications' rig: drawn from the tolerance budget, or nominal (a diagnostic)")
-    ap.add_argument("--next-drive", choices=["forward", "inverse"], default="forward",
-                    help="the designed experiment's drive (inverse: the stepper's schedule; see the docstring)")
-    ap.add_argument("--inputs", nargs="+", default=["design", "published pulse train"],
-                    choices=["design", "published pulse train", "recorded length as demand"],
-                    help="the inputs replicated (with --discriminate: whose data discovery reads)")
-    ap.add_argument("--rig-tangents", action=argparse.BooleanOptionalAction, default=True,
-                    help="the replications' fits make the rig's errors parameters of the model (exact tangents, "
-                         "as growjax fit; default); --no-rig-tangents: secants, linearised once at nominal")
-    ap.add_argument("--relinearise", action="store_true",
-                    help="with --no-rig-tangents: the secants taken again where the data put the rig")
-    ap.add_argument("--discrepancy-in-data", action="store_true",
-                    help="the replications' data also carry a fresh draw of the discrepancy the first fit found")
-    ap.add_argument("--safety-draws", type=int, default=100,
-                    help="fresh draws of the rig and θ the design is run on by the reference configuration (0: none)")
-    ap.add_argument("--resume", action="store_true",
-                    help="with --design-from: keep the replications in --out's partial file; run the rest")
-    ap.add_argument("--design-from", default=None, metavar="DESIGN.json",
-                    help="take the design (and its prediction) from this benchmark's earlier results file")
-    ap.add_argument("--discriminate", nargs=2, default=None, metavar="EFFECT",
-                    help="check the design for telling two catalogue effects apart instead (see the docstring)")
+    ap.add_argument(
+        "--maker",
+        choices=["reference", "fast"],
+        default="reference",
+        help="the configuration that makes the replications' data (fast: no model error, a diagnostic)",
+    )
+    ap.add_argument(
+        "--rig",
+        choices=["drawn", "nominal"],
+        default="drawn",
+        help="the replications' rig: drawn from the tolerance budget, or nominal (a diagnostic)",
+    )
+    ap.add_argument(
+        "--next-drive",
+        choices=["forward", "inverse"],
+        default="forward",
+        help="the designed experiment's drive (inverse: the stepper's schedule; see the docstring)",
+    )
+    ap.add_argument(
+        "--inputs",
+        nargs="+",
+        default=["design", "published pulse train"],
+        choices=["design", "published pulse train", "recorded length as demand"],
+        help="the inputs replicated (with --discriminate: whose data discovery reads)",
+    )
+    ap.add_argument(
+        "--rig-tangents",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="the replications' fits make the rig's errors parameters of the model (exact tangents, "
+        "as growjax fit; default); --no-rig-tangents: secants, linearised once at nominal",
+    )
+    ap.add_argument(
+        "--relinearise",
+        action="store_true",
+        help="with --no-rig-tangents: the secants taken again where the data put the rig",
+    )
+    ap.add_argument(
+        "--discrepancy-in-data",
+        action="store_true",
+        help="the replications' data also carry a fresh draw of the discrepancy the first fit found",
+    )
+    ap.add_argument(
+        "--safety-draws",
+        type=int,
+        default=100,
+        help="fresh draws of the rig and θ the design is run on by the reference configuration (0: none)",
+    )
+    ap.add_argument(
+        "--resume",
+        action="store_true",
+        help="with --design-from: keep the replications in --out's partial file; run the rest",
+    )
+    ap.add_argument(
+        "--design-from",
+        default=None,
+        metavar="DESIGN.json",
+        help="take the design (and its prediction) from this benchmark's earlier results file",
+    )
+    ap.add_argument(
+        "--discriminate",
+        nargs=2,
+        default=None,
+        metavar="EFFECT",
+        help="check the design for telling two catalogue effects apart instead (see the docstring)",
+    )
     ap.add_argument("--knot-spacing", type=float, default=0.5, help="s between the demand's knots")
-    ap.add_argument("--growth-law", choices=["reference", "lockhart"], default="reference",
-                    help="the growth law of the fit, the design and the replications' data (lockhart: with --for Y "
-                         "phi_L n_L, a design for the law's rate and exponent)")
+    ap.add_argument(
+        "--growth-law",
+        choices=["reference", "lockhart"],
+        default="reference",
+        help="the growth law of the fit, the design and the replications' data (lockhart: with --for Y "
+        "phi_L n_L, a design for the law's rate and exponent)",
+    )
     ap.add_argument("--candidates", nargs="+", default=None, help="with --discriminate: discovery's candidates")
-    ap.add_argument("--truths", nargs="+", default=None, metavar="EFFECT",
-                    help="with --discriminate: the hidden effects replicated ('none': clean data; default A B none)")
-    ap.add_argument("--hold-base", action="store_true",
-                    help="with --discriminate: discovery holds the base parameters at the first experiment's "
-                         "estimate (the designed experiment read with what is known) instead of refitting them")
-    ap.add_argument("--with-first", action="store_true",
-                    help="with --discriminate: also read each designed experiment together with the first one made "
-                         "again on the same robot (the published pulse train, fresh noise): discovery over the set "
-                         "of the two (growjax.discover.discover_set, one Y for the robot)")
-    ap.add_argument("--out", default=None, help="results file (default benchmarks/results/design.json, "
-                                                "design_discrimination.json with --discriminate)")
+    ap.add_argument(
+        "--truths",
+        nargs="+",
+        default=None,
+        metavar="EFFECT",
+        help="with --discriminate: the hidden effects replicated ('none': clean data; default A B none)",
+    )
+    ap.add_argument(
+        "--hold-base",
+        action="store_true",
+        help="with --discriminate: discovery holds the base parameters at the first experiment's "
+        "estimate (the designed experiment read with what is known) instead of refitting them",
+    )
+    ap.add_argument(
+        "--with-first",
+        action="store_true",
+        help="with --discriminate: also read each designed experiment together with the first one made "
+        "again on the same robot (the published pulse train, fresh noise): discovery over the set "
+        "of the two (growjax.discover.discover_set, one Y for the robot)",
+    )
+    ap.add_argument(
+        "--out",
+        default=None,
+        help="results file (default benchmarks/results/design.json, design_discrimination.json with --discriminate)",
+    )
     args = ap.parse_args()
     if args.resume and not args.design_from:
         ap.error("--resume takes up the replications of a design: give it --design-from (the run's --out)")
-    args.out = args.out or str(REPO / "benchmarks" / "results" /
-                               ("design_discrimination.json" if args.discriminate else "design.json"))
+    args.out = args.out or str(
+        REPO / "benchmarks" / "results" / ("design_discrimination.json" if args.discriminate else "design.json")
+    )
     from _environment import environment
 
     import growjax as gj
@@ -371,8 +504,13 @@ def main():
     clock = time.perf_counter()
     known, exp, base = knowledge_of(args)
     if args.discriminate:
-        record = {"environment": environment(), "arguments": vars(args), "knowledge": known.summary(),
-                  **discriminate(args, known, exp, base), "growjax": gj.__version__}
+        record = {
+            "environment": environment(),
+            "arguments": vars(args),
+            "knowledge": known.summary(),
+            **discriminate(args, known, exp, base),
+            "growjax": gj.__version__,
+        }
         record["wall_s"] = time.perf_counter() - clock
         print(json.dumps(record["named_rate"], indent=1))
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
@@ -385,8 +523,9 @@ def main():
         space = gd.stepper_space(base, args.duration, exp)
         args.inputs = [space.baseline_label if i == "published pulse train" else i for i in args.inputs]
     else:
-        space = gd.DesignSpace(args.duration, gd.limits(base).pressure, gd.catheter_of(exp, args.duration),
-                               knot_spacing=args.knot_spacing)
+        space = gd.DesignSpace(
+            args.duration, gd.limits(base).pressure, gd.catheter_of(exp, args.duration), knot_spacing=args.knot_spacing
+        )
     baseline = space.baseline_label
     sensors = tuple(args.sensors.split(","))
     out = Path(args.out)
@@ -402,19 +541,41 @@ def main():
             x = space.unconstrained(np.asarray(summary["design"]["demand_Pa"]))
     else:
         t = time.perf_counter()
-        result = gd.design(known, space, sensors=sensors, random=args.random, starts=args.starts,
-                           iterations=args.iterations, seed=args.seed, progress=True)
+        result = gd.design(
+            known,
+            space,
+            sensors=sensors,
+            random=args.random,
+            starts=args.starts,
+            iterations=args.iterations,
+            seed=args.seed,
+            progress=True,
+        )
         design_wall = time.perf_counter() - t
         space.write_csv(out.with_suffix(".csv"), result.x)
         gd.design_figure(result, out.with_suffix(".png"))
         summary = result.summary()
         x = result.x
-        landscape = {**landscape_of(summary, sensors, design_wall, baseline),
-                     "random_criterion": result.random.criterion.tolist()}
+        landscape = {
+            **landscape_of(summary, sensors, design_wall, baseline),
+            "random_criterion": result.random.criterion.tolist(),
+        }
     if not args.design_from:  # the design alone, so that ``--design-from`` can take it up if the replications stop
-        out.write_text(json.dumps({"environment": environment(), "arguments": vars(args), "knowledge": known.summary(),
-                                   "design": summary, "landscape": landscape, "growjax": gj.__version__},
-                                  indent=1, default=str) + "\n")
+        out.write_text(
+            json.dumps(
+                {
+                    "environment": environment(),
+                    "arguments": vars(args),
+                    "knowledge": known.summary(),
+                    "design": summary,
+                    "landscape": landscape,
+                    "growjax": gj.__version__,
+                },
+                indent=1,
+                default=str,
+            )
+            + "\n"
+        )
     table = {r["input"]: r["parameters"] for r in summary["table"] if tuple(r["sensors"]) == sensors}
     print(json.dumps({k: v for k, v in landscape.items() if k != "random_criterion"}, indent=1), flush=True)
     safe = safety(known, space, space.inputs(x), args.safety_draws, args.seed) if args.safety_draws else None
@@ -423,18 +584,34 @@ def main():
     predicted = {label: {n: table[label][n]["sd_log_alone"] for n in names} for label in ("design", baseline)}
     t_cath = np.asarray(space.catheter.times) if hasattr(space.catheter, "times") else np.array([0.0, 1.0])
     c_cath = np.asarray(space.catheter.values) if hasattr(space.catheter, "values") else np.zeros(2)
-    job = {"seed": args.seed, "recorded": recorded_parameters(Path(args.data)), "tolerances": dict(known.tolerances),
-           "estimate": dict(zip(names, map(float, known.estimate))), "names": names,
-           "times": np.asarray(space.times).tolist(), "catheter_t": t_cath.tolist(), "catheter_m": c_cath.tolist(),
-           "drive": space.drive, "duration": args.duration,
-           "noise_m": float(known.hyper.noise), "pressure": "pressure" in sensors, "pressure_noise": 1e3,
-           "maker": args.maker, "rig": args.rig, "inputs": args.inputs, "relinearise": args.relinearise,
-           "rig_tangents": args.rig_tangents, "growth_law": args.growth_law,
-           "discrepancy": [float(known.hyper.amplitude), float(known.hyper.time_scale)] if args.discrepancy_in_data
-           else None}
+    job = {
+        "seed": args.seed,
+        "recorded": recorded_parameters(Path(args.data)),
+        "tolerances": dict(known.tolerances),
+        "estimate": dict(zip(names, map(float, known.estimate))),
+        "names": names,
+        "times": np.asarray(space.times).tolist(),
+        "catheter_t": t_cath.tolist(),
+        "catheter_m": c_cath.tolist(),
+        "drive": space.drive,
+        "duration": args.duration,
+        "noise_m": float(known.hyper.noise),
+        "pressure": "pressure" in sensors,
+        "pressure_noise": 1e3,
+        "maker": args.maker,
+        "rig": args.rig,
+        "inputs": args.inputs,
+        "relinearise": args.relinearise,
+        "rig_tangents": args.rig_tangents,
+        "growth_law": args.growth_law,
+        "discrepancy": [float(known.hyper.amplitude), float(known.hyper.time_scale)]
+        if args.discrepancy_in_data
+        else None,
+    }
     if space.drive == "inverse":
-        job.update(edges=space.edges.tolist(),
-                   steps={"design": np.asarray(x).tolist(), baseline: space.baseline().tolist()})
+        job.update(
+            edges=space.edges.tolist(), steps={"design": np.asarray(x).tolist(), baseline: space.baseline().tolist()}
+        )
     else:
         job.update(knots=space.knots.tolist(), demand=np.asarray(space.demand(x)).tolist())
     partial = out.with_suffix(".partial.jsonl")  # replications as they finish
@@ -464,9 +641,18 @@ def main():
     rows.sort(key=lambda r: r["index"])
     replications = summarise(rows, names, predicted, baseline)
     print(json.dumps(replications, indent=1), flush=True)
-    record = {"environment": environment(), "arguments": vars(args), "knowledge": known.summary(),
-              "design": summary, "landscape": landscape, "safety": safe, "replications": replications, "rows": rows,
-              "wall_s": time.perf_counter() - clock, "growjax": gj.__version__}
+    record = {
+        "environment": environment(),
+        "arguments": vars(args),
+        "knowledge": known.summary(),
+        "design": summary,
+        "landscape": landscape,
+        "safety": safe,
+        "replications": replications,
+        "rows": rows,
+        "wall_s": time.perf_counter() - clock,
+        "growjax": gj.__version__,
+    }
     out.write_text(json.dumps(record, indent=1, default=str) + "\n")
     print(f"wrote {out}")
 

@@ -2,7 +2,7 @@
 
 Run: ``python benchmarks/discover.py [--seeds 10] [--clean 20] [--t-end 10] [--effects NAME ...] [--factors 1 2]
 [--first-seed 1000] [--first-clean-seed 2000] [--profile] [--tolerance NAME=REL ...] [--baseline N] [--merge FILE ...]``
-→ ``benchmarks/results/discover.json``. Data come from :func:`growjax.synthetic.make_experiment`
+→ ``benchmarks/results/discover.json``. Data come from :func:`growjax.data.synthetic.make_experiment`
 (the reference configuration; one noise-free trace per effect and magnitude, seeds add noise), and
 every run is :func:`growjax.discover.discover` over the whole catalogue on the fast configuration.
 
@@ -29,12 +29,12 @@ import numpy as np
 
 import growjax as gj
 from growjax import discover as gd
-from growjax import effects as fx
-from growjax import experiment as ex
-from growjax import params as gp
-from growjax import synthetic as sy
-from growjax import tolerance as tl
+from growjax.calibration import tolerance as tl
+from growjax.data import experiment as ex
+from growjax.data import synthetic as sy
 from growjax.discover import _candidates as gd_fits
+from growjax.model import effects as fx
+from growjax.model import params as gp
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "benchmarks"))
@@ -59,7 +59,9 @@ class Profile:
     def summary(self) -> dict:
         names, out = tuple(fx.CATALOGUE), {}
         for on, wall, u in self.calls:
-            row = out.setdefault(",".join(names[i] for i in on) or "base", {"n": 0, "total_s": 0.0, "max_s": 0.0, "max_u": u})
+            row = out.setdefault(
+                ",".join(names[i] for i in on) or "base", {"n": 0, "total_s": 0.0, "max_s": 0.0, "max_u": u}
+            )
             row["n"] += 1
             row["total_s"] += wall
             row["max_s"], row["max_u"] = max(row["max_s"], wall), max(row["max_u"], u)
@@ -76,8 +78,14 @@ def one_run(effect, magnitude, seed, t_end, profile=False, discrepancy="matern32
         gd_fits._linearised = timer
     start = time.perf_counter()
     try:
-        res = gd.discover(exp.time[keep], exp["robot_length_m"][keep], inputs, config=cfg, discrepancy=discrepancy,
-                          tolerances=tolerances)
+        res = gd.discover(
+            exp.time[keep],
+            exp["robot_length_m"][keep],
+            inputs,
+            config=cfg,
+            discrepancy=discrepancy,
+            tolerances=tolerances,
+        )
     finally:
         if timer is not None:
             gd_fits._linearised = timer.inner
@@ -88,17 +96,35 @@ def one_run(effect, magnitude, seed, t_end, profile=False, discrepancy="matern32
     if named and truth["parameter"] in res.parameters:
         lo, hi = res.parameters[truth["parameter"]]["interval_90"]
         covered = bool(lo <= truth["magnitude"] <= hi)
-    return {"effect": effect, "magnitude": magnitude, "seed": seed, "found": res.effect, "named": named,
-            "confounded": confounded, "covered": covered, "rmse_before_m": res.rmse_before_m,
-            "rmse_after_m": res.rmse_after_m, "noise_m": truth["noise_sd"]["robot_length_m"],
-            "wall_s": time.perf_counter() - start, "fits": res.fits, "linearisations": res.linearisations,
-            # why: each round's 2ΔlogL per candidate, the confounded ones (with their rivals), the misfit test
-            "lr_statistics": [{n: s["lr_statistic"] for n, s in scores.items()} for scores in res.evidence],
-            "confounded_with": {n: {"parameter": c["parameter"], "correlation": c["correlation"],
-                                    "rival_effects": c.get("rival_effects", [])}
-                                for n, c in res.confounded_with.items()},
-            "threshold": res.threshold, "misfit_before": res.misfit_before, "tolerances": tolerances,
-            **({"profile": timer.summary()} if timer is not None else {})}
+    return {
+        "effect": effect,
+        "magnitude": magnitude,
+        "seed": seed,
+        "found": res.effect,
+        "named": named,
+        "confounded": confounded,
+        "covered": covered,
+        "rmse_before_m": res.rmse_before_m,
+        "rmse_after_m": res.rmse_after_m,
+        "noise_m": truth["noise_sd"]["robot_length_m"],
+        "wall_s": time.perf_counter() - start,
+        "fits": res.fits,
+        "linearisations": res.linearisations,
+        # why: each round's 2ΔlogL per candidate, the confounded ones (with their rivals), the misfit test
+        "lr_statistics": [{n: s["lr_statistic"] for n, s in scores.items()} for scores in res.evidence],
+        "confounded_with": {
+            n: {
+                "parameter": c["parameter"],
+                "correlation": c["correlation"],
+                "rival_effects": c.get("rival_effects", []),
+            }
+            for n, c in res.confounded_with.items()
+        },
+        "threshold": res.threshold,
+        "misfit_before": res.misfit_before,
+        "tolerances": tolerances,
+        **({"profile": timer.summary()} if timer is not None else {}),
+    }
 
 
 def tolerances_of(options: list) -> dict | None:
@@ -117,8 +143,13 @@ def rig_label(runs) -> str:
     labels, default = set(), tl.default_budget(gj.reference())
     for r in runs:
         tol = r.get("tolerances")
-        labels.add("default tolerance budget" if tol is None else "known (tolerances 0)" if not tol else
-                   "default budget, " + ", ".join(f"{n} {u:g}" for n, u in tol.items() if default.get(n) != u))
+        labels.add(
+            "default tolerance budget"
+            if tol is None
+            else "known (tolerances 0)"
+            if not tol
+            else "default budget, " + ", ".join(f"{n} {u:g}" for n, u in tol.items() if default.get(n) != u)
+        )
     return "; ".join(sorted(labels))
 
 
@@ -128,25 +159,34 @@ def summarise(runs, baseline, args) -> dict:
     clean = [r for r in runs if r["effect"] is None]
     covered = [r["covered"] for r in hidden if r["covered"] is not None]
     summary = {
-        "environment": environment(), "t_end_s": args.t_end, "factors": args.factors,
+        "environment": environment(),
+        "t_end_s": args.t_end,
+        "factors": args.factors,
         "rig": rig_label(runs),
-        "named_or_confounded_share": float(np.mean([r["named"] or r["confounded"] for r in hidden])) if hidden else None,
-        "named_share_per_effect": {e: float(np.mean([r["named"] for r in hidden if r["effect"] == e]))
-                                   for e in args.effects if hidden},
+        "named_or_confounded_share": float(np.mean([r["named"] or r["confounded"] for r in hidden]))
+        if hidden
+        else None,
+        "named_share_per_effect": {
+            e: float(np.mean([r["named"] for r in hidden if r["effect"] == e])) for e in args.effects if hidden
+        },
         "wrong_effect_share": float(np.mean([r["found"] in fx.CATALOGUE and r["found"] != r["effect"] for r in hidden]))
-        if hidden else None,
+        if hidden
+        else None,
         "false_positive_rate": float(np.mean([r["found"] != "none" for r in clean])) if clean else None,
         "interval_coverage": float(np.mean(covered)) if covered else None,
         "median_rmse_after_over_noise": statistics.median(r["rmse_after_m"] / r["noise_m"] for r in hidden)
-        if hidden else None,
+        if hidden
+        else None,
         "median_wall_s": statistics.median(r["wall_s"] for r in runs),
         # what a run's time is made of: fits × LM steps, each a linearisation of the superset (one forward-mode solve)
         "median_fits": statistics.median(r["fits"] for r in runs),
         "median_linearisations": statistics.median(r["linearisations"] for r in runs),
         "median_wall_ms_per_linearisation": statistics.median(1e3 * r["wall_s"] / r["linearisations"] for r in runs),
         # the same clean seeds under independent noise: the discrepancy likelihood's cost, in one process
-        "wall_ratio_to_independent": statistics.median(r["wall_s"] for r in clean[:len(baseline)])
-        / statistics.median(r["wall_s"] for r in baseline) if baseline else None,
+        "wall_ratio_to_independent": statistics.median(r["wall_s"] for r in clean[: len(baseline)])
+        / statistics.median(r["wall_s"] for r in baseline)
+        if baseline
+        else None,
         "baseline_runs": baseline,
         "runs": runs,
     }
@@ -159,20 +199,39 @@ def main() -> None:
     parser.add_argument("--clean", type=int, default=20)
     parser.add_argument("--t-end", type=float, default=10.0)
     parser.add_argument("--effects", nargs="+", default=list(fx.CATALOGUE))
-    parser.add_argument("--factors", nargs="+", type=float, default=[1.0, 2.0],
-                        help="magnitudes as multiples of each effect's moderate magnitude (default 1 2)")
+    parser.add_argument(
+        "--factors",
+        nargs="+",
+        type=float,
+        default=[1.0, 2.0],
+        help="magnitudes as multiples of each effect's moderate magnitude (default 1 2)",
+    )
     parser.add_argument("--first-seed", type=int, default=1000, help="seed of the first hidden-effect run")
     parser.add_argument("--first-clean-seed", type=int, default=2000, help="seed of the first clean run")
     parser.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "discover.json"))
     parser.add_argument("--profile", action="store_true", help="time every linearisation, by the candidates on")
-    parser.add_argument("--tolerance", action="append", default=[], metavar="NAME=REL",
-                        help="a rig tolerance over the default budget, as for `growjax discover` (repeat; 'none': "
-                             "the rig known exactly)")
-    parser.add_argument("--baseline", type=int, default=0,
-                        help="run the first N clean seeds also under independent noise (the likelihood discovery "
-                             "had before the discrepancy), for the ratio of median wall times")
-    parser.add_argument("--merge", nargs="+", default=None, metavar="FILE",
-                        help="join matrices written by earlier runs (e.g. seeds split over two processes) into --out")
+    parser.add_argument(
+        "--tolerance",
+        action="append",
+        default=[],
+        metavar="NAME=REL",
+        help="a rig tolerance over the default budget, as for `growjax discover` (repeat; 'none': "
+        "the rig known exactly)",
+    )
+    parser.add_argument(
+        "--baseline",
+        type=int,
+        default=0,
+        help="run the first N clean seeds also under independent noise (the likelihood discovery "
+        "had before the discrepancy), for the ratio of median wall times",
+    )
+    parser.add_argument(
+        "--merge",
+        nargs="+",
+        default=None,
+        metavar="FILE",
+        help="join matrices written by earlier runs (e.g. seeds split over two processes) into --out",
+    )
     args = parser.parse_args()
     if args.merge:
         parts = [json.loads(Path(f).read_text()) for f in args.merge]
@@ -189,14 +248,17 @@ def main() -> None:
         for factor in args.factors:
             magnitude = factor * sy.moderate_magnitude(effect)
             for seed in range(args.seeds):
-                runs.append(one_run(effect, magnitude, args.first_seed + seed, args.t_end, args.profile,
-                                    tolerances=rig))
+                runs.append(
+                    one_run(effect, magnitude, args.first_seed + seed, args.t_end, args.profile, tolerances=rig)
+                )
                 print(json.dumps(runs[-1]), flush=True)
     for seed in range(args.clean):
         runs.append(one_run(None, None, args.first_clean_seed + seed, args.t_end, args.profile, tolerances=rig))
         print(json.dumps(runs[-1]), flush=True)
-    baseline = [one_run(None, None, args.first_clean_seed + seed, args.t_end, discrepancy="none")
-                for seed in range(min(args.baseline, args.clean))]
+    baseline = [
+        one_run(None, None, args.first_clean_seed + seed, args.t_end, discrepancy="none")
+        for seed in range(min(args.baseline, args.clean))
+    ]
     summary = summarise(runs, baseline, args)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(summary, indent=2, default=str) + "\n")

@@ -33,8 +33,14 @@ sys.path.insert(0, str(REPO / "benchmarks"))
 import coverage_discrepancy as cd
 import make_synthetic as mk
 
-OFF = [("pid.proportional", 1.1), ("pump.screw_viscous_friction", 0.9), ("tank.length", 1.1),
-       ("robot.catheter_friction", 1.1), ("pid.integral", 0.9), ("pump.syringe_area", 1.1)]
+OFF = [
+    ("pid.proportional", 1.1),
+    ("pump.screw_viscous_friction", 0.9),
+    ("tank.length", 1.1),
+    ("robot.catheter_friction", 1.1),
+    ("pid.integral", 0.9),
+    ("pump.syringe_area", 1.1),
+]
 
 
 def rig_off(t, y):
@@ -43,8 +49,9 @@ def rig_off(t, y):
     ts = jnp.asarray(np.concatenate([[config.t0], t]))
 
     def run(k):
-        p = gj.replace(base, Y=y, **{name: gj.get(base, name) * jnp.where(k == i, f, 1.0)
-                                     for i, (name, f) in enumerate(OFF)})
+        p = gj.replace(
+            base, Y=y, **{name: gj.get(base, name) * jnp.where(k == i, f, 1.0) for i, (name, f) in enumerate(OFF)}
+        )
         return gj.simulate(p, inputs, config, ts=ts).length[1:]
 
     return np.asarray(jax.jit(jax.vmap(run))(jnp.arange(len(OFF))))
@@ -80,8 +87,12 @@ def main():
         row = {"data": label}
         for kind in ("matern32", "none") if args.compare else ("matern32",):
             res = gd.discover(t[keep], data, inputs, config=config, discrepancy=kind)
-            row[kind] = {"effect": res.effect, "effects": res.effects, "confounded": list(res.confounded_with),
-                         "wall_s": res.wall_s}
+            row[kind] = {
+                "effect": res.effect,
+                "effects": res.effects,
+                "confounded": list(res.confounded_with),
+                "wall_s": res.wall_s,
+            }
         rows.append(row)
         other = f" (independent noise: {row['none']['effect']})" if args.compare else ""
         print(f"{label:34s}: {row['matern32']['effect']:14s}{other}", flush=True)
@@ -90,8 +101,20 @@ def main():
     print(f"none on {none} of {len(rows)} (independent noise: {none_iid}); target >= 19 of 20")
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"environment": environment(), "t_end_s": args.t_end, "none": none, "none_independent": none_iid, "sets": len(rows),
-                               "rows": rows, "wall_s": time.perf_counter() - clock}, indent=1))
+    out.write_text(
+        json.dumps(
+            {
+                "environment": environment(),
+                "t_end_s": args.t_end,
+                "none": none,
+                "none_independent": none_iid,
+                "sets": len(rows),
+                "rows": rows,
+                "wall_s": time.perf_counter() - clock,
+            },
+            indent=1,
+        )
+    )
 
 
 if __name__ == "__main__":

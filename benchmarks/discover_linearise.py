@@ -2,7 +2,7 @@
 
 Run: ``python benchmarks/discover_linearise.py [--candidates all|no-velocity] [--batch 6] [--per-effect]``.
 
-On ``growjax/datasets/discovery/active_channel_force.csv`` (10 s) with the 8-effect superset (or the 5 effects whose rod
+On ``growjax/data/datasets/discovery/active_channel_force.csv`` (10 s) with the 8-effect superset (or the 5 effects whose rod
 force does not depend on the velocity), for a model with Y and the pull fitted: tracing and lowering, then
 XLA's compile, timed apart; the first call and the median of 5 later calls. ``--batch B`` also times B such
 models linearised under one ``vmap`` (members stepped together) against the same B one after another: why
@@ -25,7 +25,7 @@ import numpy as np
 
 import growjax as gj
 from growjax import discover as gd
-from growjax import experiment as ex
+from growjax.data import experiment as ex
 
 REPO = Path(__file__).resolve().parents[1]
 NO_VELOCITY = ("active_channel_force", "fluid_leak", "actuation_lag", "trapped_air", "retraction_folding")
@@ -49,16 +49,20 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--candidates", choices=("all", "no-velocity"), default="all")
     ap.add_argument("--batch", type=int, default=0)
-    ap.add_argument("--per-effect", action="store_true",
-                    help="also time one linearisation with each candidate on, at each of discover's starts")
+    ap.add_argument(
+        "--per-effect",
+        action="store_true",
+        help="also time one linearisation with each candidate on, at each of discover's starts",
+    )
     args = ap.parse_args()
-    exp = ex.read(REPO / "src" / "growjax" / "datasets" / "discovery" / "active_channel_force.csv")
+    exp = ex.read(REPO / "src" / "growjax" / "data" / "datasets" / "discovery" / "active_channel_force.csv")
     cfg = gj.Config(t1=10.0)
     inputs = ex.to_inputs(exp, "forward", gj.reference(), cfg.t0, cfg.t1)
     keep = exp.time >= cfg.t0
     names = tuple(gd.fx.CATALOGUE) if args.candidates == "all" else NO_VELOCITY
-    problem = gd.make_candidates(exp.time[keep], exp["robot_length_m"][keep], inputs, names, gj.reference(),
-                                 ("Y",), cfg)
+    problem = gd.make_candidates(
+        exp.time[keep], exp["robot_length_m"][keep], inputs, names, gj.reference(), ("Y",), cfg
+    )
     k, p, q = len(names), 1, 3
     mask = np.zeros(k)
     mask[names.index("active_channel_force")] = 1.0
@@ -72,13 +76,18 @@ def main():
     start = time.perf_counter()
     lowered.compile()
     compile_s = time.perf_counter() - start
-    print(f"{len(names)} candidates: tracing and lowering {lower_s:.1f} s ({lowered.as_text().count(chr(10))} lines of "
-          f"StableHLO), XLA compile {compile_s:.1f} s")
+    print(
+        f"{len(names)} candidates: tracing and lowering {lower_s:.1f} s ({lowered.as_text().count(chr(10))} lines of "
+        f"StableHLO), XLA compile {compile_s:.1f} s"
+    )
     first, wall = timed(lambda: gd._linearised(w, problem, *model))
     print(f"{len(names)} candidates: first call after that {first:.1f} s, then {1e3 * wall:.0f} ms per linearisation")
     if args.per_effect:
-        primal = eqx.filter_jit(lambda z, mk: gj.simulate(problem.parameters(z, mk), problem.inputs, problem.config,
-                                                          ts=problem.times, breaks=problem.breaks))
+        primal = eqx.filter_jit(
+            lambda z, mk: gj.simulate(
+                problem.parameters(z, mk), problem.inputs, problem.config, ts=problem.times, breaks=problem.breaks
+            )
+        )
 
         def simulation(j):
             """(ms, accepted steps) of one simulation of the superset with effect j on (None: none) at the 6 % start."""
@@ -108,12 +117,15 @@ def main():
                 _, wall = timed(lambda wj=wj, model_j=model_j: gd._linearised(wj, problem, *model_j), repeat=3)
                 row.append(f"{1e3 * wall:5.0f}")
             ms, steps = simulation(j)
-            print(f"  {name:22s} ms per linearisation at the starts {' '.join(row)}; one simulation {ms:4.0f} ms, "
-                  f"{steps} steps")
+            print(
+                f"  {name:22s} ms per linearisation at the starts {' '.join(row)}; one simulation {ms:4.0f} ms, "
+                f"{steps} steps"
+            )
     if args.batch:
         ws = jnp.stack([w.at[1].set(-1.0 + 0.3 * b) for b in range(args.batch)])
-        batched = eqx.filter_jit(jax.vmap(lambda x, m, s, z: gd._linearised(x, problem, m, s, z),
-                                          in_axes=(0, None, None, None)))
+        batched = eqx.filter_jit(
+            jax.vmap(lambda x, m, s, z: gd._linearised(x, problem, m, s, z), in_axes=(0, None, None, None))
+        )
         _, loop = timed(lambda: [gd._linearised(x, problem, *model) for x in ws])
         _, vmapped = timed(lambda: batched(ws, *model))
         print(f"{args.batch} linearisations: {loop:.2f} s one after another, {vmapped:.2f} s under one vmap")

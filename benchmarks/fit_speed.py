@@ -3,7 +3,7 @@
 Run: ``python benchmarks/fit_speed.py [--out benchmarks/results/fit_speed.json]``.
 
 On the shipped synthetic experiment and (where present) the public one, 0–10 s, free Y, the default starts:
-``growjax.fit.fit`` with ``discrepancy="none", tolerances={}`` (independent noise, as the fit was) and with the
+``growjax.calibration.fit.fit`` with ``discrepancy="none", tolerances={}`` (independent noise, as the fit was) and with the
 defaults (Matérn-3/2 discrepancy, the default tolerance budget, the rig inferred), and with the rig fixed and its
 tolerances propagated (``rig="fixed"``), and with the rig's secants instead of its tangents
 (``rig_tangents=False``), relinearised and linearised once at nominal (``relinearise=False``), each run
@@ -23,9 +23,9 @@ from pathlib import Path
 import numpy as np
 
 import growjax as gj
-from growjax import _data
-from growjax import experiment as ex
-from growjax import fit as gf
+from growjax.calibration import fit as gf
+from growjax.data import datasets as _data
+from growjax.data import experiment as ex
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "benchmarks"))
@@ -46,9 +46,13 @@ def main():
         exp = ex.read(path).window(10.0 + 1e-9)
         base, config = gj.reference("forward"), gj.Config(t1=10.0)
         inputs = ex.to_inputs(exp, "forward", base, config.t0, config.t1)
-        kinds = {"independent": {"discrepancy": "none", "tolerances": {}}, "discrepancy": {},
-                 "rig_fixed": {"rig": "fixed"}, "secants": {"rig_tangents": False},
-                 "once": {"rig_tangents": False, "relinearise": False}}
+        kinds = {
+            "independent": {"discrepancy": "none", "tolerances": {}},
+            "discrepancy": {},
+            "rig_fixed": {"rig": "fixed"},
+            "secants": {"rig_tangents": False},
+            "once": {"rig_tangents": False, "relinearise": False},
+        }
         walls, lins = {kind: [] for kind in kinds}, {}
         for _ in range(args.repeat):  # interleaved: a drift of the machine's speed falls on both alike
             for kind, options in kinds.items():
@@ -56,20 +60,24 @@ def main():
                 res = gf.fit(exp.time, exp["robot_length_m"], inputs, free=["Y"], base=base, config=config, **options)
                 walls[kind].append(time.perf_counter() - clock)
                 lins[kind] = res.linearisations
-        row = {kind: {"first_s": w[0], "warm_s": float(np.median(w[1:])), "linearisations": lins[kind]}
-               for kind, w in walls.items()}
+        row = {
+            kind: {"first_s": w[0], "warm_s": float(np.median(w[1:])), "linearisations": lins[kind]}
+            for kind, w in walls.items()
+        }
         row["ratio_warm"] = row["discrepancy"]["warm_s"] / row["independent"]["warm_s"]
         row["ratio_first"] = row["discrepancy"]["first_s"] / row["independent"]["first_s"]
         row["ratio_warm_inferred_over_fixed"] = row["discrepancy"]["warm_s"] / row["rig_fixed"]["warm_s"]
         row["ratio_warm_over_once"] = row["discrepancy"]["warm_s"] / row["once"]["warm_s"]
         row["ratio_warm_over_secants"] = row["discrepancy"]["warm_s"] / row["secants"]["warm_s"]
         out[label] = row
-        print(f"{label}: independent {row['independent']['warm_s']:.2f} s, discrepancy {row['discrepancy']['warm_s']:.2f} s "
-              f"warm (ratio {row['ratio_warm']:.2f}); first runs {row['independent']['first_s']:.1f} / "
-              f"{row['discrepancy']['first_s']:.1f} s; the rig fixed {row['rig_fixed']['warm_s']:.2f} s warm (inferred over "
-              f"fixed {row['ratio_warm_inferred_over_fixed']:.2f}); secants relinearised {row['secants']['warm_s']:.2f} s "
-              f"({row['secants']['linearisations']} linearisations), linearised once {row['once']['warm_s']:.2f} s",
-              flush=True)
+        print(
+            f"{label}: independent {row['independent']['warm_s']:.2f} s, discrepancy {row['discrepancy']['warm_s']:.2f} s "
+            f"warm (ratio {row['ratio_warm']:.2f}); first runs {row['independent']['first_s']:.1f} / "
+            f"{row['discrepancy']['first_s']:.1f} s; the rig fixed {row['rig_fixed']['warm_s']:.2f} s warm (inferred over "
+            f"fixed {row['ratio_warm_inferred_over_fixed']:.2f}); secants relinearised {row['secants']['warm_s']:.2f} s "
+            f"({row['secants']['linearisations']} linearisations), linearised once {row['once']['warm_s']:.2f} s",
+            flush=True,
+        )
     path = Path(args.out)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps({"environment": environment(), **out}, indent=1))

@@ -9,13 +9,13 @@ residuals as they are (its own ``jax.linearize`` of the model), e.g. ``--cases f
 Problems, each from one start:
 
 * ``fit_Y``, ``fit_Y_kp``: the fit's first stage (least squares, before the discrepancy) on the shipped synthetic
-  experiment, forward drive, 0–10 s, length only: ``growjax.fit.make_problem``'s residuals (units of 1 mm) in
+  experiment, forward drive, 0–10 s, length only: ``growjax.calibration.fit.make_problem``'s residuals (units of 1 mm) in
   z = ln(θ/θ_ref) for Y, and for Y with the pressure loop's proportional gain ``pid.proportional``; the start
-  30 % above the reference values. The engine runs as the fit runs it (``growjax.fit._linearised``, the
+  30 % above the reference values. The engine runs as the fit runs it (``growjax.calibration.fit._linearised``, the
   physical bounds, ``LM_TOLERANCE``).
 * ``profile``: the control profile's problem as ``growjax.control.optimize_profile`` poses it (its residual
   function is local to it, so it is built here from the module's pieces: ``profile_inputs``,
-  ``growjax.simulate``, the same residual rows, scaling, first guess, bounds [0, the demand limit] and
+  ``growjax.simulation.simulate``, the same residual rows, scaling, first guess, bounds [0, the demand limit] and
   ``MAX_STEP``): the forward drive's demand on knots every 0.5 s over 0–5 s tracking the shipped
   experiment's length. The engine runs as the workflow runs it (trial points scored by one solve, linearised
   once accepted).
@@ -53,12 +53,12 @@ import numpy as np
 import optimistix as optx
 
 import growjax as gj
-from growjax import _data
 from growjax import control as gc
-from growjax import experiment as ex
-from growjax import fit as gf
-from growjax._least_squares import levenberg_marquardt, linearise
+from growjax.calibration import fit as gf
+from growjax.calibration.least_squares import levenberg_marquardt, linearise
 from growjax.control import profile as cp
+from growjax.data import datasets as _data
+from growjax.data import experiment as ex
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "benchmarks"))
@@ -66,9 +66,14 @@ from _environment import environment
 
 CASES = ("fit_Y", "fit_Y_kp", "profile")
 # key: label. ``lm_linearize`` (optimistix's own jax.linearize of the residuals) is not in the default run.
-SOLVERS = {"engine": "engine", "lm": "optimistix LM", "lm_best": "optimistix LM, best so far",
-           "dogleg": "optimistix Dogleg", "dogleg_best": "optimistix Dogleg, best so far",
-           "lm_linearize": "optimistix LM, jax.linearize"}
+SOLVERS = {
+    "engine": "engine",
+    "lm": "optimistix LM",
+    "lm_best": "optimistix LM, best so far",
+    "dogleg": "optimistix Dogleg",
+    "dogleg_best": "optimistix Dogleg, best so far",
+    "lm_linearize": "optimistix LM, jax.linearize",
+}
 DEFAULT_SOLVERS = ("engine", "lm", "lm_best", "dogleg", "dogleg_best")
 SAME_COST = 1e-6  # relative: an optimistix cost above the engine's by more than this is a worse fit
 WITHIN = 1.5  # the warm-time ratio under which optimistix would replace the engine
@@ -127,8 +132,10 @@ def fit_case(label, names, max_steps):
 
     case = Case(label, problem.residuals, np.full(len(names), np.log(1.3)), bounds, engine, estimate, linearised)
     case.statistical = True  # a fit: points compared in standard errors
-    case.description = (f"fit's first stage, free {', '.join(problem.names)}, {problem.times.size} length samples, "
-                        "start 30 % above the reference")
+    case.description = (
+        f"fit's first stage, free {', '.join(problem.names)}, {problem.times.size} length samples, "
+        "start 30 % above the reference"
+    )
     return case
 
 
@@ -158,16 +165,19 @@ def profile_case(max_steps, t_end=5.0, knot_dt=0.5, smooth=1e-3):
 
     def engine(x):
         score, lin = Counter(scored), Counter(linearised)
-        x, _, ok, _, _ = levenberg_marquardt(lin, x, max_steps=max_steps, bounds=bounds, max_move=cp.MAX_STEP / scale,
-                                             residuals=score)
+        x, _, ok, _, _ = levenberg_marquardt(
+            lin, x, max_steps=max_steps, bounds=bounds, max_move=cp.MAX_STEP / scale, residuals=score
+        )
         return x, ok, lin.calls - 1, score.calls + lin.calls  # one linearisation per accepted step, and the first
 
     def demand(x):
         return {"demand_kPa": [round(float(v) * scale / 1e3, 1) for v in x]}
 
     case = Case("profile", residuals, x0, bounds, engine, demand, linearised)
-    case.description = (f"control profile, {knots.size} knots every {knot_dt:g} s over 0–{t_end:g} s, "
-                        f"{ts.size} length samples, the demand kept in [0, {lim.max_demand / 1e3:.0f} kPa]")
+    case.description = (
+        f"control profile, {knots.size} knots every {knot_dt:g} s over 0–{t_end:g} s, "
+        f"{ts.size} length samples, the demand kept in [0, {lim.max_demand / 1e3:.0f} kPa]"
+    )
     return case
 
 
@@ -228,12 +238,18 @@ def measure(case, keys, repeat, max_steps):
     rows = {}
     for name in names:
         x, ok, steps, evaluations = outcome[name]
-        rows[name] = {"first_s": walls[name][0], "warm_s": float(np.median(walls[name][1:])),
-                      "warm_all_s": walls[name][1:],
-                      "steps": steps, "evaluations": evaluations, "cost": case.cost(x), "converged": ok,
-                      "outside_box": int(np.sum((x < lo - 1e-12) | (x > hi + 1e-12))),
-                      "on_bound": int(np.sum((np.abs(x - lo) < 1e-9) | (np.abs(x - hi) < 1e-9))),
-                      "estimate": case.parameters(x)}
+        rows[name] = {
+            "first_s": walls[name][0],
+            "warm_s": float(np.median(walls[name][1:])),
+            "warm_all_s": walls[name][1:],
+            "steps": steps,
+            "evaluations": evaluations,
+            "cost": case.cost(x),
+            "converged": ok,
+            "outside_box": int(np.sum((x < lo - 1e-12) | (x > hi + 1e-12))),
+            "on_bound": int(np.sum((np.abs(x - lo) < 1e-9) | (np.abs(x - hi) < 1e-9))),
+            "estimate": case.parameters(x),
+        }
     engine = rows["engine"]
     x_engine = outcome["engine"][0]
     r_lin, jac = (np.asarray(a) for a in case.linearised(jnp.asarray(x_engine)))
@@ -246,14 +262,22 @@ def measure(case, keys, repeat, max_steps):
             row["distance_se"] = float(np.max(np.abs(outcome[name][0] - x_engine) / se))
         row["warm_over_engine"] = row["warm_s"] / engine["warm_s"]
         row["cost_over_engine"] = row["cost"] / engine["cost"] - 1.0
-        row["replaces_engine"] = bool(row["cost_over_engine"] <= SAME_COST and row["warm_over_engine"] <= WITHIN
-                                      and row["outside_box"] == 0 and row["converged"])
+        row["replaces_engine"] = bool(
+            row["cost_over_engine"] <= SAME_COST
+            and row["warm_over_engine"] <= WITHIN
+            and row["outside_box"] == 0
+            and row["converged"]
+        )
     best = [n for n in names[1:] if rows[n]["replaces_engine"]]
     # The cost's own noise: at the engine's point, the solve carrying the sensitivities against the plain solve
     noise = abs(0.5 * float(r_lin @ r_lin) / engine["cost"] - 1.0)
-    return {"description": case.description, "start": case.parameters(case.x0), "solvers": rows,
-            "cost_noise_relative": noise,
-            "verdict": f"switch to {min(best, key=lambda n: rows[n]['warm_s'])}" if best else "keep the engine"}
+    return {
+        "description": case.description,
+        "start": case.parameters(case.x0),
+        "solvers": rows,
+        "cost_noise_relative": noise,
+        "verdict": f"switch to {min(best, key=lambda n: rows[n]['warm_s'])}" if best else "keep the engine",
+    }
 
 
 def main():
@@ -261,31 +285,49 @@ def main():
     ap.add_argument("--repeat", type=int, default=3, help="warm runs per solver (after one cold run)")
     ap.add_argument("--max-steps", type=int, default=100, help="the engine's accepted steps, optimistix's steps")
     ap.add_argument("--cases", default=",".join(CASES), help=f"comma-separated, of {', '.join(CASES)}")
-    ap.add_argument("--solvers", default=",".join(DEFAULT_SOLVERS),
-                    help=f"comma-separated, of {', '.join(SOLVERS)}; the engine is always run first")
+    ap.add_argument(
+        "--solvers",
+        default=",".join(DEFAULT_SOLVERS),
+        help=f"comma-separated, of {', '.join(SOLVERS)}; the engine is always run first",
+    )
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "least_squares.json"))
     args = ap.parse_args()
     cases = [c for c in args.cases.split(",") if c]
     keys = ["engine"] + [k for k in args.solvers.split(",") if k and k != "engine"]
     unknown = sorted(set(cases) - set(CASES)) + sorted(set(keys) - set(SOLVERS))
     if unknown or args.repeat < 1:
-        ap.error(f"unknown case(s) or solver(s) {unknown}; cases: {', '.join(CASES)}; solvers: {', '.join(SOLVERS)}"
-                 if unknown else "--repeat must be at least 1")
-    make = {"fit_Y": lambda: fit_case("fit_Y", ["Y"], args.max_steps),
-            "fit_Y_kp": lambda: fit_case("fit_Y_kp", ["Y", "pid.proportional"], args.max_steps),
-            "profile": lambda: profile_case(args.max_steps)}
-    out = {"environment": environment(), "data": str(_data.default_data_path()), "tolerance": gf.LM_TOLERANCE,
-           "max_steps": args.max_steps, "repeat": args.repeat, "same_cost_relative": SAME_COST,
-           "within_warm_ratio": WITHIN, "problems": {}}
+        ap.error(
+            f"unknown case(s) or solver(s) {unknown}; cases: {', '.join(CASES)}; solvers: {', '.join(SOLVERS)}"
+            if unknown
+            else "--repeat must be at least 1"
+        )
+    make = {
+        "fit_Y": lambda: fit_case("fit_Y", ["Y"], args.max_steps),
+        "fit_Y_kp": lambda: fit_case("fit_Y_kp", ["Y", "pid.proportional"], args.max_steps),
+        "profile": lambda: profile_case(args.max_steps),
+    }
+    out = {
+        "environment": environment(),
+        "data": str(_data.default_data_path()),
+        "tolerance": gf.LM_TOLERANCE,
+        "max_steps": args.max_steps,
+        "repeat": args.repeat,
+        "same_cost_relative": SAME_COST,
+        "within_warm_ratio": WITHIN,
+        "problems": {},
+    }
     for label in cases:
         result = measure(make[label](), keys, args.repeat, args.max_steps)
         out["problems"][label] = result
         print(f"{label}: {result['description']}", flush=True)
         for name, row in result["solvers"].items():
-            print(f"  {name:31s} warm {row['warm_s']:7.2f} s  first {row['first_s']:6.1f} s  steps {row['steps']:3d}  "
-                  f"evaluations {row['evaluations']:3d}  cost {row['cost']:.6g}  converged {row['converged']}  "
-                  f"outside box {row['outside_box']}" + (f"  {row['distance_se']:.2g} se from the engine's point"
-                                                         if "distance_se" in row else ""), flush=True)
+            print(
+                f"  {name:31s} warm {row['warm_s']:7.2f} s  first {row['first_s']:6.1f} s  steps {row['steps']:3d}  "
+                f"evaluations {row['evaluations']:3d}  cost {row['cost']:.6g}  converged {row['converged']}  "
+                f"outside box {row['outside_box']}"
+                + (f"  {row['distance_se']:.2g} se from the engine's point" if "distance_se" in row else ""),
+                flush=True,
+            )
         print(f"  cost noise (relative) {result['cost_noise_relative']:.1e}; verdict: {result['verdict']}", flush=True)
     path = Path(args.out)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -20,10 +20,10 @@ from pathlib import Path
 import numpy as np
 
 import growjax as gj
-from growjax import experiment as ex
-from growjax import experiments as xs
-from growjax import joint
-from growjax.experiment import Experiment
+from growjax.calibration import joint
+from growjax.data import experiment as ex
+from growjax.data import sets as xs
+from growjax.data.experiment import Experiment
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "benchmarks"))
@@ -39,8 +39,9 @@ def stepper_experiment(seed: int) -> Experiment:
     base = gj.replace(gj.reference("inverse"), Y=9000.0)
     spec = Experiment(t, {"robot_length_m": desired, "desired_length_m": desired, "catheter_length_m": catheter})
     config = gj.Config(fidelity="reference", drive="inverse", t1=10.0)
-    traj = gj.simulate(base, ex.to_inputs(spec, "inverse", base, config.t0, config.t1), config,
-                       ts=np.concatenate([[config.t0], t]))
+    traj = gj.simulate(
+        base, ex.to_inputs(spec, "inverse", base, config.t0, config.t1), config, ts=np.concatenate([[config.t0], t])
+    )
     assert int(traj.status) == gj.OK, gj.status_name(traj.status)
     length = np.asarray(traj.length)[1:] + np.random.default_rng(seed).normal(0.0, 2e-4, t.size)
     return Experiment(t, {"robot_length_m": length, "desired_length_m": desired, "catheter_length_m": catheter})
@@ -51,16 +52,22 @@ def main():
     ap.add_argument("--seed", type=int, default=3)
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "mixed_set.json"))
     args = ap.parse_args()
-    forward = ex.read(files("growjax") / "datasets" / "synthetic_forward.csv")
-    runs = (xs.Run("forward", forward, drive="forward", sensors=("length", "pressure")),
-            xs.Run("stepper", stepper_experiment(args.seed), drive="inverse"))
+    forward = ex.read(files("growjax.data") / "datasets" / "synthetic_forward.csv")
+    runs = (
+        xs.Run("forward", forward, drive="forward", sensors=("length", "pressure")),
+        xs.Run("stepper", stepper_experiment(args.seed), drive="inverse"),
+    )
     rows = {}
     for label, chosen in (("forward", (0,)), ("stepper", (1,)), ("joint", (0, 1))):
         clock = time.perf_counter()
         res = joint.fit_set(xs.ExperimentSet(tuple(runs[i] for i in chosen)), config=gj.Config(t1=10.0))
-        rows[label] = {"estimate_Pa": res.estimate[Y], "interval_90_Pa": list(res.interval_90[Y]),
-                       "programs": res.programs, "wall_s": time.perf_counter() - clock,
-                       "rmse_length_m": [r["rmse_length_m"] for r in res.runs]}
+        rows[label] = {
+            "estimate_Pa": res.estimate[Y],
+            "interval_90_Pa": list(res.interval_90[Y]),
+            "programs": res.programs,
+            "wall_s": time.perf_counter() - clock,
+            "rmse_length_m": [r["rmse_length_m"] for r in res.runs],
+        }
         print(label, json.dumps(rows[label]), flush=True)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)

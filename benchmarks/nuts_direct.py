@@ -2,7 +2,7 @@
 
 Run: ``python benchmarks/nuts_direct.py [--chains 4 --warmup 500 --samples 500] [--target-accept 0.98]
 [--max-tree-depth 10] [--vectorised-gradient] [--gradients-only] [--small-loops] [--sequential]
-[--geometry [TARGET_ACCEPT ...] [--logit]] [--out benchmarks/results/nuts_direct.json]`` (``--small-loops``: the opt-in option of :mod:`growjax.xla_flags`).
+[--geometry [TARGET_ACCEPT ...] [--logit]] [--out benchmarks/results/nuts_direct.json]`` (``--small-loops``: the opt-in option of :mod:`growjax.simulation.xla_flags`).
 
 Reads ``../shared/data/mammobot/experiment.csv`` (the shipped synthetic forward experiment when it is
 absent). Chains run in parallel, one per CPU device (the script exposes ``--chains`` devices;
@@ -31,9 +31,9 @@ import numpy as np
 from numpyro.infer.util import initialize_model
 
 import growjax as gj
-from growjax import experiment as ex
 from growjax import posterior as gpost
-from growjax import xla_flags
+from growjax.data import experiment as ex
+from growjax.simulation import xla_flags
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -46,17 +46,31 @@ def main():
     parser.add_argument("--target-accept", type=float, default=0.98)
     parser.add_argument("--t-end", type=float, default=10.0)
     parser.add_argument("--max-tree-depth", type=int, default=10)
-    parser.add_argument("--vectorised-gradient", action="store_true",
-                        help="also time the gradient vmapped over the chains (members stepped together in one solve)")
+    parser.add_argument(
+        "--vectorised-gradient",
+        action="store_true",
+        help="also time the gradient vmapped over the chains (members stepped together in one solve)",
+    )
     parser.add_argument("--gradients-only", action="store_true", help="time the gradients and stop (no sampling)")
-    parser.add_argument("--small-loops", action="store_true",
-                        help="the opt-in XLA:CPU option that compiles the solver's loop whole (growjax.xla_flags)")
-    parser.add_argument("--geometry", type=float, nargs="*", metavar="TARGET_ACCEPT",
-                        help="instead of sampling through the model: NUTS on the model linearised at the posterior mode "
-                             "(seconds), at these target acceptance rates (default 0.8 0.9 0.95 0.98)")
-    parser.add_argument("--logit", action="store_true",
-                        help="with --geometry: every prior in NumPyro's logit coordinate (no softplus coordinate for "
-                             "priors pressed against a bound, posterior.bound_start)")
+    parser.add_argument(
+        "--small-loops",
+        action="store_true",
+        help="the opt-in XLA:CPU option that compiles the solver's loop whole (growjax.simulation.xla_flags)",
+    )
+    parser.add_argument(
+        "--geometry",
+        type=float,
+        nargs="*",
+        metavar="TARGET_ACCEPT",
+        help="instead of sampling through the model: NUTS on the model linearised at the posterior mode "
+        "(seconds), at these target acceptance rates (default 0.8 0.9 0.95 0.98)",
+    )
+    parser.add_argument(
+        "--logit",
+        action="store_true",
+        help="with --geometry: every prior in NumPyro's logit coordinate (no softplus coordinate for "
+        "priors pressed against a bound, posterior.bound_start)",
+    )
     parser.add_argument("--sequential", action="store_true", help="chains one after another on one device")
     parser.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "nuts_direct.json"))
     args = parser.parse_args()
@@ -65,46 +79,90 @@ def main():
     if not args.sequential:
         jax.config.update("jax_num_cpu_devices", max(args.chains, 1))  # one chain per device, before JAX starts
     folder = ex.shared_experiment_dir()
-    exp = ex.read(folder / "experiment.csv") if folder else ex.read(REPO / "src" / "growjax" / "datasets" / "synthetic_forward.csv")
+    exp = (
+        ex.read(folder / "experiment.csv")
+        if folder
+        else ex.read(REPO / "src" / "growjax" / "data" / "datasets" / "synthetic_forward.csv")
+    )
     base = gj.reference(growth_law="lockhart")
     cfg = gj.Config(t1=args.t_end)
     inputs = ex.to_inputs(exp, "forward", base, cfg.t0, cfg.t1)
     if args.geometry is not None:
-        out = geometry(exp, inputs, base, cfg, args.chains, args.warmup, args.samples,
-                       args.geometry or [0.8, 0.9, 0.95, 0.98], args.max_tree_depth, args.logit)
+        out = geometry(
+            exp,
+            inputs,
+            base,
+            cfg,
+            args.chains,
+            args.warmup,
+            args.samples,
+            args.geometry or [0.8, 0.9, 0.95, 0.98],
+            args.max_tree_depth,
+            args.logit,
+        )
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
         Path(args.out).write_text(json.dumps(out, indent=2) + "\n")
         print(json.dumps(out, indent=2))
         return
     gradient_all_sites_s = gradient_time(exp, inputs, base, cfg, 1, model_tangents=False)
     gradient_s = gradient_time(exp, inputs, base, cfg, 1)
-    print(f"one gradient of the log density (one chain): {1e3 * gradient_all_sites_s:.0f} ms with a tangent per "
-          f"unconstrained site, {1e3 * gradient_s:.0f} ms with one per parameter (with_model_tangents)", flush=True)
+    print(
+        f"one gradient of the log density (one chain): {1e3 * gradient_all_sites_s:.0f} ms with a tangent per "
+        f"unconstrained site, {1e3 * gradient_s:.0f} ms with one per parameter (with_model_tangents)",
+        flush=True,
+    )
     gradient_vec_s = None
     if args.vectorised_gradient:
         gradient_vec_s = gradient_time(exp, inputs, base, cfg, args.chains)
         print(f"one vmapped gradient ({args.chains} chains): {1e3 * gradient_vec_s:.0f} ms", flush=True)
     if args.gradients_only:
         return
-    res = gpost.sample(exp.time, exp["robot_length_m"], inputs, base, cfg, priors=gpost.lockhart_priors(),
-                       chains=args.chains, warmup=args.warmup, samples=args.samples, progress=True,
-                       target_accept=args.target_accept, emulate=False, max_tree_depth=args.max_tree_depth,
-                       chain_method="sequential" if args.sequential else None)
+    res = gpost.sample(
+        exp.time,
+        exp["robot_length_m"],
+        inputs,
+        base,
+        cfg,
+        priors=gpost.lockhart_priors(),
+        chains=args.chains,
+        warmup=args.warmup,
+        samples=args.samples,
+        progress=True,
+        target_accept=args.target_accept,
+        emulate=False,
+        max_tree_depth=args.max_tree_depth,
+        chain_method="sequential" if args.sequential else None,
+    )
     stats = res.idata.sample_stats
     steps = float(np.asarray(stats["n_steps"]).mean()) if "n_steps" in stats else None
     s = res.summary
-    out = {"data": exp.source, "device": str(jax.devices()[0]), "law": "lockhart", "t_end_s": args.t_end,
-           "chains": args.chains, "warmup": args.warmup, "samples": args.samples,
-           "target_accept": args.target_accept, "max_tree_depth": args.max_tree_depth, "wall_s": res.wall_s,
-           "chain_method": res.summary["chain_method"], "devices": jax.local_device_count(),
-           "small_loops": xla_flags.applied(), "gradient_s_one_chain": gradient_s,
-           "gradient_s_one_chain_tangent_per_site": gradient_all_sites_s, "laplace_s": res.summary["laplace_s"],
-           "gradient_s_vmapped_chains": gradient_vec_s,
-           "tree_size_sampling_mean": steps,
-           "projected_sampling_s_4x(500+500)": None if steps is None else 4 * 1000 * steps * gradient_s,
-           "rhat_max": s["rhat_max"], "ess_bulk_min": s["ess_bulk_min"], "divergences": s["divergences"],
-           "parameters": s["parameters"], "coverage_90": s["coverage_90"],
-           "targets": {"wall_s": 600.0, "rhat_max": 1.01, "divergences": 0}}
+    out = {
+        "data": exp.source,
+        "device": str(jax.devices()[0]),
+        "law": "lockhart",
+        "t_end_s": args.t_end,
+        "chains": args.chains,
+        "warmup": args.warmup,
+        "samples": args.samples,
+        "target_accept": args.target_accept,
+        "max_tree_depth": args.max_tree_depth,
+        "wall_s": res.wall_s,
+        "chain_method": res.summary["chain_method"],
+        "devices": jax.local_device_count(),
+        "small_loops": xla_flags.applied(),
+        "gradient_s_one_chain": gradient_s,
+        "gradient_s_one_chain_tangent_per_site": gradient_all_sites_s,
+        "laplace_s": res.summary["laplace_s"],
+        "gradient_s_vmapped_chains": gradient_vec_s,
+        "tree_size_sampling_mean": steps,
+        "projected_sampling_s_4x(500+500)": None if steps is None else 4 * 1000 * steps * gradient_s,
+        "rhat_max": s["rhat_max"],
+        "ess_bulk_min": s["ess_bulk_min"],
+        "divergences": s["divergences"],
+        "parameters": s["parameters"],
+        "coverage_90": s["coverage_90"],
+        "targets": {"wall_s": 600.0, "rhat_max": 1.01, "divergences": 0},
+    }
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(out, indent=2, default=str) + "\n")
     print(json.dumps(out, indent=2, default=str))
@@ -170,11 +228,22 @@ def geometry(exp, inputs, base, cfg, chains, warmup, samples, target_accepts, ma
     model = make_model(linear, sampled)
     rows = []
     for accept in target_accepts:
-        kernel = NUTS(model, dense_mass=True, target_accept_prob=accept, max_tree_depth=max_tree_depth,
-                      inverse_mass_matrix=mass,
-                      init_strategy=numpyro.infer.init_to_value(values=start))
-        mcmc = MCMC(kernel, num_warmup=warmup, num_samples=samples, num_chains=chains, progress_bar=False,
-                    chain_method="vectorized")
+        kernel = NUTS(
+            model,
+            dense_mass=True,
+            target_accept_prob=accept,
+            max_tree_depth=max_tree_depth,
+            inverse_mass_matrix=mass,
+            init_strategy=numpyro.infer.init_to_value(values=start),
+        )
+        mcmc = MCMC(
+            kernel,
+            num_warmup=warmup,
+            num_samples=samples,
+            num_chains=chains,
+            progress_bar=False,
+            chain_method="vectorized",
+        )
         mcmc.warmup(jax.random.PRNGKey(0), y, extra_fields=("diverging", "num_steps"), collect_warmup=True)
         warm = {k: np.asarray(v) for k, v in mcmc.get_extra_fields(group_by_chain=True).items()}
         mcmc.post_warmup_state = mcmc.last_state
@@ -183,17 +252,33 @@ def geometry(exp, inputs, base, cfg, chains, warmup, samples, target_accepts, ma
         sites = [p.site for p in priors] + ["sigma"]
         post = {k: np.asarray(v) for k, v in mcmc.get_samples(group_by_chain=True).items() if k in sites}
         rhat = azs.rhat(azb.convert_to_dataset(post))
-        rows.append({"target_accept": accept, "leapfrog_per_draw_warmup": float(warm["num_steps"].mean()),
-                     "leapfrog_per_draw_sampling": float(draw["num_steps"].mean()),
-                     "leapfrog_per_chain": float(warm["num_steps"].sum(1).mean() + draw["num_steps"].sum(1).mean()),
-                     "divergences_warmup": int(warm["diverging"].sum()), "divergences_sampling": int(draw["diverging"].sum()),
-                     "rhat_max": float(max(float(rhat[k]) for k in post)),
-                     "posterior_90": {k: np.quantile(v, [0.05, 0.95]).tolist() for k, v in post.items()}})
+        rows.append(
+            {
+                "target_accept": accept,
+                "leapfrog_per_draw_warmup": float(warm["num_steps"].mean()),
+                "leapfrog_per_draw_sampling": float(draw["num_steps"].mean()),
+                "leapfrog_per_chain": float(warm["num_steps"].sum(1).mean() + draw["num_steps"].sum(1).mean()),
+                "divergences_warmup": int(warm["diverging"].sum()),
+                "divergences_sampling": int(draw["diverging"].sum()),
+                "rhat_max": float(max(float(rhat[k]) for k in post)),
+                "posterior_90": {k: np.quantile(v, [0.05, 0.95]).tolist() for k, v in post.items()},
+            }
+        )
         print(rows[-1], flush=True)
     coordinates = {p.site: gpost.coordinate(p) for p in sampled}
-    return {"data": exp.source, "law": "lockhart", "surrogate": "model linearised in θ at the posterior mode",
-            "mode": init, "laplace_s": laplace_s, "chains": chains, "warmup": warmup, "samples": samples,
-            "max_tree_depth": max_tree_depth, "coordinates": coordinates, "rows": rows}
+    return {
+        "data": exp.source,
+        "law": "lockhart",
+        "surrogate": "model linearised in θ at the posterior mode",
+        "mode": init,
+        "laplace_s": laplace_s,
+        "chains": chains,
+        "warmup": warmup,
+        "samples": samples,
+        "max_tree_depth": max_tree_depth,
+        "coordinates": coordinates,
+        "rows": rows,
+    }
 
 
 if __name__ == "__main__":

@@ -41,8 +41,8 @@ def make_population(seed: int, robots: int, rtol: float):
     import jax.numpy as jnp
 
     import growjax as gj
-    from growjax import tolerance as tl
-    from growjax.experiment import Experiment
+    from growjax.calibration import tolerance as tl
+    from growjax.data.experiment import Experiment
 
     rng = np.random.default_rng(seed)
     base = gj.reference("forward")
@@ -51,17 +51,25 @@ def make_population(seed: int, robots: int, rtol: float):
     rig = gj.replace(base, **{n: gj.get(base, n) * np.exp(b) for n, b in offsets.items()})
     cols = []
     for _ in range(robots + 1):
-        train = gj.PulseTrain(rng.uniform(80e3, 180e3), rng.uniform(1.0, 2.5), rng.uniform(0.4, 0.9),
-                              rng.uniform(0.1, 0.5))
+        train = gj.PulseTrain(
+            rng.uniform(80e3, 180e3), rng.uniform(1.0, 2.5), rng.uniform(0.4, 0.9), rng.uniform(0.1, 0.5)
+        )
         cols.append(np.asarray(train(jnp.asarray(TIME))))
     config = gj.Config(fidelity="reference", t1=10.0, rtol=rtol, atol=rtol)
     ts = jnp.asarray(np.concatenate([[config.t0], TIME]))
-    inputs = [gj.Inputs(catheter_length=gj.Sampled(jnp.asarray(TIME), jnp.asarray(CATHETER)),
-                        pressure_demand=gj.Sampled(jnp.asarray(TIME), jnp.asarray(c))) for c in cols]
+    inputs = [
+        gj.Inputs(
+            catheter_length=gj.Sampled(jnp.asarray(TIME), jnp.asarray(CATHETER)),
+            pressure_demand=gj.Sampled(jnp.asarray(TIME), jnp.asarray(c)),
+        )
+        for c in cols
+    ]
     breaks = [gj.input_breaks(i, config) for i in inputs]
     sizes = [max(b[j].size for b in breaks) for j in range(2)]
-    breaks = tuple(jnp.stack([jnp.concatenate([b[j], jnp.full(sizes[j] - b[j].size, config.t1 + 1.0)])
-                              for b in breaks]) for j in range(2))
+    breaks = tuple(
+        jnp.stack([jnp.concatenate([b[j], jnp.full(sizes[j] - b[j].size, config.t1 + 1.0)]) for b in breaks])
+        for j in range(2)
+    )
     stacked = jax.tree_util.tree_map(lambda *x: jnp.stack(x), *inputs)
 
     def run(y, inp, jumps, kinks):
@@ -70,17 +78,23 @@ def make_population(seed: int, robots: int, rtol: float):
 
     lengths, status = jax.jit(jax.vmap(run))(jnp.asarray(ys), stacked, *breaks)
     lengths = np.asarray(lengths) + rng.normal(0.0, NOISE, (robots + 1, TIME.size))
-    exps = [Experiment(TIME, {"robot_length_m": lengths[i], "catheter_length_m": CATHETER,
-                              "pressure_demand_Pa": cols[i]}, f"robot-{i}") for i in range(robots + 1)]
+    exps = [
+        Experiment(
+            TIME,
+            {"robot_length_m": lengths[i], "catheter_length_m": CATHETER, "pressure_demand_Pa": cols[i]},
+            f"robot-{i}",
+        )
+        for i in range(robots + 1)
+    ]
     return ys, offsets, exps, np.asarray(status)
 
 
 def one_population(task: tuple) -> dict:
     seed, robots, rtol, chains, warmup, samples = task
     import growjax as gj
-    from growjax import experiments as xs
-    from growjax import joint
-    from growjax import population as pop
+    from growjax.calibration import joint
+    from growjax.data import sets as xs
+    from growjax.posterior import population as pop
 
     clock = time.perf_counter()
     ys, offsets, exps, status = make_population(seed, robots, rtol)
@@ -96,31 +110,48 @@ def one_population(task: tuple) -> dict:
     nuts_s = time.perf_counter() - t0
     held = xs.Run("held-out", exps[-1], robot="held-out")
     band = pop.predict_new_robot(post, held, gj.Config(t1=10.0), draws=400, seed=seed)
-    y9 = np.asarray(exps[-1]["robot_length_m"])[-band["times"].size:]
+    y9 = np.asarray(exps[-1]["robot_length_m"])[-band["times"].size :]
     med = post.interval(np.exp(post.mu))
     sd = post.interval(post.s)
-    return {"seed": seed, "truth_Y_Pa": ys.tolist(), "rig_offsets": offsets,
-            "median_Pa": {"median": med[1], "interval_90": [med[0], med[2]],
-                          "covered": bool(med[0] <= MEDIAN <= med[2])},
-            "spread": {"median": sd[1], "interval_90": [sd[0], sd[2]], "covered": bool(sd[0] <= SPREAD <= sd[2])},
-            "robots_covered": float(np.mean([
-                np.quantile(np.exp(post.ln_theta[:, i]), 0.05) <= ys[i] <= np.quantile(np.exp(post.ln_theta[:, i]), 0.95)
-                for i in range(robots)])),
-            "new_robot_band_coverage": float(np.mean((y9 >= band["lower"]) & (y9 <= band["upper"]))),
-            "new_robot_band_width_mm": float(1e3 * np.median(band["upper"] - band["lower"])),
-            "diagnostics": post.diagnostics, "fit_status": fit.status,
-            "likelihood": _likelihood(fit),
-            "make_s": made, "fit_s": fit_s, "nuts_s": nuts_s}
+    return {
+        "seed": seed,
+        "truth_Y_Pa": ys.tolist(),
+        "rig_offsets": offsets,
+        "median_Pa": {"median": med[1], "interval_90": [med[0], med[2]], "covered": bool(med[0] <= MEDIAN <= med[2])},
+        "spread": {"median": sd[1], "interval_90": [sd[0], sd[2]], "covered": bool(sd[0] <= SPREAD <= sd[2])},
+        "robots_covered": float(
+            np.mean(
+                [
+                    np.quantile(np.exp(post.ln_theta[:, i]), 0.05)
+                    <= ys[i]
+                    <= np.quantile(np.exp(post.ln_theta[:, i]), 0.95)
+                    for i in range(robots)
+                ]
+            )
+        ),
+        "new_robot_band_coverage": float(np.mean((y9 >= band["lower"]) & (y9 <= band["upper"]))),
+        "new_robot_band_width_mm": float(1e3 * np.median(band["upper"] - band["lower"])),
+        "diagnostics": post.diagnostics,
+        "fit_status": fit.status,
+        "likelihood": _likelihood(fit),
+        "make_s": made,
+        "fit_s": fit_s,
+        "nuts_s": nuts_s,
+    }
 
 
 def _likelihood(fit) -> dict:
     """The joint fit's Gaussian that the population's NUTS samples: each robot's ln Ŷ (SI), the rig's errors and
     their covariance, so that samplers can be compared on the benchmark's populations without remaking them."""
-    from growjax import population as pop
+    from growjax.posterior import population as pop
 
     robots, _, z_hat, b_hat, cov = pop.linearised_likelihood(fit, "robot.yield_pressure")
-    return {"robots": list(robots), "ln_y_hat": z_hat.tolist(), "rig_vector": b_hat.tolist(),
-            "covariance": cov.tolist()}
+    return {
+        "robots": list(robots),
+        "ln_y_hat": z_hat.tolist(),
+        "rig_vector": b_hat.tolist(),
+        "covariance": cov.tolist(),
+    }
 
 
 def _kept(out: Path, partial: Path, args) -> list[dict]:
@@ -148,8 +179,9 @@ def main():
     ap.add_argument("--samples", type=int, default=500)
     ap.add_argument("--workers", type=int, default=1, help="populations run at a time, one process each")
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "population.json"))
-    ap.add_argument("--resume", action="store_true",
-                    help="keep the populations already in --out and its partial file; run the rest")
+    ap.add_argument(
+        "--resume", action="store_true", help="keep the populations already in --out and its partial file; run the rest"
+    )
     args = ap.parse_args()
     clock = time.perf_counter()
     partial = Path(args.out).with_suffix(".partial.jsonl")  # rows as they finish, kept if the run is cut short
@@ -158,8 +190,11 @@ def main():
     if not args.resume:
         partial.write_text("")
     done = {r["seed"] for r in rows}
-    tasks = [(args.seed + k, args.robots, args.rtol, args.chains, args.warmup, args.samples)
-             for k in range(args.populations) if args.seed + k not in done]
+    tasks = [
+        (args.seed + k, args.robots, args.rtol, args.chains, args.warmup, args.samples)
+        for k in range(args.populations)
+        if args.seed + k not in done
+    ]
 
     def keep(row):
         rows.append(row)
@@ -181,27 +216,36 @@ def main():
         if "skipped" in r:
             print(f"population {r['seed']}: {r['skipped']}", flush=True)
             continue
-        print(f"population {r['seed']:2d}: median {r['median_Pa']['interval_90']} "
-              f"{'covers' if r['median_Pa']['covered'] else 'misses'}; s {np.round(r['spread']['interval_90'], 3)} "
-              f"{'covers' if r['spread']['covered'] else 'misses'}; new-robot band {r['new_robot_band_coverage']:.2f}; "
-              f"fit {r['fit_s']:.0f} s, NUTS {r['nuts_s']:.1f} s", flush=True)
+        print(
+            f"population {r['seed']:2d}: median {r['median_Pa']['interval_90']} "
+            f"{'covers' if r['median_Pa']['covered'] else 'misses'}; s {np.round(r['spread']['interval_90'], 3)} "
+            f"{'covers' if r['spread']['covered'] else 'misses'}; new-robot band {r['new_robot_band_coverage']:.2f}; "
+            f"fit {r['fit_s']:.0f} s, NUTS {r['nuts_s']:.1f} s",
+            flush=True,
+        )
     done = [r for r in rows if "skipped" not in r]
-    summary = {"populations": len(done), "robots": args.robots,
-               "median_coverage_90": float(np.mean([r["median_Pa"]["covered"] for r in done])),
-               "spread_coverage_90": float(np.mean([r["spread"]["covered"] for r in done])),
-               "robot_coverage_90": float(np.mean([r["robots_covered"] for r in done])),
-               "new_robot_band_coverage": float(np.mean([r["new_robot_band_coverage"] for r in done])),
-               "median_fit_s": float(np.median([r["fit_s"] for r in done])),
-               "median_nuts_s": float(np.median([r["nuts_s"] for r in done])),
-               "max_divergences": int(max(r["diagnostics"]["divergences"] for r in done)),
-               "wall_s": time.perf_counter() - clock}
+    summary = {
+        "populations": len(done),
+        "robots": args.robots,
+        "median_coverage_90": float(np.mean([r["median_Pa"]["covered"] for r in done])),
+        "spread_coverage_90": float(np.mean([r["spread"]["covered"] for r in done])),
+        "robot_coverage_90": float(np.mean([r["robots_covered"] for r in done])),
+        "new_robot_band_coverage": float(np.mean([r["new_robot_band_coverage"] for r in done])),
+        "median_fit_s": float(np.median([r["fit_s"] for r in done])),
+        "median_nuts_s": float(np.median([r["nuts_s"] for r in done])),
+        "max_divergences": int(max(r["diagnostics"]["divergences"] for r in done)),
+        "wall_s": time.perf_counter() - clock,
+    }
     print(json.dumps(summary, indent=1))
     from _environment import environment
 
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"environment": environment(), "arguments": vars(args), "summary": summary,
-                               "populations": rows}, indent=1))
+    out.write_text(
+        json.dumps(
+            {"environment": environment(), "arguments": vars(args), "summary": summary, "populations": rows}, indent=1
+        )
+    )
 
 
 if __name__ == "__main__":

@@ -43,24 +43,48 @@ def main():
     out, bands = {}, {}
     for label, kind in (("discrepancy", "matern32"), ("independent", "none")):
         clock = time.perf_counter()
-        res = gpost.sample(exp.time, exp["robot_length_m"], inputs, base, config, priors=priors, chains=args.chains,
-                           warmup=args.warmup, samples=args.samples, window=(config.t0, args.split), progress=False,
-                           emulate=True, discrepancy=kind)
+        res = gpost.sample(
+            exp.time,
+            exp["robot_length_m"],
+            inputs,
+            base,
+            config,
+            priors=priors,
+            chains=args.chains,
+            warmup=args.warmup,
+            samples=args.samples,
+            window=(config.t0, args.split),
+            progress=False,
+            emulate=True,
+            discrepancy=kind,
+        )
         nuts_s = time.perf_counter() - clock
         draws = gpost.forecast(res, priors, base, inputs, config, t_new)
         lo, hi = gpost.predictive_band(draws)
         coverage = float(np.mean((y_new >= lo) & (y_new <= hi)))
         bands[label] = (lo, hi)
         y = res.summary["parameters"]["Y"]
-        out[label] = {"coverage_90_after_split": coverage, "Y_mean_Pa": y["mean"], "Y_interval_90_Pa": y["interval_90"],
-                      "rhat_max": res.summary["rhat_max"], "ess_bulk_min": res.summary["ess_bulk_min"],
-                      "divergences": res.summary["divergences"], "wall_s": nuts_s,
-                      "samples_used": res.summary["samples_used"],
-                      "discrepancy": {k: res.summary["parameters"][k] for k in ("delta_amplitude", "delta_time_scale")
-                                      if k in res.summary["parameters"]}}
-        print(f"{label:12s}: Y {y['mean']:.0f} Pa (90 % {y['interval_90'][0]:.0f}-{y['interval_90'][1]:.0f}); "
-              f"band on {args.split:g}-10 s covers {coverage:.2f} of the measured samples; "
-              f"R-hat {res.summary['rhat_max']:.3f}, {res.summary['divergences']} divergences, {nuts_s:.0f} s", flush=True)
+        out[label] = {
+            "coverage_90_after_split": coverage,
+            "Y_mean_Pa": y["mean"],
+            "Y_interval_90_Pa": y["interval_90"],
+            "rhat_max": res.summary["rhat_max"],
+            "ess_bulk_min": res.summary["ess_bulk_min"],
+            "divergences": res.summary["divergences"],
+            "wall_s": nuts_s,
+            "samples_used": res.summary["samples_used"],
+            "discrepancy": {
+                k: res.summary["parameters"][k]
+                for k in ("delta_amplitude", "delta_time_scale")
+                if k in res.summary["parameters"]
+            },
+        }
+        print(
+            f"{label:12s}: Y {y['mean']:.0f} Pa (90 % {y['interval_90'][0]:.0f}-{y['interval_90'][1]:.0f}); "
+            f"band on {args.split:g}-10 s covers {coverage:.2f} of the measured samples; "
+            f"R-hat {res.summary['rhat_max']:.3f}, {res.summary['divergences']} divergences, {nuts_s:.0f} s",
+            flush=True,
+        )
     path = Path(args.out)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps({"environment": environment(), "settings": vars(args), **out}, indent=1))
@@ -72,8 +96,14 @@ def main():
     fig, ax = plt.subplots(figsize=(7, 3.5))
     ax.plot(exp.time, 1e3 * exp["robot_length_m"], "k-", lw=1, label="measured")
     for (label, (lo, hi)), colour in zip(bands.items(), ("C0", "C3")):
-        ax.fill_between(t_new, 1e3 * lo, 1e3 * hi, color=colour, alpha=0.3,
-                        label=f"90 % band, {label} ({out[label]['coverage_90_after_split']:.0%} covered)")
+        ax.fill_between(
+            t_new,
+            1e3 * lo,
+            1e3 * hi,
+            color=colour,
+            alpha=0.3,
+            label=f"90 % band, {label} ({out[label]['coverage_90_after_split']:.0%} covered)",
+        )
     ax.axvline(args.split, color="grey", ls="--", lw=0.8)
     ax.set_xlabel("time (s)")
     ax.set_ylabel("length (mm)")

@@ -25,9 +25,9 @@ from pathlib import Path
 import numpy as np
 
 import growjax as gj
-from growjax import experiment as ex
-from growjax import fit as gf
 from growjax import posterior as gpost
+from growjax.calibration import fit as gf
+from growjax.data import experiment as ex
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "benchmarks"))
@@ -41,27 +41,59 @@ Y = "robot.yield_pressure"
 
 
 def interval_row(lo, hi, truth, estimate, wall):
-    return {"estimate_Pa": estimate, "interval_90_Pa": [lo, hi], "width_Pa": hi - lo,
-            "covered": bool(lo <= truth <= hi), "wall_s": wall}
+    return {
+        "estimate_Pa": estimate,
+        "interval_90_Pa": [lo, hi],
+        "width_Pa": hi - lo,
+        "covered": bool(lo <= truth <= hi),
+        "wall_s": wall,
+    }
 
 
 def fit_row(t, data, inputs, base, truth, rig, pressure=None):
-    res = gf.fit(t, data, inputs, free=["Y"], base=base, config=gj.Config(t1=10.0), pressure=pressure, n_starts=1,
-                 sweep_n=16, rig=rig)
-    return {**interval_row(*res.interval_90[Y], truth, res.estimate[Y], res.wall_s),
-            "linearisations": res.linearisations}
+    res = gf.fit(
+        t,
+        data,
+        inputs,
+        free=["Y"],
+        base=base,
+        config=gj.Config(t1=10.0),
+        pressure=pressure,
+        n_starts=1,
+        sweep_n=16,
+        rig=rig,
+    )
+    return {
+        **interval_row(*res.interval_90[Y], truth, res.estimate[Y], res.wall_s),
+        "linearisations": res.linearisations,
+    }
 
 
 def posterior_row(t, data, inputs, base, truth, args):
     clock = time.perf_counter()
-    res = gpost.sample(t, data, inputs, base, gj.Config(t1=10.0), priors=gpost.paper_priors(), chains=args.chains,
-                       warmup=args.warmup, samples=args.samples, progress=False, emulate=True)
+    res = gpost.sample(
+        t,
+        data,
+        inputs,
+        base,
+        gj.Config(t1=10.0),
+        priors=gpost.paper_priors(),
+        chains=args.chains,
+        warmup=args.warmup,
+        samples=args.samples,
+        progress=False,
+        emulate=True,
+    )
     y = res.summary["parameters"]["Y"]
     row = interval_row(*y["interval_90"], truth, y["mean"], time.perf_counter() - clock)
-    row.update(coverage_band_90=res.summary["coverage_90"],
-               coverage_band_90_new_experiment=res.summary["coverage_90_new_experiment"],
-               rhat_max=res.summary["rhat_max"], divergences=res.summary["divergences"],
-               linearisations=res.summary["linearisations"], rig_centre=res.summary["rig_centre"])
+    row.update(
+        coverage_band_90=res.summary["coverage_90"],
+        coverage_band_90_new_experiment=res.summary["coverage_90_new_experiment"],
+        rhat_max=res.summary["rhat_max"],
+        divergences=res.summary["divergences"],
+        linearisations=res.summary["linearisations"],
+        rig_centre=res.summary["rig_centre"],
+    )
     return row
 
 
@@ -74,20 +106,34 @@ def data_sets(args):
     published = sorted(k for k, c in cases.items() if c["demand"] == "published" and set(c["parameters"]) == {"Y"})
     for k in range(args.per_group):
         case = published[k % len(published)]
-        yield "nominal", cases[case]["parameters"]["Y"], t, lengths[case] + rng.normal(0.0, NOISE, t.size), inputs, \
-            base, None
+        yield (
+            "nominal",
+            cases[case]["parameters"]["Y"],
+            t,
+            lengths[case] + rng.normal(0.0, NOISE, t.size),
+            inputs,
+            base,
+            None,
+        )
     ys, traces, status, _ = rig_traces(args.per_group, args.seed + 1, t)
     for k in range(args.per_group):
         if int(status[k]) == gj.OK:
             yield "drawn", float(ys[k]), t, traces[k] + rng.normal(0.0, NOISE, t.size), inputs, base, None
-    path = files("growjax") / "datasets" / "synthetic_forward.csv"
+    path = files("growjax.data") / "datasets" / "synthetic_forward.csv"
     exp = ex.read(path)
     record = json.loads(Path(str(path)).with_suffix(".json").read_text())
     truth = float(record["truth"]["Y"])
     shipped_base = gj.replace(gj.reference("forward"), Y=truth)
     config = gj.Config(t1=10.0)
-    yield ("shipped", truth, exp.time, exp["robot_length_m"], ex.to_inputs(exp, "forward", shipped_base, config.t0, 10.0),
-           shipped_base, exp["pressure_Pa"] if "pressure_Pa" in exp else None)
+    yield (
+        "shipped",
+        truth,
+        exp.time,
+        exp["robot_length_m"],
+        ex.to_inputs(exp, "forward", shipped_base, config.t0, 10.0),
+        shipped_base,
+        exp["pressure_Pa"] if "pressure_Pa" in exp else None,
+    )
 
 
 def main():
@@ -103,15 +149,21 @@ def main():
     clock = time.perf_counter()
     rows = []
     for i, (group, truth, t, data, inputs, base, pressure) in enumerate(data_sets(args)):
-        row = {"group": group, "truth_Pa": truth,
-               "fit_inferred": fit_row(t, data, inputs, base, truth, "inferred", pressure),
-               "fit_fixed": fit_row(t, data, inputs, base, truth, "fixed", pressure)}
+        row = {
+            "group": group,
+            "truth_Pa": truth,
+            "fit_inferred": fit_row(t, data, inputs, base, truth, "inferred", pressure),
+            "fit_fixed": fit_row(t, data, inputs, base, truth, "fixed", pressure),
+        }
         if args.posterior_every and (i % args.posterior_every == 0 or group == "shipped"):
             row["posterior"] = posterior_row(t, data, inputs, base, truth, args)
             row["width_ratio_fit_over_posterior"] = row["fit_inferred"]["width_Pa"] / row["posterior"]["width_Pa"]
         rows.append(row)
-        shown = " ".join(f"{k} [{r['interval_90_Pa'][0]:.0f}, {r['interval_90_Pa'][1]:.0f}]"
-                         for k in ("fit_inferred", "fit_fixed", "posterior") if (r := row.get(k)))
+        shown = " ".join(
+            f"{k} [{r['interval_90_Pa'][0]:.0f}, {r['interval_90_Pa'][1]:.0f}]"
+            for k in ("fit_inferred", "fit_fixed", "posterior")
+            if (r := row.get(k))
+        )
         print(f"{group:8s} {i:3d} Y {truth:.0f} Pa: {shown}", flush=True)
     summary = {}
     for group in ("nominal", "drawn", "shipped"):
@@ -122,22 +174,40 @@ def main():
         for k in ("fit_inferred", "fit_fixed", "posterior"):
             have = [r[k] for r in rs if k in r]
             if have:
-                s[k] = {"sets": len(have), "coverage_90": float(np.mean([h["covered"] for h in have])),
-                        "median_width_Pa": float(np.median([h["width_Pa"] for h in have]))}
+                s[k] = {
+                    "sets": len(have),
+                    "coverage_90": float(np.mean([h["covered"] for h in have])),
+                    "median_width_Pa": float(np.median([h["width_Pa"] for h in have])),
+                }
         ratios = [r["width_ratio_fit_over_posterior"] for r in rs if "width_ratio_fit_over_posterior" in r]
         if ratios:
-            s["width_ratio_fit_over_posterior"] = {"min": float(np.min(ratios)), "median": float(np.median(ratios)),
-                                                   "max": float(np.max(ratios))}
-            s["posterior"]["band_coverage_90"] = float(np.mean([r["posterior"]["coverage_band_90"] for r in rs
-                                                                if "posterior" in r]))
-        s["inferred_over_fixed_width"] = float(np.median([r["fit_inferred"]["width_Pa"] / r["fit_fixed"]["width_Pa"]
-                                                          for r in rs]))
+            s["width_ratio_fit_over_posterior"] = {
+                "min": float(np.min(ratios)),
+                "median": float(np.median(ratios)),
+                "max": float(np.max(ratios)),
+            }
+            s["posterior"]["band_coverage_90"] = float(
+                np.mean([r["posterior"]["coverage_band_90"] for r in rs if "posterior" in r])
+            )
+        s["inferred_over_fixed_width"] = float(
+            np.median([r["fit_inferred"]["width_Pa"] / r["fit_fixed"]["width_Pa"] for r in rs])
+        )
         summary[group] = s
         print(group, json.dumps(s), flush=True)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"environment": environment(), "arguments": vars(args), "summary": summary,
-                               "rows": rows, "wall_s": time.perf_counter() - clock}, indent=1))
+    out.write_text(
+        json.dumps(
+            {
+                "environment": environment(),
+                "arguments": vars(args),
+                "summary": summary,
+                "rows": rows,
+                "wall_s": time.perf_counter() - clock,
+            },
+            indent=1,
+        )
+    )
 
 
 if __name__ == "__main__":

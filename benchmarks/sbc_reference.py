@@ -25,8 +25,8 @@ import numpy as np
 from scipy import stats
 
 import growjax as gj
-from growjax import emulator as em
 from growjax import posterior as gpost
+from growjax.posterior import emulator as em
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "data"))
@@ -42,8 +42,12 @@ def main():
     ap.add_argument("--warmup", type=int, default=150)
     ap.add_argument("--samples", type=int, default=150)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--model-error", type=float, default=None,
-                    help="fast-vs-reference error joined to the noise, m (default: measured over the window; 0: none)")
+    ap.add_argument(
+        "--model-error",
+        type=float,
+        default=None,
+        help="fast-vs-reference error joined to the noise, m (default: measured over the window; 0: none)",
+    )
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "sbc_reference.json"))
     args = ap.parse_args()
     clock = time.perf_counter()
@@ -64,21 +68,43 @@ def main():
 
     if args.model_error is None:  # the fast configuration's own error here, at 5 Y across the prior's box
         ys = np.linspace(5e3, 15e3, 5)
-        fast = np.stack([np.asarray(gj.simulate(gj.replace(gj.reference(), Y=y), inputs, cfg, ts=times,
-                                                breaks=breaks).length) for y in ys])
+        fast = np.stack(
+            [
+                np.asarray(gj.simulate(gj.replace(gj.reference(), Y=y), inputs, cfg, ts=times, breaks=breaks).length)
+                for y in ys
+            ]
+        )
         ref = truth_model({"robot.yield_pressure": ys})
         model_error = float(np.max(np.sqrt(np.mean((fast - ref) ** 2, axis=1))))
     else:
         model_error = args.model_error
-    res = gpost.sbc(emu, priors, replicates=args.replicates, warmup=args.warmup, samples=args.samples,
-                    seed=args.seed, noise_scale=args.noise_scale, truth_model=truth_model, model_error=model_error)
-    uniform = {s: float(stats.chisquare(np.histogram(r, bins=5, range=(0, res["draws"] + 1))[0]).pvalue)
-               for s, r in res["ranks"].items()}
-    out = {"replicates": args.replicates, "t_end_s": args.t_end, "noise_scale_m": args.noise_scale,
-           "model_error_m": model_error,
-           "emulator_error_rms_m": float(emu.error_rms), "coverage_90": res["coverage"],
-           "rank_uniformity_p": uniform, "divergences": res["divergences"], "wall_s": time.perf_counter() - clock,
-           "target_coverage": [0.8, 0.97]}
+    res = gpost.sbc(
+        emu,
+        priors,
+        replicates=args.replicates,
+        warmup=args.warmup,
+        samples=args.samples,
+        seed=args.seed,
+        noise_scale=args.noise_scale,
+        truth_model=truth_model,
+        model_error=model_error,
+    )
+    uniform = {
+        s: float(stats.chisquare(np.histogram(r, bins=5, range=(0, res["draws"] + 1))[0]).pvalue)
+        for s, r in res["ranks"].items()
+    }
+    out = {
+        "replicates": args.replicates,
+        "t_end_s": args.t_end,
+        "noise_scale_m": args.noise_scale,
+        "model_error_m": model_error,
+        "emulator_error_rms_m": float(emu.error_rms),
+        "coverage_90": res["coverage"],
+        "rank_uniformity_p": uniform,
+        "divergences": res["divergences"],
+        "wall_s": time.perf_counter() - clock,
+        "target_coverage": [0.8, 0.97],
+    }
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(out, indent=2) + "\n")
     print(json.dumps(out, indent=2))

@@ -3,10 +3,10 @@
 Run: ``python benchmarks/set_speed.py [--experiments 8] [--repeat 3] [--out benchmarks/results/set_speed.json]``.
 
 A set of ``--experiments`` reference-made experiments of one robot on one drawn rig (``benchmarks/sets.py``'s
-sets), 10 s each: ``growjax.joint.fit_set`` of the whole set, of its first experiment alone, and
-``growjax.fit.fit`` of that experiment, each ``--repeat`` times, interleaved. Printed: the median warm wall
+sets), 10 s each: ``growjax.calibration.joint.fit_set`` of the whole set, of its first experiment alone, and
+``growjax.calibration.fit.fit`` of that experiment, each ``--repeat`` times, interleaved. Printed: the median warm wall
 times and the ratio of the set's to one experiment's (target ≤ 3), with the share spent in the batched
-simulations; with ``--each`` (default), ``growjax.fit.fit`` of every experiment of the set alone, warm, and the
+simulations; with ``--each`` (default), ``growjax.calibration.fit.fit`` of every experiment of the set alone, warm, and the
 ratio of the set's fit to their mean (the eight experiments' single runs differ up to fourfold in cost, and the
 first is one of the cheapest); and one evaluation of the fit's model (residuals and tangents in Y and the rig's errors) for the
 whole set in its batched program against that of one experiment, and the set's program on one device.
@@ -35,9 +35,9 @@ from pathlib import Path
 import numpy as np
 
 import growjax as gj
-from growjax import experiments as xs
-from growjax import fit as gf
-from growjax import joint
+from growjax.calibration import fit as gf
+from growjax.calibration import joint
+from growjax.data import sets as xs
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "benchmarks"))
@@ -49,8 +49,12 @@ def main():
     ap.add_argument("--experiments", type=int, default=8)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--each", action=argparse.BooleanOptionalAction, default=True,
-                    help="also fit every experiment of the set alone (one compile each)")
+    ap.add_argument(
+        "--each",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="also fit every experiment of the set alone (one compile each)",
+    )
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "set_speed.json"))
     args = ap.parse_args()
     _, _, exps, status = make_set(np.random.default_rng(args.seed), args.experiments, 1e-6)
@@ -58,9 +62,11 @@ def main():
     first = xs.ExperimentSet(runs.runs[:1])
     config = gj.Config(t1=10.0)
     inputs = _inputs(exps[0])
-    jobs = {"set": lambda: joint.fit_set(runs, config=config),
-            "one_experiment_as_a_set": lambda: joint.fit_set(first, config=config),
-            "one_experiment_fit": lambda: gf.fit(TIME, exps[0]["robot_length_m"], inputs, config=config)}
+    jobs = {
+        "set": lambda: joint.fit_set(runs, config=config),
+        "one_experiment_as_a_set": lambda: joint.fit_set(first, config=config),
+        "one_experiment_fit": lambda: gf.fit(TIME, exps[0]["robot_length_m"], inputs, config=config),
+    }
     walls = {k: [] for k in jobs}
     simulate = []
     for _ in range(args.repeat):
@@ -87,11 +93,13 @@ def main():
 
 def _inputs(exp):
     """The inputs of one experiment of the set: its recorded demand, the sets' catheter."""
-    return gj.Inputs(catheter_length=gj.Sampled(TIME, CATHETER), pressure_demand=gj.Sampled(TIME, exp["pressure_demand_Pa"]))
+    return gj.Inputs(
+        catheter_length=gj.Sampled(TIME, CATHETER), pressure_demand=gj.Sampled(TIME, exp["pressure_demand_Pa"])
+    )
 
 
 def _each(exps, config, repeat: int) -> dict:
-    """Median warm wall time, s, of ``growjax.fit.fit`` of each experiment of the set alone (its first call
+    """Median warm wall time, s, of ``growjax.calibration.fit.fit`` of each experiment of the set alone (its first call
     compiles and is not counted), and their mean: the cost of fitting the set one experiment at a time is
     ``len(exps)`` × that mean."""
     warm = []
@@ -112,21 +120,25 @@ def _evaluation(exps, config, repeat: int) -> dict:
     experiment alone in the fit's program."""
     import jax.numpy as jnp
 
-    from growjax import experiment as ex
-    from growjax import tolerance as tl
+    from growjax.calibration import tolerance as tl
+    from growjax.data import experiment as ex
 
     base = gj.reference("forward")
     names = ("robot.yield_pressure", *tl.budget(base, None, ["robot.yield_pressure"], use_default=True))
     cfg = config.replace(adjoint="forward")
-    problems = [gf.make_problem(base, names, ex.to_inputs(e, "forward", base, cfg.t0, cfg.t1), cfg, e.time,
-                                e["robot_length_m"]) for e in exps]
+    problems = [
+        gf.make_problem(base, names, ex.to_inputs(e, "forward", base, cfg.t0, cfg.t1), cfg, e.time, e["robot_length_m"])
+        for e in exps
+    ]
     stacked = joint._stack(joint._pad_breaks(problems))
     z_set, z_one = jnp.zeros((len(exps), len(names))), jnp.zeros(len(names))
     times = {"set_s": [], "set_one_device_s": [], "one_s": []}
     for _ in range(repeat + 1):  # the first call compiles
-        for key, call in (("set_s", lambda: joint._spread(joint._linearise_runs, z_set, stacked)),
-                          ("set_one_device_s", lambda: joint._one_device(joint._linearise_runs, z_set, stacked)),
-                          ("one_s", lambda: gf._linearised(z_one, problems[0]))):
+        for key, call in (
+            ("set_s", lambda: joint._spread(joint._linearise_runs, z_set, stacked)),
+            ("set_one_device_s", lambda: joint._one_device(joint._linearise_runs, z_set, stacked)),
+            ("one_s", lambda: gf._linearised(z_one, problems[0])),
+        ):
             clock = time.perf_counter()
             jax.block_until_ready(call())
             times[key].append(time.perf_counter() - clock)

@@ -1,7 +1,7 @@
 """Benchmark one 10 s simulation and one forward-mode gradient: compile time and wall time after compilation.
 
 Run: ``python benchmarks/simulate.py [--out benchmarks/results/simulate.json] [--repeat 10] [--small-loops]
-[--tangents]`` (``--small-loops``: the opt-in option of :mod:`growjax.xla_flags`; write ``--out`` elsewhere to
+[--tangents]`` (``--small-loops``: the opt-in option of :mod:`growjax.simulation.xla_flags`; write ``--out`` elsewhere to
 keep both).
 
 Uses the shared experiment when it is beside the checkout, else the shipped synthetic data.
@@ -32,9 +32,9 @@ import numpy as np
 from _environment import environment  # benchmarks/ is on sys.path when run as a script
 
 import growjax as gj
-from growjax import experiment as ex
-from growjax import xla_flags
-from growjax.metrics import length_rmse
+from growjax.data import experiment as ex
+from growjax.simulation import xla_flags
+from growjax.simulation.metrics import length_rmse
 
 REPO = Path(__file__).resolve().parents[1]
 SIGMA = 2e-4  # m, noise scale of the length likelihood
@@ -133,14 +133,24 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "simulate.json"))
     parser.add_argument("--repeat", type=int, default=10)
-    parser.add_argument("--small-loops", action="store_true",
-                        help="the opt-in XLA:CPU option that compiles the solver's loop whole (growjax.xla_flags)")
-    parser.add_argument("--tangents", action="store_true",
-                        help="also time both laws' gradients with forward-mode and difference tangents (Config.tangents)")
+    parser.add_argument(
+        "--small-loops",
+        action="store_true",
+        help="the opt-in XLA:CPU option that compiles the solver's loop whole (growjax.simulation.xla_flags)",
+    )
+    parser.add_argument(
+        "--tangents",
+        action="store_true",
+        help="also time both laws' gradients with forward-mode and difference tangents (Config.tangents)",
+    )
     args = parser.parse_args()
     small_loops = xla_flags.apply() if args.small_loops else xla_flags.applied()
     folder = ex.shared_experiment_dir()
-    exp = ex.read(folder / "experiment.csv") if folder else ex.read(REPO / "src" / "growjax" / "datasets" / "synthetic_forward.csv")
+    exp = (
+        ex.read(folder / "experiment.csv")
+        if folder
+        else ex.read(REPO / "src" / "growjax" / "data" / "datasets" / "synthetic_forward.csv")
+    )
     fast = bench_simulation("forward", exp, args.repeat)
     gradient = bench_gradient(exp, args.repeat)
     results = {
@@ -150,27 +160,41 @@ def main():
         "small_loops": small_loops,
         "simulation": fast,
         "gradient": gradient,
-        "other_runs": [bench_simulation("forward", exp, args.repeat, 1e-6), bench_simulation("inverse", exp, args.repeat)],
+        "other_runs": [
+            bench_simulation("forward", exp, args.repeat, 1e-6),
+            bench_simulation("inverse", exp, args.repeat),
+        ],
         "targets": TARGETS,
     }
     if args.tangents:
-        results["tangents"] = [bench_gradient(exp, args.repeat, law, mode)
-                               for law in ("reference", "lockhart") for mode in ("forward", "differences")]
+        results["tangents"] = [
+            bench_gradient(exp, args.repeat, law, mode)
+            for law in ("reference", "lockhart")
+            for mode in ("forward", "differences")
+        ]
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(results, indent=2) + "\n")
     print(f"data: {exp.source}")
-    print(f"10 s simulation (fast, forward) after compile: {1e3 * fast['wall_s']:.1f} ms median of {args.repeat} "
-          f"(target <= {1e3 * TARGETS['simulate_s']:.0f} ms) {verdict(fast['wall_s'], TARGETS['simulate_s'])}; "
-          f"compile {fast['compile_s']:.1f} s, {fast['solver_steps']} steps")
-    print(f"jacfwd of the 10 s log-likelihood in (Y, ext, n): {1e3 * gradient['wall_s']:.1f} ms median of {args.repeat} "
-          f"(target <= {1e3 * TARGETS['gradient_s']:.0f} ms) {verdict(gradient['wall_s'], TARGETS['gradient_s'])}; "
-          f"compile {gradient['compile_s']:.1f} s")
+    print(
+        f"10 s simulation (fast, forward) after compile: {1e3 * fast['wall_s']:.1f} ms median of {args.repeat} "
+        f"(target <= {1e3 * TARGETS['simulate_s']:.0f} ms) {verdict(fast['wall_s'], TARGETS['simulate_s'])}; "
+        f"compile {fast['compile_s']:.1f} s, {fast['solver_steps']} steps"
+    )
+    print(
+        f"jacfwd of the 10 s log-likelihood in (Y, ext, n): {1e3 * gradient['wall_s']:.1f} ms median of {args.repeat} "
+        f"(target <= {1e3 * TARGETS['gradient_s']:.0f} ms) {verdict(gradient['wall_s'], TARGETS['gradient_s'])}; "
+        f"compile {gradient['compile_s']:.1f} s"
+    )
     for row in results.get("tangents", []):
-        print(f"  gradient, {row['law']} law, {row['tangents']} tangents: {1e3 * row['wall_s']:.1f} ms "
-              f"(compile {row['compile_s']:.1f} s)")
+        print(
+            f"  gradient, {row['law']} law, {row['tangents']} tangents: {1e3 * row['wall_s']:.1f} ms "
+            f"(compile {row['compile_s']:.1f} s)"
+        )
     for run in results["other_runs"]:
-        print(f"  {run['drive']} rtol {run['rtol']:g}: {1e3 * run['wall_s']:.1f} ms, {run['solver_steps']} steps, "
-              f"{run['status']} (information)")
+        print(
+            f"  {run['drive']} rtol {run['rtol']:g}: {1e3 * run['wall_s']:.1f} ms, {run['solver_steps']} steps, "
+            f"{run['status']} (information)"
+        )
 
 
 if __name__ == "__main__":

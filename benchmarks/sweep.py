@@ -5,13 +5,13 @@ Run: ``python benchmarks/sweep.py [--out benchmarks/results/sweep.json] [--quick
 compiled sweep of N sets spends its time, by XLA operation, printed).
 
 Measured, on the public experiment (``../shared/data/mammobot``) or, when it is absent, on
-``growjax/datasets/synthetic_forward.csv``, with the paper's box (n 0.9–1.1, Y 5–15 kPa, ext 4000–10000):
+``growjax/data/datasets/synthetic_forward.csv``, with the paper's box (n 0.9–1.1, Y 5–15 kPa, ext 4000–10000):
 
 1. ``growjax.sweep.lhs_sweep`` of 500 sets in the fast configuration: wall time after compilation
    (median of repeated calls of the compiled program, as ``SweepResult.wall_s``; target ≤ 1 s), compile
    time, and the whole ``lhs_sweep`` call (design and per-set parameter validation included), s; and, for
    information, the same sweep compiled under XLA's default emitters (the library compiles designs of up to
-   ``sweep.QUICK_COMPILE_ROWS`` sets with the quicker ones, :mod:`growjax.xla_flags`);
+   ``sweep.QUICK_COMPILE_ROWS`` sets with the quicker ones, :mod:`growjax.simulation.xla_flags`);
 2. the whole ``growjax sweep`` process (subprocess: interpreter start, imports, compile, the sweep,
    sweep.csv and sweep.png) in a temporary folder, with an empty persistent compilation cache
    (``GROWJAX_CACHE_DIR`` points at a new empty folder), so compilation is counted in full;
@@ -19,7 +19,7 @@ Measured, on the public experiment (``../shared/data/mammobot``) or, when it is 
    massless platform, PID, rod and valve balance with the same smooth laws, reference growth law)
    as a NumPy right-hand side, solved by ``solve_ivp(method="BDF", rtol=1e-6)`` on states scaled
    to O(1), restarted at every edge of the pressure demand. Its length is compared with
-   ``growjax.simulate`` (fast) at the published parameters and two other points; its cost per 10 s
+   ``growjax.simulation.simulate`` (fast) at the published parameters and two other points; its cost per 10 s
    simulation is timed on a few Latin-hypercube sets and scaled to 500 (one core, serial);
 4. the ratios baseline-500 / sweep-after-compile and baseline-500 / whole ``growjax sweep`` process
    (target ≥ 50×).
@@ -56,9 +56,9 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 import growjax as gj
-from growjax import experiment as ex
 from growjax import sweep as sw
-from growjax.signals import Constant, PulseTrain, Sampled
+from growjax.data import experiment as ex
+from growjax.model.signals import Constant, PulseTrain, Sampled
 
 REPO = Path(__file__).resolve().parents[1]
 P_ATM = 101325.0  # Pa, reference atmosphere of the fluid law
@@ -74,7 +74,7 @@ TARGETS = {"sweep_wall_s": 1.0, "ratio_min": 50.0, "agreement_m": 1e-4}
 def experiment_path() -> Path:
     """The public experiment's CSV if it is beside the checkout, else the shipped synthetic one."""
     folder = ex.shared_experiment_dir()
-    return folder / "experiment.csv" if folder else REPO / "src" / "growjax" / "datasets" / "synthetic_forward.csv"
+    return folder / "experiment.csv" if folder else REPO / "src" / "growjax" / "data" / "datasets" / "synthetic_forward.csv"
 
 
 def measured_series(exp, config: gj.Config):
@@ -89,7 +89,7 @@ def measured_series(exp, config: gj.Config):
 
 @dataclasses.dataclass(frozen=True, slots=True)
 class Lumped:
-    """Constants of the lumped forward model as Python floats (SI units, see growjax.fast_model)."""
+    """Constants of the lumped forward model as Python floats (SI units, see growjax.simulation.fast)."""
 
     # chamber and fluid
     n_syr: int  # syringes on the platform
@@ -166,8 +166,16 @@ def lumped(params, config: gj.Config) -> Lumped:
     """The :class:`Lumped` constants of ``params`` (no effects, reference growth law) under ``config``."""
     if params.effects or params.robot.growth_law != "reference":
         raise ValueError("the baseline covers the published model only (no effects, reference growth law)")
-    fl, pump, tube, tank, cv, dv, robot, pid = (params.fluid, params.pump, params.tube, params.tank,
-                                                params.check_valve, params.valve, params.robot, params.pid)
+    fl, pump, tube, tank, cv, dv, robot, pid = (
+        params.fluid,
+        params.pump,
+        params.tube,
+        params.tank,
+        params.check_valve,
+        params.valve,
+        params.robot,
+        params.pid,
+    )
     n = pump.n_syringes
     a_s, bore, length = _f(pump.syringe_area), _f(tube.hydraulic_diameter), _f(tube.length)
     ratio = 2.0 * math.pi / _f(pump.lead)
@@ -176,26 +184,50 @@ def lumped(params, config: gj.Config) -> Lumped:
     root = math.sqrt(2.0 / _f(fl.density))
     l0 = _f(robot.initial_length)
     return Lumped(
-        n_syr=n, bore=bore, hose_length=length, tank_volume=_f(tank.area) * _f(tank.length),
+        n_syr=n,
+        bore=bore,
+        hose_length=length,
+        tank_volume=_f(tank.area) * _f(tank.length),
         volume0=n * math.pi * bore**2 / 4.0 * length + _f(tank.area) * _f(tank.length),
-        wall_gain=_f(tube.diameter_compliance), wall_tau=_f(tube.wall_time_constant),
-        air=_f(fl.air_fraction), poly=_f(fl.polytropic_index), liquid=P_ATM / _f(fl.bulk_modulus_liquid),
+        wall_gain=_f(tube.diameter_compliance),
+        wall_tau=_f(tube.wall_time_constant),
+        air=_f(fl.air_fraction),
+        poly=_f(fl.polytropic_index),
+        liquid=P_ATM / _f(fl.bulk_modulus_liquid),
         push_area=n * a_s,
         damping=n * _f(pump.screw_viscous_friction) * ratio**2 + (n * a_s) ** 2 * laminar_line_resistance(params),
-        stop_k=n * _f(pump.penetration_coefficient), syringe_stroke=_f(pump.syringe_stroke),
-        kp=_f(pid.proportional), ki=_f(pid.integral), kd=_f(pid.derivative), nf=_f(pid.filter_coefficient),
-        crack=crack, crack_width=config.crack_width, switch_width=config.switch_width,
-        check_leak=_f(cv.leak_area), check_gain=(_f(cv.area_max) - _f(cv.leak_area)) / (_f(cv.max_open_pressure) - crack),
-        check_max=_f(cv.area_max), check_k=_f(cv.discharge_coefficient) * root, check_blam=_f(cv.b_lam),
-        bypass_leak=_f(dv.leak_area), bypass_span=_f(dv.area_max) - _f(dv.leak_area),
-        bypass_k=_f(dv.discharge_coefficient) * root, bypass_blam=_f(dv.b_lam),
-        rod_area=area_r, rest=_f(robot.yield_pressure) + _f(robot.active_channel_force) / area_r,
+        stop_k=n * _f(pump.penetration_coefficient),
+        syringe_stroke=_f(pump.syringe_stroke),
+        kp=_f(pid.proportional),
+        ki=_f(pid.integral),
+        kd=_f(pid.derivative),
+        nf=_f(pid.filter_coefficient),
+        crack=crack,
+        crack_width=config.crack_width,
+        switch_width=config.switch_width,
+        check_leak=_f(cv.leak_area),
+        check_gain=(_f(cv.area_max) - _f(cv.leak_area)) / (_f(cv.max_open_pressure) - crack),
+        check_max=_f(cv.area_max),
+        check_k=_f(cv.discharge_coefficient) * root,
+        check_blam=_f(cv.b_lam),
+        bypass_leak=_f(dv.leak_area),
+        bypass_span=_f(dv.area_max) - _f(dv.leak_area),
+        bypass_k=_f(dv.discharge_coefficient) * root,
+        bypass_blam=_f(dv.b_lam),
+        rod_area=area_r,
+        rest=_f(robot.yield_pressure) + _f(robot.active_channel_force) / area_r,
         friction=2.0 * math.pi * _f(robot.inner_radius) * _f(robot.catheter_friction) / area_r,
-        law_scale=1.0 / _f(robot.extensibility), law_exp=_f(robot.growth_exponent),
-        velocity_eps=config.velocity_eps, stop_width=config.stop_width,
-        stop_per_area=_f(robot.penetration_coefficient) / area_r, extend_limit=_f(robot.stroke) - l0,
-        retract_limit=-l0, initial_length=l0, hard_bound=_f(robot.hard_stop_bound),
-        hard_k=_f(robot.hard_stop_stiffness) / area_r, hard_d=_f(robot.hard_stop_damping) / area_r,
+        law_scale=1.0 / _f(robot.extensibility),
+        law_exp=_f(robot.growth_exponent),
+        velocity_eps=config.velocity_eps,
+        stop_width=config.stop_width,
+        stop_per_area=_f(robot.penetration_coefficient) / area_r,
+        extend_limit=_f(robot.stroke) - l0,
+        retract_limit=-l0,
+        initial_length=l0,
+        hard_bound=_f(robot.hard_stop_bound),
+        hard_k=_f(robot.hard_stop_stiffness) / area_r,
+        hard_d=_f(robot.hard_stop_damping) / area_r,
     )
 
 
@@ -225,7 +257,11 @@ def stored_fraction(c: Lumped, lr: float) -> tuple[float, float]:
     a, n = c.air, c.poly
     g = a * math.exp(-lr / n)
     e1, e2 = 1.0 - 1.0 / n, 1.0 - 2.0 / n
-    s = math.log1p(a) - math.log1p(g) + c.liquid * (math.expm1(lr) - a * _expm1_over(e1, lr) + a * a * _expm1_over(e2, lr))
+    s = (
+        math.log1p(a)
+        - math.log1p(g)
+        + c.liquid * (math.expm1(lr) - a * _expm1_over(e1, lr) + a * a * _expm1_over(e2, lr))
+    )
     ds = g / (n * (1.0 + g)) + c.liquid * (math.exp(lr) - a * math.exp(e1 * lr) + a * a * math.exp(e2 * lr))
     return s, ds
 
@@ -278,8 +314,9 @@ def rod_pressure(c: Lumped, pressure: float, velocity: float, displacement: floa
     if c.retract_limit < displacement < c.extend_limit and abs(displacement) < c.hard_bound:
         return p_r  # every stop's penetration ramp is zero inside its limits
     w = c.stop_width
-    cylinder = (ramp(displacement - c.extend_limit, w) * ramp(velocity, w)
-                - ramp(c.retract_limit - displacement, w) * ramp(-velocity, w))
+    cylinder = ramp(displacement - c.extend_limit, w) * ramp(velocity, w) - ramp(
+        c.retract_limit - displacement, w
+    ) * ramp(-velocity, w)
     up, down = ramp(displacement - c.hard_bound, w), ramp(-c.hard_bound - displacement, w)
     gate = min(max(up / w, 0.0), 1.0) + min(max(down / w, 0.0), 1.0)
     return p_r + c.stop_per_area * cylinder + c.hard_k * (up - down) + c.hard_d * velocity * gate
@@ -370,8 +407,16 @@ def make_rhs(c: Lumped, demand: float, catheter):
         u = c.kp * err + c.ki * z_i + c.kd * d_term
         v_p = platform_velocity(c, c.push_area * (u - p), x_p)
         q_r = robot_inflow(c, p, xi, max(catheter(t), 0.0))
-        return np.array([(c.push_area * v_p - q_r) / s0, v_p / s1, q_r / c.rod_area / s2,
-                         (c.wall_gain * p - wall) / c.wall_tau / s3, err / s4, d_term / s5])
+        return np.array(
+            [
+                (c.push_area * v_p - q_r) / s0,
+                v_p / s1,
+                q_r / c.rod_area / s2,
+                (c.wall_gain * p - wall) / c.wall_tau / s3,
+                err / s4,
+                d_term / s5,
+            ]
+        )
 
     return rhs
 
@@ -386,7 +431,9 @@ def initial_state(params, c: Lumped) -> np.ndarray:
     return np.array([stored, 0.0, 0.0, wall0, 0.0, 0.0]) / SCALES
 
 
-def scipy_length(params, inputs, config: gj.Config, ts, rtol=BASELINE_RTOL, atol=BASELINE_ATOL) -> tuple[np.ndarray, dict]:
+def scipy_length(
+    params, inputs, config: gj.Config, ts, rtol=BASELINE_RTOL, atol=BASELINE_ATOL
+) -> tuple[np.ndarray, dict]:
     """Robot length (m) at ``ts`` (s) by BDF, restarted at every demand edge; and the solver's counters.
 
     No pressure-limit stop is modelled: the demand peaks at 150 kPa, under the membrane's 373 kPa.
@@ -434,9 +481,17 @@ def time_sweep(n: int, base, inputs, config, measured, repeats: int = 3) -> dict
         start = time.perf_counter()
         walls.append(sw.lhs_sweep(n, base, inputs, config, seed=0, measured=measured).wall_s)
         calls.append(time.perf_counter() - start)
-    return {"n": n, "compile_s": first.compile_s, "first_wall_s": first.wall_s, "wall_s": statistics.median(walls),
-            "wall_runs_s": walls, "call_wall_s": statistics.median(calls), "n_devices": first.n_devices,
-            "n_failed": int(first.failed.sum()), "best": first.best()}
+    return {
+        "n": n,
+        "compile_s": first.compile_s,
+        "first_wall_s": first.wall_s,
+        "wall_s": statistics.median(walls),
+        "wall_runs_s": walls,
+        "call_wall_s": statistics.median(calls),
+        "n_devices": first.n_devices,
+        "n_failed": int(first.failed.sum()),
+        "best": first.best(),
+    }
 
 
 def time_sweep_default_emitters(n: int, base, inputs, config, measured) -> dict:
@@ -477,8 +532,13 @@ def profile_sweep(n: int, base, inputs, config, measured, top: int = 12) -> dict
         if e.get("ph") == "X" and not name.startswith("$") and "Execute" not in name and "asarray" not in name:
             total[name] += e.get("dur", 0) * 1e-3
             calls[name] += 1
-    return {"n": n, "wall_s": wall, "op_ms": sum(total.values()), "op_calls": sum(calls.values()),
-            "ops": [(k, v, calls[k]) for k, v in total.most_common(top)]}
+    return {
+        "n": n,
+        "wall_s": wall,
+        "op_ms": sum(total.values()),
+        "op_calls": sum(calls.values()),
+        "ops": [(k, v, calls[k]) for k, v in total.most_common(top)],
+    }
 
 
 def time_cli(n: int, data: Path) -> dict:
@@ -499,20 +559,29 @@ def time_cli(n: int, data: Path) -> dict:
                 raise RuntimeError(f"growjax sweep failed ({proc.returncode}):\n{proc.stderr[-2000:]}")
             summary = json.loads(js.read_text())
             runs.append((wall, summary, sorted(p.name for p in out.iterdir())))
-        shown = " ".join(["growjax", *args[len(cmd):]]).replace(tmp, "$TMP")
+        shown = " ".join(["growjax", *args[len(cmd) :]]).replace(tmp, "$TMP")
     (wall, summary, files), (warm_wall, warm, _) = runs
-    return {"n": n, "command": f"GROWJAX_CACHE_DIR=$TMP/cache {shown}", "process_wall_s": wall,
-            "compile_s_inside": summary["compile_s"], "trace_lower_s_inside": summary["trace_lower_s"],
-            "sweep_wall_s_inside": summary["wall_s"], "files": files,
-            "compilation_cache": "empty (new GROWJAX_CACHE_DIR)",
-            "warm": {"process_wall_s": warm_wall, "compile_s_inside": warm["compile_s"],
-                     "trace_lower_s_inside": warm["trace_lower_s"],
-                     "sweep_wall_s_inside": warm["wall_s"],
-                     "compilation_cache": "the one the first process filled (second process, same folder)"}}
+    return {
+        "n": n,
+        "command": f"GROWJAX_CACHE_DIR=$TMP/cache {shown}",
+        "process_wall_s": wall,
+        "compile_s_inside": summary["compile_s"],
+        "trace_lower_s_inside": summary["trace_lower_s"],
+        "sweep_wall_s_inside": summary["wall_s"],
+        "files": files,
+        "compilation_cache": "empty (new GROWJAX_CACHE_DIR)",
+        "warm": {
+            "process_wall_s": warm_wall,
+            "compile_s_inside": warm["compile_s"],
+            "trace_lower_s_inside": warm["trace_lower_s"],
+            "sweep_wall_s_inside": warm["wall_s"],
+            "compilation_cache": "the one the first process filled (second process, same folder)",
+        },
+    }
 
 
 def check_baseline(points: dict, base, inputs, config) -> list[dict]:
-    """Max |length difference| (m) over the window between the baseline and ``growjax.simulate`` (fast)."""
+    """Max |length difference| (m) over the window between the baseline and ``growjax.simulation.simulate`` (fast)."""
     ts = config.save_grid()
     rows = []
     for label, theta in points.items():
@@ -520,9 +589,18 @@ def check_baseline(points: dict, base, inputs, config) -> list[dict]:
         ref = np.asarray(gj.simulate(p, inputs, config, ts=ts).length)
         ours, stats = scipy_length(p, inputs, config, ts)
         diff = float(np.max(np.abs(ours - ref)))
-        rows.append({"point": label, "theta": theta, "max_abs_length_difference_m": diff,
-                     "final_length_growjax_m": float(ref[-1]), "final_length_scipy_m": float(ours[-1]),
-                     "scipy_ok": stats["ok"], "nfev": stats["nfev"], "njev": stats["njev"]})
+        rows.append(
+            {
+                "point": label,
+                "theta": theta,
+                "max_abs_length_difference_m": diff,
+                "final_length_growjax_m": float(ref[-1]),
+                "final_length_scipy_m": float(ours[-1]),
+                "scipy_ok": stats["ok"],
+                "nfev": stats["nfev"],
+                "njev": stats["njev"],
+            }
+        )
     return rows
 
 
@@ -537,9 +615,15 @@ def time_baseline(values, names, base, inputs, config, n: int) -> dict:
         walls.append(time.perf_counter() - start)
         nfev.append(stats["nfev"])
     per_sim = statistics.mean(walls)
-    return {"sets_timed": len(walls), "per_simulation_s": per_sim, "per_simulation_runs_s": walls,
-            "rhs_evaluations_mean": statistics.mean(nfev), "n": n, "wall_s_for_n": n * per_sim,
-            "method": f"solve_ivp BDF, rtol {BASELINE_RTOL}, atol {BASELINE_ATOL} on scaled states, restarted at demand edges"}
+    return {
+        "sets_timed": len(walls),
+        "per_simulation_s": per_sim,
+        "per_simulation_runs_s": walls,
+        "rhs_evaluations_mean": statistics.mean(nfev),
+        "n": n,
+        "wall_s_for_n": n * per_sim,
+        "method": f"solve_ivp BDF, rtol {BASELINE_RTOL}, atol {BASELINE_ATOL} on scaled states, restarted at demand edges",
+    }
 
 
 def report(out: dict) -> None:
@@ -551,35 +635,55 @@ def report(out: dict) -> None:
     allowed = b["wall_s_for_n"] / TARGETS["ratio_min"]
     lines = [
         f"data: {out['data']}  ({out['n_devices']} JAX CPU devices)",
-        (f"1. sweep of {s['n']} sets after compile: {s['wall_s']:.3f} s  (target <= {TARGETS['sweep_wall_s']} s) "
-         f"{verdict(s['wall_s'], TARGETS['sweep_wall_s'], True)};  compile {s['compile_s']:.1f} s;  "
-         f"whole lhs_sweep call {s['call_wall_s']:.2f} s (with design and parameter validation)"),
-        (f"   the same compiled under XLA's default emitters (as designs over sweep.QUICK_COMPILE_ROWS sets): "
-         f"{out['sweep_default_emitters']['wall_s']:.3f} s (information; its compile here follows the first, "
-         f"whose tracing it reuses)"),
-        (f"2. whole `growjax sweep` process ({cli['n']} sets, empty compilation cache): {cli['process_wall_s']:.1f} s "
-         f"(compile inside {cli['compile_s_inside']:.1f} s, sweep {cli['sweep_wall_s_inside']:.2f} s)"),
-        (f"   its parts: tracing and lowering {cli['trace_lower_s_inside']:.2f} s, XLA's compile {xla:.2f} s, "
-         f"the sweep {cli['sweep_wall_s_inside']:.2f} s, the rest (interpreter, imports, data, design, figure, "
-         f"files) {rest:.2f} s; {TARGETS['ratio_min']:.0f}x allows {allowed:.2f} s in all"),
-        (f"3. SciPy BDF baseline: {b['per_simulation_s']:.3f} s per 10 s simulation "
-         f"({b['sets_timed']} LHS sets) -> {b['wall_s_for_n']:.0f} s for {b['n']}"),
+        (
+            f"1. sweep of {s['n']} sets after compile: {s['wall_s']:.3f} s  (target <= {TARGETS['sweep_wall_s']} s) "
+            f"{verdict(s['wall_s'], TARGETS['sweep_wall_s'], True)};  compile {s['compile_s']:.1f} s;  "
+            f"whole lhs_sweep call {s['call_wall_s']:.2f} s (with design and parameter validation)"
+        ),
+        (
+            f"   the same compiled under XLA's default emitters (as designs over sweep.QUICK_COMPILE_ROWS sets): "
+            f"{out['sweep_default_emitters']['wall_s']:.3f} s (information; its compile here follows the first, "
+            f"whose tracing it reuses)"
+        ),
+        (
+            f"2. whole `growjax sweep` process ({cli['n']} sets, empty compilation cache): {cli['process_wall_s']:.1f} s "
+            f"(compile inside {cli['compile_s_inside']:.1f} s, sweep {cli['sweep_wall_s_inside']:.2f} s)"
+        ),
+        (
+            f"   its parts: tracing and lowering {cli['trace_lower_s_inside']:.2f} s, XLA's compile {xla:.2f} s, "
+            f"the sweep {cli['sweep_wall_s_inside']:.2f} s, the rest (interpreter, imports, data, design, figure, "
+            f"files) {rest:.2f} s; {TARGETS['ratio_min']:.0f}x allows {allowed:.2f} s in all"
+        ),
+        (
+            f"3. SciPy BDF baseline: {b['per_simulation_s']:.3f} s per 10 s simulation "
+            f"({b['sets_timed']} LHS sets) -> {b['wall_s_for_n']:.0f} s for {b['n']}"
+        ),
     ]
     for row in out["baseline_agreement"]:
-        lines.append(f"   agreement at {row['point']}: max |dL| {1e3 * row['max_abs_length_difference_m']:.4f} mm "
-                     f"(target < {1e3 * TARGETS['agreement_m']:.1f} mm) "
-                     f"{verdict(row['max_abs_length_difference_m'], TARGETS['agreement_m'], True)}")
+        lines.append(
+            f"   agreement at {row['point']}: max |dL| {1e3 * row['max_abs_length_difference_m']:.4f} mm "
+            f"(target < {1e3 * TARGETS['agreement_m']:.1f} mm) "
+            f"{verdict(row['max_abs_length_difference_m'], TARGETS['agreement_m'], True)}"
+        )
     lines += [
-        (f"4. baseline-{b['n']} / sweep after compile: {ratio['baseline_over_sweep']:.0f}x  (target >= "
-         f"{TARGETS['ratio_min']:.0f}x) {verdict(ratio['baseline_over_sweep'], TARGETS['ratio_min'], False)}"),
-        (f"   baseline-{b['n']} / whole growjax sweep process: {ratio['baseline_over_cli_process']:.1f}x  (target >= "
-         f"{TARGETS['ratio_min']:.0f}x) {verdict(ratio['baseline_over_cli_process'], TARGETS['ratio_min'], False)}"),
-        (f"   (baseline spread ideally over {out['n_devices']} cores: "
-         f"{ratio['baseline_parallel_over_cli_process']:.1f}x the whole process; no target)"),
-        (f"   second process, compilation cache filled by the first: {cli['warm']['process_wall_s']:.1f} s "
-         f"(compile inside {cli['warm']['compile_s_inside']:.1f} s, of which tracing and lowering "
-         f"{cli['warm']['trace_lower_s_inside']:.2f} s) -> {ratio['baseline_over_warm_cli_process']:.1f}x "
-         "(information)"),
+        (
+            f"4. baseline-{b['n']} / sweep after compile: {ratio['baseline_over_sweep']:.0f}x  (target >= "
+            f"{TARGETS['ratio_min']:.0f}x) {verdict(ratio['baseline_over_sweep'], TARGETS['ratio_min'], False)}"
+        ),
+        (
+            f"   baseline-{b['n']} / whole growjax sweep process: {ratio['baseline_over_cli_process']:.1f}x  (target >= "
+            f"{TARGETS['ratio_min']:.0f}x) {verdict(ratio['baseline_over_cli_process'], TARGETS['ratio_min'], False)}"
+        ),
+        (
+            f"   (baseline spread ideally over {out['n_devices']} cores: "
+            f"{ratio['baseline_parallel_over_cli_process']:.1f}x the whole process; no target)"
+        ),
+        (
+            f"   second process, compilation cache filled by the first: {cli['warm']['process_wall_s']:.1f} s "
+            f"(compile inside {cli['warm']['compile_s_inside']:.1f} s, of which tracing and lowering "
+            f"{cli['warm']['trace_lower_s_inside']:.2f} s) -> {ratio['baseline_over_warm_cli_process']:.1f}x "
+            "(information)"
+        ),
     ]
     if s["n"] != 500:
         lines.append(f"   (--quick: {s['n']} sets; the targets are set for 500)")
@@ -590,8 +694,13 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "sweep.json"))
     parser.add_argument("--quick", action="store_true", help="100-set sweeps and 2 baseline sets (smoke run)")
-    parser.add_argument("--profile", type=int, metavar="N", default=0,
-                        help="only profile one compiled sweep of N sets (XLA operations by time) and print it")
+    parser.add_argument(
+        "--profile",
+        type=int,
+        metavar="N",
+        default=0,
+        help="only profile one compiled sweep of N sets (XLA operations by time) and print it",
+    )
     args = parser.parse_args()
     n = 100 if args.quick else 500
     data = experiment_path()
@@ -605,8 +714,10 @@ def main():
     out = {"data": str(data), "n_devices": len(jax.devices()), "config": dataclasses.asdict(config)}
     if args.profile:
         prof = profile_sweep(args.profile, base, inputs, config, measured)
-        print(f"sweep of {prof['n']} sets: {prof['wall_s']:.3f} s wall; {prof['op_calls']} XLA operation launches, "
-              f"{prof['op_ms']:.0f} ms summed over threads ({1e3 * prof['op_ms'] / prof['op_calls']:.2f} µs each)")
+        print(
+            f"sweep of {prof['n']} sets: {prof['wall_s']:.3f} s wall; {prof['op_calls']} XLA operation launches, "
+            f"{prof['op_ms']:.0f} ms summed over threads ({1e3 * prof['op_ms'] / prof['op_calls']:.2f} µs each)"
+        )
         for name, ms, calls in prof["ops"]:
             print(f"  {ms:9.1f} ms  {calls:8d} calls  {name}")
         return
@@ -614,8 +725,11 @@ def main():
     out["sweep"] = time_sweep(n, base, inputs, config, measured)
     out["sweep_default_emitters"] = time_sweep_default_emitters(n, base, inputs, config, measured)
     out["cli_process"] = time_cli(n, data)
-    corners = {"published": {}, "n0.9_Y5kPa_ext4000": {"n": 0.9, "Y": 5e3, "ext": 4000.0},
-               "n1.1_Y15kPa_ext10000": {"n": 1.1, "Y": 15e3, "ext": 10000.0}}
+    corners = {
+        "published": {},
+        "n0.9_Y5kPa_ext4000": {"n": 0.9, "Y": 5e3, "ext": 4000.0},
+        "n1.1_Y15kPa_ext10000": {"n": 1.1, "Y": 15e3, "ext": 10000.0},
+    }
     out["baseline_agreement"] = check_baseline(corners, base, inputs, config)
     subset = sw.latin_hypercube(dims, n, seed=0)[: 2 if args.quick else 5]
     out["scipy_baseline"] = time_baseline(subset, names, base, inputs, config, n)

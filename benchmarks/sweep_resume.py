@@ -34,7 +34,7 @@ import numpy as np
 from _environment import environment  # benchmarks/ is on sys.path when run as a script
 
 from growjax import sweep as sw
-from growjax._sweep_store import StoreError, done_chunks
+from growjax.sweep.store import StoreError, done_chunks
 
 REPO = Path(__file__).resolve().parents[1]
 TARGET_RATIO = 1.2
@@ -42,8 +42,23 @@ TARGET_RATIO = 1.2
 
 def command(args, out: Path, *extra: str) -> list[str]:
     data = [args.data] if args.data else []
-    return [sys.executable, "-m", "growjax.cli", "sweep", *data, "--n", str(args.n), "--chunk-size",
-            str(chunk_size(args)), "--out", str(out), "--json", str(out / "summary.json"), "--quiet", *extra]
+    return [
+        sys.executable,
+        "-m",
+        "growjax.cli",
+        "sweep",
+        *data,
+        "--n",
+        str(args.n),
+        "--chunk-size",
+        str(chunk_size(args)),
+        "--out",
+        str(out),
+        "--json",
+        str(out / "summary.json"),
+        "--quiet",
+        *extra,
+    ]
 
 
 def chunk_size(args) -> int:
@@ -76,17 +91,26 @@ def interrupted(cmd: list[str], env: dict, store: Path, chunk: int, total: int, 
     if proc.poll() is None:
         proc.send_signal(signal.SIGINT)
     rc = proc.wait()
-    return {"chunks_done_at_signal": at_signal, "chunks_done": chunks_done(store, chunk), "exit_status": rc,
-            "process_wall_s": time.perf_counter() - clock}
+    return {
+        "chunks_done_at_signal": at_signal,
+        "chunks_done": chunks_done(store, chunk),
+        "exit_status": rc,
+        "process_wall_s": time.perf_counter() - clock,
+    }
 
 
 def identical(a: Path, b: Path) -> dict:
     """Whether two finished sweeps' tables are the same bit for bit: the CSV files and the stores' arrays."""
     ra, rb = sw.load(a / "sweep.zarr"), sw.load(b / "sweep.zarr")
-    same = {k: np.array_equal(getattr(ra, k), getattr(rb, k), equal_nan=k != "status")
-            for k in ("values", "rmse", "final_length", "status")}
-    return {"sweep_csv": (a / "sweep.csv").read_bytes() == (b / "sweep.csv").read_bytes(), "store_arrays": same,
-            "all": (a / "sweep.csv").read_bytes() == (b / "sweep.csv").read_bytes() and all(same.values())}
+    same = {
+        k: np.array_equal(getattr(ra, k), getattr(rb, k), equal_nan=k != "status")
+        for k in ("values", "rmse", "final_length", "status")
+    }
+    return {
+        "sweep_csv": (a / "sweep.csv").read_bytes() == (b / "sweep.csv").read_bytes(),
+        "store_arrays": same,
+        "all": (a / "sweep.csv").read_bytes() == (b / "sweep.csv").read_bytes() and all(same.values()),
+    }
 
 
 def main(argv=None):
@@ -99,32 +123,58 @@ def main(argv=None):
     args = ap.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="sweep_resume_") as tmp:
         tmp = Path(tmp)
-        env = {**os.environ, "GROWJAX_CACHE_DIR": str(tmp / "cache"),
-               "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO / "src"), os.environ.get("PYTHONPATH")]))}
+        env = {
+            **os.environ,
+            "GROWJAX_CACHE_DIR": str(tmp / "cache"),
+            "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO / "src"), os.environ.get("PYTHONPATH")])),
+        }
         warm_s, _ = timed(command(args, tmp / "warm", "--max-chunks", "1"), env)
         print(f"cache filled by a one-chunk run: {warm_s:.1f} s", flush=True)
         full_s, rc_full = timed(command(args, tmp / "full"), env)
         total = -(-args.n // chunk_size(args))
         print(f"uninterrupted: {full_s:.1f} s (exit {rc_full}), {total} chunks", flush=True)
-        stop = interrupted(command(args, tmp / "cut"), env, tmp / "cut" / "sweep.zarr", chunk_size(args), total,
-                           args.poll)
+        stop = interrupted(
+            command(args, tmp / "cut"), env, tmp / "cut" / "sweep.zarr", chunk_size(args), total, args.poll
+        )
         print(f"interrupted: {json.dumps(stop)}", flush=True)
-        resume_cmd = [sys.executable, "-m", "growjax.cli", "sweep", "--resume", str(tmp / "cut"), "--json",
-                      str(tmp / "cut" / "summary.json"), "--quiet"]
+        resume_cmd = [
+            sys.executable,
+            "-m",
+            "growjax.cli",
+            "sweep",
+            "--resume",
+            str(tmp / "cut"),
+            "--json",
+            str(tmp / "cut" / "summary.json"),
+            "--quiet",
+        ]
         resume_s, rc_resume = timed(resume_cmd, env)
         print(f"resumed: {resume_s:.1f} s (exit {rc_resume})", flush=True)
         share = (total - stop["chunks_done"]) / total
         full_sum = json.loads((tmp / "full" / "summary.json").read_text())
         resume_sum = json.loads((tmp / "cut" / "summary.json").read_text())
         result = {
-            "environment": environment(), "arguments": vars(args), "data": full_sum["data"], "n": args.n,
-            "chunks": total, "chunk_size": chunk_size(args), "n_devices": full_sum["n_devices"],
+            "environment": environment(),
+            "arguments": vars(args),
+            "data": full_sum["data"],
+            "n": args.n,
+            "chunks": total,
+            "chunk_size": chunk_size(args),
+            "n_devices": full_sum["n_devices"],
             "cache_fill_s": warm_s,
-            "uninterrupted": {"process_wall_s": full_s, "exit_status": rc_full, "sweep_wall_s": full_sum["wall_s"],
-                              "compile_s": full_sum["compile_s"]},
+            "uninterrupted": {
+                "process_wall_s": full_s,
+                "exit_status": rc_full,
+                "sweep_wall_s": full_sum["wall_s"],
+                "compile_s": full_sum["compile_s"],
+            },
             "interrupted": stop,
-            "resumed": {"process_wall_s": resume_s, "exit_status": rc_resume, "sweep_wall_s": resume_sum["wall_s"],
-                        "compile_s": resume_sum["compile_s"]},
+            "resumed": {
+                "process_wall_s": resume_s,
+                "exit_status": rc_resume,
+                "sweep_wall_s": resume_sum["wall_s"],
+                "compile_s": resume_sum["compile_s"],
+            },
             "remaining_share": share,
             "ratio_process": resume_s / (share * full_s),
             "ratio_sweep_loop": resume_sum["wall_s"] / (share * full_sum["wall_s"]),

@@ -34,9 +34,9 @@ from pathlib import Path
 import numpy as np
 
 import growjax as gj
-from growjax import experiment as ex
-from growjax import fit as gf
 from growjax import posterior as gpost
+from growjax.calibration import fit as gf
+from growjax.data import experiment as ex
 from growjax.plotting import posterior_figures, predictive_figure, trajectory_figure
 
 REPO = Path(__file__).resolve().parents[1]
@@ -79,27 +79,42 @@ def page_record(report: dict, y_fit, all_fit, contrast, results: dict, priors: d
     """What the Results page shows: Y under the default likelihood (fit and posterior, both laws), its budget,
     the predictive band's coverage, LOO, and the independent-noise fit as a contrast."""
     fit = _interval(y_fit.estimate[Y], y_fit.interval_90[Y])
-    fit.update(budget_sd_Pa=y_fit.budget.get(Y, {}), rmse_length_m=y_fit.rmse_length_m, rig_offset=y_fit.rig_offset,
-               wall_s=y_fit.wall_s)
+    fit.update(
+        budget_sd_Pa=y_fit.budget.get(Y, {}),
+        rmse_length_m=y_fit.rmse_length_m,
+        rig_offset=y_fit.rig_offset,
+        wall_s=y_fit.wall_s,
+    )
     posterior = {}
     for law, res in results.items():
         s = res.summary
-        posterior[law] = {"parameters": {k: {"mean": v["mean"], "interval_90": v["interval_90"]}
-                                         for k, v in s["parameters"].items()},
-                          **{k: s[k] for k in ("coverage_90", "coverage_90_new_experiment", "rhat_max",
-                                               "ess_bulk_min", "divergences")},
-                          "posterior_sd_over_prior_sd": report["posterior"][law]["posterior_sd_over_prior_sd"],
-                          "priors": {p.site: {"low": p.low, "high": p.high, "log": p.log} for p in priors[law]},
-                          "wall_s": res.wall_s}
+        posterior[law] = {
+            "parameters": {k: {"mean": v["mean"], "interval_90": v["interval_90"]} for k, v in s["parameters"].items()},
+            **{
+                k: s[k]
+                for k in ("coverage_90", "coverage_90_new_experiment", "rhat_max", "ess_bulk_min", "divergences")
+            },
+            "posterior_sd_over_prior_sd": report["posterior"][law]["posterior_sd_over_prior_sd"],
+            "priors": {p.site: {"low": p.low, "high": p.high, "log": p.log} for p in priors[law]},
+            "wall_s": res.wall_s,
+        }
     y_post = posterior["reference"]["parameters"]["Y"]["interval_90"]
     independent = _interval(contrast.estimate[Y], contrast.interval_90[Y])
     independent.update(rmse_length_m=contrast.rmse_length_m)
     return {
-        "environment": environment(), "command": "python calibration/calibrate_public.py",
-        "data": Path(str(report["data"])).name, "t_end_s": report["t_end_s"], "chains": report["chains"],
-        "warmup": report["warmup"], "samples": report["samples"],
-        "likelihood": {"discrepancy": y_fit.discrepancy, "tolerances": y_fit.tolerances, "rig": y_fit.rig,
-                       "samples_used": y_fit.samples_used},
+        "environment": environment(),
+        "command": "python calibration/calibrate_public.py",
+        "data": Path(str(report["data"])).name,
+        "t_end_s": report["t_end_s"],
+        "chains": report["chains"],
+        "warmup": report["warmup"],
+        "samples": report["samples"],
+        "likelihood": {
+            "discrepancy": y_fit.discrepancy,
+            "tolerances": y_fit.tolerances,
+            "rig": y_fit.rig,
+            "samples_used": y_fit.samples_used,
+        },
         "fit": fit,
         "fit_Y_ext_n": {"estimate": all_fit.estimate, "undetermined_directions": all_fit.undetermined},
         "posterior": posterior,
@@ -113,9 +128,11 @@ def page_record(report: dict, y_fit, all_fit, contrast, results: dict, priors: d
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--out", default="out/calibration")
-    parser.add_argument("--results", default=None,
-                        help="the Results page's figures (JSON); default calibration/results/calibration.json, "
-                             "none with --quick")
+    parser.add_argument(
+        "--results",
+        default=None,
+        help="the Results page's figures (JSON); default calibration/results/calibration.json, none with --quick",
+    )
     parser.add_argument("--quick", action="store_true")
     args = parser.parse_args()
     results_path = args.results or (None if args.quick else str(REPO / "calibration" / "results" / "calibration.json"))
@@ -140,42 +157,69 @@ def main():
     contrast = gf.fit(exp.time, exp["robot_length_m"], inputs, free=["Y"], config=cfg, discrepancy="none")
     report["fit_Y_independent_noise"] = contrast.summary()
     traj = gj.simulate(gj.replace(base, **y_fit.estimate), inputs, cfg)
-    trajectory_figure(traj, out / "fit.png", measured=(exp.time, exp["robot_length_m"]),
-                      title=f"fitted Y = {y_fit.estimate[Y]:.0f} Pa: "
-                            f"RMSE {1e3 * y_fit.rmse_length_m:.2f} mm")
+    trajectory_figure(
+        traj,
+        out / "fit.png",
+        measured=(exp.time, exp["robot_length_m"]),
+        title=f"fitted Y = {y_fit.estimate[Y]:.0f} Pa: RMSE {1e3 * y_fit.rmse_length_m:.2f} mm",
+    )
     print(f"[{time.perf_counter() - clock:.0f} s] fits done", flush=True)
 
     # 2–3. Posteriors of both growth laws.
     # Lockhart's posterior sits against two bounds of its box (Y = 5 kPa, n_L = 0.25): a higher target
     # acceptance shortens the steps there (one-off comparison, 2000 draws: 9 divergences at 0.9, 3 at 0.98).
-    laws = {"reference": (base, gpost.paper_priors(), 0.9),
-            "lockhart": (gj.reference(growth_law="lockhart"), gpost.lockhart_priors(), 0.98)}
+    laws = {
+        "reference": (base, gpost.paper_priors(), 0.9),
+        "lockhart": (gj.reference(growth_law="lockhart"), gpost.lockhart_priors(), 0.98),
+    }
     results, report["posterior"] = {}, {}
     for law, (law_base, priors, accept) in laws.items():
         law_inputs = ex.to_inputs(exp, "forward", law_base, cfg.t0, cfg.t1)
-        res = gpost.sample(exp.time, exp["robot_length_m"], law_inputs, law_base, cfg, priors=priors,
-                           chains=chains, warmup=warmup, samples=samples, progress=False, target_accept=accept,
-                           emulate=True)  # direct NUTS: max tree depth (reference), ~30–50 h (Lockhart)
+        res = gpost.sample(
+            exp.time,
+            exp["robot_length_m"],
+            law_inputs,
+            law_base,
+            cfg,
+            priors=priors,
+            chains=chains,
+            warmup=warmup,
+            samples=samples,
+            progress=False,
+            target_accept=accept,
+            emulate=True,
+        )  # direct NUTS: max tree depth (reference), ~30–50 h (Lockhart)
         res.idata.to_netcdf(str(out / f"posterior_{law}.nc"))
         summary = dict(res.summary)
         summary["posterior_sd_over_prior_sd"] = _identification(res.idata, priors)
         report["posterior"][law] = summary
         results[law] = res
         posterior_figures(res.idata, [p.site for p in priors] + ["sigma"], out, prefix=f"{law}_")
-        print(f"[{time.perf_counter() - clock:.0f} s] posterior ({law}) done: wall {res.wall_s:.0f} s, "
-              f"R-hat {summary['rhat_max']:.4f}, divergences {summary['divergences']}", flush=True)
+        print(
+            f"[{time.perf_counter() - clock:.0f} s] posterior ({law}) done: wall {res.wall_s:.0f} s, "
+            f"R-hat {summary['rhat_max']:.4f}, divergences {summary['divergences']}",
+            flush=True,
+        )
 
     # 4. LOO, Laplace against NUTS, figures.
     report["loo"] = gpost.compare_loo(results)
     lap = gpost.laplace(y_fit)[Y]
     nuts = report["posterior"]["reference"]["parameters"]["Y"]
-    report["laplace_vs_nuts_Y"] = {"laplace": lap, "nuts": {k: nuts[k] for k in ("mean", "sd", "interval_90")},
-                                   "mean_difference_in_nuts_sd": (lap["mean"] - nuts["mean"]) / nuts["sd"],
-                                   "sd_ratio": lap["sd"] / nuts["sd"], "laplace_wall_s": y_fit.wall_s}
+    report["laplace_vs_nuts_Y"] = {
+        "laplace": lap,
+        "nuts": {k: nuts[k] for k in ("mean", "sd", "interval_90")},
+        "mean_difference_in_nuts_sd": (lap["mean"] - nuts["mean"]) / nuts["sd"],
+        "sd_ratio": lap["sd"] / nuts["sd"],
+        "laplace_wall_s": y_fit.wall_s,
+    }
     keep = (exp.time >= cfg.t0) & (exp.time <= cfg.t1)
-    predictive_figure(exp.time[keep], exp["robot_length_m"][keep],
-                      {law: _band(r, exp.time[keep]) for law, r in results.items()}, out / "predictive.png",
-                      title="posterior predictive, reference and Lockhart growth laws")
+    predictive_figure(
+        exp.time[keep],
+        exp["robot_length_m"][keep],
+        {law: _band(r, exp.time[keep]) for law, r in results.items()},
+        out / "predictive.png",
+        title="posterior predictive, reference and Lockhart growth laws",
+    )
     report["wall_s"] = time.perf_counter() - clock
     (out / "report.json").write_text(json.dumps(report, indent=2, default=str) + "\n")
     if results_path:

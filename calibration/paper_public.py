@@ -27,7 +27,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from growjax import experiment as ex
+from growjax.data import experiment as ex
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "benchmarks"))
@@ -51,16 +51,30 @@ def data_dir(given: str | None) -> Path:
 def run(name: str, args: list[str], folder: Path, tmp: Path) -> dict:
     """One ``growjax`` command; its ``--json`` summary with the command line and the process's wall time."""
     out = tmp / name
-    cmd = [sys.executable, "-m", "growjax.cli", *args, "--data-dir", str(folder), "--out", str(out),
-           "--json", str(out / "summary.json")]
+    cmd = [
+        sys.executable,
+        "-m",
+        "growjax.cli",
+        *args,
+        "--data-dir",
+        str(folder),
+        "--out",
+        str(out),
+        "--json",
+        str(out / "summary.json"),
+    ]
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO / "src"), os.environ.get("PYTHONPATH")]))}
     clock = time.perf_counter()
     done = subprocess.run(cmd, env=env, capture_output=True, text=True)
     if not (out / "summary.json").exists():
         raise SystemExit(f"growjax {' '.join(args)} failed ({done.returncode}): {done.stderr.strip()[-400:]}")
     summary = json.loads((out / "summary.json").read_text())
-    return {"command": "growjax " + " ".join(args), "exit_status": done.returncode,
-            "process_wall_s": time.perf_counter() - clock, "summary": summary}
+    return {
+        "command": "growjax " + " ".join(args),
+        "exit_status": done.returncode,
+        "process_wall_s": time.perf_counter() - clock,
+        "summary": summary,
+    }
 
 
 def record(runs: dict) -> dict:
@@ -74,8 +88,10 @@ def record(runs: dict) -> dict:
         "sweep_ranges": sweep["ranges"],
         "sobol": sweep["sobol"],
         "pressure_limit_Pa": forward["pressure_limit_Pa"],
-        "commands": {k: {"command": r["command"], "exit_status": r["exit_status"],
-                         "process_wall_s": r["process_wall_s"]} for k, r in runs.items()},
+        "commands": {
+            k: {"command": r["command"], "exit_status": r["exit_status"], "process_wall_s": r["process_wall_s"]}
+            for k, r in runs.items()
+        },
     }
 
 
@@ -90,8 +106,12 @@ def main(argv=None):
         for name, cmd in RUNS.items():
             runs[name] = run(name, cmd, folder, Path(tmp))
             print(f"{runs[name]['command']}: {runs[name]['process_wall_s']:.0f} s", flush=True)
-    result = {"environment": environment(), "command": "python calibration/paper_public.py",
-              "data": "mammobot", **record(runs)}
+    result = {
+        "environment": environment(),
+        "command": "python calibration/paper_public.py",
+        "data": "mammobot",
+        **record(runs),
+    }
     out = Path(args.results)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(result, indent=1) + "\n")

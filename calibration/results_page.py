@@ -35,12 +35,12 @@ SYMBOLS = {Y: "Y", "robot.growth_exponent": "n", "robot.extensibility": "ext"}
 COPIED = {
     "discover": "python benchmarks/discover.py --factors 1 --baseline 3",
     "discover_rig_known": "python benchmarks/discover.py --effects retraction_folding trapped_air --factors 1 "
-                          "--clean 5 --tolerance none --out benchmarks/results/discover_rig_known.json",
+    "--clean 5 --tolerance none --out benchmarks/results/discover_rig_known.json",
     "discover_folding_no_catheter_tolerance": "python benchmarks/discover.py --effects retraction_folding --factors 1 "
-                                              "--clean 0 --tolerance robot.catheter_friction=0 "
-                                              "--out benchmarks/results/discover_folding_no_catheter_tolerance.json",
+    "--clean 0 --tolerance robot.catheter_friction=0 "
+    "--out benchmarks/results/discover_folding_no_catheter_tolerance.json",
     "discover_folding_twofold": "python benchmarks/discover.py --effects retraction_folding --factors 2 --clean 0 "
-                                "--out benchmarks/results/discover_folding_twofold.json",
+    "--out benchmarks/results/discover_folding_twofold.json",
     "control": "python benchmarks/control.py",
 }
 CONTROL_NAMES = {
@@ -50,10 +50,19 @@ CONTROL_NAMES = {
     "inverse feedback (step controller)": "stepper, closed-loop full-step controller",
     "inverse feedback, 1/16 microstep": "stepper, 1/16 microstepping",
 }
-SITES = {"Y": ("Y", 1.0, "Pa"), "phi_L": ("φ_L", 1e3, "mm/s"), "n_L": ("n_L", 1.0, ""), "ext": ("ext", 1.0, ""),
-         "n": ("n", 1.0, "")}  # site: (symbol, factor from SI, unit shown)
-BUDGET_NAMES = {"noise": "sensor noise", "discrepancy": "discrepancy", "hyperparameters": "the hyperparameters' spread",
-                "fast_model_error": "fast configuration's error"}
+SITES = {
+    "Y": ("Y", 1.0, "Pa"),
+    "phi_L": ("φ_L", 1e3, "mm/s"),
+    "n_L": ("n_L", 1.0, ""),
+    "ext": ("ext", 1.0, ""),
+    "n": ("n", 1.0, ""),
+}  # site: (symbol, factor from SI, unit shown)
+BUDGET_NAMES = {
+    "noise": "sensor noise",
+    "discrepancy": "discrepancy",
+    "hyperparameters": "the hyperparameters' spread",
+    "fast_model_error": "fast configuration's error",
+}
 
 HEADER = """# Results on the public experiment
 
@@ -98,8 +107,10 @@ def pa_interval(lo, hi) -> str:
 
 def environment_line(r: dict) -> str:
     env = r["environment"]
-    return (f"Run on {env['machine']} ({env['device']}); Python {env['python']}, jax {env['jax']}, "
-            f"growjax {env['growjax']}.")
+    return (
+        f"Run on {env['machine']} ({env['device']}); Python {env['python']}, jax {env['jax']}, "
+        f"growjax {env['growjax']}."
+    )
 
 
 def table(head: tuple, rows: list) -> str:
@@ -119,17 +130,36 @@ def count(text: str) -> tuple[int, int]:
 
 def paper_section(p: dict) -> str:
     best = p["sweep_best"]
-    rows = [("forward model (PID, ideal torque sources), published parameters", mm(p["forward_rmse_m"]), "1.7 mm",
-             f"`{p['commands']['forward']['command']}`"),
-            ("stepper (\"inverse\") model with the shipped step controller at 3 Hz", mm(p["stepper_rmse_m"]), "2.5 mm",
-             f"`{p['commands']['stepper']['command']}`"),
-            (f"best set of the paper's {p['sweep_n']}-set Latin hypercube",
-             f"Y = {best['parameters'][Y] / 1e3:.2f} kPa, {1e3 * best['rmse_length_m']:.3f} mm", "Y ≈ 7.9 kPa, 1.7 mm",
-             "`growjax sweep mammobot`"),
-            ("safe pressure of the membrane, 2tσ_y/(r_o·SF)", f"{p['pressure_limit_Pa'] / 1e3:.1f} kPa", "373.3 kPa",
-             "`growjax params`, `gj.pressure_limit`")]
-    return (f"\n## Against the paper\n\n`python calibration/paper_public.py` runs the commands below. "
-            f"{environment_line(p)}\n\n" + table(("quantity", "growjax", "paper", "how"), rows) + STEPPER)
+    rows = [
+        (
+            "forward model (PID, ideal torque sources), published parameters",
+            mm(p["forward_rmse_m"]),
+            "1.7 mm",
+            f"`{p['commands']['forward']['command']}`",
+        ),
+        (
+            'stepper ("inverse") model with the shipped step controller at 3 Hz',
+            mm(p["stepper_rmse_m"]),
+            "2.5 mm",
+            f"`{p['commands']['stepper']['command']}`",
+        ),
+        (
+            f"best set of the paper's {p['sweep_n']}-set Latin hypercube",
+            f"Y = {best['parameters'][Y] / 1e3:.2f} kPa, {1e3 * best['rmse_length_m']:.3f} mm",
+            "Y ≈ 7.9 kPa, 1.7 mm",
+            "`growjax sweep mammobot`",
+        ),
+        (
+            "safe pressure of the membrane, 2tσ_y/(r_o·SF)",
+            f"{p['pressure_limit_Pa'] / 1e3:.1f} kPa",
+            "373.3 kPa",
+            "`growjax params`, `gj.pressure_limit`",
+        ),
+    ]
+    return (
+        f"\n## Against the paper\n\n`python calibration/paper_public.py` runs the commands below. "
+        f"{environment_line(p)}\n\n" + table(("quantity", "growjax", "paper", "how"), rows) + STEPPER
+    )
 
 
 def _range(r: dict) -> str:
@@ -152,15 +182,22 @@ def sensitivity_section(p: dict) -> str:
         i = names.index("Y")
         parts.append(f"for {label} Y's first-order index is {s['S1'][i]:.2f} and its total index {s['ST'][i]:.2f}")
     others = [k for k, n in enumerate(names) if n != "Y"]
-    largest = max((abs(s[q][k]) for s in sob["indices"].values() if "error" not in s for q in ("S1", "ST")
-                   for k in others), default=math.nan)
-    tail = (f"{' and '.join(names[k] for k in others)} are indistinguishable from zero (no index above "
-            f"{largest:.2g} in magnitude)" if largest < 0.01 else
-            f"the largest index of {' or '.join(names[k] for k in others)} is {largest:.2f}")
-    return (f"\n## Sensitivity\n\nSobol indices over the paper's box ({box}; {sob['n_runs']} runs, "
-            f"`growjax sweep mammobot --sobol`, run by the same script): {'; '.join(parts)}; {tail}. In the published "
-            "growth law the velocity term is about 1e-10 of the other forces on the rod, so nothing in the length "
-            "depends on n and ext.\n")
+    largest = max(
+        (abs(s[q][k]) for s in sob["indices"].values() if "error" not in s for q in ("S1", "ST") for k in others),
+        default=math.nan,
+    )
+    tail = (
+        f"{' and '.join(names[k] for k in others)} are indistinguishable from zero (no index above "
+        f"{largest:.2g} in magnitude)"
+        if largest < 0.01
+        else f"the largest index of {' or '.join(names[k] for k in others)} is {largest:.2f}"
+    )
+    return (
+        f"\n## Sensitivity\n\nSobol indices over the paper's box ({box}; {sob['n_runs']} runs, "
+        f"`growjax sweep mammobot --sobol`, run by the same script): {'; '.join(parts)}; {tail}. In the published "
+        "growth law the velocity term is about 1e-10 of the other forces on the rod, so nothing in the length "
+        "depends on n and ext.\n"
+    )
 
 
 def _bound(site: str, value: float) -> str:
@@ -194,17 +231,21 @@ def _lockhart_note(lock: dict, scored: int) -> str:
     loose = [s for s, r in ratio.items() if r >= DETERMINED]
     shown = ", ".join(f"{symbol(s)} {r:.2f}" for s, r in ratio.items())
     if loose:
-        text = (f"Under this likelihood the {scored} scored samples leave the Lockhart law's "
-                f"{' and '.join(symbol(s) for s in loose)} close to their priors (posterior sd ÷ prior sd {shown}): "
-                "with the residuals' correlation and the rig's tolerances accounted for, the length does not single "
-                "out the growth law's form.")
+        text = (
+            f"Under this likelihood the {scored} scored samples leave the Lockhart law's "
+            f"{' and '.join(symbol(s) for s in loose)} close to their priors (posterior sd ÷ prior sd {shown}): "
+            "with the residuals' correlation and the rig's tolerances accounted for, the length does not single "
+            "out the growth law's form."
+        )
     else:
         text = f"The Lockhart posterior determines its parameters (posterior sd ÷ prior sd {shown})."
     if edges:
         text += f" Its 90 % interval reaches the edge of the prior box for {'; '.join(edges)}."
     if any(e.startswith("n_L at") for e in edges) and lock["parameters"]["n_L"]["mean"] < 0.5:
-        text += (" The data ask for a growth speed that hardly depends on the excess pressure, closer to a rate "
-                 "cap than to a power law.")
+        text += (
+            " The data ask for a growth speed that hardly depends on the excess pressure, closer to a rate "
+            "cap than to a power law."
+        )
     return text
 
 
@@ -213,10 +254,12 @@ def _band_note(post: dict) -> str:
     if cover <= 0.97:
         return ""
     sigma = post["parameters"]["sigma"]["mean"]
-    return (f" The published law's 90 % band holds {cover:.2f} of the measured points, more than the 0.9 of a band "
-            f"that describes its data: its sensor noise (σ {mm(sigma)} on average over the posterior) is inferred "
-            "from the scored keyframes alone, and the band is also compared with the interpolated samples between "
-            "them, which carry no noise of their own.")
+    return (
+        f" The published law's 90 % band holds {cover:.2f} of the measured points, more than the 0.9 of a band "
+        f"that describes its data: its sensor noise (σ {mm(sigma)} on average over the posterior) is inferred "
+        "from the scored keyframes alone, and the band is also compared with the interpolated samples between "
+        "them, which carry no noise of their own."
+    )
 
 
 def _loo_text(loo: dict) -> str:
@@ -225,8 +268,9 @@ def _loo_text(loo: dict) -> str:
     diff, dse = next(loo[k] for k in loo if k != better)["elpd_diff"], next(loo[k] for k in loo if k != better)["dse"]
     k_max = max(v["pareto_k_max"] for v in loo.values())
     verdict = "no preference between the laws" if diff < 2 * dse else f"in favour of the {law[better]}"
-    return (f"elpd difference {diff:.1f} ± {dse:.1f}: {verdict}; largest Pareto k̂ {k_max:.2f}"
-            + (" (above 0.7: the estimate is unreliable)" if k_max > 0.7 else ""))
+    return f"elpd difference {diff:.1f} ± {dse:.1f}: {verdict}; largest Pareto k̂ {k_max:.2f}" + (
+        " (above 0.7: the estimate is unreliable)" if k_max > 0.7 else ""
+    )
 
 
 def calibration_section(c: dict) -> str:
@@ -235,37 +279,64 @@ def calibration_section(c: dict) -> str:
     y_post = ref["parameters"]["Y"]
     draws = f"{c['chains']} × ({c['warmup']} + {c['samples']})"
     budget = sorted(fit["budget_sd_Pa"].items(), key=lambda kv: -kv[1])
-    undetermined = sorted({SYMBOLS.get(n, n) for d in c["fit_Y_ext_n"]["undetermined_directions"]
-                           for n, w in d["direction"].items() if abs(w) > 0.5})
+    undetermined = sorted(
+        {
+            SYMBOLS.get(n, n)
+            for d in c["fit_Y_ext_n"]["undetermined_directions"]
+            for n, w in d["direction"].items()
+            if abs(w) > 0.5
+        }
+    )
     ident = {k: v for k, v in ref["posterior_sd_over_prior_sd"].items() if k != "Y"}
     loo = c["loo"]
     hyper = c["likelihood"]["discrepancy"]
     rows = [
-        ("fit of Y (published law), default likelihood",
-         f"{pa(fit['estimate_Pa'])}, 90 % {pa_interval(*fit['interval_90_Pa'])} (width {pa(fit['width_Pa'])}); "
-         f"RMSE {mm(fit['rmse_length_m'])}"),
-        ("NUTS, published law, " + draws,
-         f"Y {pa(y_post['mean'])}, 90 % {pa_interval(*y_post['interval_90'])}; R-hat ≤ {ref['rhat_max']:.3f}, "
-         f"{ref['divergences']} divergences; posterior sd ÷ prior sd "
-         + ", ".join(f"{k} {v:.2f}" for k, v in ident.items())),
-        ("width of the fit's 90 % interval of Y ÷ the posterior's", f"{c['fit_over_posterior_width_Y']:.2f} "
-         "(target: within 25 %)"),
-        ("measured points inside the 90 % predictive band, this experiment replicated",
-         f"{ref['coverage_90']:.2f} (published law), {lock['coverage_90']:.2f} (Lockhart)"),
-        ("the same, a new experiment's band", f"{ref['coverage_90_new_experiment']:.2f} (published law), "
-         f"{lock['coverage_90_new_experiment']:.2f} (Lockhart)"),
-        ("fit of Y, ext, n", f"Y {pa(c['fit_Y_ext_n']['estimate'][Y])}; "
-         + (f"{' and '.join(undetermined)} undetermined (the smallest eigenvalues of JᵀJ lie along them)"
-            if undetermined else "every direction determined")),
-        ("NUTS, Lockhart law, " + draws,
-         f"Y {pa(lock['parameters']['Y']['mean'])}, φ_L {1e3 * lock['parameters']['phi_L']['mean']:.2f} mm/s, "
-         f"n_L {lock['parameters']['n_L']['mean']:.3f}; R-hat ≤ {lock['rhat_max']:.3f}, "
-         f"{lock['divergences']} divergences"),
+        (
+            "fit of Y (published law), default likelihood",
+            f"{pa(fit['estimate_Pa'])}, 90 % {pa_interval(*fit['interval_90_Pa'])} (width {pa(fit['width_Pa'])}); "
+            f"RMSE {mm(fit['rmse_length_m'])}",
+        ),
+        (
+            "NUTS, published law, " + draws,
+            f"Y {pa(y_post['mean'])}, 90 % {pa_interval(*y_post['interval_90'])}; R-hat ≤ {ref['rhat_max']:.3f}, "
+            f"{ref['divergences']} divergences; posterior sd ÷ prior sd "
+            + ", ".join(f"{k} {v:.2f}" for k, v in ident.items()),
+        ),
+        (
+            "width of the fit's 90 % interval of Y ÷ the posterior's",
+            f"{c['fit_over_posterior_width_Y']:.2f} (target: within 25 %)",
+        ),
+        (
+            "measured points inside the 90 % predictive band, this experiment replicated",
+            f"{ref['coverage_90']:.2f} (published law), {lock['coverage_90']:.2f} (Lockhart)",
+        ),
+        (
+            "the same, a new experiment's band",
+            f"{ref['coverage_90_new_experiment']:.2f} (published law), "
+            f"{lock['coverage_90_new_experiment']:.2f} (Lockhart)",
+        ),
+        (
+            "fit of Y, ext, n",
+            f"Y {pa(c['fit_Y_ext_n']['estimate'][Y])}; "
+            + (
+                f"{' and '.join(undetermined)} undetermined (the smallest eigenvalues of JᵀJ lie along them)"
+                if undetermined
+                else "every direction determined"
+            ),
+        ),
+        (
+            "NUTS, Lockhart law, " + draws,
+            f"Y {pa(lock['parameters']['Y']['mean'])}, φ_L {1e3 * lock['parameters']['phi_L']['mean']:.2f} mm/s, "
+            f"n_L {lock['parameters']['n_L']['mean']:.3f}; R-hat ≤ {lock['rhat_max']:.3f}, "
+            f"{lock['divergences']} divergences",
+        ),
         ("PSIS-LOO, Lockhart against published law", _loo_text(loo)),
-        ("contrast: fit of Y under independent noise, the rig exact (`--discrepancy none`)",
-         f"{pa(ind['estimate_Pa'])}, 90 % {pa_interval(*ind['interval_90_Pa'])} (width {pa(ind['width_Pa'])}, "
-         f"1/{fit['width_Pa'] / ind['width_Pa']:.0f} of the default's); over-confident, see "
-         "[Uncertainty](uncertainty.md)"),
+        (
+            "contrast: fit of Y under independent noise, the rig exact (`--discrepancy none`)",
+            f"{pa(ind['estimate_Pa'])}, 90 % {pa_interval(*ind['interval_90_Pa'])} (width {pa(ind['width_Pa'])}, "
+            f"1/{fit['width_Pa'] / ind['width_Pa']:.0f} of the default's); over-confident, see "
+            "[Uncertainty](uncertainty.md)",
+        ),
     ]
     budget_rows = [(BUDGET_NAMES.get(k, f"tolerance of `{k}`"), f"{v:.3g} Pa") for k, v in budget]
     lockhart_note = _lockhart_note(lock, c["likelihood"]["samples_used"]) + _band_note(ref)
@@ -280,7 +351,8 @@ def calibration_section(c: dict) -> str:
         + table(("quantity", "value"), rows)
         + "\nThe fit's standard deviation of Y by source (their squares add up to its variance):\n\n"
         + table(("source", "sd of Y"), budget_rows)
-        + f"\n{lockhart_note}\n")
+        + f"\n{lockhart_note}\n"
+    )
 
 
 def discovery_section(b: dict, public: dict | None) -> str:
@@ -309,12 +381,18 @@ def discovery_section(b: dict, public: dict | None) -> str:
         f"configuration, 0.2 mm noise, ten seeds per effect; `{COPIED['discover']}`), `discover` under its default "
         f"likelihood names {', '.join(f'`{e}`' for e in full)} in every seed, and "
         f"{'; '.join(phrase(e, *v) for e, v in rest.items())}. "
-        + ("It never claims a wrong effect" if float(rows["a wrong effect claimed"][1]) == 0 else
-           f"It claims a wrong effect in a share {rows['a wrong effect claimed'][1]} of the hidden-effect runs")
+        + (
+            "It never claims a wrong effect"
+            if float(rows["a wrong effect claimed"][1]) == 0
+            else f"It claims a wrong effect in a share {rows['a wrong effect claimed'][1]} of the hidden-effect runs"
+        )
         + f", and raises {fp_k} false alarms on {fp_n} data sets without a hidden effect. A run's median wall time "
         f"is {rows['median wall time of a run'][1]}"
-        + (f", {rows['wall time against independent noise'][1]}× that under `--discrepancy none`"
-           if "wall time against independent noise" in rows else "")
+        + (
+            f", {rows['wall time against independent noise'][1]}× that under `--discrepancy none`"
+            if "wall time against independent noise" in rows
+            else ""
+        )
         + f" ({environment_line_copied(main)}).\n\n"
         "An effect whose trace the rig's tolerances (chiefly the catheter friction's 20 %) or a base parameter can "
         "imitate is hard to name from the length alone: the data then favour it by less than the threshold. For "
@@ -326,7 +404,8 @@ def discovery_section(b: dict, public: dict | None) -> str:
         f"default tolerances (`{COPIED['discover_folding_twofold']}`), in "
         f"{named_in('discover_folding_twofold', 'retraction_folding')}. A researcher who has measured the frictions "
         "should say so with `--tolerance`; otherwise the `confounded` answer, with its separating measurement, is "
-        "what these data support.\n")
+        "what these data support.\n"
+    )
     if public:
         text += public_discovery(public)
     return text
@@ -334,19 +413,25 @@ def discovery_section(b: dict, public: dict | None) -> str:
 
 def public_discovery(d: dict) -> str:
     """The sentence on ``growjax discover mammobot``'s verdict (its ``--json``)."""
-    head = ("\nOn the public experiment (`growjax discover mammobot --json calibration/discover_public/discover.json "
-            f"--out calibration/discover_public`, under the default likelihood) the verdict is `{d['effect']}`")
+    head = (
+        "\nOn the public experiment (`growjax discover mammobot --json calibration/discover_public/discover.json "
+        f"--out calibration/discover_public`, under the default likelihood) the verdict is `{d['effect']}`"
+    )
     effects = " and ".join(e.replace("_", " ") for e in d.get("effects", []))
     if effects:
-        head += (f": {effects} lower the RMSE from {mm(d['rmse_before_m'])} to {mm(d['rmse_after_m'])}"
-                 + (", but the misfit test still finds structure in the residuals"
-                    if d.get("misfit_after", {}).get("structured") else ""))
+        head += f": {effects} lower the RMSE from {mm(d['rmse_before_m'])} to {mm(d['rmse_after_m'])}" + (
+            ", but the misfit test still finds structure in the residuals"
+            if d.get("misfit_after", {}).get("structured")
+            else ""
+        )
     first = d["evidence"][0] if d.get("evidence") else {}
     if d["effect"] == "none" and first:
         best = max(first, key=lambda k: first[k]["lr_statistic"])
-        head += (f": no catalogue effect clears the threshold (2ΔlogL > {d['threshold']:.2f}; the largest is "
-                 f"{first[best]['lr_statistic']:.2f}, {best.replace('_', ' ')}), and the misfit of "
-                 f"{mm(d['rmse_before_m'])} is left to the discrepancy term")
+        head += (
+            f": no catalogue effect clears the threshold (2ΔlogL > {d['threshold']:.2f}; the largest is "
+            f"{first[best]['lr_statistic']:.2f}, {best.replace('_', ' ')}), and the misfit of "
+            f"{mm(d['rmse_before_m'])} is left to the discrepancy term"
+        )
     return head + ".\n"
 
 
@@ -365,29 +450,39 @@ def control_section(b: dict, limit_pa: float) -> str:
         rows.append((CONTROL_NAMES[name], value, f"{m.group(1)} kPa"))
     rows.append(("paper, stepper model", "2.5 mm", "–"))
     crossed = max(peaks) >= limit_pa / 1e3
-    return (f"\n## Control\n\nDesigned on the fast configuration, evaluated on the reference one, 0–10 s of the "
-            f"measured length as the target (`{COPIED['control']}`; {environment_line_copied(ctl)}):\n\n"
-            + table(("design", "length RMSE", "peak pressure"), rows)
-            + ("\nA design crosses" if crossed else "\nNo design crosses")
-            + f" the membrane limit ({limit_pa / 1e3:.1f} kPa). Full steps place the robot on a 3.1 mm grid, so a "
-            "full-step controller cannot do much better than 3.1/√12 ≈ 0.9 mm; microstepping removes the grid.\n")
+    return (
+        f"\n## Control\n\nDesigned on the fast configuration, evaluated on the reference one, 0–10 s of the "
+        f"measured length as the target (`{COPIED['control']}`; {environment_line_copied(ctl)}):\n\n"
+        + table(("design", "length RMSE", "peak pressure"), rows)
+        + ("\nA design crosses" if crossed else "\nNo design crosses")
+        + f" the membrane limit ({limit_pa / 1e3:.1f} kPa). Full steps place the robot on a 3.1 mm grid, so a "
+        "full-step controller cannot do much better than 3.1/√12 ≈ 0.9 mm; microstepping removes the grid.\n"
+    )
 
 
 def render(results: Path = RESULTS, discover_public: Path = DISCOVER_PUBLIC) -> str:
     read = lambda name: json.loads((results / name).read_text())  # noqa: E731
     paper, calibration, benchmarks = read("paper.json"), read("calibration.json"), read("benchmarks.json")
     public = json.loads(discover_public.read_text()) if discover_public.exists() else None
-    return (HEADER + paper_section(paper) + sensitivity_section(paper) + calibration_section(calibration)
-            + discovery_section(benchmarks, public) + control_section(benchmarks, paper["pressure_limit_Pa"])
-            + ABOUT_LENGTH.format(scored=_scored(calibration)))
+    return (
+        HEADER
+        + paper_section(paper)
+        + sensitivity_section(paper)
+        + calibration_section(calibration)
+        + discovery_section(benchmarks, public)
+        + control_section(benchmarks, paper["pressure_limit_Pa"])
+        + ABOUT_LENGTH.format(scored=_scored(calibration))
+    )
 
 
 def _scored(c: dict) -> str:
     used, window = c["likelihood"]["samples_used"], c["t_end_s"]
     if used >= 100 * window:
         return ". The calibration above scores every sample."
-    return (f": the calibration above scores the {used} samples at its vertices and ends "
-            "(see [Uncertainty](uncertainty.md#a-record-interpolated-between-keyframes)).")
+    return (
+        f": the calibration above scores the {used} samples at its vertices and ends "
+        "(see [Uncertainty](uncertainty.md#a-record-interpolated-between-keyframes))."
+    )
 
 
 def copy_benchmarks(page: Path, results: Path = RESULTS) -> Path:
@@ -402,11 +497,14 @@ def copy_benchmarks(page: Path, results: Path = RESULTS) -> Path:
     copied = {}
     for name, command in COPIED.items():
         text = found[name]
-        copied[name] = {"command": command, "environment": text.split("\n\n")[1].strip(),
-                        "rows": table_rows(text)}
+        copied[name] = {"command": command, "environment": text.split("\n\n")[1].strip(), "rows": table_rows(text)}
     out = results / "benchmarks.json"
-    out.write_text(json.dumps({"source": "docs/benchmarks.md (python benchmarks/report.py)", **copied}, indent=1,
-                              ensure_ascii=False) + "\n")
+    out.write_text(
+        json.dumps(
+            {"source": "docs/benchmarks.md (python benchmarks/report.py)", **copied}, indent=1, ensure_ascii=False
+        )
+        + "\n"
+    )
     return out
 
 
@@ -414,8 +512,11 @@ def main(argv=None) -> Path:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--results", default=str(RESULTS))
     ap.add_argument("--out", default=str(REPO / "docs" / "results.md"))
-    ap.add_argument("--copy-benchmarks", action="store_true",
-                    help="first copy the discovery and control rows of --benchmarks into the results folder")
+    ap.add_argument(
+        "--copy-benchmarks",
+        action="store_true",
+        help="first copy the discovery and control rows of --benchmarks into the results folder",
+    )
     ap.add_argument("--benchmarks", default=str(REPO / "docs" / "benchmarks.md"))
     args = ap.parse_args(argv)
     if args.copy_benchmarks:

@@ -1,4 +1,4 @@
-"""Make the small synthetic experiments shipped with the package (``src/growjax/datasets/``).
+"""Make the small synthetic experiments shipped with the package (``src/growjax/data/datasets/``).
 
 Run from the repository root: ``python data/make_synthetic.py``. Deterministic:
 seed 20261121. Ground truth and noise are written beside each CSV as JSON.
@@ -36,11 +36,11 @@ import jax.numpy as jnp
 import numpy as np
 
 import growjax as gj
-from growjax import experiment as ex
+from growjax.data import experiment as ex
 
 SEED = 20261121
 HERE = Path(__file__).resolve().parent
-DATASETS = HERE.parent / "src" / "growjax" / "datasets"  # package resources
+DATASETS = HERE.parent / "src" / "growjax" / "data" / "datasets"  # package resources
 TRUTH = {"Y": 9000.0}
 NOISE = {"robot_length_m": 2e-4, "pressure_Pa": 500.0}
 POPULATION_MEDIAN, POPULATION_SPREAD = 8000.0, 0.1  # Pa, sd of ln Y
@@ -50,7 +50,9 @@ def make_forward(path: Path = DATASETS / "synthetic_forward.csv") -> Path:
     time = np.round(np.arange(1, 1001) * 0.01, 10)
     catheter = 0.004 + 0.004 * time
     params = gj.replace(gj.reference("forward"), **TRUTH)
-    inputs = gj.Inputs(catheter_length=gj.Sampled(jnp.asarray(time), jnp.asarray(catheter)), pressure_demand=gj.published_pulse())
+    inputs = gj.Inputs(
+        catheter_length=gj.Sampled(jnp.asarray(time), jnp.asarray(catheter)), pressure_demand=gj.published_pulse()
+    )
     config = gj.Config(fidelity="reference", t1=float(time[-1]), rtol=1e-7, atol=1e-7)
     ts = np.concatenate([[config.t0], time])
     traj = gj.simulate(params, inputs, config, ts=ts)
@@ -117,8 +119,13 @@ def reference_cases() -> dict:
 
     cases = {f"published_Y{y:.0f}": ({"Y": y}, "published") for y in GRID_Y}
     cases.update({f"sampled_Y{y:.0f}": ({"Y": y}, "sampled") for y in (6000.0, 10000.0)})
-    cases.update({"pulse50_Y6000": ({"Y": 6000.0}, "pulse50"), "step_Y8000": ({"Y": 8000.0}, "step"),
-                  "ramp_Y12000": ({"Y": 12000.0}, "ramp")})
+    cases.update(
+        {
+            "pulse50_Y6000": ({"Y": 6000.0}, "pulse50"),
+            "step_Y8000": ({"Y": 8000.0}, "step"),
+            "ramp_Y12000": ({"Y": 12000.0}, "ramp"),
+        }
+    )
     cases.update({"lockhart_published": (LOCKHART, "published"), "lockhart_sampled": (LOCKHART, "sampled")})
     draws = 5e3 + 10e3 * qmc.LatinHypercube(d=1, seed=np.random.default_rng(SEED)).random(20)[:, 0]
     cases.update({f"published_lhs{k:02d}": ({"Y": float(np.round(y, 1))}, "published") for k, y in enumerate(draws)})
@@ -159,8 +166,14 @@ def make_reference_lengths(path: Path = DATASETS / "reference_lengths.csv") -> P
             meta[name] = {"parameters": overrides, "demand": demand_name}
             print(name, f"{float(columns[name][-1]) * 1e3:.3f} mm", flush=True)
         ex.write_csv(path, time, columns)
-        info = {"configuration": {"fidelity": "reference", "rtol": TRUTH_RTOL}, "seed": SEED,
-                "catheter_length_m": "0.004 + 0.004 t", "cases": meta, "failed": failed, "demands": DEMANDS}
+        info = {
+            "configuration": {"fidelity": "reference", "rtol": TRUTH_RTOL},
+            "seed": SEED,
+            "catheter_length_m": "0.004 + 0.004 t",
+            "cases": meta,
+            "failed": failed,
+            "demands": DEMANDS,
+        }
         path.with_suffix(".json").write_text(json.dumps(info, indent=2) + "\n")
     return path
 
@@ -182,7 +195,7 @@ SET_DEMANDS = {
 
 def make_set(folder: Path = DATASETS / "set") -> Path:
     """The experiment set: three demands on one robot and one rig drawn from the default tolerance budget."""
-    from growjax import tolerance as tl
+    from growjax.calibration import tolerance as tl
 
     folder.mkdir(parents=True, exist_ok=True)
     time = np.round(np.arange(1, 1001) * 0.01, 10)
@@ -196,27 +209,48 @@ def make_set(folder: Path = DATASETS / "set") -> Path:
     for name, demand_signal in SET_DEMANDS.items():
         demand_column = np.asarray(demand_signal(jnp.asarray(time)))
         # the rig's controller reads the demand as recorded: sampled every 10 ms, as the CSV gives it back
-        inputs = gj.Inputs(catheter_length=gj.Sampled(jnp.asarray(time), jnp.asarray(catheter)),
-                           pressure_demand=gj.Sampled(jnp.asarray(time), jnp.asarray(demand_column)))
+        inputs = gj.Inputs(
+            catheter_length=gj.Sampled(jnp.asarray(time), jnp.asarray(catheter)),
+            pressure_demand=gj.Sampled(jnp.asarray(time), jnp.asarray(demand_column)),
+        )
         traj = gj.simulate(rig, inputs, config, ts=ts)
         assert int(traj.status) == gj.OK, (name, gj.status_name(traj.status))
         length = np.asarray(traj.length)[1:] + rng.normal(0.0, NOISE["robot_length_m"], time.size)
         pressure = np.asarray(traj.pressure)[1:] + rng.normal(0.0, NOISE["pressure_Pa"], time.size)
-        ex.write_csv(folder / f"{name}.csv", time, {
-            "robot_length_m": length, "pressure_Pa": pressure, "catheter_length_m": catheter,
-            "pressure_demand_Pa": demand_column})
+        ex.write_csv(
+            folder / f"{name}.csv",
+            time,
+            {
+                "robot_length_m": length,
+                "pressure_Pa": pressure,
+                "catheter_length_m": catheter,
+                "pressure_demand_Pa": demand_column,
+            },
+        )
         print(name, f"{float(length[-1]) * 1e3:.3f} mm", flush=True)
-    manifest = ['# One robot, one rig, three pressure demands (made by data/make_synthetic.py).',
-                '[defaults]', 'drive = "forward"', 'robot = "membrane-1"', 'rig = "bench"', '']
+    manifest = [
+        "# One robot, one rig, three pressure demands (made by data/make_synthetic.py).",
+        "[defaults]",
+        'drive = "forward"',
+        'robot = "membrane-1"',
+        'rig = "bench"',
+        "",
+    ]
     for k, name in enumerate(SET_DEMANDS):
-        manifest += ['[[experiment]]', f'file = "{name}.csv"']
+        manifest += ["[[experiment]]", f'file = "{name}.csv"']
         if k == 0:
             manifest.append('sensors = ["length", "pressure"]')
-        manifest.append('')
+        manifest.append("")
     (folder / "set.toml").write_text("\n".join(manifest))
-    meta = {"seed": SEED + 1, "truth": TRUTH, "rig_offsets_ln": offsets, "noise_sd": NOISE,
-            "demands": {k: repr(v) for k, v in SET_DEMANDS.items()}, "catheter_length_m": "0.004 + 0.004 t",
-            "solver": {"fidelity": "reference", "rtol": TRUTH_RTOL}}
+    meta = {
+        "seed": SEED + 1,
+        "truth": TRUTH,
+        "rig_offsets_ln": offsets,
+        "noise_sd": NOISE,
+        "demands": {k: repr(v) for k, v in SET_DEMANDS.items()},
+        "catheter_length_m": "0.004 + 0.004 t",
+        "solver": {"fidelity": "reference", "rtol": TRUTH_RTOL},
+    }
     (folder / "truth.json").write_text(json.dumps(meta, indent=2) + "\n")
     return folder
 
@@ -225,7 +259,7 @@ def make_population(folder: Path = DATASETS / "population", robots: int = 8) -> 
     """A population: ``robots`` membranes built alike (Y_i = 8 kPa·e^(0.1 η_i)) on one rig drawn from the default
     tolerance budget, each under its own pulse train, plus one more robot of the same population held out
     (new_robot.csv) to check a new robot's predictive band against."""
-    from growjax import tolerance as tl
+    from growjax.calibration import tolerance as tl
 
     folder.mkdir(parents=True, exist_ok=True)
     time = np.round(np.arange(1, 1001) * 0.01, 10)
@@ -240,28 +274,46 @@ def make_population(folder: Path = DATASETS / "population", robots: int = 8) -> 
     names = [f"robot_{i + 1}" for i in range(robots)] + ["new_robot"]
     trains = {}
     for name, y in zip(names, ys):
-        train = gj.PulseTrain(float(rng.uniform(100e3, 160e3)), float(rng.uniform(1.2, 2.2)),
-                              float(rng.uniform(0.5, 0.8)), float(rng.uniform(0.1, 0.4)))
+        train = gj.PulseTrain(
+            float(rng.uniform(100e3, 160e3)),
+            float(rng.uniform(1.2, 2.2)),
+            float(rng.uniform(0.5, 0.8)),
+            float(rng.uniform(0.1, 0.4)),
+        )
         demand_column = np.asarray(train(jnp.asarray(time)))
-        inputs = gj.Inputs(catheter_length=gj.Sampled(jnp.asarray(time), jnp.asarray(catheter)),
-                           pressure_demand=gj.Sampled(jnp.asarray(time), jnp.asarray(demand_column)))
+        inputs = gj.Inputs(
+            catheter_length=gj.Sampled(jnp.asarray(time), jnp.asarray(catheter)),
+            pressure_demand=gj.Sampled(jnp.asarray(time), jnp.asarray(demand_column)),
+        )
         traj = gj.simulate(gj.replace(rig, Y=float(y)), inputs, config, ts=ts)
         assert int(traj.status) == gj.OK, (name, gj.status_name(traj.status))
         length = np.asarray(traj.length)[1:] + rng.normal(0.0, NOISE["robot_length_m"], time.size)
-        ex.write_csv(folder / f"{name}.csv", time, {"robot_length_m": length, "catheter_length_m": catheter,
-                                                   "pressure_demand_Pa": demand_column})
+        ex.write_csv(
+            folder / f"{name}.csv",
+            time,
+            {"robot_length_m": length, "catheter_length_m": catheter, "pressure_demand_Pa": demand_column},
+        )
         trains[name] = repr(train)
         print(name, f"Y {y:.0f} Pa, {float(length[-1]) * 1e3:.3f} mm", flush=True)
-    manifest = [f"# {robots} robots built alike on one rig, one pulse train each (made by data/make_synthetic.py).",
-                "[defaults]", 'drive = "forward"', 'rig = "bench"', ""]
+    manifest = [
+        f"# {robots} robots built alike on one rig, one pulse train each (made by data/make_synthetic.py).",
+        "[defaults]",
+        'drive = "forward"',
+        'rig = "bench"',
+        "",
+    ]
     for name in names[:-1]:
         manifest += ["[[experiment]]", f'file = "{name}.csv"', f'robot = "{name}"', ""]
     (folder / "population.toml").write_text("\n".join(manifest))
-    meta = {"seed": SEED + 2, "truth": {"Y_median": POPULATION_MEDIAN, "Y_sd_ln": POPULATION_SPREAD,
-                                        "Y": dict(zip(names, map(float, ys)))},
-            "rig_offsets_ln": offsets, "noise_sd": {"robot_length_m": NOISE["robot_length_m"]},
-            "demands": trains, "catheter_length_m": "0.004 + 0.004 t",
-            "solver": {"fidelity": "reference", "rtol": TRUTH_RTOL}}
+    meta = {
+        "seed": SEED + 2,
+        "truth": {"Y_median": POPULATION_MEDIAN, "Y_sd_ln": POPULATION_SPREAD, "Y": dict(zip(names, map(float, ys)))},
+        "rig_offsets_ln": offsets,
+        "noise_sd": {"robot_length_m": NOISE["robot_length_m"]},
+        "demands": trains,
+        "catheter_length_m": "0.004 + 0.004 t",
+        "solver": {"fidelity": "reference", "rtol": TRUTH_RTOL},
+    }
     (folder / "truth.json").write_text(json.dumps(meta, indent=2) + "\n")
     return folder
 

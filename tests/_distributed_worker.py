@@ -34,19 +34,31 @@ def main() -> int:
         jax.config.update("jax_compilation_cache_dir", os.environ["GROWJAX_CACHE_DIR"])
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
     if args.coordinator:
-        jax.distributed.initialize(coordinator_address=args.coordinator, num_processes=args.num_processes,
-                                   process_id=args.process_id, initialization_timeout=120)
+        jax.distributed.initialize(
+            coordinator_address=args.coordinator,
+            num_processes=args.num_processes,
+            process_id=args.process_id,
+            initialization_timeout=120,
+        )
 
     import growjax as gj
-    from growjax import experiment as ex
     from growjax import sweep as sw
+    from growjax.data import experiment as ex
 
-    exp = ex.read(REPO / "src" / "growjax" / "datasets" / "synthetic_forward.csv")
+    exp = ex.read(REPO / "src" / "growjax" / "data" / "datasets" / "synthetic_forward.csv")
     base = gj.reference()
     inputs = ex.to_inputs(exp, "forward", base)
     dims = (sw.Dimension("robot.yield_pressure", 5e3, 15e3), sw.Dimension("robot.extensibility", 4000.0, 10000.0))
-    result = sw.lhs_sweep(N_POINTS, base, inputs, gj.Config(t1=T1), dims, seed=SEED,
-                          measured=(exp.time, exp["robot_length_m"]), chunk_size=CHUNK)
+    result = sw.lhs_sweep(
+        N_POINTS,
+        base,
+        inputs,
+        gj.Config(t1=T1),
+        dims,
+        seed=SEED,
+        measured=(exp.time, exp["robot_length_m"]),
+        chunk_size=CHUNK,
+    )
     report = {
         "process_index": jax.process_index(),
         "process_count": jax.process_count(),

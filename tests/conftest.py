@@ -3,9 +3,9 @@
 import os
 from pathlib import Path
 
-from growjax import xla_flags
+from growjax.simulation import xla_flags
 
-# The run is mostly compiles: XLA's quicker emitters for all of it (growjax.xla_flags), set before JAX starts and
+# The run is mostly compiles: XLA's quicker emitters for all of it (growjax.simulation.xla_flags), set before JAX starts and
 # inherited by the xdist workers and CLI subprocesses; only for a jaxlib known to have them (XLA aborts a process
 # on an unknown flag). test_xla_flags runs XLA's default too.
 xla_flags.apply_quick_compile()
@@ -17,8 +17,10 @@ if "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
 # solver's nested loops: a gradient program of the solver compiles in 6 s instead of 14 s, the suite about 11 %
 # quicker; rounding moves as above.
 if "xla_disable_hlo_passes" not in os.environ.get("XLA_FLAGS", ""):
-    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "")
-                               + " --xla_disable_hlo_passes=while-loop-invariant-code-motion,simplify-while-loops")
+    os.environ["XLA_FLAGS"] = (
+        os.environ.get("XLA_FLAGS", "")
+        + " --xla_disable_hlo_passes=while-loop-invariant-code-motion,simplify-while-loops"
+    )
 
 import jax
 import numpy as np
@@ -30,24 +32,39 @@ jax.config.update("jax_compilation_cache_dir", _CACHE)
 jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
 
 import growjax as gj
-from growjax import experiment as ex
+from growjax.data import experiment as ex
 
 REPO = Path(__file__).resolve().parents[1]
-DATASETS = REPO / "src" / "growjax" / "datasets"
+DATASETS = REPO / "src" / "growjax" / "data" / "datasets"
 
 # The test run spreads whole files over its workers (``--dist loadfile``), except the files that fit the published
 # pulse over 10 s (Y alone, and Y with the rig's errors): they go to one worker, one after another, so that the later
 # ones find those programs compiled in memory instead of compiling them again.
-SHARED_PROGRAMS = {name: "fits_of_the_published_pulse"
-                   for name in ("test_calibration.py", "test_rig.py", "test_uncertainty.py")}
+SHARED_PROGRAMS = {
+    name: "fits_of_the_published_pulse" for name in ("test_calibration.py", "test_rig.py", "test_uncertainty.py")
+}
 
 
 # The longest scopes first (seconds of a cold run on a 2-core CPU, roughly), so that no worker is left with a long
 # file while the other is idle; the rest follow in xdist's order (most tests first).
-LONGEST_FIRST = ("fits_of_the_published_pulse", "test_sweep.py", "test_model.py", "test_discover.py", "test_sets.py",
-                 "test_control.py", "test_effects.py", "test_population.py", "test_fidelity.py", "test_xla_flags.py",
-                 "test_cli.py", "test_inference_data.py", "test_growth_law.py", "test_api.py", "test_design.py",
-                 "test_install.py")
+LONGEST_FIRST = (
+    "fits_of_the_published_pulse",
+    "test_sweep.py",
+    "test_model.py",
+    "test_discover.py",
+    "test_sets.py",
+    "test_control.py",
+    "test_effects.py",
+    "test_population.py",
+    "test_fidelity.py",
+    "test_xla_flags.py",
+    "test_cli.py",
+    "test_inference_data.py",
+    "test_growth_law.py",
+    "test_api.py",
+    "test_design.py",
+    "test_install.py",
+)
 
 
 def pytest_xdist_make_scheduler(config, log):
@@ -81,7 +98,7 @@ def shared_experiment():
 
 @pytest.fixture(scope="session")
 def synthetic_experiment():
-    """The synthetic forward-drive experiment shipped with the package (growjax/datasets)."""
+    """The synthetic forward-drive experiment shipped with the package (growjax/data/datasets)."""
     return ex.read(DATASETS / "synthetic_forward.csv")
 
 

@@ -1,5 +1,5 @@
 """The public API: shape/dtype annotations (jaxtyping) on the entry points, configuration checks, and
-``jax.grad`` through :func:`growjax.simulate` in every configuration."""
+``jax.grad`` through :func:`growjax.simulation.simulate` in every configuration."""
 
 import typing
 
@@ -11,14 +11,28 @@ import pytest
 import growjax as gj
 from growjax import control as gc
 from growjax import discover as gdisc
-from growjax import discrepancy as dc
-from growjax import fit as gfit
 from growjax import posterior as gpost
-from growjax.simulate import simulate_from
+from growjax.calibration import discrepancy as dc
+from growjax.calibration import fit as gfit
+from growjax.simulation.simulate import simulate_from
 
-ANNOTATED = [gj.simulate, gj.simulate_members, gj.input_breaks, simulate_from, gj.Inputs.jump_times,
-             gj.Inputs.kink_times, gc.optimize_profile, gc.run_closed_loop, gc.Plant.advance, gfit.fit,
-             gpost.sample, gpost.forecast, gdisc.discover, dc.log_likelihood, dc.whiten]
+ANNOTATED = [
+    gj.simulate,
+    gj.simulate_members,
+    gj.input_breaks,
+    simulate_from,
+    gj.Inputs.jump_times,
+    gj.Inputs.kink_times,
+    gc.optimize_profile,
+    gc.run_closed_loop,
+    gc.Plant.advance,
+    gfit.fit,
+    gpost.sample,
+    gpost.forecast,
+    gdisc.discover,
+    dc.log_likelihood,
+    dc.whiten,
+]
 RECORDS = [gj.Trajectory, gc.Target, gc.ProfileResult, gc.ClosedLoopResult, gc.LengthPID]
 
 
@@ -60,7 +74,7 @@ def test_config_records_the_emitters_its_programs_compile_with():
     """``quick_compile`` (XLA:CPU's older emitters round differently) comes from the process where a program is
     compiled under ``jax.jit``, and a value such a program cannot take is refused; within a sweep's own compile
     (``xla_flags.compiling``) the sweep's choice holds."""
-    from growjax import xla_flags
+    from growjax.simulation import xla_flags
 
     quick = xla_flags.quick_compile_applied()
     assert gj.Config().resolved().quick_compile is quick
@@ -77,7 +91,7 @@ NAMES = ("Y", "check_valve.max_open_pressure")
 
 
 def _final_length(experiment, fidelity):
-    from growjax import experiment as ex
+    from growjax.data import experiment as ex
 
     cfg = gj.Config(fidelity=fidelity, t1=1.5, rtol=1e-8)
     base = gj.reference()

@@ -7,9 +7,9 @@ import pytest
 from conftest import REPO
 
 import growjax as gj
-from growjax import experiment as ex
-from growjax import fit as gf
 from growjax import posterior as gpost
+from growjax.calibration import fit as gf
+from growjax.data import experiment as ex
 
 TRUTH_Y = 9000.0
 NOISE = 2e-4  # m
@@ -33,8 +33,9 @@ def _synthetic(t1, seed):
 GRID = ["published_Y6000", "published_Y7920", "published_Y10000", "published_Y12000", "published_Y14000"]
 
 
-@pytest.mark.parametrize("grid, least", [((0, 2, 4), 2), pytest.param(range(5), 4, marks=pytest.mark.slow)],
-                         ids=["three", "five"])
+@pytest.mark.parametrize(
+    "grid, least", [((0, 2, 4), 2), pytest.param(range(5), 4, marks=pytest.mark.slow)], ids=["three", "five"]
+)
 def test_fit_intervals_cover_the_truth_on_data_made_by_the_reference(grid, least):
     """Y across the paper's box (three of the five by default), 10 s, noise 0.2 mm: the fast model's 90 % intervals
     (noise and its measured model error) cover at least ``least`` of them. Each fit starts at the published Y
@@ -46,8 +47,9 @@ def test_fit_intervals_cover_the_truth_on_data_made_by_the_reference(grid, least
         name = GRID[k]
         truth = cases[name]["parameters"]["Y"]
         data = lengths[name] + np.random.default_rng(100 + k).normal(0.0, NOISE, time.size)
-        res = gf.fit(time, data, inputs, free=["Y"], config=gj.Config(t1=10.0), n_starts=1, sweep_n=0,
-                     sigma_length=NOISE)
+        res = gf.fit(
+            time, data, inputs, free=["Y"], config=gj.Config(t1=10.0), n_starts=1, sweep_n=0, sigma_length=NOISE
+        )
         lo, hi = res.interval_90["robot.yield_pressure"]
         covered += lo < truth < hi
         errors.append((res.estimate["robot.yield_pressure"] - truth) / res.standard_error["robot.yield_pressure"])
@@ -96,14 +98,22 @@ def test_nuts_on_reference_made_data_is_converged_and_covers_the_reference_estim
     times, length = exp.time, exp["robot_length_m"]
     ref_cfg = gj.Config(t1=0.8, fidelity="reference", rtol=1e-7)
     grid = np.linspace(8800.0, 9800.0, 11)
-    sse = [float(np.sum((np.asarray(gj.simulate(gj.replace(gj.reference(), Y=y), inputs, ref_cfg, ts=times).length)
-                         - length) ** 2)) for y in grid]
+    sse = [
+        float(
+            np.sum(
+                (np.asarray(gj.simulate(gj.replace(gj.reference(), Y=y), inputs, ref_cfg, ts=times).length) - length)
+                ** 2
+            )
+        )
+        for y in grid
+    ]
     a, b, _ = np.polyfit(grid, sse, 2)
     y_reference, se_reference = -b / (2 * a), NOISE / np.sqrt(a)
     assert (y_reference - TRUTH_Y) / se_reference > 2.0  # the noise draw, not the model, moves Y off the truth
     priors = gpost.paper_priors()[:1]
-    res = gpost.sample(times, length, inputs, config=cfg, priors=priors, chains=2, warmup=80, samples=80,
-                       seed=3, progress=False)
+    res = gpost.sample(
+        times, length, inputs, config=cfg, priors=priors, chains=2, warmup=80, samples=80, seed=3, progress=False
+    )
     s = res.summary
     assert s["divergences"] == 0
     assert s["rhat_max"] < 1.05
@@ -125,7 +135,7 @@ def test_nuts_on_reference_made_data_is_converged_and_covers_the_reference_estim
 def test_simulation_based_calibration_of_nuts_covers_at_the_nominal_rate():
     from scipy import stats
 
-    from growjax import emulator as em
+    from growjax.posterior import emulator as em
 
     cfg, inputs, times, _ = _synthetic(0.8, seed=14)
     emu = em.build([em.Axis("Y", 5e3, 15e3, 41)], gj.reference(), inputs, cfg, times)
@@ -149,7 +159,7 @@ def test_emulated_and_direct_posteriors_agree_on_the_test_problem():
 
 
 def _numeric(residuals):
-    """``linearised`` for :func:`growjax.fit.levenberg_marquardt` from NumPy residuals (forward differences)."""
+    """``linearised`` for :func:`growjax.calibration.fit.levenberg_marquardt` from NumPy residuals (forward differences)."""
 
     def linearised(z):
         z = np.asarray(z, float)
@@ -222,8 +232,9 @@ def test_levenberg_marquardt_stops_at_the_costs_resolution_instead_of_wandering_
     for shift in range(16):
         plain, resolved = [], []
         _, cost_plain, _, _, _ = gf.levenberg_marquardt(_noisy_line(plain, noise, shift), np.zeros(2), max_steps=60)
-        z, cost, ok, _, _ = gf.levenberg_marquardt(_noisy_line(resolved, noise, shift), np.zeros(2), max_steps=60,
-                                                   relative_resolution=1e-3)
+        z, cost, ok, _, _ = gf.levenberg_marquardt(
+            _noisy_line(resolved, noise, shift), np.zeros(2), max_steps=60, relative_resolution=1e-3
+        )
         assert ok and len(resolved) <= min(len(plain), 15)
         assert abs(cost - cost_plain) < 10 * 1e-3 * cost_plain  # the same minimum, within ten resolutions
         assert z == pytest.approx([1.0, 2.0], abs=0.1)
@@ -233,8 +244,9 @@ def test_levenberg_marquardt_stops_at_the_costs_resolution_instead_of_wandering_
     # without noise the resolution changes nothing: a clean fit ends as before
     clean, clean_resolved = [], []
     out = gf.levenberg_marquardt(_noisy_line(clean, 0.0), np.zeros(2), max_steps=60)
-    out_resolved = gf.levenberg_marquardt(_noisy_line(clean_resolved, 0.0), np.zeros(2), max_steps=60,
-                                          relative_resolution=1e-3)
+    out_resolved = gf.levenberg_marquardt(
+        _noisy_line(clean_resolved, 0.0), np.zeros(2), max_steps=60, relative_resolution=1e-3
+    )
     assert np.array_equal(out[0], out_resolved[0]) and len(clean) == len(clean_resolved)
 
 
@@ -268,8 +280,9 @@ def test_levenberg_marquardt_linearises_only_the_points_it_accepts():
         return f(np.asarray(z, float))
 
     plain = gf.levenberg_marquardt(steep, np.array([-1.0]), max_steps=40, max_move=3.0)
-    z, cost, ok, _, _ = gf.levenberg_marquardt(linearised, np.array([-1.0]), max_steps=40, max_move=3.0,
-                                               residuals=residuals)
+    z, cost, ok, _, _ = gf.levenberg_marquardt(
+        linearised, np.array([-1.0]), max_steps=40, max_move=3.0, residuals=residuals
+    )
     assert ok and z[0] == pytest.approx(plain[0][0], abs=1e-6) and cost == pytest.approx(plain[1], rel=1e-6)
     assert set(linearised_at[1:]) <= set(scored) and len(scored) > len(linearised_at) - 1  # some were rejected
     costs = [0.5 * float(f(np.array([x])) @ f(np.array([x]))) for x in linearised_at]
@@ -383,10 +396,16 @@ def test_softplus_coordinate_keeps_the_prior_and_the_posterior():
     assert [type(p).__name__ for p in sampled] == ["SoftplusPrior", "RidgePrior"]  # a at its bound, b across it
     quantiles, divergences = [], []
     for ps, init, m in ((priors, mode, inverse_mass), (sampled, start, mass)):
-        kernel = NUTS(make_model(mean, ps), dense_mass=True, inverse_mass_matrix=m, target_accept_prob=0.9,
-                      init_strategy=numpyro.infer.init_to_value(values=init))
-        mcmc = MCMC(kernel, num_warmup=500, num_samples=1000, num_chains=2, chain_method="vectorized",
-                    progress_bar=False)
+        kernel = NUTS(
+            make_model(mean, ps),
+            dense_mass=True,
+            inverse_mass_matrix=m,
+            target_accept_prob=0.9,
+            init_strategy=numpyro.infer.init_to_value(values=init),
+        )
+        mcmc = MCMC(
+            kernel, num_warmup=500, num_samples=1000, num_chains=2, chain_method="vectorized", progress_bar=False
+        )
         mcmc.run(jax.random.PRNGKey(1), jnp.asarray(y), extra_fields=("diverging",))
         draws = mcmc.get_samples()
         quantiles.append({k: np.quantile(np.asarray(draws[k]), [0.1, 0.5, 0.9]) for k in ("a", "b")})
@@ -409,11 +428,14 @@ def test_ridge_coordinate_keeps_the_prior():
     ridge = gpost.RidgePrior("b", "b", 0.1, 10.0, log=True, along=((pressed, 3.0),), offset=0.4)
     v = jnp.linspace(-40.0, 40.0, 200_001)
     for a in (0.0201, 0.03, 0.049):
+
         def model(a=a):
             ridge.sample({"a": a})
 
         density = np.exp(np.asarray(jax.vmap(lambda x: log_density(model, (), {}, {"v_b": x})[0])(v)))
-        theta = np.asarray(jax.vmap(lambda x: constrain_fn(model, (), {}, {"v_b": x}, return_deterministic=True)["b"])(v))
+        theta = np.asarray(
+            jax.vmap(lambda x: constrain_fn(model, (), {}, {"v_b": x}, return_deterministic=True)["b"])(v)
+        )
         assert np.all(np.diff(theta) >= 0) and theta[0] < 0.1 + 1e-9 and theta[-1] > 10.0 - 1e-9
         assert np.trapezoid(density, np.asarray(v)) == pytest.approx(1.0, abs=1e-6)
         f = np.log(theta / 0.1) / np.log(100.0)
@@ -434,6 +456,7 @@ def test_model_tangents_give_numpyros_forward_gradient():
     for m in (mean, gpost.with_model_tangents(mean, [p.name for p in priors])):
         model = make_model(m)
         z, unravel = ravel_pytree(unconstrain_fn(model, (y,), {}, point))
+
         def potential(z, model=model, unravel=unravel):
             return potential_energy(model, (y,), {}, unravel(z))
 
@@ -453,14 +476,16 @@ def test_observation_draws_equal_numpyros_log_likelihood_and_predictive():
     t = np.linspace(0.0, 1.0, 30)
     priors = (gpost.Prior("a", "a", 0.5, 2.0),)
     model_error = 3e-4
-    model = functools.partial(gpost.growth_model, mean_length=lambda th: th["a"] * 1e-2 * t, priors=priors,
-                              model_error=model_error)
+    model = functools.partial(
+        gpost.growth_model, mean_length=lambda th: th["a"] * 1e-2 * t, priors=priors, model_error=model_error
+    )
     rng = np.random.default_rng(0)
     draws = {"a": rng.uniform(0.5, 2.0, (2, 40)), "sigma": rng.uniform(1e-3, 2e-3, (2, 40))}
     draws["length_model"] = draws["a"][..., None] * 1e-2 * t
     observed = 1.2e-2 * t + rng.normal(0.0, 1.5e-3, t.size)
-    loglik, predicted, new = gpost.observation_draws(draws["length_model"], draws["sigma"], model_error, observed,
-                                                     seed=1)
+    loglik, predicted, new = gpost.observation_draws(
+        draws["length_model"], draws["sigma"], model_error, observed, seed=1
+    )
     np.testing.assert_array_equal(predicted, new)  # independent noise: nothing of this experiment to keep
     flat = {k: v.reshape(80, *v.shape[2:]) for k, v in draws.items()}
     expected = np.asarray(log_likelihood(model, flat, observed)["length"]).reshape(2, 40, -1)

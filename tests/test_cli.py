@@ -8,13 +8,23 @@ import numpy as np
 import pytest
 
 import growjax as gj
-from growjax import experiment as ex
+from growjax.data import experiment as ex
 
 
 def test_simulate_command_writes_an_experiment_csv_a_figure_and_json(tmp_path):
     out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "growjax.cli", "simulate", "--t-end", "3", "--out", str(out),
-           "--json", str(tmp_path / "s.json")]
+    cmd = [
+        sys.executable,
+        "-m",
+        "growjax.cli",
+        "simulate",
+        "--t-end",
+        "3",
+        "--out",
+        str(out),
+        "--json",
+        str(tmp_path / "s.json"),
+    ]
     done = subprocess.run(cmd, capture_output=True, text=True, check=False, timeout=600)
     assert done.returncode == 0, done.stderr
     summary = json.loads((tmp_path / "s.json").read_text())
@@ -36,8 +46,19 @@ def test_a_failed_run_exits_nonzero_with_the_reason_and_still_writes_its_summary
     data = tmp_path / "loud.csv"
     t = np.round(np.arange(1, 201) * 0.01, 10)
     ex.write_csv(data, t, {"catheter_length_m": np.full(t.size, 0.02), "pressure_demand_Pa": np.full(t.size, 600e3)})
-    cmd = [sys.executable, "-m", "growjax.cli", "simulate", str(data), "--t-end", "2", "--out", str(tmp_path / "o"),
-           "--json", "-"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "growjax.cli",
+        "simulate",
+        str(data),
+        "--t-end",
+        "2",
+        "--out",
+        str(tmp_path / "o"),
+        "--json",
+        "-",
+    ]
     done = subprocess.run(cmd, capture_output=True, text=True, check=False, timeout=600)
     assert done.returncode == 1, done.stderr
     assert "membrane limit" in done.stderr.splitlines()[-1]
@@ -55,7 +76,9 @@ def test_version_lists_and_option_errors(capsys):
     assert cli.main(["params", "--json", "-"]) == 0
     rows = {r["name"]: r for r in json.loads(capsys.readouterr().out)["parameters"]}
     y = rows["robot.yield_pressure"]
-    assert y["symbol"] == "Y" and y["unit"] == "Pa" and y["range"] == [0.0, 1e6] and y["value"] == pytest.approx(7920.46)
+    assert (
+        y["symbol"] == "Y" and y["unit"] == "Pa" and y["range"] == [0.0, 1e6] and y["value"] == pytest.approx(7920.46)
+    )
     assert cli.main(["params"]) == 0 and "robot.yield_pressure" in capsys.readouterr().out
 
     assert cli.main(["effects"]) == 0
@@ -90,27 +113,35 @@ def test_every_command_shares_the_options_and_shows_defaults():
 def test_simulate_command_reports_bad_input(tmp_path):
     bad = tmp_path / "bad.csv"
     bad.write_text("time_s,robot_length_m\n0,10\n1,11\n")
-    done = subprocess.run([sys.executable, "-m", "growjax.cli", "simulate", str(bad), "--out", str(tmp_path)],
-                          capture_output=True, text=True, check=False, timeout=600)
+    done = subprocess.run(
+        [sys.executable, "-m", "growjax.cli", "simulate", str(bad), "--out", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        check=False,
+        timeout=600,
+    )
     assert done.returncode == 2 and "millimetres" in done.stderr
 
 
-@pytest.mark.parametrize("argv, named", [
-    (["posterior", "--chains", "0"], "--chains: must be at least 1, got 0"),
-    (["posterior", "--samples", "-5"], "--samples: must be at least 1, got -5"),
-    (["posterior", "--warmup", "-1"], "--warmup: must be at least 0, got -1"),
-    (["sweep", "--n", "0"], "--n: must be at least 1"),
-    (["sweep", "--sobol-n", "100"], "--sobol-n: must be a power of 2"),
-    (["sweep", "--chunk-size", "0"], "--chunk-size: must be at least 1"),
-    (["fit", "--starts", "0"], "--starts: must be at least 1"),
-    (["discover", "--workers", "-2"], "--workers: must be at least 1"),
-    (["control", "--draws", "0"], "--draws: must be at least 1"),
-    (["control", "--iterations", "two"], "--iterations: 'two' is not an integer"),
-    (["control", "--microsteps", "0"], "--microsteps: must be at least 1"),
-    (["simulate", "--seed", "-1"], "--seed: must be at least 0"),
-    (["simulate", "--t-end", "0"], "--t-end: must be a positive number"),
-    (["fit", "--rtol=-1e-6"], "--rtol: must be a positive number"),
-])
+@pytest.mark.parametrize(
+    "argv, named",
+    [
+        (["posterior", "--chains", "0"], "--chains: must be at least 1, got 0"),
+        (["posterior", "--samples", "-5"], "--samples: must be at least 1, got -5"),
+        (["posterior", "--warmup", "-1"], "--warmup: must be at least 0, got -1"),
+        (["sweep", "--n", "0"], "--n: must be at least 1"),
+        (["sweep", "--sobol-n", "100"], "--sobol-n: must be a power of 2"),
+        (["sweep", "--chunk-size", "0"], "--chunk-size: must be at least 1"),
+        (["fit", "--starts", "0"], "--starts: must be at least 1"),
+        (["discover", "--workers", "-2"], "--workers: must be at least 1"),
+        (["control", "--draws", "0"], "--draws: must be at least 1"),
+        (["control", "--iterations", "two"], "--iterations: 'two' is not an integer"),
+        (["control", "--microsteps", "0"], "--microsteps: must be at least 1"),
+        (["simulate", "--seed", "-1"], "--seed: must be at least 0"),
+        (["simulate", "--t-end", "0"], "--t-end: must be a positive number"),
+        (["fit", "--rtol=-1e-6"], "--rtol: must be a positive number"),
+    ],
+)
 def test_counts_and_spans_are_checked_by_the_parser(argv, named, capsys):
     from growjax import cli
 
@@ -123,8 +154,11 @@ def test_counts_and_spans_are_checked_by_the_parser(argv, named, capsys):
 def _rows(path, header, times):
     cols = header.split(",")
     values = {"time_s": None, "robot_length_m": 0.010, "catheter_length_m": 0.004}
-    path.write_text(header + "\n" + "".join(
-        ",".join(str(t) if c == "time_s" else str(values[c]) for c in cols) + "\n" for t in times))
+    path.write_text(
+        header
+        + "\n"
+        + "".join(",".join(str(t) if c == "time_s" else str(values[c]) for c in cols) + "\n" for t in times)
+    )
     return path
 
 
@@ -219,26 +253,65 @@ def test_design_takes_the_growth_law_of_what_is_known(tmp_path, monkeypatch):
 
     monkeypatch.setattr(gd, "design", design)
     saved = tmp_path / "fit.json"
-    saved.write_text(json.dumps({"parameters": {
-        "robot.yield_pressure": {"estimate": 9000.0, "standard_error": 200.0},
-        "robot.lockhart_rate": {"estimate": 9.0, "standard_error": None},
-        "robot.lockhart_exponent": {"estimate": 0.05, "standard_error": None}}}))
+    saved.write_text(
+        json.dumps(
+            {
+                "parameters": {
+                    "robot.yield_pressure": {"estimate": 9000.0, "standard_error": 200.0},
+                    "robot.lockhart_rate": {"estimate": 9.0, "standard_error": None},
+                    "robot.lockhart_exponent": {"estimate": 0.05, "standard_error": None},
+                }
+            }
+        )
+    )
     with pytest.raises(_Designed):
-        cli.main(["design", "--law", "lockhart", "--for", "Y", "phi_L", "n_L", "--fit-from", str(saved),
-                  "--out", str(tmp_path / "out")])
+        cli.main(
+            [
+                "design",
+                "--law",
+                "lockhart",
+                "--for",
+                "Y",
+                "phi_L",
+                "n_L",
+                "--fit-from",
+                str(saved),
+                "--out",
+                str(tmp_path / "out"),
+            ]
+        )
     known = seen["knowledge"]
     assert known.base.robot.growth_law == "lockhart"
     assert known.names == ("robot.yield_pressure", "robot.lockhart_rate", "robot.lockhart_exponent")
     reference = gj.reference(growth_law="lockhart")
     for name in known.names[1:]:  # undetermined: at the box's centre, with its variance
         assert float(gj.get(known.base, name)) == pytest.approx(float(gj.get(reference, name)))
-        assert known.covariance[known.names.index(name), known.names.index(name)] == pytest.approx(np.log(4.0) ** 2 / 12)
+        assert known.covariance[known.names.index(name), known.names.index(name)] == pytest.approx(
+            np.log(4.0) ** 2 / 12
+        )
 
 
 @pytest.mark.slow
 def test_posterior_command_writes_inference_data_and_the_issue_keys(tmp_path):
-    cmd = [sys.executable, "-m", "growjax.cli", "posterior", "--t-end", "0.8", "--chains", "2", "--warmup", "40",
-           "--samples", "40", "--emulate", "--out", str(tmp_path), "--json", str(tmp_path / "p.json")]
+    cmd = [
+        sys.executable,
+        "-m",
+        "growjax.cli",
+        "posterior",
+        "--t-end",
+        "0.8",
+        "--chains",
+        "2",
+        "--warmup",
+        "40",
+        "--samples",
+        "40",
+        "--emulate",
+        "--out",
+        str(tmp_path),
+        "--json",
+        str(tmp_path / "p.json"),
+    ]
     done = subprocess.run(cmd, capture_output=True, text=True, check=False, timeout=900)
     assert done.returncode == 0, done.stderr
     # stderr is a pipe: a line per phase, no bars (NumPyro's redraw with carriage returns)
@@ -259,7 +332,7 @@ def test_fit_passes_the_rigs_treatment_to_the_fit(monkeypatch, tmp_path, capsys)
     """``growjax fit`` makes the rig's errors parameters of the model by default (``--rig-tangents``);
     ``--no-rig-tangents`` takes secants, relinearised where the data put the rig unless ``--no-relinearise``."""
     from growjax import cli
-    from growjax import fit as gf
+    from growjax.calibration import fit as gf
 
     seen = []
 
@@ -268,7 +341,7 @@ def test_fit_passes_the_rigs_treatment_to_the_fit(monkeypatch, tmp_path, capsys)
         raise ValueError("stopped before fitting")
 
     monkeypatch.setattr(gf, "fit", stop)
-    data = "src/growjax/datasets/synthetic_forward.csv"
+    data = "src/growjax/data/datasets/synthetic_forward.csv"
     for extra in ([], ["--rig-tangents"], ["--no-rig-tangents"], ["--no-rig-tangents", "--no-relinearise"]):
         assert cli.main(["fit", data, "--out", str(tmp_path), "--quiet", *extra]) == 2
     assert seen == [(True, True), (True, True), (True, False), (False, False)]

@@ -6,16 +6,16 @@ import numpy as np
 import pytest
 
 import growjax as gj
-from growjax import hydraulics as hy
-from growjax._smooth import bracketed_root, smooth_ramp, smooth_step
-from growjax.fluid import (
+from growjax.model import hydraulics as hy
+from growjax.model._smooth import bracketed_root, smooth_ramp, smooth_step
+from growjax.model.fluid import (
     Fluid,
     bulk_modulus,
     pressure_at_stored_fraction,
     stored_volume_fraction,
     water,
 )
-from growjax.robot import catheter_friction_gain, rod_balance, rod_pressure
+from growjax.model.robot import catheter_friction_gain, rod_balance, rod_pressure
 
 
 def test_water_properties_match_the_stock_table():

@@ -82,8 +82,12 @@ def test_feedback_rejects_a_disturbance_the_open_loop_does_not(target):
     for force in (0.0, 0.05):
         p = gj.with_effects(base, gj.effects.ActiveChannelForce(force=force))
         closed = gc.run_closed_loop(gc.Plant.make(p, gj.Config(t1=T)), pid, target, T)
-        inputs = gj.Inputs(catheter_length=gc.catheter_signal(target), pressure_demand=gj.Sampled(
-            np.concatenate([[0.0], closed.tick_time + pid.dt]), np.concatenate([[110e3], closed.command])))
+        inputs = gj.Inputs(
+            catheter_length=gc.catheter_signal(target),
+            pressure_demand=gj.Sampled(
+                np.concatenate([[0.0], closed.tick_time + pid.dt]), np.concatenate([[110e3], closed.command])
+            ),
+        )
         ts = target.time[target.time <= T]
         # the open loop replays the undisturbed closed loop's demand
         if force == 0.0:
@@ -107,8 +111,9 @@ def test_tuning_reduces_the_cost_it_optimises(target):
 
 
 def test_step_controller_steps_back_and_respects_the_step_rate():
-    tg = gc.Target(np.arange(0.01, 2.0, 0.01), 0.010 + 6e-3 * np.sin(np.pi * np.arange(0.01, 2.0, 0.01) / 2.0) ** 2,
-                   np.zeros(199))
+    tg = gc.Target(
+        np.arange(0.01, 2.0, 0.01), 0.010 + 6e-3 * np.sin(np.pi * np.arange(0.01, 2.0, 0.01) / 2.0) ** 2, np.zeros(199)
+    )
     p = gc.plant_params("inverse", tg)
     ctrl = gc.StepController(rate=20.0, lead=0.05)
     res = gc.run_closed_loop(gc.Plant.make(p, gj.Config(drive="inverse", t1=2.0)), ctrl, tg, 2.0)
@@ -147,11 +152,13 @@ def test_step_controller_holds_forward_steps_above_its_pressure_gate():
     ctrl = gc.StepController(rate=20.0, lead=0.2, pressure_gate=gate)
     res = gc.run_closed_loop(gc.Plant.make(p, gj.Config(drive="inverse", t1=2.0)), ctrl, tg, 2.0)
     sub = res.time.size // res.tick_time.size  # samples per tick; the last one is the tick's end
-    sensed = np.concatenate([[0.0], res.pressure[sub - 1::sub][:-1]])  # what each tick saw
+    sensed = np.concatenate([[0.0], res.pressure[sub - 1 :: sub][:-1]])  # what each tick saw
     forward = np.diff(np.concatenate([[0.0], res.command])) > 0
     assert forward.any() and np.all(sensed[forward] < gate)
-    held = (sensed >= gate) & (np.interp(res.tick_time + ctrl.lead, tg.time, tg.length) > np.interp(
-        res.tick_time, res.time, res.length) + 0.5 * gc.step_length(p))
+    held = (sensed >= gate) & (
+        np.interp(res.tick_time + ctrl.lead, tg.time, tg.length)
+        > np.interp(res.tick_time, res.time, res.length) + 0.5 * gc.step_length(p)
+    )
     assert held.any()  # the gate did bind: it held steps the error asked for
 
 
@@ -229,8 +236,11 @@ def test_design_builds_its_plant_and_limits_from_base(target, monkeypatch):
 
     monkeypatch.setattr(_design_module(), "optimize_profile", stop)
     reference = gj.reference("forward")
-    changed = gj.replace(reference, Y=2.5 * float(gj.get(reference, "Y")), membrane_yield_stress=0.5 * float(
-        gj.get(reference, "robot.membrane_yield_stress")))
+    changed = gj.replace(
+        reference,
+        Y=2.5 * float(gj.get(reference, "Y")),
+        membrane_yield_stress=0.5 * float(gj.get(reference, "robot.membrane_yield_stress")),
+    )
     for base, want in ((None, reference), (changed, changed)):
         with pytest.raises(_Designed):
             gc.design(target, "forward", "open-loop", T, evaluate_on="fast", base=base)
@@ -264,8 +274,9 @@ def test_design_tunes_feedback_on_draws_of_the_rig_within_its_tolerances(target,
     with pytest.raises(_Designed):
         gc.design(target, "forward", "feedback", T, n_draws=64, seed=2)
     assert seen["draws"] is None  # no tolerances: the rig as it is
-    np.testing.assert_array_equal(gc.rig_draws(64, seen["base"], {"Kp": 0.1}, seed=2)["pid.proportional"],
-                                  draws["pid.proportional"])  # seeded
+    np.testing.assert_array_equal(
+        gc.rig_draws(64, seen["base"], {"Kp": 0.1}, seed=2)["pid.proportional"], draws["pid.proportional"]
+    )  # seeded
     with pytest.raises(ValueError, match="feedback design only"):
         gc.design(target, "forward", "mpc", T, tolerances={"Kp": 0.1})
 
@@ -275,7 +286,9 @@ def test_design_on_a_changed_base_tracks_differently(target):
     """End to end (slow: two profile optimisations, ~1 min each on 2 cores): a stiffer robot needs another profile."""
     short = gc.Target(*(np.asarray(a)[target.time <= 0.6] for a in target))
     reference = gj.reference("forward")
-    runs = [gc.design(short, "forward", "open-loop", 0.6, iterations=1, evaluate_on="fast", base=base)
-            for base in (None, gj.replace(reference, Y=30e3))]
+    runs = [
+        gc.design(short, "forward", "open-loop", 0.6, iterations=1, evaluate_on="fast", base=base)
+        for base in (None, gj.replace(reference, Y=30e3))
+    ]
     assert runs[0]["profile"]["demand_Pa"] != runs[1]["profile"]["demand_Pa"]
     assert runs[1]["tracking_rmse_m"] > runs[0]["tracking_rmse_m"]

@@ -1,4 +1,4 @@
-"""growjax.datasets.fetch: the public experiment from a hash-checked local copy, and one clear line offline."""
+"""growjax.data.datasets.fetch: the public experiment from a hash-checked local copy, and one clear line offline."""
 
 import shutil
 
@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 from conftest import REPO
 
-from growjax import cli, datasets
-from growjax import experiment as ex
+from growjax import cli
+from growjax.data import datasets
+from growjax.data import experiment as ex
 
 SHARED = REPO.parent / "shared" / "data" / "mammobot"  # the authors' files beside the checkout
 UNREACHABLE = "http://127.0.0.1:9/growjax-test/"  # the discard port: refused at once, no network needed
@@ -38,8 +39,9 @@ def test_fetch_checks_and_converts_a_local_copy_to_the_experiment_csv(local_copy
     for column in ("robot_length_m", "catheter_length_m"):
         np.testing.assert_array_equal(exp[column], mat[column])
     if (local_copy / "experiment.csv").is_file():  # the CSV published beside them (10 significant digits)
-        np.testing.assert_allclose(exp["robot_length_m"], ex.read(local_copy / "experiment.csv")["robot_length_m"],
-                                   rtol=0, atol=1e-11)
+        np.testing.assert_allclose(
+            exp["robot_length_m"], ex.read(local_copy / "experiment.csv")["robot_length_m"], rtol=0, atol=1e-11
+        )
     monkeypatch.setenv(datasets.DATA_DIR_ENV, str(local_copy))  # the environment names the copy instead
     assert datasets.fetch("mammobot", cache_dir=tmp_path) == path
 
@@ -71,8 +73,9 @@ def test_the_command_line_fails_in_one_line_offline_and_on_a_bad_copy(offline, t
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and f"{UNREACHABLE}kings_ts.mat" in err and str(offline) in err
     assert cli.main(["simulate", "mammobot", "--data-dir", str(tmp_path), "--out", str(tmp_path / "o")]) == 2
-    assert capsys.readouterr().err.strip() == (f"growjax simulate: error: no file kings_ts.mat in {tmp_path} (the "
-                                               "data set's files: a copy of the authors')")
+    assert capsys.readouterr().err.strip() == (
+        f"growjax simulate: error: no file kings_ts.mat in {tmp_path} (the data set's files: a copy of the authors')"
+    )
 
 
 def test_the_command_line_names_the_data_set_with_a_local_copy(offline, local_copy):

@@ -12,13 +12,13 @@ from conftest import objective_differences
 import growjax as gj
 from growjax import cli
 from growjax import design as gd
-from growjax import discrepancy as dc
-from growjax import experiment as ex
-from growjax import fit as gf
-from growjax import tolerance as tl
+from growjax.calibration import discrepancy as dc
+from growjax.calibration import fit as gf
+from growjax.calibration import tolerance as tl
+from growjax.data import experiment as ex
 
 Y = "robot.yield_pressure"
-DATA = "src/growjax/datasets/synthetic_forward.csv"
+DATA = "src/growjax/data/datasets/synthetic_forward.csv"
 
 
 def _catheter():
@@ -40,13 +40,26 @@ def test_criterion_is_the_dense_gaussian_posterior():
     n, m = 40, 4
     t = np.sort(rng.uniform(0.0, 4.0, n))
     hyper = dc.Hyper.of(3e-4, 0.7, 2e-4, 0.05)
-    s = gd.Sensitivities(jnp.zeros(n), jnp.zeros(n), jnp.asarray(rng.normal(0, 1e-3, (n, m))),
-                         jnp.asarray(rng.normal(0, 2e3, (n, m))), jnp.asarray(True))
+    s = gd.Sensitivities(
+        jnp.zeros(n),
+        jnp.zeros(n),
+        jnp.asarray(rng.normal(0, 1e-3, (n, m))),
+        jnp.asarray(rng.normal(0, 2e3, (n, m))),
+        jnp.asarray(True),
+    )
     prior = np.diag([0.05, 0.2, 0.05, 0.02]) ** 2
     rem = rng.normal(0, 1e-4, (n, 3))
     for sensors, sigma_p in ((("length",), 1e3), (("length", "pressure"), 1.5e3)):
-        pred = gd.posterior(s, t, hyper, np.linalg.inv(prior), np.diag([0.0, *np.diag(np.linalg.inv(prior))[1:]]),
-                            sensors, sigma_p, jnp.asarray(rem))
+        pred = gd.posterior(
+            s,
+            t,
+            hyper,
+            np.linalg.inv(prior),
+            np.diag([0.0, *np.diag(np.linalg.inv(prior))[1:]]),
+            sensors,
+            sigma_p,
+            jnp.asarray(rem),
+        )
         h = np.asarray(s.jac_length)
         r = dc.kernel(t, hyper) + dc.noise_kernel(t, hyper)
         v = rem
@@ -75,12 +88,25 @@ def test_criterion_is_the_dense_gaussian_posterior():
 def test_knowledge_from_a_saved_fit(tmp_path):
     base = gj.reference("forward")
     saved = tmp_path / "fit.json"
-    saved.write_text(json.dumps({"parameters": {Y: {"estimate": 8000.0, "standard_error": 160.0},
-                                                "robot.extensibility": {"estimate": 0.03, "standard_error": None},
-                                                "robot.growth_exponent": {"estimate": 0.64, "standard_error": 25.0}},
-                                 "discrepancy": {"kind": "matern32", "amplitude_m": 5e-4, "time_scale_s": 1.0,
-                                                 "noise_m": 2e-4, "noise_time_s": 0.0},
-                                 "tolerances": {"pid.proportional": 0.05}}))
+    saved.write_text(
+        json.dumps(
+            {
+                "parameters": {
+                    Y: {"estimate": 8000.0, "standard_error": 160.0},
+                    "robot.extensibility": {"estimate": 0.03, "standard_error": None},
+                    "robot.growth_exponent": {"estimate": 0.64, "standard_error": 25.0},
+                },
+                "discrepancy": {
+                    "kind": "matern32",
+                    "amplitude_m": 5e-4,
+                    "time_scale_s": 1.0,
+                    "noise_m": 2e-4,
+                    "noise_time_s": 0.0,
+                },
+                "tolerances": {"pid.proportional": 0.05},
+            }
+        )
+    )
     known = gd.from_summary(saved, base, ["Y", "ext"])
     assert known.estimate[0] == 8000.0 and known.rig == ("pid.proportional",)
     assert np.sqrt(known.covariance[0, 0]) == pytest.approx(0.02)
@@ -90,7 +116,8 @@ def test_knowledge_from_a_saved_fit(tmp_path):
     lo, hi = gf.default_range(base, "robot.growth_exponent")
     wide = gd.from_summary(saved, base, ["Y", "n"])  # an interval wider than the box says less than the box
     assert wide.estimate[1] == pytest.approx(np.sqrt(lo * hi)) and wide.covariance[1, 1] == pytest.approx(
-        np.log(hi / lo) ** 2 / 12)
+        np.log(hi / lo) ** 2 / 12
+    )
     assert float(known.hyper.amplitude) == 5e-4
     assert known.prior_precision(False)[0, 0] == 0.0 and known.prior_precision(True)[0, 0] == pytest.approx(1 / 0.02**2)
     with pytest.raises(ValueError, match="did not fit pid.proportional"):
@@ -111,8 +138,12 @@ def test_a_design_is_written_in_the_rigs_terms(tmp_path):
     assert "robot_length_m" not in back and back.time[0] == 0.0 and back.time[-1] == 12.0
     inputs = ex.to_inputs(back, "forward", gj.reference("forward"), t1=12.0)
     ts = jnp.asarray(space.times)
-    np.testing.assert_allclose(np.asarray(jax.vmap(inputs.pressure_demand)(ts)),
-                               np.asarray(jax.vmap(space.inputs(x).pressure_demand)(ts)), rtol=1e-9, atol=1e-6)
+    np.testing.assert_allclose(
+        np.asarray(jax.vmap(inputs.pressure_demand)(ts)),
+        np.asarray(jax.vmap(space.inputs(x).pressure_demand)(ts)),
+        rtol=1e-9,
+        atol=1e-6,
+    )
     # The catheter follows the experiment already run, held at its last value after its end (10 s).
     cath = np.asarray(jax.vmap(inputs.catheter_length)(jnp.asarray([5.0, 10.0, 11.5])))
     np.testing.assert_allclose(cath, [0.024, 0.044, 0.044], atol=1e-12)
@@ -130,10 +161,23 @@ def test_the_random_batchs_summary_counts_apart_the_inputs_without_a_criterion()
     from growjax.design.workflow import DesignResult
 
     batch = dopt.RandomBatch(np.zeros((5, 2)), np.array([np.nan, -3.0, np.inf, -1.0, -2.0]), drawn=9, wall_s=1.0)
-    result = DesignResult(("robot.yield_pressure",), np.ones(1), gd.DesignSpace(1.0, 1e5, gj.Constant(0.0)),
-                          np.zeros(2), np.zeros(3), np.zeros(3), rows=[], checks={}, random=batch, descents=[],
-                          limits=SimpleNamespace(summary=dict), criterion="A", sensors=("length",), knowledge={},
-                          wall_s={})
+    result = DesignResult(
+        ("robot.yield_pressure",),
+        np.ones(1),
+        gd.DesignSpace(1.0, 1e5, gj.Constant(0.0)),
+        np.zeros(2),
+        np.zeros(3),
+        np.zeros(3),
+        rows=[],
+        checks={},
+        random=batch,
+        descents=[],
+        limits=SimpleNamespace(summary=dict),
+        criterion="A",
+        sensors=("length",),
+        knowledge={},
+        wall_s={},
+    )
     r = result.summary()["random"]
     assert r["criterion_undefined"] == 2 and r["criterion_best"] == -3.0 and batch.best == 1
     assert r["criterion_quantiles"] == {"0.1": pytest.approx(-2.8), "0.5": -2.0, "0.9": pytest.approx(-1.2)}
@@ -163,8 +207,16 @@ def test_the_check_flags_exactly_the_inputs_that_cross_a_limit_on_simulation():
     drawn = gd.draws(known, 3, seed=1)
     assert set(drawn) == {Y, *known.tolerances} and all(v.shape == (3,) for v in drawn.values())
     designs = [space.unconstrained(np.full(space.size + 1, v)) for v in (60e3, 150e3, 250e3)]
-    res = gd.check(gd.stack([space.inputs(x) for x in designs]), known, space.config(), space.times, space.breaks(),
-                   lim, drawn, keep_runs=True)
+    res = gd.check(
+        gd.stack([space.inputs(x) for x in designs]),
+        known,
+        space.config(),
+        space.times,
+        space.breaks(),
+        lim,
+        drawn,
+        keep_runs=True,
+    )
     # on its own simulation of every draw: the peaks the check reports, and the verdict they imply
     config = space.config()
     for i, x in enumerate(designs):
@@ -184,14 +236,18 @@ def test_the_check_flags_exactly_the_inputs_that_cross_a_limit_on_simulation():
 
 
 def test_design_command_refuses_bad_input_with_exit_2(capsys, tmp_path):
-    for argv, message in ((["--for", "Y", "no_such_parameter"], "no_such_parameter"),
-                          (["--duration", "0"], "--duration"),
-                          (["--p-max", "400e3"], "above the sensed-pressure ceiling"),
-                          (["--next-drive", "inverse", "--p-max", "200e3"], "the stepper's schedule has neither"),
-                          (["--next-drive", "inverse", "--discriminate", "retraction_folding", "trapped_air"],
-                           "drop --next-drive inverse"),
-                          (["--knot-spacing", "20", "--duration", "5"], "knot spacing"),
-                          (["--fit-from", "/nonexistent/fit.json"], "cannot read the saved fit")):
+    for argv, message in (
+        (["--for", "Y", "no_such_parameter"], "no_such_parameter"),
+        (["--duration", "0"], "--duration"),
+        (["--p-max", "400e3"], "above the sensed-pressure ceiling"),
+        (["--next-drive", "inverse", "--p-max", "200e3"], "the stepper's schedule has neither"),
+        (
+            ["--next-drive", "inverse", "--discriminate", "retraction_folding", "trapped_air"],
+            "drop --next-drive inverse",
+        ),
+        (["--knot-spacing", "20", "--duration", "5"], "knot spacing"),
+        (["--fit-from", "/nonexistent/fit.json"], "cannot read the saved fit"),
+    ):
         try:
             status = cli.main(["design", DATA, "--out", str(tmp_path / "never"), *argv])
         except SystemExit as stop:  # argparse's own checks
@@ -224,8 +280,9 @@ def test_a_stepper_schedule_is_written_as_the_desired_length_the_controller_turn
         np.testing.assert_array_equal(issued, designed)
     # the recorded length as the desired length: what the shipped model's stepper does with it
     shipped = ex.to_inputs(exp, "inverse", base, 0.001, 4.0).steps
-    np.testing.assert_array_equal(np.asarray(jax.vmap(shipped)(after)),
-                                  np.asarray(jax.vmap(space.inputs(baseline).steps)(after)))
+    np.testing.assert_array_equal(
+        np.asarray(jax.vmap(shipped)(after)), np.asarray(jax.vmap(space.inputs(baseline).steps)(after))
+    )
     assert np.sum(baseline) > 0 and np.all(np.cumsum(scaled) <= np.cumsum(xs[0]))
     assert len(moved) == len({m.tobytes() for m in moved}) and np.all(np.sum(moved != baseline, axis=1) <= 2)
 
@@ -243,8 +300,9 @@ def test_the_criterions_gradient_through_the_model_matches_finite_differences(sh
     """Through the linearised covariances alone and with the remainder's solves at drawn rigs (the objective the
     search and the table share)."""
     known, space = short_problem
-    problem = gd.make(known, space, points=2, nonlinear_draws=nonlinear_draws, seed=0,
-                      config=gj.Config(rtol=1e-7, atol=1e-7))
+    problem = gd.make(
+        known, space, points=2, nonlinear_draws=nonlinear_draws, seed=0, config=gj.Config(rtol=1e-7, atol=1e-7)
+    )
     x = space.unconstrained(np.array([0.0, 90e3, 60e3, 120e3, 80e3]))
     value, grad = (np.asarray(a) for a in gd.value_and_gradient(problem, x))
     assert value == pytest.approx(float(sum(gd.evaluate(problem, x))), rel=1e-5)  # two programs: rounding
@@ -261,8 +319,14 @@ def test_the_criterions_gradient_through_the_model_matches_finite_differences(sh
 
 @pytest.mark.slow
 def test_the_design_beats_the_published_pulse_and_the_best_random_input_and_is_admissible():
-    known = gd.Knowledge(gj.replace(gj.reference("forward"), Y=9000.0), (Y,), np.array([[0.02**2]]),
-                         {"robot.catheter_friction": 0.2, "pid.proportional": 0.05}, dc.Hyper.of(0.0, 1.0, 2e-4), "test")
+    known = gd.Knowledge(
+        gj.replace(gj.reference("forward"), Y=9000.0),
+        (Y,),
+        np.array([[0.02**2]]),
+        {"robot.catheter_friction": 0.2, "pid.proportional": 0.05},
+        dc.Hyper.of(0.0, 1.0, 2e-4),
+        "test",
+    )
     space = gd.DesignSpace(3.0, 336e3, _catheter(), knot_spacing=0.5)
     res = gd.design(known, space, random=6, starts=1, iterations=6, n_draws=4, seed=0, points=2, nonlinear_draws=2)
     crit = {r["input"]: r["criterion"] for r in res.rows}
@@ -289,21 +353,52 @@ def test_the_design_beats_the_published_pulse_and_the_best_random_input_and_is_a
 @pytest.mark.slow
 def test_design_command_writes_a_csv_that_simulate_reads(tmp_path, capsys):
     saved = tmp_path / "fit.json"
-    saved.write_text(json.dumps({"parameters": {Y: {"estimate": 9000.0, "standard_error": 200.0}},
-                                 "discrepancy": {"amplitude_m": 3e-5, "time_scale_s": 2.0, "noise_m": 2e-4},
-                                 "tolerances": {"robot.catheter_friction": 0.2}}))
+    saved.write_text(
+        json.dumps(
+            {
+                "parameters": {Y: {"estimate": 9000.0, "standard_error": 200.0}},
+                "discrepancy": {"amplitude_m": 3e-5, "time_scale_s": 2.0, "noise_m": 2e-4},
+                "tolerances": {"robot.catheter_friction": 0.2},
+            }
+        )
+    )
     out = tmp_path / "design"
-    argv = ["design", DATA, "--fit-from", str(saved), "--duration", "2", "--knot-spacing", "1", "--random", "3",
-            "--starts", "1", "--iterations", "2", "--draws", "3", "--points", "1", "--nonlinear-draws", "2",
-            "--sensors", "length,pressure", "--out", str(out),
-            "--quiet"]
+    argv = [
+        "design",
+        DATA,
+        "--fit-from",
+        str(saved),
+        "--duration",
+        "2",
+        "--knot-spacing",
+        "1",
+        "--random",
+        "3",
+        "--starts",
+        "1",
+        "--iterations",
+        "2",
+        "--draws",
+        "3",
+        "--points",
+        "1",
+        "--nonlinear-draws",
+        "2",
+        "--sensors",
+        "length,pressure",
+        "--out",
+        str(out),
+        "--quiet",
+    ]
     assert cli.main(argv) == 0
     text = capsys.readouterr().out
     assert "published pulse train" in text and "best random input" in text and "length+pressure" in text
     summary = json.loads((out / "summary.json").read_text())
     assert {(r["input"], tuple(r["sensors"])) for r in summary["table"]} == {
-        (i, s) for i in ("published pulse train", "best random input", "design")
-        for s in (("length",), ("length", "pressure"))}
+        (i, s)
+        for i in ("published pulse train", "best random input", "design")
+        for s in (("length",), ("length", "pressure"))
+    }
     assert (out / "design.png").stat().st_size > 10_000
     assert cli.main(["simulate", str(out / "design.csv"), "--t-end", "2", "--out", str(tmp_path / "sim")]) == 0
     traj = ex.read(tmp_path / "sim" / "trajectory.csv")
@@ -327,7 +422,20 @@ def test_a_stepper_design_beats_the_recorded_length_and_the_best_random_schedule
     summary = res.summary()
     assert summary["drive"] == "inverse" and len(summary["design"]["steps"]) == space.size
     space.write_csv(tmp_path / "design.csv", res.x)
-    assert cli.main(["simulate", str(tmp_path / "design.csv"), "--drive", "inverse", "--t-end", "3",
-                     "--out", str(tmp_path / "sim")]) == 0
+    assert (
+        cli.main(
+            [
+                "simulate",
+                str(tmp_path / "design.csv"),
+                "--drive",
+                "inverse",
+                "--t-end",
+                "3",
+                "--out",
+                str(tmp_path / "sim"),
+            ]
+        )
+        == 0
+    )
     traj = ex.read(tmp_path / "sim" / "trajectory.csv")
     assert np.max(traj["pressure_Pa"]) <= res.limits.pressure and np.max(traj["robot_length_m"]) <= res.limits.length

@@ -12,12 +12,12 @@ from conftest import objective_differences
 import growjax as gj
 from growjax import cli
 from growjax import design as gd
-from growjax import discrepancy as dc
-from growjax import synthetic as syn
+from growjax.calibration import discrepancy as dc
+from growjax.data import synthetic as syn
 from growjax.design import discrimination as ddis
 
 Y = "robot.yield_pressure"
-DATA = "src/growjax/datasets/synthetic_forward.csv"
+DATA = "src/growjax/data/datasets/synthetic_forward.csv"
 PAIR = ("retraction_folding", "trapped_air")
 RISE_FALL = np.array([0.0, 150e3, 40e3, 150e3, 40e3])  # Pa at the knots: growth, then retraction, twice
 
@@ -31,8 +31,14 @@ def _catheter():
 def short():
     """The short case of tests/test_design.py (2 s, knots every 0.5 s, two toleranced rig parameters)."""
     base = gj.replace(gj.reference("forward"), Y=9000.0)
-    known = gd.Knowledge(base, (Y,), np.array([[0.03**2]]), {"robot.catheter_friction": 0.2, "pid.proportional": 0.05},
-                         dc.Hyper.of(1e-4, 0.8, 2e-4, 0.01), "test")
+    known = gd.Knowledge(
+        base,
+        (Y,),
+        np.array([[0.03**2]]),
+        {"robot.catheter_friction": 0.2, "pid.proportional": 0.05},
+        dc.Hyper.of(1e-4, 0.8, 2e-4, 0.01),
+        "test",
+    )
     space = gd.DesignSpace(2.0, 336e3, _catheter(), knot_spacing=0.5)
     return known, space, ddis.make(known, space, PAIR, config=gj.Config(rtol=1e-7, atol=1e-7))
 
@@ -56,28 +62,41 @@ def test_the_statistic_is_the_dense_generalised_least_squares_projection():
     beta = np.linalg.solve(jac.T @ si_j, jac.T @ si_r)
     assert value == pytest.approx((r - jac @ beta) @ np.linalg.solve(sigma, r - jac @ beta), rel=1e-7)
     # r in the span of J: the rival imitates it exactly
-    assert abs(float(ddis.statistic(jnp.asarray(jac @ [0.3, -2.0]), jnp.asarray(jac), jnp.asarray(rig),
-                                    jnp.asarray(u), t, hyper))) < 1e-9 * dense
+    assert (
+        abs(
+            float(
+                ddis.statistic(
+                    jnp.asarray(jac @ [0.3, -2.0]), jnp.asarray(jac), jnp.asarray(rig), jnp.asarray(u), t, hyper
+                )
+            )
+        )
+        < 1e-9 * dense
+    )
 
 
 def test_rivals_must_be_two_distinct_catalogue_effects():
     assert ddis.rivals(["trapped_air", "fluid_leak"]) == ("trapped_air", "fluid_leak")
-    for bad, message in ((["trapped_air"], "exactly two"), (["trapped_air"] * 2, "twice"),
-                         (["trapped_air", "no_such_effect"], "unknown effect 'no_such_effect'"),
-                         (["a", "b", "c"], "exactly two")):
+    for bad, message in (
+        (["trapped_air"], "exactly two"),
+        (["trapped_air"] * 2, "twice"),
+        (["trapped_air", "no_such_effect"], "unknown effect 'no_such_effect'"),
+        (["a", "b", "c"], "exactly two"),
+    ):
         with pytest.raises(ValueError, match=message):
             ddis.rivals(bad)
 
 
 def test_discriminate_command_refuses_bad_input_with_exit_2(capsys, tmp_path):
-    for argv, message in ((["--discriminate", "trapped_air", "no_such_effect"], "unknown effect 'no_such_effect'"),
-                          (["--discriminate", "trapped_air"], "exactly two"),
-                          (["--discriminate", "trapped_air", "trapped_air"], "trapped_air twice"),
-                          (["--discriminate", *PAIR, "--for", "Y"], "give one of them"),
-                          (["--discriminate", *PAIR, "--size", "0.3"], "--size takes one size per effect"),
-                          (["--discriminate", *PAIR, "--size", "0.3", "0.9"], "outside its range"),
-                          (["--size", "0.3", "0.005"], "--size gives"),
-                          (["--discriminate", *PAIR, "--sensors", "length,pressure"], "length alone")):
+    for argv, message in (
+        (["--discriminate", "trapped_air", "no_such_effect"], "unknown effect 'no_such_effect'"),
+        (["--discriminate", "trapped_air"], "exactly two"),
+        (["--discriminate", "trapped_air", "trapped_air"], "trapped_air twice"),
+        (["--discriminate", *PAIR, "--for", "Y"], "give one of them"),
+        (["--discriminate", *PAIR, "--size", "0.3"], "--size takes one size per effect"),
+        (["--discriminate", *PAIR, "--size", "0.3", "0.9"], "outside its range"),
+        (["--size", "0.3", "0.005"], "--size gives"),
+        (["--discriminate", *PAIR, "--sensors", "length,pressure"], "length alone"),
+    ):
         try:
             status = cli.main(["design", DATA, "--out", str(tmp_path / "never"), *argv])
         except SystemExit as stop:
@@ -97,8 +116,16 @@ def _t(problem, truth, rival, k):
     """T of data from the run ``truth`` fitted by the run ``rival`` with effect ``k``'s parameter (0: A, 1: B) free."""
     p = len(problem.names)
     jac = rival[2]
-    return float(ddis.statistic(truth[0] - rival[0], jac[:, [*range(p), p + k]], jac[:, p + 2:], problem.tolerance,
-                                problem.times, problem.hyper))
+    return float(
+        ddis.statistic(
+            truth[0] - rival[0],
+            jac[:, [*range(p), p + k]],
+            jac[:, p + 2 :],
+            problem.tolerance,
+            problem.times,
+            problem.hyper,
+        )
+    )
 
 
 @pytest.mark.slow
@@ -153,12 +180,39 @@ def test_the_discriminating_design_beats_the_published_pulse_and_the_best_random
 @pytest.mark.slow
 def test_discriminate_command_prints_the_table_and_writes_the_files(tmp_path, capsys):
     saved = tmp_path / "fit.json"
-    saved.write_text(json.dumps({"parameters": {Y: {"estimate": 9000.0, "standard_error": 270.0}},
-                                 "discrepancy": {"amplitude_m": 1e-4, "time_scale_s": 0.8, "noise_m": 2e-4},
-                                 "tolerances": {"robot.catheter_friction": 0.2, "pid.proportional": 0.05}}))
+    saved.write_text(
+        json.dumps(
+            {
+                "parameters": {Y: {"estimate": 9000.0, "standard_error": 270.0}},
+                "discrepancy": {"amplitude_m": 1e-4, "time_scale_s": 0.8, "noise_m": 2e-4},
+                "tolerances": {"robot.catheter_friction": 0.2, "pid.proportional": 0.05},
+            }
+        )
+    )
     out = tmp_path / "discriminate"
-    argv = ["design", DATA, "--fit-from", str(saved), "--discriminate", *PAIR, "--duration", "2", "--knot-spacing",
-            "0.5", "--random", "3", "--starts", "1", "--iterations", "2", "--draws", "3", "--out", str(out), "--quiet"]
+    argv = [
+        "design",
+        DATA,
+        "--fit-from",
+        str(saved),
+        "--discriminate",
+        *PAIR,
+        "--duration",
+        "2",
+        "--knot-spacing",
+        "0.5",
+        "--random",
+        "3",
+        "--starts",
+        "1",
+        "--iterations",
+        "2",
+        "--draws",
+        "3",
+        "--out",
+        str(out),
+        "--quiet",
+    ]
     assert cli.main(argv) == 0
     text = capsys.readouterr().out
     assert "to tell retraction_folding from trapped_air" in text and "expected to separate" in text

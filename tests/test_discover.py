@@ -11,7 +11,7 @@ from conftest import REPO, ar1_noise, smooth_perturbation
 
 import growjax as gj
 from growjax import discover as gd
-from growjax import experiment as ex
+from growjax.data import experiment as ex
 
 
 def _smooth_bump(t, height):
@@ -65,7 +65,7 @@ def test_candidate_parameters_are_named_with_units_and_ranges():
 
 def _example(name):
     """A reference-made experiment (10 s, noise 0.2 mm, the shipped synthetic inputs) and its truth."""
-    from growjax import synthetic as sy
+    from growjax.data import synthetic as sy
 
     effect = {"clean": None, "outside_oscillating_force": "oscillating_force"}.get(name, name)
     exp = sy.make_experiment(effect, seed=20261122, inputs="synthetic", noise_pressure_Pa=None)
@@ -102,14 +102,19 @@ def test_a_hidden_lag_is_fitted_in_its_own_basin_and_no_other_effect_is_claimed(
     one minimum: a single start (η = 2 % of the range) stops in a side basin (Y 8 687 Pa, τ 8.6 ms), where
     ``discover`` would claim trapped_air. Fitted from every start, the lag's misfit falls to the noise and
     trapped air is not claimed: the lag is named or, trading with Y, reported confounded."""
-    from growjax import synthetic as sy
+    from growjax.data import synthetic as sy
 
     exp = sy.make_experiment("actuation_lag", sy.moderate_magnitude("actuation_lag"), seed=1000, t_end=10.0)
     cfg = gj.Config(t1=10.0)
     inputs = ex.to_inputs(exp, "forward", gj.reference(), cfg.t0, cfg.t1)
     keep = exp.time >= cfg.t0
-    res = gd.discover(exp.time[keep], exp["robot_length_m"][keep], inputs, config=cfg,
-                      candidates=("actuation_lag", "trapped_air", "fluid_leak"))
+    res = gd.discover(
+        exp.time[keep],
+        exp["robot_length_m"][keep],
+        inputs,
+        config=cfg,
+        candidates=("actuation_lag", "trapped_air", "fluid_leak"),
+    )
     lag = res.evidence[0]["actuation_lag"]
     assert lag["rmse_m"] < 1.1 * exp.metadata["noise_sd"]["robot_length_m"], gd.summary_text(res)
     assert lag["lr_statistic"] > res.evidence[0]["trapped_air"]["lr_statistic"]
@@ -126,7 +131,7 @@ def test_a_base_shift_the_fast_models_own_error_explains_is_no_confounding():
     on 1000 samples is 2ΔlogL ≈ 9 > the threshold 6.24, and a leak or folding with Y held absorbed it: the
     matrix counted a false positive (``confounded``). Allowing for the model's error (m·e²/σ² ≈ 6) gives ``none``;
     without the allowance the same data still report ``confounded``."""
-    from growjax import synthetic as sy
+    from growjax.data import synthetic as sy
 
     exp = sy.make_experiment(None, None, seed=2007, t_end=10.0)
     cfg = gj.Config(t1=10.0)
@@ -139,8 +144,10 @@ def test_a_base_shift_the_fast_models_own_error_explains_is_no_confounding():
     assert strict.effect == "confounded" and strict.trade_allowance == 0.0, gd.summary_text(strict)
     for name in strict.confounded_with:  # with -s: what the base-held fits gave the confounded candidates
         s = strict.evidence[0][name]
-        print(f"{name}: 2ΔlogL {s['lr_statistic']:.2f} jointly, {s['lr_statistic_base_held']:.2f} with Y held; "
-              f"allowance {res.trade_allowance:.1f}")
+        print(
+            f"{name}: 2ΔlogL {s['lr_statistic']:.2f} jointly, {s['lr_statistic_base_held']:.2f} with Y held; "
+            f"allowance {res.trade_allowance:.1f}"
+        )
 
 
 # -- the small version CI runs: shipped reference-made examples, first 3 s, three candidates ----------------
@@ -149,12 +156,12 @@ SMALL_CANDIDATES = ("active_channel_force", "fluid_leak", "retraction_folding")
 SMALL_T_END = 3.0  # s: two retractions of the published pulse
 
 
-SHIPPED = REPO / "src" / "growjax" / "datasets" / "discovery"
+SHIPPED = REPO / "src" / "growjax" / "data" / "datasets" / "discovery"
 
 
 def _small_example(name):
     """(sample times (T,) s, length (T,) m, inputs, configuration) of a shipped example of
-    growjax/datasets/discovery/ (reference-made, noise 0.2 mm) on 0–3 s."""
+    growjax/data/datasets/discovery/ (reference-made, noise 0.2 mm) on 0–3 s."""
     cfg = gj.Config(t1=SMALL_T_END)
     exp = ex.read(SHIPPED / f"{name}.csv").window(SMALL_T_END + 1e-9)
     inputs = ex.to_inputs(exp, "forward", gj.reference(), cfg.t0, cfg.t1)
@@ -221,7 +228,7 @@ def test_candidate_fits_stay_in_their_physical_ranges():
     times the range's top, hidden by the fast configuration itself, is fitted at the top, not beyond it. (The
     fast configuration makes these data on purpose: the test is of the bound, not of the model's error, and the
     reference's ~70 s compile would buy nothing here.)"""
-    from growjax import effects as fx
+    from growjax.model import effects as fx
 
     times, _, inputs, cfg = _small_example("clean")
     top = gd.candidate_parameter("fluid_leak")[2][1]
@@ -231,7 +238,8 @@ def test_candidate_fits_stay_in_their_physical_ranges():
     lo, hi = problem.bounds()
     for k, name in enumerate(SMALL_CANDIDATES):  # the upper bound of u is the range's top in SI
         assert float(problem.effect_values(jnp.full(3, hi[1 + k]), jnp.eye(3)[k])[k]) == pytest.approx(
-            gd.candidate_parameter(name)[2][1], rel=1e-9)
+            gd.candidate_parameter(name)[2][1], rel=1e-9
+        )
     y_lo, y_hi, _ = gj.params.physical_ranges(problem.base)[problem.base_names[0]]  # Y: (0, y_hi) Pa
     assert y_lo == 0 and lo[0] == -np.inf and hi[0] == pytest.approx(np.log(y_hi / float(problem.refs[0])))
     k = SMALL_CANDIDATES.index("fluid_leak")

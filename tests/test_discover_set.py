@@ -12,11 +12,11 @@ from scipy import stats
 import growjax as gj
 from growjax import cli
 from growjax import discover as gd
-from growjax import experiment as ex
-from growjax import experiments as xs
+from growjax.data import experiment as ex
+from growjax.data import sets as xs
 
-DISCOVERY_SET = Path(str(files("growjax") / "datasets" / "discovery_set"))
-CLEAN_SET = Path(str(files("growjax") / "datasets" / "set"))
+DISCOVERY_SET = Path(str(files("growjax.data") / "datasets" / "discovery_set"))
+CLEAN_SET = Path(str(files("growjax.data") / "datasets" / "set"))
 CANDIDATES = ("retraction_folding", "fluid_leak", "active_channel_force")
 CONFIG = gj.Config(t1=3.0)
 
@@ -51,10 +51,11 @@ def test_bad_input_is_refused_before_any_fit():
 
 def test_the_command_line_refuses_a_bad_set_or_effect_with_exit_2_and_one_line(tmp_path, capsys):
     manifest = DISCOVERY_SET / "set.toml"
-    for argv, message in (([str(manifest), "--candidates", "folding"], "unknown effect 'folding'"),
-                          ([str(manifest), str(manifest)], "give it alone"),
-                          ([str(DISCOVERY_SET / "pulse_slow.csv"), str(tmp_path / "absent.csv")],
-                           "not found")):
+    for argv, message in (
+        ([str(manifest), "--candidates", "folding"], "unknown effect 'folding'"),
+        ([str(manifest), str(manifest)], "give it alone"),
+        ([str(DISCOVERY_SET / "pulse_slow.csv"), str(tmp_path / "absent.csv")], "not found"),
+    ):
         try:
             code = cli.main(["discover", *argv, "--out", str(tmp_path / "out")])
         except SystemExit as stop:  # the parser's refusal
@@ -101,8 +102,9 @@ def test_no_effect_is_named_on_a_clean_set_on_a_rig_off_its_nominal_values():
     """The shipped set (three demands, one robot, the rig drawn from its tolerances, no effect): no candidate clears
     the threshold, and the answer is none."""
     runs = xs.read([CLEAN_SET / "set.toml"])
-    exps = xs.ExperimentSet(tuple(xs.Run(r.name, r.experiment.window(CONFIG.t1 + 1e-9), robot=r.robot, rig=r.rig)
-                                  for r in runs))  # the length alone, 3 s: the folding set's programs serve it
+    exps = xs.ExperimentSet(
+        tuple(xs.Run(r.name, r.experiment.window(CONFIG.t1 + 1e-9), robot=r.robot, rig=r.rig) for r in runs)
+    )  # the length alone, 3 s: the folding set's programs serve it
     res = gd.discover_set(exps, config=CONFIG, candidates=CANDIDATES)
     assert res.effect == "none", gd.set_summary_text(res)
     assert not any(s["clears_threshold"] for s in res.evidence[0].values())

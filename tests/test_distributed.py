@@ -47,8 +47,13 @@ def _run_all(jobs: dict, tmp_path: Path) -> dict:
     with contextlib.ExitStack() as logs:
         for name, argv in jobs.items():
             log = logs.enter_context(open(tmp_path / f"{name}.log", "w"))
-            procs[name] = subprocess.Popen([sys.executable, str(WORKER), *argv], stdout=log,
-                                           stderr=subprocess.STDOUT, env=env, cwd=WORKER.parents[1])
+            procs[name] = subprocess.Popen(
+                [sys.executable, str(WORKER), *argv],
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                env=env,
+                cwd=WORKER.parents[1],
+            )
         deadline = time.monotonic() + TIMEOUT_S
         try:
             for proc in procs.values():
@@ -78,9 +83,11 @@ def test_sweep_across_two_processes_equals_one_process(tmp_path):
     outcome = _run_all(jobs, tmp_path)
     elapsed = time.perf_counter() - start
     for name, (rc, log) in outcome.items():
-        assert rc == 0, (f"{name} exited with {rc} (timeout {TIMEOUT_S} s; -9 = killed) after {elapsed:.0f} s; "
-                         f"its output:\n{log}\n--- all outputs ---\n"
-                         + "\n".join(f"[{n}] rc={r}\n{text}" for n, (r, text) in outcome.items()))
+        assert rc == 0, (
+            f"{name} exited with {rc} (timeout {TIMEOUT_S} s; -9 = killed) after {elapsed:.0f} s; "
+            f"its output:\n{log}\n--- all outputs ---\n"
+            + "\n".join(f"[{n}] rc={r}\n{text}" for n, (r, text) in outcome.items())
+        )
 
     single, *workers = (json.loads((tmp_path / f"{n}.json").read_text()) for n in ("single", "process0", "process1"))
     assert (single["process_count"], single["device_count"], single["n_devices"]) == (1, 4, 4)

@@ -32,17 +32,39 @@ def test_docs_build_strict_with_executed_tutorials(tmp_path):
     pytest.importorskip("mkdocstrings_handlers.python")
     env = dict(os.environ, GROWJAX_QUICK="1", GROWJAX_DOCS_CACHE="false", NO_MKDOCS_2_WARNING="1")
     start = time.perf_counter()
-    run = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "-d", str(tmp_path / "site")],
-                         cwd=REPO, env=env, capture_output=True, text=True, timeout=1800, check=False)
+    run = subprocess.run(
+        [sys.executable, "-m", "mkdocs", "build", "--strict", "-d", str(tmp_path / "site")],
+        cwd=REPO,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=1800,
+        check=False,
+    )
     wall = time.perf_counter() - start
     assert run.returncode == 0, run.stderr[-6000:]
     site = tmp_path / "site"
-    for page in ("getting-started", "model", "data", "results", "uncertainty", "design", "benchmarks", "api",
-                 "tutorials/simulate", "tutorials/sweep", "tutorials/fit_posterior", "tutorials/discover",
-                 "tutorials/control", "tutorials/sets", "tutorials/design"):
+    for page in (
+        "getting-started",
+        "model",
+        "data",
+        "results",
+        "uncertainty",
+        "design",
+        "benchmarks",
+        "api",
+        "tutorials/simulate",
+        "tutorials/sweep",
+        "tutorials/fit_posterior",
+        "tutorials/discover",
+        "tutorials/control",
+        "tutorials/sets",
+        "tutorials/design",
+    ):
         assert (site / page / "index.html").is_file(), page
     assert sorted(p.name for p in (site / "tutorials").rglob("*") if p.is_file() and p.suffix != ".html") == sorted(
-        p.name for p in NOTEBOOKS.glob("*.ipynb"))  # the notebooks, not what running them may leave beside them
+        p.name for p in NOTEBOOKS.glob("*.ipynb")
+    )  # the notebooks, not what running them may leave beside them
     simulate = (site / "tutorials" / "simulate" / "index.html").read_text()
     assert "length RMSE against the data" in simulate and "data:image/png" in simulate  # executed, with figures
     print(f"mkdocs build --strict: {wall:.1f} s")

@@ -1,13 +1,13 @@
 """Every catalogue effect: absent at zero, acting in its physical direction, the same in both configurations,
-differentiable; and the synthetic-experiment generator built on them (growjax.synthetic).
+differentiable; and the synthetic-experiment generator built on them (growjax.data.synthetic).
 
 All runs are 0–3 s of the forward drive under the published pulse with the shipped synthetic inputs
 (catheter 0.004 + 0.004 t m), available everywhere. The effects are simulated in the *superset* model
-(every known effect present, all at zero but one: :func:`growjax.synthetic.hidden_effect_parameters`),
+(every known effect present, all at zero but one: :func:`growjax.data.synthetic.hidden_effect_parameters`),
 which is the same model as the effect alone and shares one compiled solver between all effects.
 
 The fast configuration is checked against noise-free traces made by the reference configuration
-(rtol 1e-7) and shipped in growjax/datasets/discovery/reference/ (``python data/make_discovery_examples.py reference``):
+(rtol 1e-7) and shipped in growjax/data/datasets/discovery/reference/ (``python data/make_discovery_examples.py reference``):
 the reference cannot be cached on disk (its solve uses host callbacks) and costs about a minute to
 compile per process, so the live comparison runs under ``-m slow``.
 """
@@ -23,9 +23,9 @@ import pytest
 from conftest import REPO
 
 import growjax as gj
-from growjax import effects as fx
-from growjax import experiment as ex
-from growjax import synthetic as sy
+from growjax.data import experiment as ex
+from growjax.data import synthetic as sy
+from growjax.model import effects as fx
 
 sys.path.insert(0, str(REPO / "data"))
 import make_discovery_examples as mde  # the shipped reference traces, made and read there
@@ -56,8 +56,11 @@ def inputs():
 def _run(params, inputs, config=FAST):
     traj = gj.simulate(params, inputs, config, ts=TS)
     assert int(traj.status) == gj.OK, gj.status_name(traj.status)
-    return {"length": np.asarray(traj.length), "pressure": np.asarray(traj.pressure),
-            "syringe": np.asarray(traj.syringe_displacement)}
+    return {
+        "length": np.asarray(traj.length),
+        "pressure": np.asarray(traj.pressure),
+        "syringe": np.asarray(traj.syringe_displacement),
+    }
 
 
 @pytest.fixture(scope="module")
@@ -85,16 +88,32 @@ def test_an_effect_at_zero_contributes_nothing(name):
     rng = np.random.default_rng(7)
     for _ in range(20):
         t, p, v = rng.uniform(0, 10), rng.uniform(-5e3, 3e5), rng.normal(0.0, 0.02)
-        rod = fx.Rod(t=t, pressure=p, velocity=v, length=rng.uniform(0, 0.08), catheter_length=rng.uniform(0, 0.05),
-                     inner_radius=params.robot.inner_radius, area=params.robot.area)
+        rod = fx.Rod(
+            t=t,
+            pressure=p,
+            velocity=v,
+            length=rng.uniform(0, 0.08),
+            catheter_length=rng.uniform(0, 0.05),
+            inner_radius=params.robot.inner_radius,
+            area=params.robot.area,
+        )
         assert float(effect.rod_force(rod, state)) == 0.0
         assert float(effect.chamber_outflow(t, p, state)) == 0.0
         commanded = rng.normal(0.0, 50.0)
         assert float(effect.drive(commanded, state)) == commanded
-        instant = fx.Instant(t=t, pressure=p, robot_pressure=p - 100.0, robot_flow=v * params.robot.area, velocity=v,
-                             length=0.02, drive=commanded)
+        instant = fx.Instant(
+            t=t,
+            pressure=p,
+            robot_pressure=p - 100.0,
+            robot_flow=v * params.robot.area,
+            velocity=v,
+            length=0.02,
+            drive=commanded,
+        )
         np.testing.assert_array_equal(np.asarray(effect.rates(instant, state)), 0.0)
-    same = jax.tree_util.tree_map(lambda a, b: bool(np.all(np.asarray(a) == np.asarray(b))), effect.apply(params), params)
+    same = jax.tree_util.tree_map(
+        lambda a, b: bool(np.all(np.asarray(a) == np.asarray(b))), effect.apply(params), params
+    )
     assert all(jax.tree_util.tree_leaves(same))
 
 
@@ -166,7 +185,7 @@ def _check_leak(base, eff, name):
     g = sy.moderate_magnitude(name)
     leaked = g * np.concatenate([[0.0], np.cumsum(0.5 * (eff["pressure"][1:] + eff["pressure"][:-1]) * np.diff(TS))])
     assert leaked[-1] > 5e-8  # m³: 50 mm³, 8 mm of robot
-    np.testing.assert_allclose(extra[_at(1.0):], leaked[_at(1.0):], rtol=0.03)
+    np.testing.assert_allclose(extra[_at(1.0) :], leaked[_at(1.0) :], rtol=0.03)
     on = (TS > RISES[0] + 0.05) & (TS < FALLS[0])
     assert np.mean(eff["pressure"][on] - base["pressure"][on]) < 0.0
 
@@ -341,7 +360,9 @@ def test_the_derivative_at_an_absent_effect_is_finite_and_right(inputs, name):
     length0, tangent = _length_and_tangent(zero, _unit(k), inputs, breaks)
     grad = float(tangent[-1])
     assert np.isfinite(grad)
-    fd = (float(_length_and_tangent(_unit(k, 0.1 * m), _unit(k), inputs, breaks)[0][-1]) - float(length0[-1])) / (0.1 * m)
+    fd = (float(_length_and_tangent(_unit(k, 0.1 * m), _unit(k), inputs, breaks)[0][-1]) - float(length0[-1])) / (
+        0.1 * m
+    )
     assert grad == pytest.approx(fd, rel=5e-2)
 
 
@@ -404,8 +425,8 @@ def test_make_experiment_noise_seeds_cache_and_format(monkeypatch, tmp_path, tra
 
 
 def test_shipped_discovery_examples():
-    """growjax/datasets/discovery/: small CSVs with a JSON truth beside each, 0.01–10 s, length noise 0.2 mm as stated."""
-    folder = REPO / "src" / "growjax" / "datasets" / "discovery"
+    """growjax/data/datasets/discovery/: small CSVs with a JSON truth beside each, 0.01–10 s, length noise 0.2 mm as stated."""
+    folder = REPO / "src" / "growjax" / "data" / "datasets" / "discovery"
     paths = sorted(folder.glob("*.csv"))
     assert {p.stem for p in paths} >= {"clean", "active_channel_force", "retraction_folding"}
     assert any(sy.read_truth(p)["in_catalogue"] is False for p in paths)

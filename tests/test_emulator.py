@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import growjax as gj
-from growjax import emulator as em
+from growjax.posterior import emulator as em
 
 
 def _table(f, axes):
@@ -14,10 +14,20 @@ def _table(f, axes):
     values = f(*grids)[..., None] * np.array([1.0, -2.0])  # two "output times"
     lows = [np.log(a.low) if a.log else a.low for a in axes]
     highs = [np.log(a.high) if a.log else a.high for a in axes]
-    return em.Emulator(values=jnp.asarray(em._pad_linear(values, len(axes))), times=jnp.zeros(2),
-                       lows=jnp.asarray(lows), highs=jnp.asarray(highs), error_rms=jnp.asarray(0.0),
-                       error_max=jnp.asarray(0.0), base=None, inputs=None, names=("a", "b"),
-                       log=tuple(a.log for a in axes), nodes=tuple(a.nodes for a in axes), config=None)
+    return em.Emulator(
+        values=jnp.asarray(em._pad_linear(values, len(axes))),
+        times=jnp.zeros(2),
+        lows=jnp.asarray(lows),
+        highs=jnp.asarray(highs),
+        error_rms=jnp.asarray(0.0),
+        error_max=jnp.asarray(0.0),
+        base=None,
+        inputs=None,
+        names=("a", "b"),
+        log=tuple(a.log for a in axes),
+        nodes=tuple(a.nodes for a in axes),
+        config=None,
+    )
 
 
 def test_interpolation_is_exact_for_quadratics_inside_and_linear_at_the_edges():
@@ -31,7 +41,9 @@ def test_interpolation_is_exact_for_quadratics_inside_and_linear_at_the_edges():
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
     lin = _table(lambda a, b: 4.0 - a + 2.0 * b, axes)  # linear: exact everywhere, end cells included
     pts = np.column_stack([rng.uniform(1.0, 3.0, 50), rng.uniform(-1.0, 1.0, 50)])
-    np.testing.assert_allclose(np.asarray(jax.vmap(lin)(jnp.asarray(pts)))[:, 0], 4.0 - pts[:, 0] + 2.0 * pts[:, 1], atol=1e-12)
+    np.testing.assert_allclose(
+        np.asarray(jax.vmap(lin)(jnp.asarray(pts)))[:, 0], 4.0 - pts[:, 0] + 2.0 * pts[:, 1], atol=1e-12
+    )
     assert np.all(np.isnan(np.asarray(emu(jnp.array([3.5, 0.0])))))  # outside the box: NaN, never extrapolated
 
 

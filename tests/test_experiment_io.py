@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 import growjax as gj
-from growjax import experiment as ex
-from growjax.motor import step_schedule
+from growjax.data import experiment as ex
+from growjax.model.motor import step_schedule
 
 GOOD = "time_s,robot_length_m,catheter_length_m\n0.0,0.010,0.004\n0.1,0.011,0.005\n0.2,0.012,0.006\n"
 

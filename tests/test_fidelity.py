@@ -8,7 +8,7 @@ import pytest
 from conftest import REPO
 
 import growjax as gj
-from growjax import effects as fx
+from growjax.model import effects as fx
 
 sys.path.insert(0, str(REPO / "data"))
 import make_synthetic as mk
@@ -18,7 +18,7 @@ FAST = gj.Config(t1=10.0)
 
 @pytest.fixture(scope="module")
 def reference_traces():
-    """Noise-free lengths made by the reference configuration (rtol 1e-7), growjax/datasets/reference_lengths.csv."""
+    """Noise-free lengths made by the reference configuration (rtol 1e-7), growjax/data/datasets/reference_lengths.csv."""
     return mk.read_reference_lengths()
 
 
@@ -30,8 +30,18 @@ def _fast_length(case, times):
 
 
 # Every demand and both growth laws; the Latin-hypercube cases run in the benchmark (benchmarks/agreement.py).
-CASES = ["published_Y6000", "published_Y10000", "published_Y14000", "sampled_Y6000", "sampled_Y10000",
-         "pulse50_Y6000", "step_Y8000", "ramp_Y12000", "lockhart_published", "lockhart_sampled"]
+CASES = [
+    "published_Y6000",
+    "published_Y10000",
+    "published_Y14000",
+    "sampled_Y6000",
+    "sampled_Y10000",
+    "pulse50_Y6000",
+    "step_Y8000",
+    "ramp_Y12000",
+    "lockhart_published",
+    "lockhart_sampled",
+]
 
 
 @pytest.mark.parametrize("name", CASES)
@@ -63,7 +73,9 @@ def test_effects_plug_into_both_configurations_and_they_agree():
     # With every effect at zero the extended model is the base model: the lag's extra state changes only the
     # adaptive step sequence, i.e. the length at the solver's tolerance (measured 0.25 µm).
     zero = gj.with_effects(gj.replace(gj.reference(), Y=7000.0), *(type(e)() for e in effects))
-    np.testing.assert_allclose(np.asarray(gj.simulate(zero, inputs, short, ts=ts).length), np.asarray(base.length), rtol=0, atol=2e-6)
+    np.testing.assert_allclose(
+        np.asarray(gj.simulate(zero, inputs, short, ts=ts).length), np.asarray(base.length), rtol=0, atol=2e-6
+    )
 
 
 @pytest.mark.slow

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import growjax as gj
-from growjax import hydraulics as hy
-from growjax.robot import LOCKHART_PRESSURE_SCALE, inflow, rod_balance, rod_pressure
+from growjax.model import hydraulics as hy
+from growjax.model.robot import LOCKHART_PRESSURE_SCALE, inflow, rod_balance, rod_pressure
 
 WIDTHS = (1e-12, 1e-6)  # velocity_eps m/s (regularisation negligible here), stop width m
 
@@ -82,7 +82,7 @@ def test_forward_mode_and_difference_tangents_give_the_same_jacobian():
     default, the rod balance's Newton solve evaluated once) and by central differences of the field (whose match
     with differences of whole solves tests/test_model.py checks) agree, for d(length)/d(Y, φ_L, n_L) over 1.5 s,
     both through ``length_jacobian`` (NUTS's path: one solve gives the length and its Jacobian)."""
-    from growjax.simulate import length_jacobian
+    from growjax.simulation.simulate import length_jacobian
 
     t = np.array([0.0, 100.0])
     inputs = gj.Inputs(catheter_length=gj.Sampled(t, 0.004 + 0.004 * t), pressure_demand=gj.published_pulse())
@@ -94,8 +94,10 @@ def test_forward_mode_and_difference_tangents_give_the_same_jacobian():
         return _lockhart(**dict(zip(names, theta)))
 
     forward = gj.Config(t1=1.5, adjoint="forward", tangents="forward")
-    runs = {mode: length_jacobian(params_of, theta0, inputs, forward.replace(tangents=mode), ts)
-            for mode in ("forward", "differences")}
+    runs = {
+        mode: length_jacobian(params_of, theta0, inputs, forward.replace(tangents=mode), ts)
+        for mode in ("forward", "differences")
+    }
     (traj_f, jf), (traj_d, jd) = ((r[0], np.asarray(r[1])) for r in runs.values())
     assert int(traj_f.status) == int(traj_d.status) == gj.OK
     assert np.all(np.abs(jd[-1] * np.asarray(theta0)) > 1e-4)  # each matters (> 0.1 mm over its whole value)

@@ -16,9 +16,9 @@ import pytest
 import xarray as xr
 
 import growjax as gj
-from growjax import emulator as em
 from growjax import plotting as gplot
 from growjax import posterior as gpost
+from growjax.posterior import emulator as em
 
 azp = gplot.arviz_plots()
 
@@ -41,10 +41,20 @@ def _linear_emulator(prior):
     spacing = (prior.high - prior.low) / (prior.nodes - 1)
     nodes = prior.low + spacing * np.arange(-1, prior.nodes + 1)  # with one ghost node per side
     values = 2e-2 * (1.0 - (nodes[:, None] - 9000.0) / 20000.0) * TIMES[None, :]
-    return em.Emulator(values=jnp.asarray(values), times=jnp.asarray(TIMES), lows=jnp.asarray([prior.low]),
-                       highs=jnp.asarray([prior.high]), error_rms=jnp.asarray(0.0), error_max=jnp.asarray(0.0),
-                       base=gj.reference(), inputs=None, names=(prior.name,), log=(False,), nodes=(prior.nodes,),
-                       config=gj.Config(t1=0.8))
+    return em.Emulator(
+        values=jnp.asarray(values),
+        times=jnp.asarray(TIMES),
+        lows=jnp.asarray([prior.low]),
+        highs=jnp.asarray([prior.high]),
+        error_rms=jnp.asarray(0.0),
+        error_max=jnp.asarray(0.0),
+        base=gj.reference(),
+        inputs=None,
+        names=(prior.name,),
+        log=(False,),
+        nodes=(prior.nodes,),
+        config=gj.Config(t1=0.8),
+    )
 
 
 @pytest.fixture(scope="module")
@@ -52,9 +62,21 @@ def small_posterior():
     """2 chains × 40 draws of Y and σ, through the emulator above, on data made at Y = 9 kPa with 0.2 mm noise."""
     prior = gpost.paper_priors()[0]
     length = 2e-2 * TIMES + np.random.default_rng(0).normal(0.0, 2e-4, TIMES.size)
-    return gpost.sample(TIMES, length, None, config=gj.Config(t1=0.8), priors=[prior], chains=2, warmup=40,
-                        samples=40, seed=0, progress=False, emulate=_linear_emulator(prior), discrepancy="none",
-                        tolerances={})
+    return gpost.sample(
+        TIMES,
+        length,
+        None,
+        config=gj.Config(t1=0.8),
+        priors=[prior],
+        chains=2,
+        warmup=40,
+        samples=40,
+        seed=0,
+        progress=False,
+        emulate=_linear_emulator(prior),
+        discrepancy="none",
+        tolerances={},
+    )
 
 
 def test_the_groups_hold_what_arviz_expects_where_it_looks(small_posterior):
@@ -94,18 +116,27 @@ def test_arviz_summary_loo_and_plots_run_on_it_and_it_survives_netcdf(small_post
     idata.to_netcdf(str(path))
     with xr.open_datatree(str(path)) as back:  # ArviZ 1.x's from_netcdf
         assert set(back.children) == GROUPS
-        np.testing.assert_array_equal(back.posterior_predictive["length_model"],
-                                      idata.posterior_predictive["length_model"])
+        np.testing.assert_array_equal(
+            back.posterior_predictive["length_model"], idata.posterior_predictive["length_model"]
+        )
         np.testing.assert_array_equal(back.constant_data["scored"], idata.constant_data["scored"])
         assert back.constant_data["scored"].dtype == bool
         assert azs.summary(back).equals(table)
         assert _plotted(azp.plot_ppc_dist(back, var_names=["length"])) == 1
 
 
-@pytest.mark.parametrize("name", [
-    pytest.param(name, marks=pytest.mark.xfail(GRID_BROKEN, raises=TypeError, strict=True,
-                                               reason="arviz-plots < 1.1 with xarray ≥ 2026.4"))
-    for name in ("plot_trace_dist", "plot_rank_dist")])
+@pytest.mark.parametrize(
+    "name",
+    [
+        pytest.param(
+            name,
+            marks=pytest.mark.xfail(
+                GRID_BROKEN, raises=TypeError, strict=True, reason="arviz-plots < 1.1 with xarray ≥ 2026.4"
+            ),
+        )
+        for name in ("plot_trace_dist", "plot_rank_dist")
+    ],
+)
 def test_arviz_trace_plots_with_marginals(small_posterior, name):
     with plt.style.context("arviz-variat"):
         assert _plotted(getattr(azp, name)(small_posterior.idata)) >= 4  # Y and σ: marginal and trace or ranks
@@ -121,11 +152,20 @@ def test_a_likelihood_that_scores_some_samples_keeps_every_sample_observed(tmp_p
     scored = np.zeros(n, bool)
     scored[::8] = True
     loglik = np.where(scored, rng.normal(5.0, 0.1, (chains, draws, n)), 0.0)
-    fields = {"diverging": np.zeros((chains, draws), bool), "energy": rng.normal(size=(chains, draws)),
-              "num_steps": np.full((chains, draws), 7)}
-    idata = gpost.inference_data({"Y": rng.normal(9e3, 1e2, (chains, draws)), "sigma": np.full((chains, draws), 2e-4),
-                                  "length_model": model}, fields, TIMES, 2e-2 * TIMES, scored, loglik,
-                                 model + 2e-4 * rng.standard_normal(model.shape))
+    fields = {
+        "diverging": np.zeros((chains, draws), bool),
+        "energy": rng.normal(size=(chains, draws)),
+        "num_steps": np.full((chains, draws), 7),
+    }
+    idata = gpost.inference_data(
+        {"Y": rng.normal(9e3, 1e2, (chains, draws)), "sigma": np.full((chains, draws), 2e-4), "length_model": model},
+        fields,
+        TIMES,
+        2e-2 * TIMES,
+        scored,
+        loglik,
+        model + 2e-4 * rng.standard_normal(model.shape),
+    )
     assert idata.observed_data["length"].shape == (n,) and int(idata.constant_data["scored"].sum()) == 10
     assert set(idata.sample_stats.data_vars) == {"diverging", "energy", "n_steps", "tree_depth", "solver_ok"}
     assert int(idata.sample_stats["tree_depth"].max()) == 3  # 7 leapfrog steps: a tree of depth 3
@@ -162,10 +202,26 @@ def test_posterior_figures_are_written(small_posterior, tmp_path):
 
 def test_importing_growjax_and_its_arviz_stack_warns_of_nothing():
     """No deprecation or refactor warning at import (an error here), and ArviZ 0.x's package is not imported."""
-    code = ("import sys, growjax, growjax.posterior, growjax.plotting; growjax.plotting.arviz_plots(); "
-            "import arviz_base, arviz_stats; assert 'arviz' not in sys.modules, 'arviz 0.x imported'")
-    done = subprocess.run([sys.executable, "-W", "error::FutureWarning", "-W", "error::DeprecationWarning",
-                           "-W", "error::PendingDeprecationWarning", "-c", code],
-                          capture_output=True, text=True, check=False, timeout=300)
+    code = (
+        "import sys, growjax, growjax.posterior, growjax.plotting; growjax.plotting.arviz_plots(); "
+        "import arviz_base, arviz_stats; assert 'arviz' not in sys.modules, 'arviz 0.x imported'"
+    )
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-W",
+            "error::FutureWarning",
+            "-W",
+            "error::DeprecationWarning",
+            "-W",
+            "error::PendingDeprecationWarning",
+            "-c",
+            code,
+        ],
+        capture_output=True,
+        text=True,
+        check=False,
+        timeout=300,
+    )
     assert done.returncode == 0, done.stderr[-3000:]
     assert "arviz" not in done.stderr.lower(), done.stderr

@@ -8,9 +8,9 @@ from conftest import SHORT, forward_inputs
 from scipy.integrate import quad
 
 import growjax as gj
-from growjax import experiment as ex
-from growjax.fluid import bulk_modulus
-from growjax.metrics import length_rmse
+from growjax.data import experiment as ex
+from growjax.model.fluid import bulk_modulus
+from growjax.simulation.metrics import length_rmse
 
 
 def _stored(params, p0, p1):
@@ -19,11 +19,17 @@ def _stored(params, p0, p1):
     return quad(lambda p: volume / float(bulk_modulus(params.fluid, p)), p0, p1, limit=200, epsrel=1e-10)[0]
 
 
-EDGE_TIMES = np.unique(np.concatenate([np.linspace(0.001, 3.0, 61)] + [
-    e + np.array([-1e-3, -1e-4, 0.0, 1e-4, 1e-3, 1e-2]) for e in (0.26, 1.43, 1.56, 2.73)]))  # rises and falls
+EDGE_TIMES = np.unique(
+    np.concatenate(
+        [np.linspace(0.001, 3.0, 61)]
+        + [e + np.array([-1e-3, -1e-4, 0.0, 1e-4, 1e-3, 1e-2]) for e in (0.26, 1.43, 1.56, 2.73)]
+    )
+)  # rises and falls
 
 
-@pytest.mark.parametrize("demand", [gj.published_pulse(), gj.PulseTrain(300e3, 0.7, 0.5, 0.05)], ids=["published", "300kPa"])
+@pytest.mark.parametrize(
+    "demand", [gj.published_pulse(), gj.PulseTrain(300e3, 0.7, 0.5, 0.05)], ids=["published", "300kPa"]
+)
 def test_volume_balance_holds_through_every_demand_edge(demand):
     """Delivered = grown + stored at every save time, the stored volume from the sensed pressure by quadrature."""
     rigid = gj.replace(gj.reference(), **{"tube.diameter_compliance": 0.0})
@@ -74,8 +80,10 @@ def test_forward_demands_beyond_the_membrane_limit_stop_with_status_1(amplitude)
     pulse = gj.simulate(gj.reference(), forward_inputs(amplitude=amplitude), SHORT)
     t_pulse = _assert_stopped_at_the_limit(pulse, 0.6)
     assert t_pulse > 0.26  # after the first rise
-    step = gj.Inputs(catheter_length=gj.Constant(0.02),
-                     pressure_demand=gj.Sampled(np.array([0.0, 0.1, 0.1 + 1e-9, 100.0]), np.array([0.0, 0.0, amplitude, amplitude])))
+    step = gj.Inputs(
+        catheter_length=gj.Constant(0.02),
+        pressure_demand=gj.Sampled(np.array([0.0, 0.1, 0.1 + 1e-9, 100.0]), np.array([0.0, 0.0, amplitude, amplitude])),
+    )
     _assert_stopped_at_the_limit(gj.simulate(gj.reference(), step, SHORT), 0.6)
 
 
@@ -199,7 +207,7 @@ def test_bad_input_is_named():
 
 
 def test_input_breaks_are_remembered_only_while_valid():
-    from growjax.simulate import input_breaks
+    from growjax.simulation.simulate import input_breaks
 
     cfg = gj.Config()
     inputs = gj.Inputs(catheter_length=gj.Constant(0.0), pressure_demand=gj.PulseTrain(150e3, 1.3, 0.9, 0.26))
@@ -217,7 +225,7 @@ def test_input_breaks_are_remembered_only_while_valid():
 
 def test_input_breaks_found_under_a_trace_are_not_remembered():
     """JAX makes even a constant array a tracer under ``jit``: breaks found there must not be reused outside."""
-    from growjax.simulate import input_breaks
+    from growjax.simulation.simulate import input_breaks
 
     cfg = gj.Config(t1=1.0)
     inputs = gj.Inputs(catheter_length=gj.Constant(0.0), pressure_demand=gj.PulseTrain(150e3, 1.3, 0.9, 0.26))
@@ -231,8 +239,8 @@ def test_fits_and_the_emulator_score_the_model_at_the_samples():
     """Samples at whole hundredths fall between the default save grid's points (every 10 ms from t0 = 1 ms):
     fit residuals and the emulator's prediction use the solution at the samples themselves (a sweep's RMSE:
     tests/test_sweep.py)."""
-    from growjax import emulator as em
-    from growjax import fit as gf
+    from growjax.calibration import fit as gf
+    from growjax.posterior import emulator as em
 
     cfg = gj.Config(t1=1.0)
     inputs = gj.Inputs(catheter_length=gj.Constant(0.0), pressure_demand=gj.PulseTrain(150e3, 1.3, 0.9, 0.26))
@@ -245,8 +253,9 @@ def test_fits_and_the_emulator_score_the_model_at_the_samples():
     data = exact + 1e-4
     problem = gf.make_problem(base, ["Y"], inputs, cfg, times, data, sigma_length=1e-4)
     np.testing.assert_allclose(np.asarray(problem.residuals(jnp.zeros(1))), -1.0, atol=1e-4)  # 1e-8 m
-    predicted = em.predicted_length({"robot.yield_pressure": base.robot.yield_pressure}, base, inputs, cfg,
-                                    jnp.asarray(times))
+    predicted = em.predicted_length(
+        {"robot.yield_pressure": base.robot.yield_pressure}, base, inputs, cfg, jnp.asarray(times)
+    )
     np.testing.assert_allclose(np.asarray(predicted), exact, atol=1e-9)
 
 
@@ -257,8 +266,12 @@ def test_a_batch_saves_in_its_loop_what_single_runs_interpolate_afterwards():
     a grid through every demand edge and denser than one step may cover (1 ms: ``SAVE_WINDOW`` then
     shortens the batch's steps), at a stop on the pressure limit (a 10 µm membrane: limit 107 kPa), and for a
     member whose field is not finite at t0 (it fails at once, beside the others)."""
-    members = [gj.reference(), gj.replace(gj.reference(), Y=12e3, n=1.05), gj.replace(gj.reference(), t=1e-5),
-               gj.replace(gj.reference(), Y=float("nan"))]
+    members = [
+        gj.reference(),
+        gj.replace(gj.reference(), Y=12e3, n=1.05),
+        gj.replace(gj.reference(), t=1e-5),
+        gj.replace(gj.reference(), Y=float("nan")),
+    ]
     expected = [gj.OK, gj.OK, gj.PRESSURE_LIMIT, gj.SOLVER_FAILED]
     stacked = jax.tree_util.tree_map(lambda *leaves: jnp.stack([jnp.asarray(x) for x in leaves]), *members)
     inputs = forward_inputs()
@@ -274,7 +287,9 @@ def test_a_batch_saves_in_its_loop_what_single_runs_interpolate_afterwards():
             assert np.all(np.isnan(batch.length[i][1:])) and np.all(np.isnan(single.length[1:]))
             continue
         np.testing.assert_array_equal(np.isnan(batch.length[i]), np.isnan(single.length))
-        np.testing.assert_allclose(batch.length[i], single.length, rtol=0, atol=5e-6, equal_nan=True)  # measured ≤ 0.6 µm
+        np.testing.assert_allclose(
+            batch.length[i], single.length, rtol=0, atol=5e-6, equal_nan=True
+        )  # measured ≤ 0.6 µm
         np.testing.assert_allclose(batch.pressure[i], single.pressure, rtol=2e-3, atol=500.0, equal_nan=True)  # ≤ 83 Pa
     assert float(batch.limit_time[2]) < 1.0 and np.all(np.isfinite(batch.length[:2]))
 
@@ -286,7 +301,7 @@ def test_the_integrator_saves_in_its_loop_the_solution_it_would_record(batched):
     rounding, 4e-16 measured), and
     the exact solution to the tolerance (measured 1.0e-6 relative at k = 3, 1.1e-8 at k = 1), on a 2 ms grid and
     through the jump, with and without a leading batch axis."""
-    from growjax import _rosenbrock as rb
+    from growjax.simulation import _rosenbrock as rb
 
     def field(t, y, k):
         return -k * jnp.where(t < 0.5, 1.0, 2.0) * y
@@ -296,11 +311,13 @@ def test_the_integrator_saves_in_its_loop_the_solution_it_would_record(batched):
     kw = {"rtol": 1e-8, "atol": 1e-10, "max_steps": 4000, "breaks": jnp.array([0.5]), "jumps": jnp.array([True])}
     if batched:
         kw.update(breaks=jnp.full((2, 1), 0.5), jumps=jnp.ones((2, 1), bool))
-        run = rb.integrate(field, jnp.ones((2, 1)), 0.0, 2.0, args=jnp.asarray(ks), batched=True,
-                           save_ts=jnp.tile(ts, (2, 1)), **kw)
+        run = rb.integrate(
+            field, jnp.ones((2, 1)), 0.0, 2.0, args=jnp.asarray(ks), batched=True, save_ts=jnp.tile(ts, (2, 1)), **kw
+        )
         kept = rb.integrate(field, jnp.ones((2, 1)), 0.0, 2.0, args=jnp.asarray(ks), batched=True, **kw)
-        recorded = np.stack([np.asarray(rb.evaluate(jax.tree_util.tree_map(lambda x, i=i: x[i], kept.steps), ts))
-                             for i in range(2)])[:, :, 0, 0]
+        recorded = np.stack(
+            [np.asarray(rb.evaluate(jax.tree_util.tree_map(lambda x, i=i: x[i], kept.steps), ts)) for i in range(2)]
+        )[:, :, 0, 0]
         saved = np.asarray(run.saved)[:, :, 0, 0]
     else:
         ks = ks[:1]
@@ -319,21 +336,34 @@ def test_a_batch_inverts_and_measures_the_variation_as_single_members_do():
     (‖W₀⁻¹ΔW‖∞, refined by the spectral radius above 1) against the single-member LAPACK inverse and
     ``_variation``: members that need row exchanges (zero leading entries), one ill-conditioned, and changes on both
     sides of the bound (a non-normal one whose ∞-norm exceeds 1 while its spectral radius does not)."""
-    from growjax import _rosenbrock as rb
+    from growjax.simulation import _rosenbrock as rb
 
     rng = np.random.default_rng(7)
     n = 6
     swap = np.eye(n)[[1, 0, 3, 2, 5, 4]]  # every diagonal entry zero: no step without a row exchange
-    mats = np.stack([np.eye(n) + 0.3 * rng.normal(size=(n, n)), swap, swap + 1e-3 * rng.normal(size=(n, n)),
-                     np.diag([1.0, 1e-7, 1.0, 1.0, 1e3, 1.0]) + 1e-4 * rng.normal(size=(n, n)),
-                     np.eye(n) - 50.0 * rng.normal(size=(n, n))])
+    mats = np.stack(
+        [
+            np.eye(n) + 0.3 * rng.normal(size=(n, n)),
+            swap,
+            swap + 1e-3 * rng.normal(size=(n, n)),
+            np.diag([1.0, 1e-7, 1.0, 1.0, 1e3, 1.0]) + 1e-4 * rng.normal(size=(n, n)),
+            np.eye(n) - 50.0 * rng.normal(size=(n, n)),
+        ]
+    )
     inverse = np.asarray(jax.vmap(rb._batchable_inverse)(jnp.asarray(mats)))
     expected = np.stack([np.linalg.inv(m) for m in mats])
     np.testing.assert_allclose(inverse, expected, rtol=1e-9, atol=1e-12 * np.abs(expected).max())
 
     nilpotent = np.diag(np.full(n - 1, 3.0), 1)  # ‖·‖∞ = 3, spectral radius 0
-    changes = np.stack([0.01 * rng.normal(size=(n, n)), nilpotent, 2.0 * np.eye(n), 0.5 * rng.normal(size=(n, n)),
-                        nilpotent + 0.9 * np.eye(n)])
+    changes = np.stack(
+        [
+            0.01 * rng.normal(size=(n, n)),
+            nilpotent,
+            2.0 * np.eye(n),
+            0.5 * rng.normal(size=(n, n)),
+            nilpotent + 0.9 * np.eye(n),
+        ]
+    )
     w_inv = np.broadcast_to(np.eye(n), changes.shape)
     batch = np.asarray(jax.vmap(rb._batchable_variation)(jnp.asarray(w_inv), jnp.asarray(changes)))
     single = np.array([float(rb._variation(jnp.asarray(w), jnp.asarray(c))) for w, c in zip(w_inv, changes)])
@@ -350,8 +380,12 @@ def test_simulate_members_equals_the_vmapped_simulate(fidelity):
     here); the bounds are the solver's (1e-3 relative, 1e-4 of each field's scale, 2 % of the steps), so that two
     compiles that round differently, and so take a step differently, cannot fail it."""
     # the members of the batch test above (its vmapped program, compiled once)
-    members = [gj.reference(), gj.replace(gj.reference(), Y=12e3, n=1.05), gj.replace(gj.reference(), t=1e-5),
-               gj.replace(gj.reference(), Y=float("nan"))]
+    members = [
+        gj.reference(),
+        gj.replace(gj.reference(), Y=12e3, n=1.05),
+        gj.replace(gj.reference(), t=1e-5),
+        gj.replace(gj.reference(), Y=float("nan")),
+    ]
     stacked = jax.tree_util.tree_map(lambda *leaves: jnp.stack([jnp.asarray(x) for x in leaves]), *members)
     inputs = forward_inputs()
     config = SHORT.replace(fidelity=fidelity, t1=1.0) if fidelity == "reference" else SHORT
@@ -374,5 +408,8 @@ def test_simulate_members_equals_the_vmapped_simulate(fidelity):
             np.testing.assert_array_equal(a, b, err_msg=name)
     if fidelity == "fast":
         with pytest.raises(TypeError, match="not differentiable"):
-            jax.jvp(lambda y: gj.simulate_members(gj.replace(stacked, Y=y), inputs, config, ts=ts).length,
-                    (stacked.robot.yield_pressure,), (jnp.ones(len(members)),))
+            jax.jvp(
+                lambda y: gj.simulate_members(gj.replace(stacked, Y=y), inputs, config, ts=ts).length,
+                (stacked.robot.yield_pressure,),
+                (jnp.ones(len(members)),),
+            )

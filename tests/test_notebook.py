@@ -15,5 +15,6 @@ def test_tutorial_executes_at_full_size(path, monkeypatch):
     nbclient = pytest.importorskip("nbclient")
     nb = nbformat.read(path, as_version=4)
     monkeypatch.setitem(os.environ, "GROWJAX_QUICK", "0")  # inherited by the kernel
-    nbclient.NotebookClient(nb, timeout=3600, kernel_name="python3",
-                            resources={"metadata": {"path": str(path.parent)}}).execute()  # hidden checks included
+    nbclient.NotebookClient(
+        nb, timeout=3600, kernel_name="python3", resources={"metadata": {"path": str(path.parent)}}
+    ).execute()  # hidden checks included

@@ -9,13 +9,13 @@ import pytest
 
 import growjax as gj
 from growjax import cli
-from growjax import experiment as ex
-from growjax import experiments as xs
-from growjax import population as pop
-from growjax.joint import SetFitResult
+from growjax.calibration.joint import SetFitResult
+from growjax.data import experiment as ex
+from growjax.data import sets as xs
+from growjax.posterior import population as pop
 
 Y = "robot.yield_pressure"
-SET = Path(str(files("growjax") / "datasets" / "set"))
+SET = Path(str(files("growjax.data") / "datasets" / "set"))
 MEDIAN, SPREAD, ROBOTS = 8e3, 0.1, 8
 SIGMA = 0.015  # each robot's own sd of ln Y from its data
 G = np.array([0.4, 0.2])  # every robot's ln Y per unit rig error: the rig moves all robots alike
@@ -29,10 +29,26 @@ def _set_fit(z_hat, robots, runs=None):
     joint = np.block([[SIGMA**2 * np.eye(r) + (G * U**2) @ G * np.ones((r, r)), -gu], [-gu.T, np.diag(U**2)]])
     labels = tuple(f"{Y}@{k}" for k in robots)
     est = dict(zip(labels, np.exp(z_hat)))
-    return SetFitResult(labels, est, {}, {}, {}, joint[:r, :r], runs or [], "inferred", "shared", {}, {}, 0.0,
-                        "converged", 0.0, 0.0, rig_labels=(("rig", "pump.screw_viscous_friction"),
-                                                           ("rig", "robot.catheter_friction")),
-                        rig_vector=np.zeros(2), joint_covariance=joint)
+    return SetFitResult(
+        labels,
+        est,
+        {},
+        {},
+        {},
+        joint[:r, :r],
+        runs or [],
+        "inferred",
+        "shared",
+        {},
+        {},
+        0.0,
+        "converged",
+        0.0,
+        0.0,
+        rig_labels=(("rig", "pump.screw_viscous_friction"), ("rig", "robot.catheter_friction")),
+        rig_vector=np.zeros(2),
+        joint_covariance=joint,
+    )
 
 
 def _coverage(populations: int, shared_rig: bool):
@@ -106,9 +122,12 @@ def test_a_new_robot_band_centres_on_the_population_and_widens_with_its_spread()
     band = pop.predict_new_robot(post, run, config, draws=64, seed=0)
     wide = pop.PopulationResult(**{**post.__dict__, "s": post.s + 0.3})
     wider = pop.predict_new_robot(wide, run, config, draws=64, seed=0)
-    at_median = gj.simulate(gj.replace(run.base(), Y=float(np.exp(np.median(post.mu)))),
-                            ex.to_inputs(run.experiment, run.drive, run.base(), config.t0, config.t1), config,
-                            ts=np.concatenate([[config.t0], band["times"]]))
+    at_median = gj.simulate(
+        gj.replace(run.base(), Y=float(np.exp(np.median(post.mu)))),
+        ex.to_inputs(run.experiment, run.drive, run.base(), config.t0, config.t1),
+        config,
+        ts=np.concatenate([[config.t0], band["times"]]),
+    )
     assert band["failed"] == 0 and band["draws"].shape == (64, band["times"].size)
     assert np.all(band["lower"] < band["upper"])
     assert np.median(np.abs(band["median"] - np.asarray(at_median.length)[1:])) < 0.3e-3
@@ -127,13 +146,33 @@ def test_the_command_line_wants_several_robots_for_a_population(tmp_path, capsys
 @pytest.mark.slow
 def test_the_command_line_samples_a_population_of_three_robots(tmp_path):
     manifest = tmp_path / "pop.toml"
-    rows = "\n".join(f'[[experiment]]\nfile = "{SET / f}"\nrobot = "{r}"\n'
-                     for f, r in (("pulse_published.csv", "a"), ("pulse_slow.csv", "b"), ("pulse_100kPa.csv", "c")))
+    rows = "\n".join(
+        f'[[experiment]]\nfile = "{SET / f}"\nrobot = "{r}"\n'
+        for f, r in (("pulse_published.csv", "a"), ("pulse_slow.csv", "b"), ("pulse_100kPa.csv", "c"))
+    )
     manifest.write_text('[defaults]\ndrive = "forward"\nrig = "bench"\n' + rows)
     out = tmp_path / "out"
-    code = cli.main(["posterior", str(manifest), "--hierarchical", "Y", "--t-end", "4", "--chains", "2",
-                     "--warmup", "200", "--samples", "200", "--out", str(out), "--json", str(tmp_path / "s.json"),
-                     "--quiet"])
+    code = cli.main(
+        [
+            "posterior",
+            str(manifest),
+            "--hierarchical",
+            "Y",
+            "--t-end",
+            "4",
+            "--chains",
+            "2",
+            "--warmup",
+            "200",
+            "--samples",
+            "200",
+            "--out",
+            str(out),
+            "--json",
+            str(tmp_path / "s.json"),
+            "--quiet",
+        ]
+    )
     import json
 
     s = json.loads((tmp_path / "s.json").read_text())

@@ -31,8 +31,11 @@ def test_a_stopped_run_ends_with_how_far_it_got_and_few_steps_give_a_line_each()
         shown.update(1)
     shown.close()
     shown.close()
-    assert [line.split(" (")[0] for line in stream.getvalue().splitlines()] == ["fits: 4/40 fits", "fits: 8/40 fits",
-                                                                               "fits: 9/40 fits"]
+    assert [line.split(" (")[0] for line in stream.getvalue().splitlines()] == [
+        "fits: 4/40 fits",
+        "fits: 8/40 fits",
+        "fits: 9/40 fits",
+    ]
     stream = io.StringIO()
     with _progress.bar(3, "x", stream=stream) as shown:
         for _ in range(3):

@@ -1,4 +1,4 @@
-"""An effect of one's own joins the catalogue through growjax.effects.register, with its declaration checked."""
+"""An effect of one's own joins the catalogue through growjax.model.effects.register, with its declaration checked."""
 
 from typing import ClassVar
 
@@ -7,17 +7,29 @@ import pytest
 
 import growjax as gj
 from growjax import discover as gd
-from growjax import effects as fx
+from growjax.model import effects as fx
 
 
 def _effect(name, ranges, units):
-    return type("Custom", (fx.Effect,), {
-        "__annotations__": {"name": ClassVar[str], "description": ClassVar[str], "units": ClassVar[dict],
-                            "ranges": ClassVar[dict], "stiffness": float},
-        "name": name, "description": "pull proportional to the length", "units": units, "ranges": ranges,
-        "stiffness": 0.0,
-        "rod_force": lambda self, rod, state: self.stiffness * rod.length + jnp.zeros_like(rod.pressure),
-    })
+    return type(
+        "Custom",
+        (fx.Effect,),
+        {
+            "__annotations__": {
+                "name": ClassVar[str],
+                "description": ClassVar[str],
+                "units": ClassVar[dict],
+                "ranges": ClassVar[dict],
+                "stiffness": float,
+            },
+            "name": name,
+            "description": "pull proportional to the length",
+            "units": units,
+            "ranges": ranges,
+            "stiffness": 0.0,
+            "rod_force": lambda self, rod, state: self.stiffness * rod.length + jnp.zeros_like(rod.pressure),
+        },
+    )
 
 
 def test_register_adds_a_candidate_and_checks_its_declaration(monkeypatch):

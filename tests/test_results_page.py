@@ -28,8 +28,9 @@ def report():
 
 
 def test_results_page_is_rendered_from_the_committed_files(page):
-    assert (REPO / "docs" / "results.md").read_text() == page.render(), \
+    assert (REPO / "docs" / "results.md").read_text() == page.render(), (
         "docs/results.md differs from its results files: run python calibration/results_page.py"
+    )
 
 
 def test_results_page_quotes_the_benchmarks_page(page, report):
@@ -37,8 +38,9 @@ def test_results_page_quotes_the_benchmarks_page(page, report):
     copied = json.loads((REPO / "calibration" / "results" / "benchmarks.json").read_text())
     shown = report.sections((REPO / "docs" / "benchmarks.md").read_text())
     for name in page.COPIED:
-        assert copied[name]["rows"] == report.table_rows(shown[name]), \
+        assert copied[name]["rows"] == report.table_rows(shown[name]), (
             f"{name}: run python calibration/results_page.py --copy-benchmarks"
+        )
 
 
 def test_calibration_figures_reach_the_page(page, tmp_path):
@@ -85,12 +87,20 @@ def test_report_page_round_trips(report):
 
 
 def test_sweep_resume_rows(report):
-    r = {"uninterrupted": {"process_wall_s": 40.0, "sweep_wall_s": 30.0},
-         "interrupted": {"chunks_done": 10, "exit_status": 130},
-         "resumed": {"process_wall_s": 24.0, "sweep_wall_s": 16.5},
-         "identical": {"all": False, "sweep_csv": True, "store_arrays": {"rmse": False}},
-         "chunks": 20, "n": 5000, "chunk_size": 250, "n_devices": 2, "remaining_share": 0.5,
-         "ratio_process": 1.2, "ratio_sweep_loop": 1.1, "target_ratio": 1.2}
+    r = {
+        "uninterrupted": {"process_wall_s": 40.0, "sweep_wall_s": 30.0},
+        "interrupted": {"chunks_done": 10, "exit_status": 130},
+        "resumed": {"process_wall_s": 24.0, "sweep_wall_s": 16.5},
+        "identical": {"all": False, "sweep_csv": True, "store_arrays": {"rmse": False}},
+        "chunks": 20,
+        "n": 5000,
+        "chunk_size": 250,
+        "n_devices": 2,
+        "remaining_share": 0.5,
+        "ratio_process": 1.2,
+        "ratio_sweep_loop": 1.1,
+        "target_ratio": 1.2,
+    }
     rows = {a: (b, c) for a, b, c in report.rows_sweep_resume(r)}
     assert rows["resumed table identical to the uninterrupted one"][0] == "no"
     assert "arrays different" in rows["resumed table identical to the uninterrupted one"][1]

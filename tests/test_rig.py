@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 import growjax as gj
-from growjax import discrepancy as dc
-from growjax import fit as gf
+from growjax.calibration import discrepancy as dc
+from growjax.calibration import fit as gf
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "data"))
@@ -54,10 +54,23 @@ def test_inferred_rig_covariance_is_the_marginal_gls_and_its_budget_adds_up():
 
 @pytest.fixture(scope="module")
 def rig_off():
-    t, lengths, cases, = mk.read_reference_lengths()
+    (
+        t,
+        lengths,
+        cases,
+    ) = mk.read_reference_lengths()
     data = lengths[RIG_OFF] + np.random.default_rng(5).normal(0.0, 2e-4, t.size)
-    fit = lambda rig, **kw: gf.fit(t, data, mk.reference_inputs("published"), free=["Y"], config=gj.Config(t1=10.0),
-                                   n_starts=1, sweep_n=0, rig=rig, **kw)
+    fit = lambda rig, **kw: gf.fit(
+        t,
+        data,
+        mk.reference_inputs("published"),
+        free=["Y"],
+        config=gj.Config(t1=10.0),
+        n_starts=1,
+        sweep_n=0,
+        rig=rig,
+        **kw,
+    )
     points = {"tangents": [], "secants": []}  # (z, the rig's values) of every run of the model in a fit
     linearised = gf._linearised
 
@@ -66,6 +79,7 @@ def rig_off():
             rig = np.concatenate([np.ravel(np.asarray(x, float)) for x in jax.tree_util.tree_leaves(problem.base)])
             points[kind].append(np.asarray(z, float).tobytes() + rig.tobytes())
             return linearised(z, problem)
+
         return run
 
     def counting(kind, **kw):
@@ -77,8 +91,11 @@ def rig_off():
     # fitted when first asked for
     secants = functools.cache(lambda: counting("secants", rig_tangents=False))
     once = functools.cache(lambda: fit("inferred", rig_tangents=False, relinearise=False))
-    return cases[RIG_OFF]["parameters"]["Y"], {"once": once, "fixed": fit("fixed"), "secants": secants,
-                                                "tangents": counting("tangents")}, points
+    return (
+        cases[RIG_OFF]["parameters"]["Y"],
+        {"once": once, "fixed": fit("fixed"), "secants": secants, "tangents": counting("tangents")},
+        points,
+    )
 
 
 def test_the_data_inform_the_rig_on_reference_made_data(rig_off):
@@ -142,8 +159,8 @@ def test_fit_and_posterior_agree_on_the_shipped_data(synthetic_experiment):
     """The shipped synthetic experiment: the fit's and the posterior's 90 % intervals of Y agree within 25 % in
     width (both infer the rig), the fixed propagation is far wider, and the posterior's band of this experiment
     replicated holds 0.85–0.95 of the measured points while a new experiment's is wider."""
-    from growjax import experiment as ex
     from growjax import posterior as gpost
+    from growjax.data import experiment as ex
 
     exp = synthetic_experiment
     base = gj.replace(gj.reference("forward"), Y=9000.0)
@@ -151,8 +168,9 @@ def test_fit_and_posterior_agree_on_the_shipped_data(synthetic_experiment):
     inputs = ex.to_inputs(exp, "forward", base, config.t0, config.t1)
     width = lambda iv: iv[1] - iv[0]
     fit = gf.fit(exp.time, exp["robot_length_m"], inputs, base=base, config=config, pressure=exp["pressure_Pa"])
-    fixed = gf.fit(exp.time, exp["robot_length_m"], inputs, base=base, config=config, pressure=exp["pressure_Pa"],
-                   rig="fixed")
+    fixed = gf.fit(
+        exp.time, exp["robot_length_m"], inputs, base=base, config=config, pressure=exp["pressure_Pa"], rig="fixed"
+    )
     post = gpost.sample(exp.time, exp["robot_length_m"], inputs, base, config, emulate=True, progress=False)
     posterior_width = width(post.summary["parameters"]["Y"]["interval_90"])
     assert abs(width(fit.interval_90[Y]) / posterior_width - 1.0) < 0.25
@@ -180,7 +198,8 @@ def test_the_posterior_linearised_away_from_nominal_keeps_the_rig_prior_about_no
     y = np.asarray(mu) + rng.normal(0.0, 5e-4, t.size)
     shifted = mu - jnp.asarray(g @ c)
     assert float(at_c.distribution(mu, hyper).log_prob(jnp.asarray(y)[at_c.index])) == pytest.approx(
-        float(nominal.distribution(shifted, hyper).log_prob(jnp.asarray(y)[nominal.index])), rel=1e-12)
+        float(nominal.distribution(shifted, hyper).log_prob(jnp.asarray(y)[nominal.index])), rel=1e-12
+    )
     mean_c, var_c = at_c.conditional(jnp.asarray(y), mu, hyper)
     mean_0, var_0 = nominal.conditional(jnp.asarray(y), shifted, hyper)
     np.testing.assert_allclose(np.asarray(mean_c), np.asarray(mean_0) - g @ c, atol=1e-12)
@@ -203,16 +222,22 @@ def test_a_rig_misfit_that_runs_y_to_zero_with_the_rig_nominal_is_brought_back_b
     ~0 Pa, where it no longer acts and the rig's errors cannot pull it back; the fit takes the rig's errors from
     the box's edge as well, and the estimate covers the truth with a finite interval."""
     from growjax import design as gd
-    from growjax import experiment as ex
+    from growjax.data import experiment as ex
 
     truth_y, noise, hyper = 8975.38, 2.0169e-4, dc.Hyper.of(2.927e-5, 1.964, 0.0, 0.0)
     base = gj.replace(gj.reference("inverse"), Y=9000.0)
     rng = np.random.default_rng([0, 2])
-    tolerances = {"pid.proportional": 0.05, "pid.integral": 0.05, "pump.screw_viscous_friction": 0.2,
-                  "pump.syringe_area": 0.02, "tank.length": 0.05, "robot.catheter_friction": 0.2}
+    tolerances = {
+        "pid.proportional": 0.05,
+        "pid.integral": 0.05,
+        "pump.screw_viscous_friction": 0.2,
+        "pump.syringe_area": 0.02,
+        "tank.length": 0.05,
+        "robot.catheter_friction": 0.2,
+    }
     offsets = {n: float(rng.normal(0.0, u)) for n, u in tolerances.items()}
     rig = gj.replace(base, Y=truth_y, **{n: gj.get(base, n) * np.exp(b) for n, b in offsets.items()})
-    space = gd.stepper_space(base, 10.0, ex.read(REPO / "src" / "growjax" / "datasets" / "synthetic_forward.csv"))
+    space = gd.stepper_space(base, 10.0, ex.read(REPO / "src" / "growjax" / "data" / "datasets" / "synthetic_forward.csv"))
     t = space.times
     rng.normal(0.0, noise, t.size), rng.integers(2**31)  # the designed run's draws, made first in the benchmark
     maker = gj.Config(fidelity="reference", drive="inverse", t1=10.0)
@@ -220,8 +245,16 @@ def test_a_rig_misfit_that_runs_y_to_zero_with_the_rig_nominal_is_brought_back_b
     length = np.asarray(gj.simulate(rig, inputs, maker, ts=np.concatenate([[maker.t0], t])).length)[1:]
     length = length + rng.normal(0.0, noise, t.size)
     length = length + np.asarray(dc.sample(jax.random.PRNGKey(int(rng.integers(2**31))), t, hyper))
-    res = gf.fit(t, length, inputs, free=["Y"], base=gj.replace(base, Y=truth_y),
-                 config=gj.Config(drive="inverse", t1=10.0), n_starts=1, sweep_n=16)
+    res = gf.fit(
+        t,
+        length,
+        inputs,
+        free=["Y"],
+        base=gj.replace(base, Y=truth_y),
+        config=gj.Config(drive="inverse", t1=10.0),
+        n_starts=1,
+        sweep_n=16,
+    )
     assert res.starts[0]["estimate"][Y] < 2500.0, res.starts  # the rig held nominal: Y run out of its box
     assert res.interval_90[Y] is not None, res.estimate
     lo, hi = res.interval_90[Y]

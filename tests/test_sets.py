@@ -10,13 +10,13 @@ import pytest
 
 import growjax as gj
 from growjax import cli
-from growjax import experiments as xs
-from growjax import joint
-from growjax._cli_summary import summary_lines
-from growjax.experiment import ExperimentError
+from growjax.calibration import joint
+from growjax.cli._summary import summary_lines
+from growjax.data import sets as xs
+from growjax.data.experiment import ExperimentError
 
 REPO = Path(__file__).resolve().parents[1]
-SET = Path(str(files("growjax") / "datasets" / "set"))
+SET = Path(str(files("growjax.data") / "datasets" / "set"))
 Y = "robot.yield_pressure"
 
 
@@ -37,16 +37,19 @@ def test_the_shipped_manifest_reads_as_one_robot_on_one_rig():
     assert exps.group_of("robot") == ["membrane-1"] * 3 and exps.group_of("experiment") == [r.name for r in exps]
 
 
-@pytest.mark.parametrize("text, message", [
-    ('[[experiment]]\nfile = "missing.csv"\n', "file missing.csv not found"),
-    ('[[experiment]]\nfile = "a.csv"\nwindow = [20.0, 30.0]\n', "holds no data"),
-    ('[[experiment]]\nfile = "a.csv"\nrig = "other"\n[rig.bench]\nparameters = {}\n', "unknown rig 'other'"),
-    ('[[experiment]]\nfile = "a.csv"\nrobot = "r9"\n[robot.r1]\n', "unknown robot 'r9'"),
-    ('[[experiment]]\nfile = "a.csv"\nsensors = ["length", "pressure"]\n', "no pressure_Pa column"),
-    ('[[experiment]]\nfile = "a.csv"\ncolour = "red"\n', "unknown key"),
-    ('[[experiment]]\nfile = "a.csv"\nparameters = { Q = 1.0 }\n', "unknown parameter 'Q'"),
-    ("experiment = 3\n", "no [[experiment]] entries"),
-])
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ('[[experiment]]\nfile = "missing.csv"\n', "file missing.csv not found"),
+        ('[[experiment]]\nfile = "a.csv"\nwindow = [20.0, 30.0]\n', "holds no data"),
+        ('[[experiment]]\nfile = "a.csv"\nrig = "other"\n[rig.bench]\nparameters = {}\n', "unknown rig 'other'"),
+        ('[[experiment]]\nfile = "a.csv"\nrobot = "r9"\n[robot.r1]\n', "unknown robot 'r9'"),
+        ('[[experiment]]\nfile = "a.csv"\nsensors = ["length", "pressure"]\n', "no pressure_Pa column"),
+        ('[[experiment]]\nfile = "a.csv"\ncolour = "red"\n', "unknown key"),
+        ('[[experiment]]\nfile = "a.csv"\nparameters = { Q = 1.0 }\n', "unknown parameter 'Q'"),
+        ("experiment = 3\n", "no [[experiment]] entries"),
+    ],
+)
 def test_a_bad_manifest_is_one_error_naming_the_experiment_and_the_problem(tmp_path, text, message):
     path = _write(tmp_path, text)
     with pytest.raises(ExperimentError, match=message.replace("[", r"\[").replace("]", r"\]")):
@@ -87,11 +90,18 @@ def test_a_set_of_one_is_the_single_fit(shipped_set):
     exps, _, config = shipped_set
     run = exps.runs[1]
     alone = joint.fit_set(xs.ExperimentSet((run,)), free=["Y"], config=config, sweep_n=0)
-    from growjax import experiment as ex
-    from growjax import fit as gf
+    from growjax.calibration import fit as gf
+    from growjax.data import experiment as ex
 
-    single = gf.fit(run.times, run.length, ex.to_inputs(run.experiment, "forward", run.base(), config.t0, config.t1),
-                    free=["Y"], config=config, sweep_n=0, relinearise=True)
+    single = gf.fit(
+        run.times,
+        run.length,
+        ex.to_inputs(run.experiment, "forward", run.base(), config.t0, config.t1),
+        free=["Y"],
+        config=config,
+        sweep_n=0,
+        relinearise=True,
+    )
     # both fit the rig's errors in the model's own tangents
     assert abs(alone.estimate[Y] - single.estimate[Y]) < 0.25 * single.standard_error[Y]
     assert alone.standard_error[Y] == pytest.approx(single.standard_error[Y], rel=0.15)
@@ -116,17 +126,24 @@ def test_the_shipped_set_fitted_jointly_covers(shipped_set):
     summary = together.summary()
     lines = summary_lines({**summary, "command": "fit", "figure": "fit.png"})
     assert summary["rig_settled"] and not any("had not settled" in line for line in lines)
-    unsettled = summary_lines({**summary, "command": "fit", "figure": "fit.png", "rig_settled": False,
-                               "linearisations": joint.RELINEARISE_STEPS, "rig_last_move": 0.12})
-    assert any("had not settled after 8 linearisations" in line and "0.12 of a tolerance" in line
-               for line in unsettled)
+    unsettled = summary_lines(
+        {
+            **summary,
+            "command": "fit",
+            "figure": "fit.png",
+            "rig_settled": False,
+            "linearisations": joint.RELINEARISE_STEPS,
+            "rig_last_move": 0.12,
+        }
+    )
+    assert any("had not settled after 8 linearisations" in line and "0.12 of a tolerance" in line for line in unsettled)
 
 
 def test_runs_of_different_lengths_and_sensors_pad_to_one_program_and_keep_their_own_rows():
     """Three runs on one configuration, 80 and 50 samples, one with the pressure: padded to one tree of one shape
     (one compiled program), the padded samples repeat a run's last one, and each run's kept rows of the padded
     measurements are its own measurements, in order (its residuals, cut back, are the unpadded run's)."""
-    from growjax import fit as gf
+    from growjax.calibration import fit as gf
 
     cfg, base = gj.Config(t1=1.0), gj.reference("forward")
     inputs = gj.Inputs(catheter_length=gj.Constant(0.02), pressure_demand=gj.PulseTrain(amplitude=150e3))
@@ -135,11 +152,13 @@ def test_runs_of_different_lengths_and_sensors_pad_to_one_program_and_keep_their
     problems = []
     for m, p in zip(sizes, sensed):
         t = np.arange(1, m + 1) * 0.01
-        problems.append(gf.make_problem(base, (Y,), inputs, cfg, t, rng.normal(size=m),
-                                        rng.normal(size=m) if p else None))
+        problems.append(
+            gf.make_problem(base, (Y,), inputs, cfg, t, rng.normal(size=m), rng.normal(size=m) if p else None)
+        )
     padded, rows = joint._pad_samples(problems)
-    shapes = {(jax.tree_util.tree_structure(pr), tuple(np.shape(x) for x in jax.tree_util.tree_leaves(pr)))
-              for pr in padded}
+    shapes = {
+        (jax.tree_util.tree_structure(pr), tuple(np.shape(x) for x in jax.tree_util.tree_leaves(pr))) for pr in padded
+    }
     assert len(shapes) == 1
     for pr, pad, keep, m in zip(problems, padded, rows, sizes):
         own = np.concatenate([pr.length] + ([] if pr.pressure is None else [pr.pressure]))
@@ -179,10 +198,10 @@ def test_the_shipped_set_fitted_jointly_beats_each_experiment_alone(shipped_set)
     exps, _, config = shipped_set
     label = f"{Y}@membrane-1"
     together = np.diff(joint.fit_set(exps, config=config).interval_90[label])[0]
-    best_single = min(np.diff(joint.fit_set(xs.ExperimentSet((r,)), config=config).interval_90[label])[0]
-                      for r in exps.runs)
+    best_single = min(
+        np.diff(joint.fit_set(xs.ExperimentSet((r,)), config=config).interval_90[label])[0] for r in exps.runs
+    )
     assert together < best_single
-
 
 
 _SPREAD = """
@@ -191,7 +210,8 @@ jax.config.update("jax_num_cpu_devices", 2)
 jax.config.update("jax_enable_x64", True)
 import numpy as np
 import growjax as gj
-from growjax import fit as gf, joint
+from growjax.calibration import fit as gf
+from growjax.calibration import joint
 
 cfg = gj.Config(t1=1.0)
 base = gj.reference("forward")

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 import growjax as gj
-from growjax import experiment as ex
 from growjax import sweep as sw
+from growjax.data import experiment as ex
 
 CFG = gj.Config(t1=2.0)
 REPO = Path(__file__).resolve().parents[1]
@@ -44,8 +44,13 @@ def test_dimension_parsing_names_the_problem():
     d = sw.parse_dimension("Y=5000:15000", base)
     assert (d.name, d.low, d.high, d.log) == ("robot.yield_pressure", 5000.0, 15000.0, False)
     assert sw.parse_dimension("air_fraction=1e-4:1e-2:log", base).log
-    for bad, msg in [("Y", "NAME=LOW:HIGH"), ("Y=1:x", "not numbers"), ("Y=5:1", "LOW < HIGH"),
-                     ("nope=1:2", "unknown parameter"), ("Y=0:1:log", "LOW > 0")]:
+    for bad, msg in [
+        ("Y", "NAME=LOW:HIGH"),
+        ("Y=1:x", "not numbers"),
+        ("Y=5:1", "LOW < HIGH"),
+        ("nope=1:2", "unknown parameter"),
+        ("Y=0:1:log", "LOW > 0"),
+    ]:
         with pytest.raises(ValueError, match=msg):
             sw.parse_dimension(bad, base)
 
@@ -71,7 +76,7 @@ def test_sweep_equals_one_at_a_time_and_chunking_changes_nothing(setup):
     for i in (0, 3):
         p = gj.replace(base, **dict(zip(names, values[i])))
         model = np.asarray(single(p, ts).length)
-        at_samples = model[:inside.sum()]  # the sweep scores the model at the samples
+        at_samples = model[: inside.sum()]  # the sweep scores the model at the samples
         rmse = float(np.sqrt(np.mean((at_samples - length[inside]) ** 2)))
         assert whole.rmse[i] == pytest.approx(rmse, rel=tol)
         assert whole.final_length[i] == pytest.approx(float(model[-1]), rel=tol)
@@ -83,13 +88,13 @@ def test_sweep_equals_one_at_a_time_and_chunking_changes_nothing(setup):
 
 def test_large_batches_compute_the_fields_shared_values_once_with_the_same_result(setup):
     """From ``SHARED_BATCH_MIN`` members per device the field passes its shared values through a dot
-    (:func:`growjax.fast_model._computed_once`); the results equal those of small batches, which do not.
+    (:func:`growjax.simulation.fast._computed_once`); the results equal those of small batches, which do not.
 
     The shared values differ from the recomputed ones by rounding (XLA's kernels differ), which can move an
     adaptive step: the runs then differ at the solver's tolerance (0.7 µm of length at the default rtol 1e-4,
     5e-9 m at 1e-6, measured). At rtol 1e-6 a real difference would show far above that.
     """
-    from growjax import fast_model as fm
+    from growjax.simulation import fast as fm
 
     base, inputs, measured = setup
     cfg = CFG.replace(rtol=1e-6)
@@ -132,19 +137,42 @@ def test_sobol_indices_find_that_yield_pressure_dominates(setup):
 
 def test_sweep_command_writes_table_figures_and_summary(tmp_path, capsys):
     out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "growjax.cli", "sweep", str(REPO / "src" / "growjax" / "datasets" / "synthetic_forward.csv"), "--n", "16",
-           "--t-end", "2", "--seed", "5", "--chunk-size", "4", "--out", str(out), "--json", str(out / "s.json")]
+    cmd = [
+        sys.executable,
+        "-m",
+        "growjax.cli",
+        "sweep",
+        str(REPO / "src" / "growjax" / "data" / "datasets" / "synthetic_forward.csv"),
+        "--n",
+        "16",
+        "--t-end",
+        "2",
+        "--seed",
+        "5",
+        "--chunk-size",
+        "4",
+        "--out",
+        str(out),
+        "--json",
+        str(out / "s.json"),
+    ]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, check=False)
     assert proc.returncode == 0, proc.stderr[-2000:]
     # progress on a pipe: plain lines, one per chunk here (4 chunks: every 25 %)
     assert "\r" not in proc.stderr and "sweep: 4/4 chunks (100 %)" in proc.stderr and len(proc.stderr) < 1000
     summary = json.loads((out / "s.json").read_text())
     assert summary["n_failed"] == 0 and summary["best"]["rmse_length_m"] > 0
-    assert set(summary["best"]["parameters"]) == {"robot.growth_exponent", "robot.yield_pressure", "robot.extensibility"}
+    assert set(summary["best"]["parameters"]) == {
+        "robot.growth_exponent",
+        "robot.yield_pressure",
+        "robot.extensibility",
+    }
     assert summary["wall_s"] > 0 and 0 < summary["trace_lower_s"] < summary["compile_s"]  # a fresh process traces
     rows = (out / "sweep.csv").read_text().splitlines()
     assert len(rows) == 17 and rows[0].endswith("rmse_length_m,final_length_m,status")
-    assert (out / "sweep.png").stat().st_size > 10_000  # (--sobol: test_sobol_indices_find_that_yield_pressure_dominates)
+    assert (
+        out / "sweep.png"
+    ).stat().st_size > 10_000  # (--sobol: test_sobol_indices_find_that_yield_pressure_dominates)
     from growjax import cli
 
     assert cli.main(["sweep", "--range", "Y=9:1"]) == 2 and "LOW < HIGH" in capsys.readouterr().err
@@ -165,8 +193,9 @@ def test_sweep_command_writes_table_figures_and_summary(tmp_path, capsys):
     assert f"0 of 4 chunks kept in {stopped / 'sweep.zarr'}; complete it with: growjax sweep --resume {stopped}" in err
     assert "SIGINT received: stopping after the chunk in flight" in err
     assert not (stopped / "sweep.csv").exists()
-    resumed = subprocess.run([*cmd[:4], "--resume", str(stopped), "--quiet"], capture_output=True, text=True,
-                             timeout=600, check=False)
+    resumed = subprocess.run(
+        [*cmd[:4], "--resume", str(stopped), "--quiet"], capture_output=True, text=True, timeout=600, check=False
+    )
     assert resumed.returncode == 0, resumed.stderr[-2000:]
     assert resumed.stderr == ""  # --quiet
     assert (stopped / "sweep.csv").read_bytes() == (out / "sweep.csv").read_bytes()
@@ -216,7 +245,7 @@ def test_a_signal_stops_a_stored_sweep_after_the_chunk_in_flight(setup, tmp_path
 
 
 def test_a_second_signal_stops_at_once_but_not_inside_a_write():
-    from growjax._stopping import Stopper
+    from growjax.sweep.stopping import Stopper
 
     with Stopper(announce=False) as stop:
         os.kill(os.getpid(), signal.SIGINT)
@@ -264,7 +293,7 @@ def test_resume_refuses_a_missing_corrupt_or_other_store_and_writes_nothing(setu
 def test_sweep_resume_errors_are_one_line_with_exit_2_and_change_nothing(tmp_path, capsys):
     from growjax import cli
 
-    data = str(REPO / "src" / "growjax" / "datasets" / "synthetic_forward.csv")
+    data = str(REPO / "src" / "growjax" / "data" / "datasets" / "synthetic_forward.csv")
     folder = tmp_path / "run"
     argv = ["sweep", data, "--n", "4", "--t-end", "2", "--seed", "5", "--chunk-size", "2", "--quiet"]
     assert cli.main([*argv, "--out", str(folder), "--max-chunks", "1"]) == 3
@@ -273,12 +302,14 @@ def test_sweep_resume_errors_are_one_line_with_exit_2_and_change_nothing(tmp_pat
     broken = tmp_path / "broken"
     shutil.copytree(folder, broken)
     (broken / "sweep.zarr" / "zarr.json").write_text("{")
-    cases = [(["--resume", str(tmp_path / "absent")], "no such folder"),
-             (["--resume", str(folder), "--seed", "0"], "holds another sweep: --seed 0 here, 5 there"),
-             (["--resume", str(folder), "--range", "Y=5000:9000"], "holds another sweep: --range"),
-             (["--resume", str(broken)], "not a readable sweep store"),
-             (["--resume", str(folder), "--out", str(tmp_path / "elsewhere")], "writes its results there"),
-             ([*argv[1:], "--out", str(folder)], "holds an unfinished sweep")]
+    cases = [
+        (["--resume", str(tmp_path / "absent")], "no such folder"),
+        (["--resume", str(folder), "--seed", "0"], "holds another sweep: --seed 0 here, 5 there"),
+        (["--resume", str(folder), "--range", "Y=5000:9000"], "holds another sweep: --range"),
+        (["--resume", str(broken)], "not a readable sweep store"),
+        (["--resume", str(folder), "--out", str(tmp_path / "elsewhere")], "writes its results there"),
+        ([*argv[1:], "--out", str(folder)], "holds an unfinished sweep"),
+    ]
     for extra, message in cases:
         assert cli.main(["sweep", *extra]) == 2, extra
         err = capsys.readouterr().err
@@ -308,17 +339,55 @@ def test_sweep_command_as_two_processes_gives_the_single_process_result(tmp_path
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    argv = [sys.executable, "-m", "growjax.cli", "sweep", "--n", "8", "--chunk-size", "4", "--t-end", "1", "--seed", "2",
-            "--quiet"]
+    argv = [
+        sys.executable,
+        "-m",
+        "growjax.cli",
+        "sweep",
+        "--n",
+        "8",
+        "--chunk-size",
+        "4",
+        "--t-end",
+        "1",
+        "--seed",
+        "2",
+        "--quiet",
+    ]
     env = {**os.environ, "GROWJAX_CPU_DEVICES": "1"}
-    procs = [subprocess.Popen([*argv, "--out", str(tmp_path / "two"), "--coordinator", f"127.0.0.1:{port}",
-                               "--num-processes", "2", "--process-id", str(i), "--json", str(tmp_path / f"{i}.json")],
-                              env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for i in (0, 1)]
+    procs = [
+        subprocess.Popen(
+            [
+                *argv,
+                "--out",
+                str(tmp_path / "two"),
+                "--coordinator",
+                f"127.0.0.1:{port}",
+                "--num-processes",
+                "2",
+                "--process-id",
+                str(i),
+                "--json",
+                str(tmp_path / f"{i}.json"),
+            ],
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for i in (0, 1)
+    ]
     outs = [p.communicate(timeout=600) for p in procs]
     assert [p.returncode for p in procs] == [0, 0], [o[1][-2000:] for o in outs]
     assert "wrote" in outs[0][0] and "sweep" not in outs[1][0]  # process 0 reports (Gloo prints its own lines)
     assert json.loads((tmp_path / "0.json").read_text())["n_processes"] == 2 and not (tmp_path / "1.json").exists()
-    one = subprocess.run([*argv, "--out", str(tmp_path / "one")], env={**env, "GROWJAX_CPU_DEVICES": "2"},
-                         capture_output=True, text=True, timeout=600, check=False)
+    one = subprocess.run(
+        [*argv, "--out", str(tmp_path / "one")],
+        env={**env, "GROWJAX_CPU_DEVICES": "2"},
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
     assert one.returncode == 0, one.stderr[-2000:]
     assert (tmp_path / "two" / "sweep.csv").read_bytes() == (tmp_path / "one" / "sweep.csv").read_bytes()

@@ -1,5 +1,5 @@
-"""The shared likelihood: Matérn-3/2 discrepancy, sensor noise and rig tolerances (growjax.discrepancy,
-growjax.tolerance) and what fit, posterior and discovery make of data the fitted model does not reproduce."""
+"""The shared likelihood: Matérn-3/2 discrepancy, sensor noise and rig tolerances (growjax.calibration.discrepancy,
+growjax.calibration.tolerance) and what fit, posterior and discovery make of data the fitted model does not reproduce."""
 
 import sys
 from pathlib import Path
@@ -12,10 +12,10 @@ from conftest import ar1_noise, smooth_perturbation
 from scipy.stats import multivariate_normal
 
 import growjax as gj
-from growjax import discrepancy as dc
-from growjax import experiment as ex
-from growjax import fit as gf
-from growjax import tolerance as tl
+from growjax.calibration import discrepancy as dc
+from growjax.calibration import fit as gf
+from growjax.calibration import tolerance as tl
+from growjax.data import experiment as ex
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "data"))
@@ -41,7 +41,8 @@ def test_kalman_likelihood_whitening_and_forecast_equal_the_dense_gaussian(noise
     k = _dense(t, hyper, g, u)
     r = rng.multivariate_normal(np.zeros(t.size), k)
     assert float(dc.log_likelihood(r, t, hyper, g, u)) == pytest.approx(
-        multivariate_normal(np.zeros(t.size), k).logpdf(r), rel=1e-10)
+        multivariate_normal(np.zeros(t.size), k).logpdf(r), rel=1e-10
+    )
     w = np.asarray(dc.whiten(r, t, hyper, g, u))
     np.testing.assert_allclose(w, np.linalg.solve(np.linalg.cholesky(k), r), atol=1e-8)
     seen = t < 6.0
@@ -53,8 +54,9 @@ def test_kalman_likelihood_whitening_and_forecast_equal_the_dense_gaussian(noise
     k0, ko = _dense(t, hyper), _dense(t, hyper)[np.ix_(seen, seen)]
     kf = k0[np.ix_(~seen, seen)]
     np.testing.assert_allclose(mean[~seen], kf @ np.linalg.solve(ko, r[seen]), atol=1e-12)
-    np.testing.assert_allclose(var[~seen], np.diag(k0[np.ix_(~seen, ~seen)] - kf @ np.linalg.solve(ko, kf.T)),
-                               rtol=1e-8)
+    np.testing.assert_allclose(
+        var[~seen], np.diag(k0[np.ix_(~seen, ~seen)] - kf @ np.linalg.solve(ko, kf.T)), rtol=1e-8
+    )
 
 
 @pytest.mark.parametrize("noise_time", [0.0, 0.05])
@@ -126,6 +128,7 @@ def test_tolerances_parse_and_resolve():
 
 # -- fits of reference-made data (the shipped reference traces, fitted by the fast configuration) ------------
 
+
 @pytest.fixture(scope="module")
 def reference():
     t, lengths, cases = mk.read_reference_lengths()
@@ -145,8 +148,10 @@ def test_intervals_cover_y_under_a_discrepancy_the_model_does_not_have(reference
     the perturbation; ``benchmarks/coverage_discrepancy.py --budget default`` measures that coverage.)"""
     t, lengths, cases, _ = reference
     rng = np.random.default_rng(7)
-    for name, extra in (("published_Y10000", smooth_perturbation(rng, t, 3e-4, 1.5)),
-                        ("published_Y7920", ar1_noise(rng, t, 2.5e-4, 0.2))):
+    for name, extra in (
+        ("published_Y10000", smooth_perturbation(rng, t, 3e-4, 1.5)),
+        ("published_Y7920", ar1_noise(rng, t, 2.5e-4, 0.2)),
+    ):
         truth = cases[name]["parameters"]["Y"]
         data = lengths[name] + extra + rng.normal(0.0, 5e-5, t.size)
         new = _fit(reference, data, tolerances={})
@@ -178,8 +183,9 @@ def test_a_window_keeps_only_its_samples_and_a_bad_one_is_refused(reference):
     """The problem a windowed fit solves holds the samples inside the window alone (the model still runs from t0);
     a reversed window and an unknown likelihood are refused before any simulation."""
     t, lengths, _cases, inputs = reference
-    problem = gf.make_problem(gj.reference(), ["Y"], inputs, gj.Config(t1=10.0), t, lengths["published_Y7920"],
-                              window=(5.0, 10.0))
+    problem = gf.make_problem(
+        gj.reference(), ["Y"], inputs, gj.Config(t1=10.0), t, lengths["published_Y7920"], window=(5.0, 10.0)
+    )
     inside = (t >= 5.0) & (t <= 10.0)
     np.testing.assert_array_equal(np.asarray(problem.times), t[inside])
     np.testing.assert_array_equal(np.asarray(problem.length), lengths["published_Y7920"][inside])
@@ -200,6 +206,7 @@ def test_a_window_scores_only_its_samples(reference):
 
 # -- posterior and discovery ---------------------------------------------------------------------------------
 
+
 def test_the_numpyro_model_carries_the_same_likelihood():
     """growth_model's log-density with a discrepancy is the priors plus the filter's log-likelihood, and its
     replicated data vary as the residual model says."""
@@ -213,26 +220,49 @@ def test_the_numpyro_model_carries_the_same_likelihood():
     priors = (gpost.Prior("Y", "robot.yield_pressure", 5e3, 15e3),)
     y = mu + np.random.default_rng(0).normal(0.0, 3e-4, t.size)
     values = {"Y": 8e3, "sigma": 2e-4, "delta_amplitude": 4e-4, "delta_time_scale": 0.8, "noise_time": 0.02}
-    model = lambda data: gpost.growth_model(data, mean_length=lambda th: jnp.asarray(mu), priors=priors,
-                                            residuals=residuals)
+    model = lambda data: gpost.growth_model(
+        data, mean_length=lambda th: jnp.asarray(mu), priors=priors, residuals=residuals
+    )
     total, _ = log_density(model, (jnp.asarray(y),), {}, values)
     hyper = dc.Hyper.of(4e-4, 0.8, 2e-4, 0.02)
     import numpyro.distributions as dist
-    expected = (float(dc.log_likelihood(y - mu, t, hyper)) + float(dist.Uniform(5e3, 15e3).log_prob(8e3))
-                + float(dist.HalfNormal(1e-3).log_prob(2e-4)) + float(dist.HalfNormal(dc.AMPLITUDE_SCALE).log_prob(4e-4))
-                + float(dist.LogNormal(0.0, dc.TIME_SCALE_LOG_SD).log_prob(0.8))
-                + float(dist.LogNormal(np.log(dc.NOISE_TIME_MEDIAN), dc.NOISE_TIME_LOG_SD).log_prob(0.02)))
+
+    expected = (
+        float(dc.log_likelihood(y - mu, t, hyper))
+        + float(dist.Uniform(5e3, 15e3).log_prob(8e3))
+        + float(dist.HalfNormal(1e-3).log_prob(2e-4))
+        + float(dist.HalfNormal(dc.AMPLITUDE_SCALE).log_prob(4e-4))
+        + float(dist.LogNormal(0.0, dc.TIME_SCALE_LOG_SD).log_prob(0.8))
+        + float(dist.LogNormal(np.log(dc.NOISE_TIME_MEDIAN), dc.NOISE_TIME_LOG_SD).log_prob(0.02))
+    )
     assert float(total) == pytest.approx(expected, rel=1e-10)
-    loglik, same, draws = gpost.observation_draws(np.tile(mu, (2, 50, 1)), np.full((2, 50), 2e-4), 0.0, y, 0,
-                                                  residuals, np.full((2, 50), 4e-4), np.full((2, 50), 0.8),
-                                                  np.full((2, 50), 0.02))
+    loglik, same, draws = gpost.observation_draws(
+        np.tile(mu, (2, 50, 1)),
+        np.full((2, 50), 2e-4),
+        0.0,
+        y,
+        0,
+        residuals,
+        np.full((2, 50), 4e-4),
+        np.full((2, 50), 0.8),
+        np.full((2, 50), 0.02),
+    )
     assert loglik.shape == draws.shape == same.shape == (2, 50, t.size)
     assert float(loglik[0, 0].sum()) == pytest.approx(float(dc.log_likelihood(y - mu, t, hyper)), rel=1e-10)
     assert np.std(draws - mu) == pytest.approx(np.hypot(4e-4, 2e-4), rel=0.25)  # a new experiment
     # a replication of this one keeps the discrepancy the data show: centred on it, its spread near the noise's
     y_off = y + 8e-4 * np.sin(2.0 * np.pi * t / 3.0)
-    _, same, _ = gpost.observation_draws(np.tile(mu, (2, 50, 1)), np.full((2, 50), 2e-4), 0.0, y_off, 0, residuals,
-                                         np.full((2, 50), 4e-4), np.full((2, 50), 0.8), np.full((2, 50), 0.02))
+    _, same, _ = gpost.observation_draws(
+        np.tile(mu, (2, 50, 1)),
+        np.full((2, 50), 2e-4),
+        0.0,
+        y_off,
+        0,
+        residuals,
+        np.full((2, 50), 4e-4),
+        np.full((2, 50), 0.8),
+        np.full((2, 50), 0.02),
+    )
     mean, var = residuals.conditional(jnp.asarray(y_off), jnp.asarray(mu), hyper)
     off = np.mean(same, axis=(0, 1)) - mu - np.asarray(mean)
     assert np.sqrt(np.mean(off**2)) < 0.1 * np.sqrt(np.mean(np.asarray(mean) ** 2))
@@ -261,9 +291,11 @@ def test_the_drift_allowance_is_the_independent_noise_one_without_a_discrepancy_
 RIG_OFF_CANDIDATES = ("active_channel_force", "fluid_leak", "retraction_folding")
 
 
-@pytest.mark.parametrize("candidates", [("active_channel_force",),
-                                        pytest.param(RIG_OFF_CANDIDATES, marks=pytest.mark.slow)],
-                         ids=["active-channel", "three"])
+@pytest.mark.parametrize(
+    "candidates",
+    [("active_channel_force",), pytest.param(RIG_OFF_CANDIDATES, marks=pytest.mark.slow)],
+    ids=["active-channel", "three"],
+)
 def test_discovery_reads_a_rig_parameter_off_within_reason_as_no_effect(reference, candidates):
     """Reference-made data (0–3 s, 0.2 mm noise) with the lead screw's friction 10 % low (twice its tolerance): with
     the rig's tolerances marginalised the answer is `none`, among the active channel's pull alone (by default: the
@@ -317,11 +349,11 @@ def test_the_likelihood_of_runs_sharing_a_rig_is_the_dense_gaussian():
     cov = np.zeros((sum(b.shape[0] for b in blocks),) * 2)
     at = np.cumsum([0] + [b.shape[0] for b in blocks])
     for k, b in enumerate(blocks):
-        cov[at[k]:at[k + 1], at[k]:at[k + 1]] = b
+        cov[at[k] : at[k + 1], at[k] : at[k + 1]] = b
     gs = [g[k][observed[k]] for k in range(e)]
     for a in range(e):
         for b in range(e):
             if rigs[a] == rigs[b]:
-                cov[at[a]:at[a + 1], at[b]:at[b + 1]] += (gs[a] * u**2) @ gs[b].T
+                cov[at[a] : at[a + 1], at[b] : at[b + 1]] += (gs[a] * u**2) @ gs[b].T
     y = np.concatenate([r[k][observed[k]] for k in range(e)])
     assert value == pytest.approx(float(multivariate_normal(np.zeros(y.size), cov).logpdf(y)), rel=1e-9)

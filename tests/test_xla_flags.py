@@ -11,8 +11,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from growjax import xla_flags
-from growjax._rosenbrock import _inverse
+from growjax.simulation import xla_flags
+from growjax.simulation._rosenbrock import _inverse
 
 OPTION = "xla_cpu_small_while_loop_byte_threshold"
 
@@ -20,7 +20,8 @@ OPTION = "xla_cpu_small_while_loop_byte_threshold"
 def test_the_option_joins_existing_flags_and_never_overrides_a_users_setting():
     assert xla_flags.with_small_loops("") == f"--xla_backend_extra_options={OPTION}=1000000000"
     assert xla_flags.with_small_loops("--xla_dump_to=/tmp/d") == (
-        f"--xla_dump_to=/tmp/d --xla_backend_extra_options={OPTION}=1000000000")
+        f"--xla_dump_to=/tmp/d --xla_backend_extra_options={OPTION}=1000000000"
+    )
     joined = xla_flags.with_small_loops("--xla_backend_extra_options=a=1")
     assert joined == f"--xla_backend_extra_options=a=1,{OPTION}=1000000000"
     own = f"--xla_backend_extra_options={OPTION}=0"
@@ -55,7 +56,10 @@ def test_elementwise_inverse_matches_lapack_on_stiff_solver_matrices(n):
 
 
 def test_quick_compile_joins_flags_and_falls_back_where_jaxlib_lacks_it(monkeypatch):
-    assert xla_flags.quick_compile_flags("--xla_dump_to=/tmp/d") == "--xla_dump_to=/tmp/d --xla_cpu_use_fusion_emitters=false"
+    assert (
+        xla_flags.quick_compile_flags("--xla_dump_to=/tmp/d")
+        == "--xla_dump_to=/tmp/d --xla_cpu_use_fusion_emitters=false"
+    )
     own = "--xla_cpu_use_fusion_emitters=true"
     assert xla_flags.quick_compile_flags(own) == own
     lowered = jax.jit(lambda x: 2.0 * x).lower(1.5)
@@ -94,19 +98,24 @@ over = gj.simulate(gj.reference(), gj.Inputs(catheter_length=gj.Constant(0.02),
 result = {"length": [float(x) for x in traj.length], "status": int(traj.status),
           "over_status": int(over.status), "limit_time": float(over.limit_time)}
 """
-CHILD = """
+CHILD = (
+    """
 import json, os, sys
-import growjax.xla_flags as xf
+import growjax.simulation.xla_flags as xf
 if sys.argv[1] == "quick":
     os.environ["XLA_FLAGS"] = xf.quick_compile_flags("")
 applied = xf.apply() if sys.argv[1] == "on" else xf.applied()
-""" + RUN + """
+"""
+    + RUN
+    + """
 print(json.dumps({"applied": applied, **result}))
 """
+)
 
 
-@pytest.mark.parametrize("modes", [("off",), pytest.param(("on", "off", "quick"), marks=pytest.mark.slow)],
-                         ids=["default", "all"])
+@pytest.mark.parametrize(
+    "modes", [("off",), pytest.param(("on", "off", "quick"), marks=pytest.mark.slow)], ids=["default", "all"]
+)
 def test_a_simulation_under_each_option_gives_the_same_solution(modes):
     """The same 2 s run in one process per option: XLA's default (which the test run itself does not use,
     conftest.py), and (slow) the quick compile alone and the small loops; and in this process, under the test
@@ -118,8 +127,9 @@ def test_a_simulation_under_each_option_gives_the_same_solution(modes):
     exec(RUN, here)
     out = {"test run": here["result"]}
     for mode in modes:
-        run = subprocess.run([sys.executable, "-c", CHILD, mode], capture_output=True, text=True, env=env, timeout=300,
-                             check=False)
+        run = subprocess.run(
+            [sys.executable, "-c", CHILD, mode], capture_output=True, text=True, env=env, timeout=300, check=False
+        )
         assert run.returncode == 0, run.stderr[-2000:]
         out[mode] = json.loads(run.stdout.strip().splitlines()[-1])
     assert not out["off"]["applied"] and out.get("on", {"applied": True})["applied"]

@@ -2,7 +2,7 @@
 
 Importing growjax turns on float64 in JAX for the process (``jax_enable_x64``): the model
 spans pressures of 1e5 Pa and compliances of 1e-13 m³/Pa, which float32 cannot resolve.
-:mod:`growjax.xla_flags` holds an opt-in XLA:CPU option that compiles the solver's loop into one kernel.
+:mod:`growjax.simulation.xla_flags` holds an opt-in XLA:CPU option that compiles the solver's loop into one kernel.
 """
 
 __version__ = "0.8.0"  # the one version string: pyproject.toml reads it (setuptools dynamic version)
@@ -11,10 +11,9 @@ import jax
 
 jax.config.update("jax_enable_x64", True)  # the package's one global setting; see the module docstring
 
-from growjax import effects
-from growjax.config import Config
-from growjax.effects import Effect
-from growjax.params import (
+from growjax.model import effects
+from growjax.model.effects import Effect
+from growjax.model.params import (
     Parameters,
     as_dict,
     get,
@@ -24,8 +23,8 @@ from growjax.params import (
     validate,
     with_effects,
 )
-from growjax.robot import pressure_limit
-from growjax.signals import (
+from growjax.model.robot import pressure_limit
+from growjax.model.signals import (
     Constant,
     Inputs,
     PulseTrain,
@@ -33,8 +32,9 @@ from growjax.signals import (
     StepSchedule,
     published_pulse,
 )
-from growjax.simulate import input_breaks, simulate, simulate_members
-from growjax.trajectory import (
+from growjax.simulation.config import Config
+from growjax.simulation.simulate import input_breaks, simulate, simulate_members
+from growjax.simulation.trajectory import (
     OK,
     PRESSURE_LIMIT,
     SOLVER_FAILED,

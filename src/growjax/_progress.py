@@ -47,8 +47,9 @@ class Lines(Silent):
     the end. Also stands in for the part of tqdm's interface that NumPyro uses (iteration over ``iterable``,
     ``set_description``: the phase shown where ``phases``, ``set_postfix_str``: ignored); thread-safe."""
 
-    def __init__(self, total: int, desc: str, unit: str = "", stream=None, step: float = STEP, iterable=None,
-                 phases: bool = True):
+    def __init__(
+        self, total: int, desc: str, unit: str = "", stream=None, step: float = STEP, iterable=None, phases: bool = True
+    ):
         self.total, self.desc, self.unit, self.step, self.phases = max(int(total), 0), desc, unit, step, phases
         self.stream = stream if stream is not None else sys.stderr
         self.iterable, self.phase = iterable, ""
@@ -59,7 +60,11 @@ class Lines(Silent):
     def update(self, n: int = 1) -> None:
         with self._lock:
             self.done += n
-            if self.total and self.done < self.total and self.done / self.total >= (self._shown + 1) * self.step - 1e-12:
+            if (
+                self.total
+                and self.done < self.total
+                and self.done / self.total >= (self._shown + 1) * self.step - 1e-12
+            ):
                 self._shown = int(self.done / self.total / self.step + 1e-9)
                 self._write()
 
@@ -85,8 +90,11 @@ class Lines(Silent):
         unit = f" {self.unit}s" if self.unit else ""
         pct = 100.0 * self.done / self.total
         phase = f", {self.phase}" if self.phase and self.phases else ""
-        _write_line(f"{self.desc}: {self.done}/{self.total}{unit} ({pct:.0f} %), "
-                    f"{time.perf_counter() - self._start:.1f} s{phase}", self.stream)
+        _write_line(
+            f"{self.desc}: {self.done}/{self.total}{unit} ({pct:.0f} %), "
+            f"{time.perf_counter() - self._start:.1f} s{phase}",
+            self.stream,
+        )
 
 
 _WRITING = threading.Lock()  # one line at a time, whole, from any thread

@@ -83,8 +83,14 @@ def population_figure(population, band: dict, path, measured=None):
     ax0.set_xlabel(label)
     ax0.legend(fontsize=8)
     t = band["times"]
-    ax1.fill_between(t, 1e3 * band["lower"], 1e3 * band["upper"], color="C2", alpha=0.3,
-                     label=f"new robot, {round(100 * band['level'])} %")
+    ax1.fill_between(
+        t,
+        1e3 * band["lower"],
+        1e3 * band["upper"],
+        color="C2",
+        alpha=0.3,
+        label=f"new robot, {round(100 * band['level'])} %",
+    )
     ax1.plot(t, 1e3 * band["median"], color="C2")
     if measured is not None:
         tm, ym = (np.asarray(x) for x in measured)
@@ -151,8 +157,9 @@ def sobol_figure(sobol: dict, path, title: str = ""):
     """Bar chart of first-order (S1) and total-order (ST) Sobol indices with 95 % bootstrap intervals, per output."""
     outputs = [k for k, v in sobol["indices"].items() if "S1" in v]
     names = [_axis(n)[0] for n in sobol["names"]]
-    fig, axes = plt.subplots(1, max(1, len(outputs)), figsize=(5 * max(1, len(outputs)), 4), constrained_layout=True,
-                             squeeze=False)
+    fig, axes = plt.subplots(
+        1, max(1, len(outputs)), figsize=(5 * max(1, len(outputs)), 4), constrained_layout=True, squeeze=False
+    )
     x = np.arange(len(names))
     for ax, key in zip(axes[0], outputs):
         s = sobol["indices"][key]
@@ -171,8 +178,9 @@ def predictive_figure(times, observed, bands: dict, path, title: str = ""):
     """Measured length with posterior predictive 90 % bands, one per model ({label: (lower, upper, median)}, m)."""
     fig, ax = plt.subplots(figsize=(8, 3.8), constrained_layout=True)
     for k, (label, (lo, hi, med)) in enumerate(bands.items()):
-        ax.fill_between(times, 1e3 * np.asarray(lo), 1e3 * np.asarray(hi), color=f"C{k}", alpha=0.25,
-                        label=f"{label}: 90 % band")
+        ax.fill_between(
+            times, 1e3 * np.asarray(lo), 1e3 * np.asarray(hi), color=f"C{k}", alpha=0.25, label=f"{label}: 90 % band"
+        )
         ax.plot(times, 1e3 * np.asarray(med), color=f"C{k}", lw=1.2)
     ax.plot(times, 1e3 * np.asarray(observed), "k.", ms=1.5, label="measured")
     ax.set_xlabel("time (s)")
@@ -257,16 +265,28 @@ def discovery_figure(result, path, title: str = ""):
     t = np.asarray(result.times)
     fig, (ax_l, ax_r) = plt.subplots(2, 1, figsize=(8, 6), sharex=True, constrained_layout=True)
     ax_l.plot(t, 1e3 * np.asarray(result.measured), ".", ms=2, color="0.5", label="measured")
-    ax_l.plot(t, 1e3 * np.asarray(result.before), color="C0", lw=1.2,
-              label=f"base model (RMSE {1e3 * result.rmse_before_m:.2f} mm)")
+    ax_l.plot(
+        t,
+        1e3 * np.asarray(result.before),
+        color="C0",
+        lw=1.2,
+        label=f"base model (RMSE {1e3 * result.rmse_before_m:.2f} mm)",
+    )
     if result.effects:
-        ax_l.plot(t, 1e3 * np.asarray(result.after), color="C3", lw=1.2,
-                  label=f"+ {', '.join(result.effects)} (RMSE {1e3 * result.rmse_after_m:.2f} mm)")
+        ax_l.plot(
+            t,
+            1e3 * np.asarray(result.after),
+            color="C3",
+            lw=1.2,
+            label=f"+ {', '.join(result.effects)} (RMSE {1e3 * result.rmse_after_m:.2f} mm)",
+        )
     ax_l.set_ylabel("length (mm)")
     ax_l.legend(loc="best", fontsize=8)
     ax_r.plot(t, 1e3 * (np.asarray(result.before) - np.asarray(result.measured)), color="C0", lw=0.8, label="base")
     if result.effects:
-        ax_r.plot(t, 1e3 * (np.asarray(result.after) - np.asarray(result.measured)), color="C3", lw=0.8, label="extended")
+        ax_r.plot(
+            t, 1e3 * (np.asarray(result.after) - np.asarray(result.measured)), color="C3", lw=0.8, label="extended"
+        )
     ax_r.axhline(0.0, color="k", lw=0.5)
     ax_r.set_ylabel("model − measured (mm)")
     ax_r.set_xlabel("time (s)")

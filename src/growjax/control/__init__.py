@@ -6,7 +6,7 @@ What is here, in the order a design uses it:
   step command → length (stepper) about an operating point, from exact JAX Jacobians of the fast
   configuration's vector field, as a python-control ``StateSpace`` (``sys.A`` … work with ``scipy.signal``).
 * :func:`optimize_profile` — the pressure-demand profile (piecewise linear on fixed knots) that makes the
-  robot follow a desired length, by least squares with forward-mode Jacobians through :func:`growjax.simulate`
+  robot follow a desired length, by least squares with forward-mode Jacobians through :func:`growjax.simulation.simulate`
   (all knots in one merged sensitivity solve), inside the demand box [0, p_max]. For the stepper drive
   (integer commands) an open-loop step schedule is found on the model without gradients: :func:`optimize_steps`
   searches the lead of a schedule read off the target, :func:`plan_steps` replays the steps the tuned
@@ -21,7 +21,7 @@ What is here, in the order a design uses it:
 * :func:`design` — one design (drive × method) end to end, summarised for JSON (the ``growjax control`` command).
 
 The plant of a closed loop (:class:`Plant`) is stepped tick by tick from its state through
-:func:`growjax.simulate.simulate_from`, with the solver and settings of its configuration, so a controller
+:func:`growjax.simulation.simulate.simulate_from`, with the solver and settings of its configuration, so a controller
 designed on the fast model is evaluated on the model it was not designed on. All quantities SI: lengths m,
 pressures Pa, times s. Its figure: :func:`growjax.plotting.control_figure`.
 """
@@ -86,10 +86,43 @@ def __getattr__(name):
 
 
 __all__ = [
-    "DEFAULT_LOG_GAINS", "MPC", "PRESSURE_MARGIN", "ClosedLoopResult", "KnotProfile", "LengthPID", "Limits", "Plant",
-    "ProfileResult", "StepController", "Target", "TuneResult", "catheter_signal", "design", "limits", "linearize",
-    "operating_point", "optimize_profile", "optimize_steps", "parameter_draws", "pid_cost_fn", "pid_loop",
-    "plan_steps", "plant_params", "ramp_with_pauses", "rig_draws", "rmse", "run_closed_loop", "score", "segment_inputs",
-    "simulate_profile", "simulate_steps", "step_commands", "step_length", "step_sequence", "target_from_experiment",
-    "tune_pid", "tune_stepper", "with_microstepping",
+    "DEFAULT_LOG_GAINS",
+    "MPC",
+    "PRESSURE_MARGIN",
+    "ClosedLoopResult",
+    "KnotProfile",
+    "LengthPID",
+    "Limits",
+    "Plant",
+    "ProfileResult",
+    "StepController",
+    "Target",
+    "TuneResult",
+    "catheter_signal",
+    "design",
+    "limits",
+    "linearize",
+    "operating_point",
+    "optimize_profile",
+    "optimize_steps",
+    "parameter_draws",
+    "pid_cost_fn",
+    "pid_loop",
+    "plan_steps",
+    "plant_params",
+    "ramp_with_pauses",
+    "rig_draws",
+    "rmse",
+    "run_closed_loop",
+    "score",
+    "segment_inputs",
+    "simulate_profile",
+    "simulate_steps",
+    "step_commands",
+    "step_length",
+    "step_sequence",
+    "target_from_experiment",
+    "tune_pid",
+    "tune_stepper",
+    "with_microstepping",
 ]

@@ -14,9 +14,9 @@ import numpy as np
 from jaxtyping import Array, Float
 
 import growjax as gj
-from growjax import fast_model as fm
 from growjax.control.plant import Plant, catheter_signal, segment_inputs
 from growjax.control.targets import Limits, Target, limits, rmse, step_length
+from growjax.simulation import fast as fm
 
 
 class LengthPID(eqx.Module):
@@ -32,7 +32,7 @@ class LengthPID(eqx.Module):
     dt: float = eqx.field(static=True, default=0.01)
 
     def gains(self):
-        return 10.0 ** self.log_gains
+        return 10.0**self.log_gains
 
     def init(self):
         return jnp.zeros(2)  # (integral of error m·s, filtered derivative m/s)
@@ -88,16 +88,18 @@ def pid_loop(plant: Plant, pid: LengthPID, target_ts, target_len, catheter, lim:
     return out
 
 
-def run_closed_loop(plant: Plant, controller: LengthPID | StepController | MPC, target: Target, t1: float,
-                    lim: Limits | None = None) -> ClosedLoopResult:
+def run_closed_loop(
+    plant: Plant, controller: LengthPID | StepController | MPC, target: Target, t1: float, lim: Limits | None = None
+) -> ClosedLoopResult:
     """Run a length controller (:class:`LengthPID`, :class:`StepController` or :class:`MPC`) around ``plant``
     from rest over [0, t1] s, and score it against ``target`` (RMSE on the samples at t ≥ 0.01 s)."""
     lim = lim or limits(plant.params)
     cath = catheter_signal(target)
     if isinstance(controller, LengthPID):
         fn = eqx.filter_jit(pid_loop)
-        ts, length, pressure, u, st = fn(plant, controller, jnp.asarray(target.time), jnp.asarray(target.length),
-                                         cath, lim, t1)
+        ts, length, pressure, u, st = fn(
+            plant, controller, jnp.asarray(target.time), jnp.asarray(target.length), cath, lim, t1
+        )
         ts, length, pressure = np.asarray(ts), np.asarray(length), np.asarray(pressure)
         return score(ts, length, pressure, np.asarray(u), ts - controller.dt, target, lim, int(np.max(st)))
     return controller.run(plant, target, t1, lim, cath)
@@ -107,8 +109,9 @@ def score(ts, length, pressure, command, ticks, target, lim, status, step_s=None
     keep = ts >= 0.01 - 1e-12
     e = rmse(ts[keep], length[keep], target)
     crossed = bool(np.any(~np.isfinite(pressure)) or np.nanmax(pressure) > lim.pressure_limit)
-    return ClosedLoopResult(ts, length, pressure, command, ticks, e if np.isfinite(e) else float("nan"), crossed,
-                            status, step_s)
+    return ClosedLoopResult(
+        ts, length, pressure, command, ticks, e if np.isfinite(e) else float("nan"), crossed, status, step_s
+    )
 
 
 @eqx.filter_jit
@@ -175,7 +178,7 @@ class MPC(eqx.Module):
     fast model), warm-started from the last plan; apply the first knot. On a plant of another configuration the
     state estimate is the fast model run alongside, with its length and pressure reset to the measured ones.
 
-    The steps are not :func:`growjax._least_squares.levenberg_marquardt`: a tick's plan is one compiled program
+    The steps are not :func:`growjax.calibration.least_squares.levenberg_marquardt`: a tick's plan is one compiled program
     of a fixed number of full steps, its time per tick bounded. Measured on the control benchmark (10 s of the
     public length, reference plant), the engine's damped, rejectable steps within the same two iterations track
     at 0.76 mm RMSE against 0.45 mm for the full steps.
@@ -193,7 +196,9 @@ class MPC(eqx.Module):
 
         def predict(y, ta, u_now, plan):
             knots_t = ta + hdt * jnp.arange(n + 1)
-            inputs = gj.Inputs(catheter_length=cath, pressure_demand=gj.Sampled(knots_t, jnp.concatenate([u_now[None], plan])))
+            inputs = gj.Inputs(
+                catheter_length=cath, pressure_demand=gj.Sampled(knots_t, jnp.concatenate([u_now[None], plan]))
+            )
             ts = ta + hdt * jnp.arange(1, n * m + 1) / m
             _, (l, p, _), _ = model.advance(y, inputs, ta, ta + n * hdt, ts, knots=knots_t[1:-1])
             return l, p
@@ -211,8 +216,7 @@ class MPC(eqx.Module):
             def resid(x):
                 l, p = predict(y, ta, u_now, x * scale)
                 du = jnp.diff(jnp.concatenate([u_now[None] / scale, x]))
-                return jnp.concatenate([(l - ref) / 1e-3, jnp.sqrt(self.w_move) * du,
-                                        jax.nn.relu(p - ceiling) / 1e3])
+                return jnp.concatenate([(l - ref) / 1e-3, jnp.sqrt(self.w_move) * du, jax.nn.relu(p - ceiling) / 1e3])
 
             x = plan / scale
             for _ in range(self.iterations):  # the plan and its n perturbations in one batched solve
@@ -276,8 +280,17 @@ class MPC(eqx.Module):
             u_now = u_next
             plan = np.concatenate([plan[1:], plan[-1:]])
         ts = np.concatenate(out_t)
-        return score(ts, np.concatenate(out_l), np.concatenate(out_p), np.asarray(us), ticks, target, lim, status,
-                      np.asarray(step_s))
+        return score(
+            ts,
+            np.concatenate(out_l),
+            np.concatenate(out_p),
+            np.asarray(us),
+            ticks,
+            target,
+            lim,
+            status,
+            np.asarray(step_s),
+        )
 
 
 def _reset_estimate(model: Plant, y_hat, t, measured):

@@ -8,13 +8,21 @@ import jax.numpy as jnp
 import numpy as np
 
 import growjax as gj
-from growjax import fast_model as fm
 from growjax.control.plant import Plant
-from growjax.params import Parameters
+from growjax.model.params import Parameters
+from growjax.simulation import fast as fm
 
 
-def operating_point(params: Parameters, drive: str = "forward", pressure: float = 150e3, length: float | None = None,
-                    catheter: float = 0.0, steps: float = 0.0, settle: float = 1.0, microstep: bool = True):
+def operating_point(
+    params: Parameters,
+    drive: str = "forward",
+    pressure: float = 150e3,
+    length: float | None = None,
+    catheter: float = 0.0,
+    steps: float = 0.0,
+    settle: float = 1.0,
+    microstep: bool = True,
+):
     """(plant, scaled state, inputs) at an operating point.
 
     Forward drive: the state after ``settle`` s at constant demand ``pressure`` (Pa): growing at a steady
@@ -23,8 +31,9 @@ def operating_point(params: Parameters, drive: str = "forward", pressure: float 
     """
     config = gj.Config(drive=drive, t1=settle)
     plant = Plant.make(params, config, microstep=microstep and drive == "inverse")
-    inputs = gj.Inputs(catheter_length=gj.Constant(catheter), pressure_demand=gj.Constant(pressure),
-                       steps=gj.Constant(steps))
+    inputs = gj.Inputs(
+        catheter_length=gj.Constant(catheter), pressure_demand=gj.Constant(pressure), steps=gj.Constant(steps)
+    )
     y0 = plant.initial_state()
     y, _, _ = jax.jit(lambda y: plant.advance(y, inputs, config.t0, settle, jnp.asarray([settle])))(y0)
     if length is not None:
@@ -34,8 +43,15 @@ def operating_point(params: Parameters, drive: str = "forward", pressure: float 
     return plant, y, inputs
 
 
-def linearize(params: Parameters | None = None, drive: str = "forward", pressure: float = 150e3, length: float | None = None,
-              catheter: float = 0.0, steps: float = 0.0, settle: float = 1.0):
+def linearize(
+    params: Parameters | None = None,
+    drive: str = "forward",
+    pressure: float = 150e3,
+    length: float | None = None,
+    catheter: float = 0.0,
+    steps: float = 0.0,
+    settle: float = 1.0,
+):
     """Linear model of demand → length about an operating point, as a ``control.StateSpace``.
 
     Forward drive: input the pressure demand (Pa), output the robot length (m); operating point after
@@ -52,8 +68,11 @@ def linearize(params: Parameters | None = None, drive: str = "forward", pressure
     t = jnp.asarray(settle)
 
     def with_u(u):
-        return (eqx.tree_at(lambda i: i.pressure_demand, inputs, gj.Constant(u)) if drive == "forward"
-                else eqx.tree_at(lambda i: i.steps, inputs, gj.Constant(u)))
+        return (
+            eqx.tree_at(lambda i: i.pressure_demand, inputs, gj.Constant(u))
+            if drive == "forward"
+            else eqx.tree_at(lambda i: i.steps, inputs, gj.Constant(u))
+        )
 
     u0 = jnp.asarray(pressure if drive == "forward" else steps, float)
     f = lambda y, u: plant.field(t, y, with_u(u))
@@ -63,12 +82,24 @@ def linearize(params: Parameters | None = None, drive: str = "forward", pressure
     c = np.asarray(jax.jacfwd(g, 0)(y, u0))[None, :]
     d = np.asarray(jax.jacfwd(g, 1)(y, u0)).reshape(1, 1)
     names = list(fm.layout(plant.params, drive)[0])
-    sys = control.ss(a, b, c, d, inputs=["pressure_demand" if drive == "forward" else "step_command"],
-                     outputs=["length"], states=names)
+    sys = control.ss(
+        a,
+        b,
+        c,
+        d,
+        inputs=["pressure_demand" if drive == "forward" else "step_command"],
+        outputs=["length"],
+        states=names,
+    )
     rates = np.asarray(f(y, u0))
     i = names.index("robot_displacement")
-    sys.operating_point = {"state": np.asarray(y), "input": float(u0), "rates": rates,
-                           "length_m": float(g(y, u0)), "pressure_Pa": float(plant.outputs(t, y, with_u(u0))[1]),
-                           "growth_speed_m_s": float(rates[i] * plant.scales()[i]),
-                           "growing": bool(rates[i] * plant.scales()[i] > 1e-5)}
+    sys.operating_point = {
+        "state": np.asarray(y),
+        "input": float(u0),
+        "rates": rates,
+        "length_m": float(g(y, u0)),
+        "pressure_Pa": float(plant.outputs(t, y, with_u(u0))[1]),
+        "growth_speed_m_s": float(rates[i] * plant.scales()[i]),
+        "growing": bool(rates[i] * plant.scales()[i] > 1e-5),
+    }
     return sys

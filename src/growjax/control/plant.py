@@ -1,5 +1,5 @@
 """A configuration of the model as a plant: stepped from its state tick by tick through
-:func:`growjax.simulate.simulate_from` (the configuration's own solver and settings), with the vector field and
+:func:`growjax.simulation.simulate.simulate_from` (the configuration's own solver and settings), with the vector field and
 outputs of a state for linear models and state estimates. SI units."""
 
 from __future__ import annotations
@@ -12,10 +12,10 @@ import numpy as np
 from jaxtyping import Array, Float, Int
 
 import growjax as gj
-from growjax import effects as fx
-from growjax import fast_model as fm
-from growjax import reference_model as rm
-from growjax.simulate import simulate_from
+from growjax.model import effects as fx
+from growjax.simulation import fast as fm
+from growjax.simulation import reference as rm
+from growjax.simulation.simulate import simulate_from
 
 # Step budget of one tick, per fidelity (a tick spans at most a few hundred steps).
 TICK_STEPS = {"fast": 400, "reference": 20_000}
@@ -23,7 +23,7 @@ TICK_STEPS = {"fast": 400, "reference": 20_000}
 
 def with_microstepping(params, on: bool = True):
     """``params`` with the stepper's driver swapped for the sine–cosine microstepping one (both configurations;
-    :func:`growjax.motor.winding_voltages`): the step command may then be any real number."""
+    :func:`growjax.model.motor.winding_voltages`): the step command may then be any real number."""
     return eqx.tree_at(lambda p: p.motor, params, dataclasses.replace(params.motor, microstepping=on))
 
 
@@ -44,8 +44,9 @@ class Plant(eqx.Module):
         if microstep and config.drive != "inverse":
             raise ValueError("microstepping is a driver of the stepper (inverse) drive")
         params = with_microstepping(params) if microstep else params
-        config = config.replace(stop_at_pressure_limit=False,
-                                max_steps=config.max_steps or TICK_STEPS[config.fidelity]).resolved()
+        config = config.replace(
+            stop_at_pressure_limit=False, max_steps=config.max_steps or TICK_STEPS[config.fidelity]
+        ).resolved()
         return cls(params, config, cls._module(config).prepare(fx.apply_all(params), config))
 
     @staticmethod
@@ -81,8 +82,15 @@ class Plant(eqx.Module):
         out = rm.outputs(t, y, applied, inputs, self.config, self.prep)
         return out["length"], out["pressure"], out["syringe_displacement"]
 
-    def advance(self, y: Float[Array, " n"], inputs: gj.Inputs, ta, tb, ts: Float[Array, " S"],
-                knots: Float[Array, " K"] | None = None) -> tuple[Float[Array, " n"], tuple, Int[Array, ""]]:
+    def advance(
+        self,
+        y: Float[Array, " n"],
+        inputs: gj.Inputs,
+        ta,
+        tb,
+        ts: Float[Array, " S"],
+        knots: Float[Array, " K"] | None = None,
+    ) -> tuple[Float[Array, " n"], tuple, Int[Array, ""]]:
         """Integrate from state ``y`` at ``ta`` to ``tb`` (s) → (state at tb, outputs at ``ts`` (S,) each, status:
         0 reached tb, 2 failed).
 
@@ -98,8 +106,11 @@ class Plant(eqx.Module):
 
 def segment_inputs(catheter, ta, tb, ua, ub, steps):
     """Inputs of one tick: the demand ramps from ``ua`` at ``ta`` to ``ub`` at ``tb`` (first-order hold)."""
-    return gj.Inputs(catheter_length=catheter, pressure_demand=gj.Sampled(jnp.stack([ta, tb]), jnp.stack([ua, ub])),
-                     steps=gj.Constant(steps))
+    return gj.Inputs(
+        catheter_length=catheter,
+        pressure_demand=gj.Sampled(jnp.stack([ta, tb]), jnp.stack([ua, ub])),
+        steps=gj.Constant(steps),
+    )
 
 
 def catheter_signal(target):

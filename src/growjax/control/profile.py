@@ -1,4 +1,4 @@
-"""Open-loop design: the forward drive's pressure-demand profile by least squares through :func:`growjax.simulate`,
+"""Open-loop design: the forward drive's pressure-demand profile by least squares through :func:`growjax.simulation.simulate`,
 and the stepper's step schedules (integer commands: searched, not differentiated). SI units."""
 
 from __future__ import annotations
@@ -12,10 +12,10 @@ import numpy as np
 from jaxtyping import Float
 
 import growjax as gj
-from growjax._least_squares import levenberg_marquardt, linearise
+from growjax.calibration.least_squares import levenberg_marquardt, linearise
 from growjax.control.plant import catheter_signal
 from growjax.control.targets import Limits, Target, limits, rmse, step_length
-from growjax.params import Parameters
+from growjax.model.params import Parameters
 
 
 class KnotProfile(gj.Sampled):
@@ -47,17 +47,26 @@ def profile_inputs(target: Target, knots, values):
     return gj.Inputs(catheter_length=catheter_signal(target), pressure_demand=KnotProfile(knots, values))
 
 
-def optimize_profile(params: Parameters, target: Target, t1: float | None = None, knot_dt: float = 0.2,
-                     iterations: int = 15, lim: Limits | None = None, smooth: float = 1e-3,
-                     initial: float = 120e3, config: gj.Config | None = None, lead: float = 0.0) -> ProfileResult:
+def optimize_profile(
+    params: Parameters,
+    target: Target,
+    t1: float | None = None,
+    knot_dt: float = 0.2,
+    iterations: int = 15,
+    lim: Limits | None = None,
+    smooth: float = 1e-3,
+    initial: float = 120e3,
+    config: gj.Config | None = None,
+    lead: float = 0.0,
+) -> ProfileResult:
     """The forward drive's pressure-demand profile (piecewise linear, knots every ``knot_dt`` s) that makes the
-    length follow ``target``, by :func:`growjax._least_squares.levenberg_marquardt` on the tracking residuals.
+    length follow ``target``, by :func:`growjax.calibration.least_squares.levenberg_marquardt` on the tracking residuals.
 
     Residuals: length error on the target's grid (mm), ``smooth``·knot differences (per 10 kPa), and the sensed
     pressure's excess over ``lim.max_demand`` (per kPa); the knots are kept in [0, ``lim.max_demand``] (the
     engine's bounds). A trial point is scored by one solve and linearised once accepted: residuals and
-    Jacobian in one forward-mode pass through :func:`growjax.simulate` (all knots in one solve,
-    :func:`growjax._least_squares.linearise`); a step moves each knot by at most :data:`MAX_STEP`.
+    Jacobian in one forward-mode pass through :func:`growjax.simulation.simulate` (all knots in one solve,
+    :func:`growjax.calibration.least_squares.linearise`); a step moves each knot by at most :data:`MAX_STEP`.
     ``iterations``: at most that many accepted steps (fewer where the engine converges first).
     ``cost_history``: Σ r² at the first guess and after each accepted step.
     """
@@ -98,11 +107,13 @@ def optimize_profile(params: Parameters, target: Target, t1: float | None = None
         speed = np.gradient(target.at(knots + knot_dt), knots)
         x = np.clip(0.6 + 12.0 * np.maximum(speed, 0.0) / 1e-2 * 0.1, 0.0, hi)
     bounds = (np.zeros(knots.size), np.full(knots.size, hi))
-    x, _, _, r, _ = levenberg_marquardt(linearise_accepted, x, max_steps=iterations, bounds=bounds,
-                                        max_move=MAX_STEP / scale, residuals=score)
+    x, _, _, r, _ = levenberg_marquardt(
+        linearise_accepted, x, max_steps=iterations, bounds=bounds, max_move=MAX_STEP / scale, residuals=score
+    )
     n = ts.size
-    return ProfileResult(knots, x * scale, history, float(np.sqrt(np.mean((r[:n] * 1e-3) ** 2))),
-                         time.perf_counter() - t0w)
+    return ProfileResult(
+        knots, x * scale, history, float(np.sqrt(np.mean((r[:n] * 1e-3) ** 2))), time.perf_counter() - t0w
+    )
 
 
 def simulate_profile(params, target: Target, profile: ProfileResult, config: gj.Config):
@@ -111,8 +122,9 @@ def simulate_profile(params, target: Target, profile: ProfileResult, config: gj.
     return gj.simulate(params, profile_inputs(target, profile.knots, profile.demand), config, ts=ts)
 
 
-def step_commands(params, target: Target, rate: float, lead: float, t1: float, lim: Limits | None = None,
-                  microsteps: int = 1):
+def step_commands(
+    params, target: Target, rate: float, lead: float, t1: float, lim: Limits | None = None, microsteps: int = 1
+):
     """Open-loop stepper command: (tick times (s), step counts) = round(demand(t + lead)·microsteps)/microsteps
     at ``rate`` Hz (≤ ``lim.max_step_rate``), at most one step per tick, back steps included."""
     lim = lim or limits(params)
@@ -128,8 +140,7 @@ def step_commands(params, target: Target, rate: float, lead: float, t1: float, l
     return ticks, np.asarray(counts)
 
 
-def optimize_steps(params, target: Target, t1: float, rate: float = 50.0, leads=None,
-                   config: gj.Config | None = None):
+def optimize_steps(params, target: Target, t1: float, rate: float = 50.0, leads=None, config: gj.Config | None = None):
     """The open-loop step schedule (integer steps: a search over the lead time, not gradients) of the stepper
     drive minimising the length RMSE on ``config`` (default fast). → (best lead s, RMSE m, ticks, counts)."""
     config = config or gj.Config(drive="inverse", t1=t1)

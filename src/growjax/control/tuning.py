@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import growjax as gj
-from growjax import tolerance as tl
+from growjax.calibration import tolerance as tl
 from growjax.control.controllers import (
     LengthPID,
     StepController,
@@ -26,8 +26,7 @@ from growjax.control.targets import Limits, Target, limits
 DEFAULT_LOG_GAINS = (7.0, 7.0, 4.5)  # Kp 1e7 Pa/m (10 kPa per mm), Ki 1e7 Pa/(m s), Kd 3e4 Pa s/m
 
 
-def parameter_draws(n: int, seed: int = 0, posterior: str | None = None, base=None, rel_sd: float = 0.05,
-                    names=None):
+def parameter_draws(n: int, seed: int = 0, posterior: str | None = None, base=None, rel_sd: float = 0.05, names=None):
     """Parameter sets as {name: (n,) array}.
 
     From an ArviZ posterior file (netCDF, read as an xarray DataTree): joint draws (picked at random, seeded) of
@@ -56,7 +55,7 @@ def parameter_draws(n: int, seed: int = 0, posterior: str | None = None, base=No
 def rig_draws(n: int, base, tolerances: dict, seed: int = 0) -> dict:
     """Draws of the rig within its tolerances as {qualified name: (n,) array}: each toleranced parameter ψ·exp(u z),
     z ~ N(0, 1) independent (seeded), u its relative standard uncertainty in ``tolerances`` {name: u}
-    (:mod:`growjax.tolerance`; aliases allowed, zeros dropped). {} for no tolerances."""
+    (:mod:`growjax.calibration.tolerance`; aliases allowed, zeros dropped). {} for no tolerances."""
     tol = tl.budget(base, tolerances, use_default=False)
     rng = np.random.default_rng([seed, 1])  # a stream apart from the posterior's draws
     return {k: float(gj.get(base, k)) * np.exp(u * rng.standard_normal(n)) for k, u in tol.items()}
@@ -82,8 +81,15 @@ class TuneResult(NamedTuple):
     wall_s: float
 
 
-def pid_cost_fn(base, target: Target, t1: float, pid: LengthPID, draws: dict | None = None,
-                lim: Limits | None = None, config: gj.Config | None = None):
+def pid_cost_fn(
+    base,
+    target: Target,
+    t1: float,
+    pid: LengthPID,
+    draws: dict | None = None,
+    lim: Limits | None = None,
+    config: gj.Config | None = None,
+):
     """J(log_gains) = mean over parameter draws of the squared length RMSE (mm²) of the PID closed loop on the
     fast configuration (+ a penalty on pressure above the membrane limit); jitted, vmapped over draws."""
     lim = lim or limits(base)
@@ -93,8 +99,9 @@ def pid_cost_fn(base, target: Target, t1: float, pid: LengthPID, draws: dict | N
     def one(params, log_gains):
         plant = Plant.make(params, config)
         ctrl = eqx.tree_at(lambda c: c.log_gains, pid, log_gains)
-        ts, length, pressure, _, _ = pid_loop(plant, ctrl, jnp.asarray(target.time), jnp.asarray(target.length),
-                                              cath, lim, t1)
+        ts, length, pressure, _, _ = pid_loop(
+            plant, ctrl, jnp.asarray(target.time), jnp.asarray(target.length), cath, lim, t1
+        )
         err = (length - jnp.interp(ts, jnp.asarray(target.time), jnp.asarray(target.length))) / 1e-3
         over = jax.nn.relu(pressure - lim.pressure_limit) / 1e3
         return jnp.mean(jnp.nan_to_num(err, nan=1e2) ** 2) + jnp.mean(over**2)
@@ -142,13 +149,21 @@ def tune_pid(cost, log_gains, iterations: int = 10, step: float = 0.3, fd: float
         x, c = trials[best], float(tv[best])
         step = min(step * (1.5 if best == 0 else 1.0), 1.0) if best == 0 else s * 0.5**best
         hist.append(c)
-    kp, ki, kd = 10.0 ** x
-    return TuneResult(x, {"Kp_Pa_per_m": kp, "Ki_Pa_per_m_s": ki, "Kd_Pa_s_per_m": kd}, hist,
-                      time.perf_counter() - start)
+    kp, ki, kd = 10.0**x
+    return TuneResult(
+        x, {"Kp_Pa_per_m": kp, "Ki_Pa_per_m_s": ki, "Kd_Pa_s_per_m": kd}, hist, time.perf_counter() - start
+    )
 
 
-def tune_stepper(params, target: Target, t1: float, microsteps: int = 1, rates=(20.0, 25.0, 50.0),
-                 leads=(0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4), gates=(160e3, 200e3, 240e3, float("inf"))):
+def tune_stepper(
+    params,
+    target: Target,
+    t1: float,
+    microsteps: int = 1,
+    rates=(20.0, 25.0, 50.0),
+    leads=(0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4),
+    gates=(160e3, 200e3, 240e3, float("inf")),
+):
     """The step controller's rate (Hz), lead (s) and pressure gate (Pa) by search on the fast model (its cost is
     piecewise constant in them, so a grid, not a gradient; leads 50 ms apart).
     → (best :class:`StepController`, its RMSE m)."""

@@ -30,9 +30,9 @@ What is here, in the order a design uses it:
 SI units throughout: s, Pa, m; uncertainties of ln θ (relative).
 """
 
+from growjax.design import discrimination
 from growjax.design.constraints import Check, Limits, check, draws, limits, penalty, stack
 from growjax.design.criterion import Precision, Prediction, information, posterior
-from growjax.design import discrimination
 from growjax.design.discrimination import Discrimination
 from growjax.design.figure import design_figure
 from growjax.design.knowledge import Knowledge, from_fit, from_summary

@@ -19,15 +19,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from growjax import fit as gf
-from growjax import params as gp
+from growjax.calibration import fit as gf
 from growjax.control.targets import PRESSURE_MARGIN
 from growjax.control.tuning import rig_draws
 from growjax.design.knowledge import Knowledge
 from growjax.design.sensitivity import Sensitivities
-from growjax.robot import pressure_limit
-from growjax.simulate import as_arrays, simulate
-from growjax.trajectory import OK
+from growjax.model import params as gp
+from growjax.model.robot import pressure_limit
+from growjax.simulation.simulate import as_arrays, simulate
+from growjax.simulation.trajectory import OK
 
 STROKE_MARGIN = 0.95  # the length's ceiling as a share of the robot's stroke
 SPREAD = 2.5  # sds of the linearised spread over the draws the penalty keeps clear of each limit
@@ -48,17 +48,31 @@ class Limits:
     membrane: float = float("nan")  # Pa, the membrane limit itself (for reports)
 
     def summary(self) -> dict:
-        return {"pressure_ceiling_Pa": self.pressure, "membrane_limit_Pa": self.membrane,
-                "length_ceiling_m": self.length, "syringe_stroke_m": self.syringe, "max_pump_speed_m_s": self.speed}
+        return {
+            "pressure_ceiling_Pa": self.pressure,
+            "membrane_limit_Pa": self.membrane,
+            "length_ceiling_m": self.length,
+            "syringe_stroke_m": self.syringe,
+            "max_pump_speed_m_s": self.speed,
+        }
 
 
-def limits(base: gp.Parameters, margin: float = PRESSURE_MARGIN, stroke_margin: float = STROKE_MARGIN,
-           max_speed: float | None = None) -> Limits:
+def limits(
+    base: gp.Parameters,
+    margin: float = PRESSURE_MARGIN,
+    stroke_margin: float = STROKE_MARGIN,
+    max_speed: float | None = None,
+) -> Limits:
     """The :class:`Limits` of ``base``: sensed pressure ≤ ``margin`` × the membrane limit, length ≤
     ``stroke_margin`` × the robot's stroke, syringe travel ≤ its stroke, the platform's speed ≤ ``max_speed``."""
     membrane = float(pressure_limit(base.robot))
-    return Limits(margin * membrane, stroke_margin * float(base.robot.stroke), float(base.pump.syringe_stroke),
-                  max_speed, membrane)
+    return Limits(
+        margin * membrane,
+        stroke_margin * float(base.robot.stroke),
+        float(base.pump.syringe_stroke),
+        max_speed,
+        membrane,
+    )
 
 
 def draws(knowledge: Knowledge, n: int = DRAWS, seed: int = 0) -> dict:
@@ -101,9 +115,14 @@ class Check(eqx.Module):
     pressure: np.ndarray | None = None
 
     def row(self, i: int) -> dict:
-        return {"admissible": bool(self.admissible[i]), "runs_completed": bool(self.completed[i]),
-                "peak_pressure_Pa": float(self.peak_pressure[i]), "peak_length_m": float(self.peak_length[i]),
-                "peak_syringe_travel_m": float(self.peak_syringe[i]), "peak_pump_speed_m_s": float(self.peak_speed[i])}
+        return {
+            "admissible": bool(self.admissible[i]),
+            "runs_completed": bool(self.completed[i]),
+            "peak_pressure_Pa": float(self.peak_pressure[i]),
+            "peak_length_m": float(self.peak_length[i]),
+            "peak_syringe_travel_m": float(self.peak_syringe[i]),
+            "peak_pump_speed_m_s": float(self.peak_speed[i]),
+        }
 
 
 def stack(inputs: list):
@@ -142,8 +161,16 @@ def check(inputs, knowledge: Knowledge, config, ts, breaks, lim: Limits, drawn: 
     admissible = completed & (peak_p <= lim.pressure) & (peak_l <= lim.length) & (peak_s <= lim.syringe)
     if lim.speed is not None:
         admissible &= peak_v <= lim.speed
-    return Check(peak_p, peak_l, peak_s, peak_v, completed, admissible,
-                 length if keep_runs else None, pressure if keep_runs else None)
+    return Check(
+        peak_p,
+        peak_l,
+        peak_s,
+        peak_v,
+        completed,
+        admissible,
+        length if keep_runs else None,
+        pressure if keep_runs else None,
+    )
 
 
 @eqx.filter_jit

@@ -7,7 +7,7 @@ posterior covariance of w is
 
     Σ_post = (Σ_prior⁻¹ + J̃ᵀ K⁻¹ J̃ + J_Pᵀ J_P / σ_P²)⁻¹,
 
-K the covariance of the discrepancy and the sensor noise on the sample times (:mod:`growjax.discrepancy`; K⁻¹J̃
+K the covariance of the discrepancy and the sensor noise on the sample times (:mod:`growjax.calibration.discrepancy`; K⁻¹J̃
 by the Kalman filter's whitening, exact for the Matérn-3/2 and Ornstein–Uhlenbeck processes) and the pressure
 rows with independent noise of sd σ_P. The rig's errors b are nuisance parameters (their tolerances the
 prior): the block of Σ_post on θ has them integrated out. The covariance does not depend on the data, only on
@@ -26,7 +26,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from growjax import discrepancy as dc
+from growjax.calibration import discrepancy as dc
 from growjax.design.sensitivity import Sensitivities
 
 SENSORS = ("length", "pressure")
@@ -66,13 +66,21 @@ def information(s: Sensitivities, times, hyper: dc.Hyper, sensors=("length",), p
     return info
 
 
-def posterior(s: Sensitivities, times, hyper: dc.Hyper, precision_known, precision_alone, sensors=("length",),
-              pressure_noise: float = PRESSURE_NOISE, remainder=None) -> Prediction:
+def posterior(
+    s: Sensitivities,
+    times,
+    hyper: dc.Hyper,
+    precision_known,
+    precision_alone,
+    sensors=("length",),
+    pressure_noise: float = PRESSURE_NOISE,
+    remainder=None,
+) -> Prediction:
     """The :class:`Prediction` of sensitivities ``s``: Σ = (Λ₀ + information)⁻¹ for the prior precisions Λ₀
     ``precision_known`` and ``precision_alone`` (m, m) (:meth:`growjax.design.knowledge.Knowledge.prior_precision`).
 
     ``remainder`` (n, D) m: what the rig's linearised effect misses at D draws of the rig
-    (:func:`growjax.design.sensitivity.remainder`). A fit that linearises the rig (:func:`growjax.fit.fit`) takes
+    (:func:`growjax.design.sensitivity.remainder`). A fit that linearises the rig (:func:`growjax.calibration.fit.fit`) takes
     it for data: its estimate moves by Σ J̃ᵀK⁻¹ r for a remainder r, so the covariance gains
     Σ J̃ᵀK⁻¹ V VᵀK⁻¹J̃ Σ with V Vᵀ = the remainder's second moment over the draws (the sandwich of the estimator
     the fit is, with the remainder as an error it does not model)."""

@@ -10,7 +10,7 @@ Hunter–Reiner and Box–Hill)
 
 r = μ_A − μ_B (n,) m the two models' lengths on the sample times, J (n, p + 1) the sensitivities of μ_B to its
 free parameters (ln θ and B's parameter), Σ = K + G U Gᵀ: K the discrepancy and the sensor noise of the residual
-model (whitened by the Kalman filter, :func:`growjax.discrepancy.whiten`), G the rig's sensitivities and
+model (whitened by the Kalman filter, :func:`growjax.calibration.discrepancy.whiten`), G the rig's sensitivities and
 U = diag(u²) its tolerances (marginalised, as the discovery's scores do). T_BA swaps the roles. The design
 maximises min(T_AB, T_BA): whichever effect is real, the data should name it.
 
@@ -21,7 +21,7 @@ exactly the non-centrality of the discovery's statistic: the difference of the t
 coordinate each parameter is moved in (a column scaling of J); B's parameter moves linearly, by a tenth of its
 range's top per unit, as in the discovery. Its limits: the refit is linearised (a large effect, or one whose
 rival must move far to imitate it, is rejected more surely than T says), and the true effect's size is assumed
-(its moderate magnitude, :func:`growjax.synthetic.moderate_magnitude`, unless given).
+(its moderate magnitude, :func:`growjax.data.synthetic.moderate_magnitude`, unless given).
 """
 
 from __future__ import annotations
@@ -31,18 +31,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from growjax import discrepancy as dc
-from growjax import effects as fx
-from growjax import params as gp
-from growjax import synthetic as syn
-from growjax.config import Config
+from growjax.calibration import discrepancy as dc
 from growjax.control.profile import KnotProfile
+from growjax.data import synthetic as syn
 from growjax.design import constraints as dcon
 from growjax.design import sensitivity
 from growjax.design.knowledge import Knowledge
 from growjax.design.space import DesignSpace, demand_at_knots
-from growjax.signals import Inputs
-from growjax.simulate import as_arrays
+from growjax.model import effects as fx
+from growjax.model import params as gp
+from growjax.model.signals import Inputs
+from growjax.simulation.config import Config
+from growjax.simulation.simulate import as_arrays
 
 FLOOR = 1e-12  # T below which the objective −ln T is held (rivals indistinguishable there)
 
@@ -51,8 +51,9 @@ def rivals(effects) -> tuple[str, str]:
     """``effects`` as a pair of distinct catalogue names; ValueError naming what is wrong."""
     effects = tuple(effects)
     if len(effects) != 2:
-        raise ValueError(f"model discrimination needs exactly two rival effects, got {len(effects)}: "
-                         f"{', '.join(effects) or 'none'}")
+        raise ValueError(
+            f"model discrimination needs exactly two rival effects, got {len(effects)}: {', '.join(effects) or 'none'}"
+        )
     for name in effects:
         if name not in fx.CATALOGUE:
             raise ValueError(f"unknown effect {name!r}; the catalogue: {', '.join(sorted(fx.CATALOGUE))}")
@@ -98,7 +99,9 @@ class Discrimination(eqx.Module):
 
     def inputs(self, x) -> Inputs:
         """The inputs of design x (K − 1,) (traceable)."""
-        return Inputs(catheter_length=self.catheter, pressure_demand=KnotProfile(self.knots, demand_at_knots(x, self.p_max)))
+        return Inputs(
+            catheter_length=self.catheter, pressure_demand=KnotProfile(self.knots, demand_at_knots(x, self.p_max))
+        )
 
     def solve(self, inputs, sizes, breaks=None):
         """(length (n,), pressure (n,), jac_length (n, m), jac_pressure (n, m)) of the model at effect ``sizes``
@@ -111,8 +114,9 @@ class Discrimination(eqx.Module):
             moved.update({f: sizes[k] + self.scales[k] * w[p + k] for k, f in enumerate(self.fields)})
             return gp.replace(self.base, **moved)
 
-        s = sensitivity.solve_along(params_of, p + 2 + len(self.rig), inputs, self.config, self.times,
-                                    self.breaks if breaks is None else breaks)
+        s = sensitivity.solve_along(
+            params_of, p + 2 + len(self.rig), inputs, self.config, self.times, self.breaks if breaks is None else breaks
+        )
         return s.length, s.pressure, s.jac_length, s.jac_pressure
 
     def solves(self, inputs, breaks=None):
@@ -127,8 +131,16 @@ class Discrimination(eqx.Module):
         out = []
         for truth, rival in ((0, 1), (1, 0)):
             cols = [*range(p), p + rival]
-            out.append(statistic(length[truth] - length[rival], jac[rival][:, cols], jac[rival][:, p + 2:],
-                                 self.tolerance, self.times, self.hyper))
+            out.append(
+                statistic(
+                    length[truth] - length[rival],
+                    jac[rival][:, cols],
+                    jac[rival][:, p + 2 :],
+                    self.tolerance,
+                    self.times,
+                    self.hyper,
+                )
+            )
         return jnp.stack(out)
 
     def of_runs(self, runs):
@@ -152,8 +164,14 @@ class Discrimination(eqx.Module):
         return jnp.where(jnp.isfinite(value), value, jnp.inf)
 
 
-def make(knowledge: Knowledge, space: DesignSpace, effects, sizes=None, limits: dcon.Limits | None = None,
-         config: Config | None = None) -> Discrimination:
+def make(
+    knowledge: Knowledge,
+    space: DesignSpace,
+    effects,
+    sizes=None,
+    limits: dcon.Limits | None = None,
+    config: Config | None = None,
+) -> Discrimination:
     """The :class:`Discrimination` of ``effects`` (two catalogue names) on ``space``, θ = ``knowledge``'s
     parameters at their estimate (refitted with the rival's effect), its rig and residual model; ``sizes`` (a, b)
     SI: each effect's size, as the truth and as the rival's starting point (default their moderate magnitudes);
@@ -170,15 +188,26 @@ def make(knowledge: Knowledge, space: DesignSpace, effects, sizes=None, limits: 
     prior = np.zeros((p + 2 + q,) * 2)
     prior[:p, :p] = knowledge.covariance
     u = np.asarray(list(knowledge.tolerances.values()), float)
-    prior[p + 2:, p + 2:] = np.diag(u**2)
+    prior[p + 2 :, p + 2 :] = np.diag(u**2)
     return Discrimination(
-        base=as_arrays(base), sizes=jnp.asarray([[sizes[0], 0.0], [0.0, sizes[1]]]), scales=jnp.asarray(scales),
-        knots=jnp.asarray(space.knots), p_max=jnp.asarray(float(space.p_max)), catheter=space.catheter,
-        times=jnp.asarray(space.times), hyper=knowledge.hyper, tolerance=jnp.asarray(u),
-        prior_covariance=jnp.asarray(prior), breaks=space.breaks(),
-        limits=limits if limits is not None else dcon.limits(knowledge.base), names=tuple(knowledge.names),
-        effects=effects, fields=fields, rig=knowledge.rig,
-        config=(config or space.config()).replace(t1=float(space.duration), adjoint="forward").resolved())
+        base=as_arrays(base),
+        sizes=jnp.asarray([[sizes[0], 0.0], [0.0, sizes[1]]]),
+        scales=jnp.asarray(scales),
+        knots=jnp.asarray(space.knots),
+        p_max=jnp.asarray(float(space.p_max)),
+        catheter=space.catheter,
+        times=jnp.asarray(space.times),
+        hyper=knowledge.hyper,
+        tolerance=jnp.asarray(u),
+        prior_covariance=jnp.asarray(prior),
+        breaks=space.breaks(),
+        limits=limits if limits is not None else dcon.limits(knowledge.base),
+        names=tuple(knowledge.names),
+        effects=effects,
+        fields=fields,
+        rig=knowledge.rig,
+        config=(config or space.config()).replace(t1=float(space.duration), adjoint="forward").resolved(),
+    )
 
 
 @eqx.filter_jit

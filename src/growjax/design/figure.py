@@ -25,9 +25,11 @@ def design_figure(result, path) -> Path:
     stepper = space.drive == "inverse"
     scale_d = 1e3 if stepper else 1e-3  # mm of commanded length, or kPa of demand
     baseline = space.baseline_label
-    demands = {baseline: space.baseline_command(fine),
-               "best random input": space.command(result.random.designs[result.random.best], fine),
-               "design": space.command(result.x, fine)}
+    demands = {
+        baseline: space.baseline_command(fine),
+        "best random input": space.command(result.random.designs[result.random.best], fine),
+        "design": space.command(result.x, fine),
+    }
     for label in (baseline, "best random input", "design"):
         color = STYLE.get(label, BASELINE_COLOUR)
         ax_d.plot(fine, demands[label] * scale_d, color=color, lw=1.6 if label == "design" else 1.0, label=label)
@@ -52,13 +54,19 @@ def design_figure(result, path) -> Path:
     row = next(r for r in result.rows if r["input"] == "design" and tuple(r["sensors"]) == result.sensors)
     if result.discrimination:
         a, b = result.discrimination["effects"]
-        ax_d.set_title(f"designed input to tell {a} from {b}: min T {row['T_min']:.1f} (threshold "
-                       f"{result.discrimination['threshold']:.1f}) (bands: range over the rig and θ draws)", fontsize=9)
+        ax_d.set_title(
+            f"designed input to tell {a} from {b}: min T {row['T_min']:.1f} (threshold "
+            f"{result.discrimination['threshold']:.1f}) (bands: range over the rig and θ draws)",
+            fontsize=9,
+        )
     else:
         sds = ", ".join(f"{n.split('.')[-1]} ±{100 * p['sd_log']:.2f} %" for n, p in row["parameters"].items())
         what = "designed step schedule" if stepper else "designed input"
-        ax_d.set_title(f"{what} ({result.criterion}-optimal; {', '.join(result.sensors)}): {sds} "
-                       "(bands: range over the rig and θ draws)", fontsize=9)
+        ax_d.set_title(
+            f"{what} ({result.criterion}-optimal; {', '.join(result.sensors)}): {sds} "
+            "(bands: range over the rig and θ draws)",
+            fontsize=9,
+        )
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=120)

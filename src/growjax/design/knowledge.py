@@ -2,10 +2,10 @@
 tolerances and the residual model's hyperparameters, from a fit of the experiments already run.
 
 The design's prior on w = (ln θ, b) is blockdiag(Σ_θ, U): Σ_θ the fit's covariance of ln θ (what the data
-already say), U = diag(u²) the rig's tolerances (its relative errors b = ln ψ/ψ₀, :mod:`growjax.tolerance`).
+already say), U = diag(u²) the rig's tolerances (its relative errors b = ln ψ/ψ₀, :mod:`growjax.calibration.tolerance`).
 The rig enters the next experiment as a fresh nuisance with its tolerance prior: what the old data said of the
 rig is not carried over (conservative where the next experiment runs on the same rig). A parameter the fit left
-undetermined (no interval, or one wider than its sampling box, :func:`growjax.fit.default_range`) takes a uniform
+undetermined (no interval, or one wider than its sampling box, :func:`growjax.calibration.fit.default_range`) takes a uniform
 prior over that box instead: the box's variance of ln θ, centred on the box (the fit's estimate of such a
 parameter is arbitrary, and can lie far outside the box: draws about it would run the robot in a regime nothing
 supports).
@@ -19,10 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
-from growjax import discrepancy as dc
-from growjax import fit as gf
-from growjax import params as gp
-from growjax import tolerance as tl
+from growjax.calibration import discrepancy as dc
+from growjax.calibration import fit as gf
+from growjax.calibration import tolerance as tl
+from growjax.model import params as gp
 
 # Residual model when no fit gives one: white length noise of 0.2 mm, no discrepancy.
 DEFAULT_HYPER = {"amplitude_m": 0.0, "time_scale_s": 1.0, "noise_m": 2e-4, "noise_time_s": 0.0}
@@ -77,17 +77,21 @@ class Knowledge:
         out[p:, p:] = np.diag(1.0 / u**2)
         return out
 
-    def on(self, base: gp.Parameters) -> "Knowledge":
+    def on(self, base: gp.Parameters) -> Knowledge:
         """What is known, carried to other parameters ``base`` (another drive's, say): θ at its estimate there,
         the rest as here."""
         return dataclasses.replace(self, base=gp.replace(base, **dict(zip(self.names, self.estimate))))
 
     def summary(self) -> dict:
         sd = np.sqrt(np.diag(self.covariance))
-        return {"source": self.source,
-                "parameters": {n: {"estimate": float(v), "sd_log": float(s)}
-                               for n, v, s in zip(self.names, self.estimate, sd)},
-                "tolerances": dict(self.tolerances), "discrepancy": self.hyper.as_dict()}
+        return {
+            "source": self.source,
+            "parameters": {
+                n: {"estimate": float(v), "sd_log": float(s)} for n, v, s in zip(self.names, self.estimate, sd)
+            },
+            "tolerances": dict(self.tolerances),
+            "discrepancy": self.hyper.as_dict(),
+        }
 
 
 def box_variance(base: gp.Parameters, name: str) -> float:
@@ -128,7 +132,7 @@ def _hyper(record: dict | None) -> dc.Hyper:
 
 
 def from_fit(result: gf.FitResult, base: gp.Parameters, tolerances: dict | None = None) -> Knowledge:
-    """What a :class:`growjax.fit.FitResult` of ``base`` knows: θ at its estimate, its covariance of ln θ, its
+    """What a :class:`growjax.calibration.fit.FitResult` of ``base`` knows: θ at its estimate, its covariance of ln θ, its
     residual model and tolerances (``tolerances`` overrides them; None: the fit's, else the default budget)."""
     names = tuple(result.names)
     raw = np.asarray(result.covariance_log, float)
@@ -136,8 +140,7 @@ def from_fit(result: gf.FitResult, base: gp.Parameters, tolerances: dict | None 
     cov = _covariance(base, names, raw, determined)
     est = _centred(base, names, {n: result.estimate[n] for n in names}, determined)
     tol = dict(result.tolerances) if tolerances is None and result.tolerances else tl.budget(base, tolerances, names)
-    return Knowledge(gp.replace(base, **{**result.estimate, **est}), names, cov, tol, _hyper(result.discrepancy),
-                     "fit")
+    return Knowledge(gp.replace(base, **{**result.estimate, **est}), names, cov, tol, _hyper(result.discrepancy), "fit")
 
 
 def from_summary(path, base: gp.Parameters, names, tolerances: dict | None = None) -> Knowledge:

@@ -40,8 +40,16 @@ class Descent:
     start: np.ndarray
 
 
-def adam(value_and_grad: Callable, x0, iterations: int = ITERATIONS, learning_rate: float = LEARNING_RATE,
-         beta1: float = 0.9, beta2: float = 0.999, eps: float = 1e-8, progress=None) -> Descent:
+def adam(
+    value_and_grad: Callable,
+    x0,
+    iterations: int = ITERATIONS,
+    learning_rate: float = LEARNING_RATE,
+    beta1: float = 0.9,
+    beta2: float = 0.999,
+    eps: float = 1e-8,
+    progress=None,
+) -> Descent:
     """Adam on ``value_and_grad(x) → (f, ∇f)`` from ``x0`` (K,), the step decaying linearly to a tenth over
     ``iterations``. A non-finite value (the model failed there) sends the search back to the best point with half
     the step. Returns the best iterate (the start included)."""
@@ -74,8 +82,14 @@ def adam(value_and_grad: Callable, x0, iterations: int = ITERATIONS, learning_ra
 GRADIENTS = ("differences", "jax")
 
 
-def multistart(problem: dprob.Problem, starts, iterations: int = ITERATIONS, learning_rate: float = LEARNING_RATE,
-               gradient: str = "differences", progress: bool = False) -> list[Descent]:
+def multistart(
+    problem: dprob.Problem,
+    starts,
+    iterations: int = ITERATIONS,
+    learning_rate: float = LEARNING_RATE,
+    gradient: str = "differences",
+    progress: bool = False,
+) -> list[Descent]:
     """:func:`adam` on the problem's objective from each row of ``starts`` (S, K − 1), best first. ``gradient``:
     ``"differences"``, the slope over a step of the demand (:func:`growjax.design.problem.smoothed_gradient`), or
     ``"jax"``, the exact derivative by forward mode through the model
@@ -120,8 +134,15 @@ def neighbours(space, x) -> np.ndarray:
 BATCH = 8  # neighbours scored together in the local search (one compiled evaluation each, a thread per core)
 
 
-def local_search(problem: dprob.Problem, space, starts, moves: int = ITERATIONS, seed: int = 0,
-                 batch: int = BATCH, progress: bool = False) -> list[Descent]:
+def local_search(
+    problem: dprob.Problem,
+    space,
+    starts,
+    moves: int = ITERATIONS,
+    seed: int = 0,
+    batch: int = BATCH,
+    progress: bool = False,
+) -> list[Descent]:
     """From each row of ``starts`` (S, N), at most ``moves`` moves of a first-improvement search over the stepper's
     :func:`neighbours`: they are scored ``batch`` at a time in a seeded random order
     (:func:`growjax.design.problem.values`), and the first batch holding one better than the incumbent moves the
@@ -139,7 +160,7 @@ def local_search(problem: dprob.Problem, space, starts, moves: int = ITERATIONS,
                 cands = neighbours(space, x)
                 cands = cands[rng.permutation(len(cands))]
                 for lo in range(0, len(cands), batch):
-                    v = dprob.values(problem, cands[lo: lo + batch])
+                    v = dprob.values(problem, cands[lo : lo + batch])
                     i = int(np.argmin(v))
                     if v[i] < f:
                         x, f = cands[lo + i], float(v[i])
@@ -171,8 +192,16 @@ class RandomBatch:
         return np.argsort(self.criterion)
 
 
-def random_admissible(problem: dprob.Problem, space: DesignSpace, knowledge: Knowledge, n: int, seed: int = 0,
-                      drawn: dict | None = None, rounds: int = ROUNDS, progress: bool = False) -> RandomBatch:
+def random_admissible(
+    problem: dprob.Problem,
+    space: DesignSpace,
+    knowledge: Knowledge,
+    n: int,
+    seed: int = 0,
+    drawn: dict | None = None,
+    rounds: int = ROUNDS,
+    progress: bool = False,
+) -> RandomBatch:
     """n random admissible inputs, scored: each random design simulated over every draw (``drawn``, default
     :func:`growjax.design.constraints.draws` of ``knowledge``, seeded) in batches, the inadmissible dropped, more
     drawn (at most ``rounds`` rounds) until n pass; then the criterion of each (one compiled evaluation per
@@ -185,14 +214,23 @@ def random_admissible(problem: dprob.Problem, space: DesignSpace, knowledge: Kno
     for _ in range(rounds):
         batch = space.random(max(n - len(kept), 1) * 2 if kept or total else n, rng)
         total += len(batch)
-        res = dcon.check(dcon.stack([space.inputs(x) for x in batch]), knowledge, space.config(), space.times, breaks,
-                         problem.limits, drawn)
+        res = dcon.check(
+            dcon.stack([space.inputs(x) for x in batch]),
+            knowledge,
+            space.config(),
+            space.times,
+            breaks,
+            problem.limits,
+            drawn,
+        )
         kept += [x for x, ok in zip(batch, res.admissible) if ok]
         if len(kept) >= n:
             break
     if not kept:
-        raise ValueError(f"none of {total} random inputs in [0, {space.p_max / 1e3:.0f} kPa] stays inside the limits "
-                         "for every draw of the rig: lower p_max or shorten the run")
+        raise ValueError(
+            f"none of {total} random inputs in [0, {space.p_max / 1e3:.0f} kPa] stays inside the limits "
+            "for every draw of the rig: lower p_max or shorten the run"
+        )
     designs = np.asarray(kept[:n])
     _progress.note(f"design: scoring {len(designs)} random admissible inputs", progress)
     crit = dprob.evaluate_many(problem, designs)[:, 0]

@@ -27,9 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from growjax import discrepancy as dc
-from growjax import params as gp
-from growjax.config import Config
+from growjax.calibration import discrepancy as dc
 from growjax.control.profile import KnotProfile
 from growjax.control.tuning import rig_draws
 from growjax.design import constraints as dcon
@@ -37,8 +35,10 @@ from growjax.design import criterion as dcrit
 from growjax.design import sensitivity
 from growjax.design.knowledge import Knowledge
 from growjax.design.space import DesignSpace, demand_at_knots, stepper_inputs
-from growjax.signals import Inputs
-from growjax.simulate import as_arrays
+from growjax.model import params as gp
+from growjax.model.signals import Inputs
+from growjax.simulation.config import Config
+from growjax.simulation.simulate import as_arrays
 
 POINTS = 4  # points of (θ, rig) the criterion is averaged over
 DEMAND_STEP = 0.02  # share of p_max by which :func:`smoothed_gradient` moves each knot
@@ -74,11 +74,21 @@ class Problem(eqx.Module):
         """The inputs of design x (traceable): the demand's logits (K − 1,) or the stepper's steps (N,)."""
         if self.drive == "inverse":
             return stepper_inputs(self.catheter, self.knots, x)
-        return Inputs(catheter_length=self.catheter, pressure_demand=KnotProfile(self.knots, demand_at_knots(x, self.p_max)))
+        return Inputs(
+            catheter_length=self.catheter, pressure_demand=KnotProfile(self.knots, demand_at_knots(x, self.p_max))
+        )
 
     def sensitivities(self, inputs, breaks=None, z=None) -> sensitivity.Sensitivities:
-        return sensitivity.solve(self.base, inputs, self.names, self.rig, self.config, self.times,
-                                 self.breaks if breaks is None else breaks, z)
+        return sensitivity.solve(
+            self.base,
+            inputs,
+            self.names,
+            self.rig,
+            self.config,
+            self.times,
+            self.breaks if breaks is None else breaks,
+            z,
+        )
 
     def predict(self, inputs, breaks=None, z=None, sensors=None, nonlinear: bool = False) -> dcrit.Prediction:
         """The :class:`growjax.design.criterion.Prediction` of ``inputs`` (their ``breaks``, default the design
@@ -88,10 +98,19 @@ class Problem(eqx.Module):
         s = self.sensitivities(inputs, breaks, z)
         rem = None
         if nonlinear and self.offsets.shape[0]:
-            rem = sensitivity.remainder(self.base, inputs, self.names, self.rig, self.config, self.times, breaks, s,
-                                        self.offsets, z)
-        return dcrit.posterior(s, self.times, self.hyper, self.precision_known, self.precision_alone,
-                               self.sensors if sensors is None else sensors, self.pressure_noise, rem)
+            rem = sensitivity.remainder(
+                self.base, inputs, self.names, self.rig, self.config, self.times, breaks, s, self.offsets, z
+            )
+        return dcrit.posterior(
+            s,
+            self.times,
+            self.hyper,
+            self.precision_known,
+            self.precision_alone,
+            self.sensors if sensors is None else sensors,
+            self.pressure_noise,
+            rem,
+        )
 
     def covariance(self, inputs, breaks=None):
         """The covariance (m, m) of the estimate of w with what is known that the table reports
@@ -114,9 +133,18 @@ class Problem(eqx.Module):
         return jnp.where(jnp.isfinite(value), value, jnp.inf)
 
 
-def make(knowledge: Knowledge, space: DesignSpace, criterion: str = "A", sensors=("length",),
-         pressure_noise: float = dcrit.PRESSURE_NOISE, limits: dcon.Limits | None = None, points: int = POINTS,
-         seed: int = 0, config: Config | None = None, nonlinear_draws: int = NONLINEAR_DRAWS) -> Problem:
+def make(
+    knowledge: Knowledge,
+    space: DesignSpace,
+    criterion: str = "A",
+    sensors=("length",),
+    pressure_noise: float = dcrit.PRESSURE_NOISE,
+    limits: dcon.Limits | None = None,
+    points: int = POINTS,
+    seed: int = 0,
+    config: Config | None = None,
+    nonlinear_draws: int = NONLINEAR_DRAWS,
+) -> Problem:
     """The :class:`Problem` of designing ``space``'s input given ``knowledge``; ``criterion`` ``"A"`` or ``"D"`` on
     the parameters of interest; ``points``: the points of (θ, rig) the criterion is averaged over (1: the local
     design at the estimate; more: the estimate and draws from the prior, seeded); ``config``: the fast
@@ -130,8 +158,9 @@ def make(knowledge: Knowledge, space: DesignSpace, criterion: str = "A", sensors
         raise ValueError(f"points must be at least 1, got {points}")
     prior = knowledge.prior_covariance()
     rng = np.random.default_rng([seed, 3])
-    zs = np.concatenate([np.zeros((1, prior.shape[0])),
-                         rng.multivariate_normal(np.zeros(prior.shape[0]), prior, size=points - 1)])
+    zs = np.concatenate(
+        [np.zeros((1, prior.shape[0])), rng.multivariate_normal(np.zeros(prior.shape[0]), prior, size=points - 1)]
+    )
     lim = limits if limits is not None else dcon.limits(knowledge.base)
     drawn = rig_draws(nonlinear_draws, knowledge.base, knowledge.tolerances, seed + 1) if nonlinear_draws else {}
     offsets = np.zeros((0, len(knowledge.rig)))
@@ -139,16 +168,27 @@ def make(knowledge: Knowledge, space: DesignSpace, criterion: str = "A", sensors
         offsets = np.stack([np.log(drawn[n] / float(gp.get(knowledge.base, n))) for n in knowledge.rig], axis=1)
     stepper = space.drive == "inverse"
     return Problem(
-        base=as_arrays(knowledge.base), knots=jnp.asarray(space.edges if stepper else space.knots),
+        base=as_arrays(knowledge.base),
+        knots=jnp.asarray(space.edges if stepper else space.knots),
         p_max=jnp.asarray(0.0 if stepper else float(space.p_max)),
-        catheter=space.catheter, times=jnp.asarray(space.times), hyper=knowledge.hyper,
+        catheter=space.catheter,
+        times=jnp.asarray(space.times),
+        hyper=knowledge.hyper,
         precision_known=jnp.asarray(knowledge.prior_precision(True)),
         precision_alone=jnp.asarray(knowledge.prior_precision(False)),
-        prior_covariance=jnp.asarray(prior), points=jnp.asarray(zs), offsets=jnp.asarray(offsets),
-        breaks=space.breaks(), limits=lim, names=tuple(knowledge.names), rig=knowledge.rig, sensors=sensors,
-        pressure_noise=float(pressure_noise), criterion=dcrit.Precision(len(knowledge.names), criterion),
+        prior_covariance=jnp.asarray(prior),
+        points=jnp.asarray(zs),
+        offsets=jnp.asarray(offsets),
+        breaks=space.breaks(),
+        limits=lim,
+        names=tuple(knowledge.names),
+        rig=knowledge.rig,
+        sensors=sensors,
+        pressure_noise=float(pressure_noise),
+        criterion=dcrit.Precision(len(knowledge.names), criterion),
         config=(config or space.config()).replace(t1=float(space.duration), adjoint="forward").resolved(),
-        drive=space.drive)
+        drive=space.drive,
+    )
 
 
 @eqx.filter_jit
@@ -177,6 +217,7 @@ def information(problem: Problem, inputs, breaks):
 def _information(problem: Problem, inputs, breaks):
     """:func:`information`'s outputs and the limits' penalty at the estimate (:func:`growjax.design.constraints.penalty`).
     The first point is the estimate (:func:`make`), so its sensitivities serve the penalty and the cross term too."""
+
     def info(s):
         w = dc.whiten(s.jac_length, problem.times, problem.hyper)
         jp = s.jac_pressure / problem.pressure_noise
@@ -189,12 +230,19 @@ def _information(problem: Problem, inputs, breaks):
     m, d = s.jac_length.shape[1], problem.offsets.shape[0]
     cross = jnp.zeros((m, 0))
     if d:
-        rem = sensitivity.remainder(problem.base, inputs, problem.names, problem.rig, problem.config, problem.times,
-                                    breaks, s, problem.offsets)
+        rem = sensitivity.remainder(
+            problem.base, inputs, problem.names, problem.rig, problem.config, problem.times, breaks, s, problem.offsets
+        )
         w = dc.whiten(jnp.concatenate([s.jac_length, rem / jnp.sqrt(d)], axis=1), problem.times, problem.hyper)
         cross = w[:, :m].T @ w[:, m:]
-    return info_l, info_p, cross, s.length, s.pressure, dcon.penalty(s, problem.prior_covariance, problem.limits,
-                                                                      problem.spread)
+    return (
+        info_l,
+        info_p,
+        cross,
+        s.length,
+        s.pressure,
+        dcon.penalty(s, problem.prior_covariance, problem.limits, problem.spread),
+    )
 
 
 def covariances(problem: Problem, info_length, info_pressure, cross, sensors) -> dict:

@@ -1,7 +1,7 @@
 """The model's length and pressure under an input, with their sensitivities to w = (ln θ, b): one forward
 sensitivity solve of the fast configuration.
 
-The solve is plain JAX (the Rosenbrock integrator's loop, :func:`growjax._fast_solve.solve_with_sensitivities`),
+The solve is plain JAX (the Rosenbrock integrator's loop, :func:`growjax.simulation._fast_solve.solve_with_sensitivities`),
 so forward mode differentiates it again: ``jax.jvp`` of :func:`solve` along a change of the input gives the
 sensitivities' own derivatives, and with them the gradient of any criterion built on them with respect to the
 design (a while loop, so forward mode only: one tangent per design variable).
@@ -15,11 +15,11 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from growjax import _fast_solve
-from growjax import effects as fx
-from growjax import params as gp
-from growjax.simulate import as_arrays, simulate
-from growjax.trajectory import OK
+from growjax.model import effects as fx
+from growjax.model import params as gp
+from growjax.simulation import _fast_solve
+from growjax.simulation.simulate import as_arrays, simulate
+from growjax.simulation.trajectory import OK
 
 
 class Sensitivities(NamedTuple):
@@ -61,13 +61,15 @@ def solve_along(params_of, m: int, inputs, config, ts, breaks) -> Sensitivities:
     d_float = jax.vmap(lambda e: jax.jvp(applied, (w0,), (e,))[1])(jnp.eye(m))
     d_params = eqx.combine(d_float, jax.tree_util.tree_map(zeros, eqx.filter(params, mask, inverse=True)))
     d_inputs = jax.tree_util.tree_map(zeros, inputs)
-    traj, tangents = _fast_solve.solve_with_sensitivities(params, inputs, config, jnp.asarray(ts), *breaks,
-                                                          (d_params, d_inputs))
+    traj, tangents = _fast_solve.solve_with_sensitivities(
+        params, inputs, config, jnp.asarray(ts), *breaks, (d_params, d_inputs)
+    )
     return Sensitivities(traj.length, traj.pressure, tangents["length"].T, tangents["pressure"].T, traj.status == OK)
 
 
-def remainder(base: gp.Parameters, inputs, names: tuple, rig: tuple, config, ts, breaks, s: Sensitivities, offsets,
-              z=None):
+def remainder(
+    base: gp.Parameters, inputs, names: tuple, rig: tuple, config, ts, breaks, s: Sensitivities, offsets, z=None
+):
     """R (n, D) m: what the rig's linearised effect misses, L(b + b_k) − L(b) − G b_k for each row b_k of
     ``offsets`` (D, q) (the rig's relative errors) about the point ``z`` (p + q,) of w (default 0); ``s`` the
     sensitivities there (G its rig columns). One plain solve per draw and one at the point (traceable)."""

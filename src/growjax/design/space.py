@@ -12,7 +12,7 @@ declared slope break, so the solver's breaks do not depend on the values). The c
 gives, not a design variable: its length is the one of the experiment already run (held after its end).
 
 The stepper's input is discrete. Its position controller samples the desired length every 1/f s and issues at
-most one step per period, half a period later (:func:`growjax.motor.step_schedule`), so every schedule it can
+most one step per period, half a period later (:func:`growjax.model.motor.step_schedule`), so every schedule it can
 issue is a choice of −1, 0 or +1 step at each of the same edge times. A design is that vector of choices; the
 schedule's count is its running sum, never below 0 (the robot starts at rest). All schedules share their edges,
 hence the solver's breaks and one compiled program; the criterion is piecewise constant in them, so the search
@@ -30,12 +30,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from growjax import experiment as ex
-from growjax.config import Config
 from growjax.control.profile import KnotProfile
-from growjax.motor import step_schedule
-from growjax.signals import Constant, Inputs, Sampled, StepSchedule, published_pulse
-from growjax.simulate import input_breaks
+from growjax.data import experiment as ex
+from growjax.model.motor import step_schedule
+from growjax.model.signals import Constant, Inputs, Sampled, StepSchedule, published_pulse
+from growjax.simulation.config import Config
+from growjax.simulation.simulate import input_breaks
 
 KNOT_SPACING = 0.5  # s between the demand's knots
 SAMPLE_INTERVAL = 0.01  # s between the sensors' samples (100 Hz, as the shipped experiments)
@@ -65,7 +65,9 @@ class DesignSpace:
         if not 0 < self.knot_spacing <= self.duration:
             raise ValueError(f"the knot spacing must lie in (0, duration = {self.duration} s], got {self.knot_spacing}")
         if not 0 < self.sample_interval <= self.duration:
-            raise ValueError(f"the sample interval must lie in (0, duration = {self.duration} s], got {self.sample_interval}")
+            raise ValueError(
+                f"the sample interval must lie in (0, duration = {self.duration} s], got {self.sample_interval}"
+            )
 
     @property
     def knots(self) -> np.ndarray:
@@ -99,7 +101,9 @@ class DesignSpace:
 
     def inputs(self, x) -> Inputs:
         """The model's inputs under design x (K − 1,) (traceable)."""
-        return Inputs(catheter_length=self.catheter, pressure_demand=KnotProfile(jnp.asarray(self.knots), self.demand(x)))
+        return Inputs(
+            catheter_length=self.catheter, pressure_demand=KnotProfile(jnp.asarray(self.knots), self.demand(x))
+        )
 
     def breaks(self):
         """The inputs' (jump, slope-break) times the solver steps onto: the same for every design."""
@@ -150,8 +154,13 @@ class DesignSpace:
         return {"knots_s": self.knots.tolist(), "demand_Pa": np.asarray(self.demand(x)).tolist()}
 
     def settings(self) -> dict:
-        return {"drive": self.drive, "duration_s": self.duration, "knot_spacing_s": self.knot_spacing,
-                "p_max_Pa": self.p_max, "sample_interval_s": self.sample_interval}
+        return {
+            "drive": self.drive,
+            "duration_s": self.duration,
+            "knot_spacing_s": self.knot_spacing,
+            "p_max_Pa": self.p_max,
+            "sample_interval_s": self.sample_interval,
+        }
 
 
 def demand_at_knots(x, p_max):
@@ -193,7 +202,7 @@ def stepper_inputs(catheter, edges, x) -> Inputs:
 class StepperSpace:
     """The stepper (inverse) drive's schedule over ``duration`` s: at each of the position controller's edges
     (:attr:`edges`, every 1/``rate`` s) −1, 0 or +1 step, each step ``metres_per_step`` m of commanded robot length
-    (:func:`growjax.experiment.demand_steps`); the catheter length ``catheter`` (a signal, m); the baseline
+    (:func:`growjax.data.experiment.demand_steps`); the catheter length ``catheter`` (a signal, m); the baseline
     ``recorded`` (a desired length, m, as a signal: the length the experiment already run recorded, which is what the
     shipped stepper model is driven by); the sensors sampled every ``sample_interval`` s. Build it with
     :func:`stepper_space`."""
@@ -326,12 +335,20 @@ class StepperSpace:
         return Path(path)
 
     def describe(self, x) -> dict:
-        return {"edges_s": self.edges.tolist(), "steps": np.asarray(x, float).tolist(),
-                "commanded_length_m": np.asarray(self.demand(x)).tolist()}
+        return {
+            "edges_s": self.edges.tolist(),
+            "steps": np.asarray(x, float).tolist(),
+            "commanded_length_m": np.asarray(self.demand(x)).tolist(),
+        }
 
     def settings(self) -> dict:
-        return {"drive": self.drive, "duration_s": self.duration, "controller_rate_Hz": self.rate,
-                "metres_per_step": self.metres_per_step, "sample_interval_s": self.sample_interval}
+        return {
+            "drive": self.drive,
+            "duration_s": self.duration,
+            "controller_rate_Hz": self.rate,
+            "metres_per_step": self.metres_per_step,
+            "sample_interval_s": self.sample_interval,
+        }
 
 
 def stepper_space(base, duration: float, experiment: ex.Experiment | None = None) -> StepperSpace:
@@ -341,5 +358,11 @@ def stepper_space(base, duration: float, experiment: ex.Experiment | None = None
     if experiment is not None and "robot_length_m" in experiment:
         recorded = held(experiment, "robot_length_m", duration)
     per_metre = float(ex.demand_steps(base, 1.0))
-    return StepperSpace(float(duration), 1.0 / per_metre, float(base.motor.controller_rate),
-                        catheter_of(experiment, duration), recorded, t0=Config().t0)
+    return StepperSpace(
+        float(duration),
+        1.0 / per_metre,
+        float(base.motor.controller_rate),
+        catheter_of(experiment, duration),
+        recorded,
+        t0=Config().t0,
+    )

@@ -13,8 +13,7 @@ import jax
 import numpy as np
 
 from growjax import _progress
-from growjax import effects as fx
-from growjax import fit as gf
+from growjax.calibration import fit as gf
 from growjax.design import constraints as dcon
 from growjax.design import criterion as dcrit
 from growjax.design import discrimination as ddis
@@ -22,8 +21,9 @@ from growjax.design import optimise as dopt
 from growjax.design import problem as dprob
 from growjax.design.knowledge import Knowledge
 from growjax.design.space import DesignSpace, StepperSpace
-from growjax.signals import Inputs
-from growjax.simulate import input_breaks
+from growjax.model import effects as fx
+from growjax.model.signals import Inputs
+from growjax.simulation.simulate import input_breaks
 
 SHRINK = (0.97, 0.93, 0.88, 0.8, 0.7)  # demand scalings tried on a design that fails its check
 
@@ -64,22 +64,33 @@ class DesignResult:
 
     def summary(self) -> dict:
         random = self.random
-        defined = np.asarray(random.criterion)[np.isfinite(random.criterion)]  # inf or NaN: the model failed, or no information
+        defined = np.asarray(random.criterion)[
+            np.isfinite(random.criterion)
+        ]  # inf or NaN: the model failed, or no information
         return {
-            "parameters": list(self.names), "criterion": self.criterion, "sensors": list(self.sensors),
+            "parameters": list(self.names),
+            "criterion": self.criterion,
+            "sensors": list(self.sensors),
             **self.space.settings(),
             "design": {**self.space.describe(self.x), "demand_scaled": self.scaled},
             "table": self.rows,
             "checks": {k: c.row(0) for k, c in self.checks.items()},
             "limits": self.limits.summary(),
-            "random": {"admissible": int(len(random.designs)), "drawn": random.drawn,
-                       "criterion_best": float(random.criterion[random.best]),
-                       "criterion_quantiles": {q: float(np.quantile(defined, float(q))) if defined.size else None
-                                               for q in ("0.1", "0.5", "0.9")},
-                       "criterion_undefined": int(np.sum(~np.isfinite(random.criterion)))},
-            "descents": [{"start_criterion": float(d.history[0]), "best": float(d.value), "history": d.history}
-                         for d in self.descents],
-            "knowledge": self.knowledge, "wall_s": self.wall_s,
+            "random": {
+                "admissible": int(len(random.designs)),
+                "drawn": random.drawn,
+                "criterion_best": float(random.criterion[random.best]),
+                "criterion_quantiles": {
+                    q: float(np.quantile(defined, float(q))) if defined.size else None for q in ("0.1", "0.5", "0.9")
+                },
+                "criterion_undefined": int(np.sum(~np.isfinite(random.criterion))),
+            },
+            "descents": [
+                {"start_criterion": float(d.history[0]), "best": float(d.value), "history": d.history}
+                for d in self.descents
+            ],
+            "knowledge": self.knowledge,
+            "wall_s": self.wall_s,
             **({"discrimination": self.discrimination} if self.discrimination else {}),
         }
 
@@ -90,11 +101,24 @@ def published_inputs(space: DesignSpace | StepperSpace) -> Inputs:
     return space.baseline_inputs()
 
 
-def design(knowledge: Knowledge, space: DesignSpace | StepperSpace, criterion: str = "A", sensors=("length",),
-           random: int = 64, starts: int = 1, iterations: int = dopt.ITERATIONS, n_draws: int = dcon.DRAWS, seed: int = 0,
-           points: int = dprob.POINTS, pressure_noise: float = dcrit.PRESSURE_NOISE, limits: dcon.Limits | None = None,
-           learning_rate: float = dopt.LEARNING_RATE, nonlinear_draws: int = dprob.NONLINEAR_DRAWS,
-           gradient: str = "differences", progress: bool = False) -> DesignResult:
+def design(
+    knowledge: Knowledge,
+    space: DesignSpace | StepperSpace,
+    criterion: str = "A",
+    sensors=("length",),
+    random: int = 64,
+    starts: int = 1,
+    iterations: int = dopt.ITERATIONS,
+    n_draws: int = dcon.DRAWS,
+    seed: int = 0,
+    points: int = dprob.POINTS,
+    pressure_noise: float = dcrit.PRESSURE_NOISE,
+    limits: dcon.Limits | None = None,
+    learning_rate: float = dopt.LEARNING_RATE,
+    nonlinear_draws: int = dprob.NONLINEAR_DRAWS,
+    gradient: str = "differences",
+    progress: bool = False,
+) -> DesignResult:
     """Design the next experiment's input for the precision of ``knowledge``'s parameters.
 
     ``random`` random admissible inputs are drawn and scored (:func:`growjax.design.optimise.random_admissible`);
@@ -112,31 +136,74 @@ def design(knowledge: Knowledge, space: DesignSpace | StepperSpace, criterion: s
     """
     clock, wall = time.perf_counter(), {}
     sensors = tuple(sensors)
-    problem = dprob.make(knowledge, space, criterion, sensors, pressure_noise, limits, points, seed,
-                         nonlinear_draws=nonlinear_draws)
+    problem = dprob.make(
+        knowledge, space, criterion, sensors, pressure_noise, limits, points, seed, nonlinear_draws=nonlinear_draws
+    )
     lim = problem.limits
     if space.drive == "forward" and space.p_max > lim.pressure + 1e-9:
-        raise ValueError(f"p_max {space.p_max / 1e3:.1f} kPa is above the sensed-pressure ceiling "
-                         f"{lim.pressure / 1e3:.1f} kPa (the membrane limit {lim.membrane / 1e3:.1f} kPa × the margin)")
+        raise ValueError(
+            f"p_max {space.p_max / 1e3:.1f} kPa is above the sensed-pressure ceiling "
+            f"{lim.pressure / 1e3:.1f} kPa (the membrane limit {lim.membrane / 1e3:.1f} kPa × the margin)"
+        )
     sets = [sensors] if sensors == ("length",) else [("length",), sensors]
     rows, batch, descents, x, scaled, checks, wall = _search(
-        problem, knowledge, space, random, starts, iterations, n_draws, seed, learning_rate, gradient, progress,
-        lambda inputs, breaks: _row(problem, knowledge, space.baseline_label, inputs, breaks, sets))
+        problem,
+        knowledge,
+        space,
+        random,
+        starts,
+        iterations,
+        n_draws,
+        seed,
+        learning_rate,
+        gradient,
+        progress,
+        lambda inputs, breaks: _row(problem, knowledge, space.baseline_label, inputs, breaks, sets),
+    )
     best_random = batch.designs[batch.best]
-    for label, inputs, breaks in (("best random input", space.inputs(best_random), problem.breaks),
-                                  ("design", space.inputs(x), problem.breaks)):
+    for label, inputs, breaks in (
+        ("best random input", space.inputs(best_random), problem.breaks),
+        ("design", space.inputs(x), problem.breaks),
+    ):
         rows += _row(problem, knowledge, label, inputs, breaks, sets)
     wall["total_s"] = time.perf_counter() - clock
     knots = space.edges if space.drive == "inverse" else space.knots
-    return DesignResult(tuple(knowledge.names), knowledge.estimate, space, x, knots, np.asarray(space.demand(x)),
-                        rows, checks, batch, descents, lim, criterion, sensors, knowledge.summary(), wall, scaled)
+    return DesignResult(
+        tuple(knowledge.names),
+        knowledge.estimate,
+        space,
+        x,
+        knots,
+        np.asarray(space.demand(x)),
+        rows,
+        checks,
+        batch,
+        descents,
+        lim,
+        criterion,
+        sensors,
+        knowledge.summary(),
+        wall,
+        scaled,
+    )
 
 
-def discriminate(knowledge: Knowledge, space: DesignSpace, effects, sizes=None, random: int = 64, starts: int = 1,
-                 iterations: int = dopt.ITERATIONS, n_draws: int = dcon.DRAWS, seed: int = 0,
-                 limits: dcon.Limits | None = None, learning_rate: float = dopt.LEARNING_RATE,
-                 gradient: str = "differences", false_positive_rate: float = 0.05,
-                 progress: bool = False) -> DesignResult:
+def discriminate(
+    knowledge: Knowledge,
+    space: DesignSpace,
+    effects,
+    sizes=None,
+    random: int = 64,
+    starts: int = 1,
+    iterations: int = dopt.ITERATIONS,
+    n_draws: int = dcon.DRAWS,
+    seed: int = 0,
+    limits: dcon.Limits | None = None,
+    learning_rate: float = dopt.LEARNING_RATE,
+    gradient: str = "differences",
+    false_positive_rate: float = 0.05,
+    progress: bool = False,
+) -> DesignResult:
     """Design the next experiment's input to tell two rival catalogue ``effects`` (A, B) apart: the input that
     maximises min(T_AB, T_BA) (:mod:`growjax.design.discrimination`), with ``knowledge``'s parameters refitted
     beside the rival's effect; ``sizes`` (a, b) SI: the effects' assumed sizes (default their moderate
@@ -149,36 +216,84 @@ def discriminate(knowledge: Knowledge, space: DesignSpace, effects, sizes=None, 
     from growjax.discover import boundary_threshold
 
     if space.drive != "forward":
-        raise ValueError("the discrimination design is built for the forward drive's demand, not the stepper's schedule")
+        raise ValueError(
+            "the discrimination design is built for the forward drive's demand, not the stepper's schedule"
+        )
     clock = time.perf_counter()
     problem = ddis.make(knowledge, space, effects, sizes, limits)
     lim = problem.limits
     if space.p_max > lim.pressure + 1e-9:
-        raise ValueError(f"p_max {space.p_max / 1e3:.1f} kPa is above the sensed-pressure ceiling "
-                         f"{lim.pressure / 1e3:.1f} kPa (the membrane limit {lim.membrane / 1e3:.1f} kPa × the margin)")
+        raise ValueError(
+            f"p_max {space.p_max / 1e3:.1f} kPa is above the sensed-pressure ceiling "
+            f"{lim.pressure / 1e3:.1f} kPa (the membrane limit {lim.membrane / 1e3:.1f} kPa × the margin)"
+        )
     threshold = boundary_threshold(false_positive_rate / len(fx.CATALOGUE))
     base_t, batch, descents, x, scaled, checks, wall = _search(
-        problem, knowledge, space, random, starts, iterations, n_draws, seed, learning_rate, gradient, progress,
-        lambda inputs, breaks: ddis.statistics(problem, inputs, breaks))
+        problem,
+        knowledge,
+        space,
+        random,
+        starts,
+        iterations,
+        n_draws,
+        seed,
+        learning_rate,
+        gradient,
+        progress,
+        lambda inputs, breaks: ddis.statistics(problem, inputs, breaks),
+    )
     a, b = problem.effects
     rows = []
-    for label, t in (("published pulse train", base_t),
-                     ("best random input", ddis.statistics(problem, space.inputs(batch.designs[batch.best]), problem.breaks)),
-                     ("design", ddis.statistics(problem, space.inputs(x), problem.breaks))):
+    for label, t in (
+        ("published pulse train", base_t),
+        ("best random input", ddis.statistics(problem, space.inputs(batch.designs[batch.best]), problem.breaks)),
+        ("design", ddis.statistics(problem, space.inputs(x), problem.breaks)),
+    ):
         t_ab, t_ba = (max(float(v), 0.0) for v in t)
-        rows.append({"input": label, "sensors": ["length"], "criterion": -float(np.log(max(min(t_ab, t_ba), ddis.FLOOR))),
-                     "T": {f"{a} real, {b} fitted": t_ab, f"{b} real, {a} fitted": t_ba}, "T_min": min(t_ab, t_ba),
-                     "expected_to_separate": bool(min(t_ab, t_ba) > threshold)})
+        rows.append(
+            {
+                "input": label,
+                "sensors": ["length"],
+                "criterion": -float(np.log(max(min(t_ab, t_ba), ddis.FLOOR))),
+                "T": {f"{a} real, {b} fitted": t_ab, f"{b} real, {a} fitted": t_ba},
+                "T_min": min(t_ab, t_ba),
+                "expected_to_separate": bool(min(t_ab, t_ba) > threshold),
+            }
+        )
     wall["total_s"] = time.perf_counter() - clock
     sizes = np.diag(np.asarray(problem.sizes))
-    record = {"effects": [a, b], "parameters": list(problem.fields), "sizes": [float(v) for v in sizes],
-              "refitted": list(knowledge.names), "threshold": threshold, "false_positive_rate": false_positive_rate}
-    return DesignResult((a, b), knowledge.estimate, space, x, space.knots, np.asarray(space.demand(x)), rows, checks,
-                        batch, descents, lim, "discrimination", ("length",), knowledge.summary(), wall, scaled, record)
+    record = {
+        "effects": [a, b],
+        "parameters": list(problem.fields),
+        "sizes": [float(v) for v in sizes],
+        "refitted": list(knowledge.names),
+        "threshold": threshold,
+        "false_positive_rate": false_positive_rate,
+    }
+    return DesignResult(
+        (a, b),
+        knowledge.estimate,
+        space,
+        x,
+        space.knots,
+        np.asarray(space.demand(x)),
+        rows,
+        checks,
+        batch,
+        descents,
+        lim,
+        "discrimination",
+        ("length",),
+        knowledge.summary(),
+        wall,
+        scaled,
+        record,
+    )
 
 
-def _search(problem, knowledge, space, random, starts, iterations, n_draws, seed, learning_rate, gradient, progress,
-            baseline):
+def _search(
+    problem, knowledge, space, random, starts, iterations, n_draws, seed, learning_rate, gradient, progress, baseline
+):
     """The random batch, the search from its best, the check of the result and of the two baselines over the
     draws; beside them (its programs compile while the search runs) ``baseline(inputs, breaks)`` of the space's
     baseline, the table's row: (that row, batch, descents, design, the share of its demand kept, checks, wall
@@ -189,9 +304,21 @@ def _search(problem, knowledge, space, random, starts, iterations, n_draws, seed
     base_inputs = space.baseline_inputs()
     base_breaks = input_breaks(base_inputs, space.config())
     with ThreadPoolExecutor(max_workers=1) as pool:
-        published = pool.submit(lambda: (baseline(base_inputs, base_breaks),
-                                         dcon.check(dcon.stack([base_inputs]), knowledge, space.config(), space.times,
-                                                    base_breaks, lim, drawn, keep_runs=True)))
+        published = pool.submit(
+            lambda: (
+                baseline(base_inputs, base_breaks),
+                dcon.check(
+                    dcon.stack([base_inputs]),
+                    knowledge,
+                    space.config(),
+                    space.times,
+                    base_breaks,
+                    lim,
+                    drawn,
+                    keep_runs=True,
+                ),
+            )
+        )
         _progress.note(f"design: {random} random admissible inputs, each checked over {n_draws} draws", progress)
         batch = dopt.random_admissible(problem, space, knowledge, random, seed, drawn, progress=progress)
         wall["random_s"] = batch.wall_s
@@ -203,8 +330,9 @@ def _search(problem, knowledge, space, random, starts, iterations, n_draws, seed
             descents = dopt.multistart(problem, batch.designs[order], iterations, learning_rate, gradient, progress)
         wall["descent_s"] = time.perf_counter() - t
         t = time.perf_counter()
-        x, scaled, check = _admissible(problem, space, knowledge, _by_reported(problem, space, descents, batch, starts),
-                                       drawn, lim)
+        x, scaled, check = _admissible(
+            problem, space, knowledge, _by_reported(problem, space, descents, batch, starts), drawn, lim
+        )
         wall["check_s"] = time.perf_counter() - t
         checks = {"design": check, "best random input": _one(space, knowledge, batch.designs[batch.best], drawn, lim)}
         row, checks[space.baseline_label] = published.result()
@@ -230,23 +358,41 @@ def _covariances(problem, inputs, breaks, sets) -> list[dict]:
 def _admissible(problem, space, knowledge, xs, drawn, lim):
     """(design, the share of its demand kept, its check): the first of ``xs`` (S, K − 1) that passes the check
     over the draws, else the first scaled down until it does."""
-    check = dcon.check(dcon.stack([space.inputs(x) for x in xs]), knowledge, space.config(), space.times, space.breaks(),
-                       lim, drawn)
+    check = dcon.check(
+        dcon.stack([space.inputs(x) for x in xs]), knowledge, space.config(), space.times, space.breaks(), lim, drawn
+    )
     for i in np.flatnonzero(check.admissible):
         return xs[i], 1.0, _one(space, knowledge, xs[i], drawn, lim)
     scaled = [space.scaled(xs[0], f) for f in SHRINK]
-    check = dcon.check(dcon.stack([space.inputs(x) for x in scaled]), knowledge, space.config(), space.times,
-                       space.breaks(), lim, drawn)
+    check = dcon.check(
+        dcon.stack([space.inputs(x) for x in scaled]),
+        knowledge,
+        space.config(),
+        space.times,
+        space.breaks(),
+        lim,
+        drawn,
+    )
     for i in np.flatnonzero(check.admissible):
         return scaled[i], SHRINK[i], _one(space, knowledge, scaled[i], drawn, lim)
-    raise DesignError(f"no admissible design: over the draws the best one reaches {check.peak_pressure[0] / 1e3:.1f} kPa "
-                      f"(ceiling {lim.pressure / 1e3:.1f}) and {check.peak_length[0] * 1e3:.1f} mm "
-                      f"(ceiling {lim.length * 1e3:.1f}); lower p_max or shorten the run")
+    raise DesignError(
+        f"no admissible design: over the draws the best one reaches {check.peak_pressure[0] / 1e3:.1f} kPa "
+        f"(ceiling {lim.pressure / 1e3:.1f}) and {check.peak_length[0] * 1e3:.1f} mm "
+        f"(ceiling {lim.length * 1e3:.1f}); lower p_max or shorten the run"
+    )
 
 
 def _one(space, knowledge, x, drawn, lim):
-    return dcon.check(dcon.stack([space.inputs(x)]), knowledge, space.config(), space.times, space.breaks(), lim, drawn,
-                      keep_runs=True)
+    return dcon.check(
+        dcon.stack([space.inputs(x)]),
+        knowledge,
+        space.config(),
+        space.times,
+        space.breaks(),
+        lim,
+        drawn,
+        keep_runs=True,
+    )
 
 
 def _row(problem, knowledge: Knowledge, label: str, inputs, breaks, sets) -> list[dict]:
@@ -255,15 +401,21 @@ def _row(problem, knowledge: Knowledge, label: str, inputs, breaks, sets) -> lis
     theta = knowledge.estimate
     rows = []
     for sensors, covs in zip(sets, _covariances(problem, inputs, breaks, sets)):
-        sd, sd_alone, sd_linear = (np.sqrt(np.clip(np.diag(covs[k])[:p], 0, None))
-                                   for k in ("known", "alone", "known_local"))
+        sd, sd_alone, sd_linear = (
+            np.sqrt(np.clip(np.diag(covs[k])[:p], 0, None)) for k in ("known", "alone", "known_local")
+        )
         cov = covs["known"]
         params = {}
         for i, n in enumerate(knowledge.names):
             lo, hi = theta[i] * np.exp(-gf.Z90 * sd[i]), theta[i] * np.exp(gf.Z90 * sd[i])
-            params[n] = {"estimate": float(theta[i]), "sd_log": float(sd[i]), "sd_log_alone": float(sd_alone[i]),
-                         "sd_log_local": float(sd_linear[i]), "interval_90": [float(lo), float(hi)],
-                         "width_90": float(hi - lo)}
+            params[n] = {
+                "estimate": float(theta[i]),
+                "sd_log": float(sd[i]),
+                "sd_log_alone": float(sd_alone[i]),
+                "sd_log_local": float(sd_linear[i]),
+                "interval_90": [float(lo), float(hi)],
+                "width_90": float(hi - lo),
+            }
         crit = float(problem.criterion.of_covariance(jax.numpy.asarray(cov)))
         rows.append({"input": label, "sensors": list(sensors), "criterion": crit, "parameters": params})
     return rows

@@ -44,9 +44,9 @@ The workflow (:func:`discover`), on a measured length L(t):
    structure remains that no candidate removes, the answer is ``unexplained``; with no misfit and no
    candidate over the threshold, ``none``.
 
-Under the default likelihood (``discrepancy="matern32"``, :mod:`growjax.discrepancy`) every 2ΔlogL above is a
+Under the default likelihood (``discrepancy="matern32"``, :mod:`growjax.calibration.discrepancy`) every 2ΔlogL above is a
 difference of profile log-likelihoods under a smooth discrepancy plus (possibly correlated) sensor noise,
-with the rig's tolerances marginalised (:mod:`growjax.tolerance`, sensitivities at the base fit); the misfit
+with the rig's tolerances marginalised (:mod:`growjax.calibration.tolerance`, sensitivities at the base fit); the misfit
 test becomes the discrepancy's significance against white noise, the base-held trade of step 4 counts
 only where the misfit at the start is structured and material, and the allowance m·e²/σ² of step 4 becomes
 its counterpart under that likelihood, tr(K⁻¹K_e) (K the residuals' covariance, K_e the drift's): a
@@ -59,13 +59,13 @@ absorb a misfit stops at the edge (``at_range_edge`` in the evidence), where its
 Intervals on η are Gauss–Newton (delta method) at σ, clipped to the physical range. A fit stops once its
 steps no longer move 2ΔlogL by ``LR_RESOLUTION`` (σ estimated from the data's second differences) nor its
 cost by ``COST_NOISE`` of itself, the fast configuration's own noise: below that its trial points only wander
-(:func:`growjax.fit.levenberg_marquardt`).
+(:func:`growjax.calibration.fit.levenberg_marquardt`).
 
 The package: the candidate problem and its fits (``_candidates``, ``_fitting``), scoring (``_scoring``), the
 decision (``_decision``), the report (``_report``) and the workflow that runs them (``_workflow``).
 """
 
-from growjax import effects as fx
+from growjax.model import effects as fx
 
 from ._candidates import (
     BASE_START_FACTORS,
@@ -98,9 +98,36 @@ from ._set import SetDiscoveryResult, boundary_p_value, boundary_threshold, disc
 from ._workflow import discover
 
 __all__ = [
-    "BASE_START_FACTORS", "COST_NOISE", "ETA_FLOOR", "LR_RESOLUTION", "MATERIAL_MISFIT", "PHASES", "PINNED_FACTOR",
-    "SEPARATING", "START_FRACTIONS", "STRUCTURE_THRESHOLD", "Z90", "CandidateFit", "Candidates", "DiscoveryResult",
-    "Fitter", "Scorer", "SetDiscoveryResult", "boundary_p_value", "boundary_threshold", "candidate_parameter",
-    "discover", "discover_set", "fx", "locate", "make_candidates", "misfit_test",
-    "noise_from_differences", "phases", "score_candidate", "score_round", "set_summary_text", "summary_text",
+    "BASE_START_FACTORS",
+    "COST_NOISE",
+    "ETA_FLOOR",
+    "LR_RESOLUTION",
+    "MATERIAL_MISFIT",
+    "PHASES",
+    "PINNED_FACTOR",
+    "SEPARATING",
+    "START_FRACTIONS",
+    "STRUCTURE_THRESHOLD",
+    "Z90",
+    "CandidateFit",
+    "Candidates",
+    "DiscoveryResult",
+    "Fitter",
+    "Scorer",
+    "SetDiscoveryResult",
+    "boundary_p_value",
+    "boundary_threshold",
+    "candidate_parameter",
+    "discover",
+    "discover_set",
+    "fx",
+    "locate",
+    "make_candidates",
+    "misfit_test",
+    "noise_from_differences",
+    "phases",
+    "score_candidate",
+    "score_round",
+    "set_summary_text",
+    "summary_text",
 ]

@@ -13,11 +13,11 @@ import jax.numpy as jnp
 import numpy as np
 from scipy import stats
 
-from growjax import effects as fx
-from growjax import params as gp
-from growjax.config import Config
-from growjax.fit import LM_TOLERANCE, levenberg_marquardt, physical_bounds
-from growjax.simulate import input_breaks, simulate
+from growjax.calibration.fit import LM_TOLERANCE, levenberg_marquardt, physical_bounds
+from growjax.model import effects as fx
+from growjax.model import params as gp
+from growjax.simulation.config import Config
+from growjax.simulation.simulate import input_breaks, simulate
 
 Z90 = float(stats.norm.ppf(0.95))
 START_FRACTIONS = (0.02, 0.06, 0.2)  # starts of a new effect parameter, as fractions of its range's top
@@ -31,7 +31,7 @@ def candidate_parameter(name: str) -> tuple[str, str, tuple[float, float]]:
     if name not in fx.CATALOGUE:
         raise ValueError(f"unknown effect {name!r}; the catalogue has {sorted(fx.CATALOGUE)}")
     cls = fx.CATALOGUE[name]
-    (field, rng), = cls.ranges.items()
+    ((field, rng),) = cls.ranges.items()
     return f"{name}.{field}", cls.units.get(field, ""), tuple(map(float, rng))
 
 
@@ -112,20 +112,21 @@ class Candidates(eqx.Module):
 @eqx.filter_jit
 def _linearised(w, problem: Candidates, mask, select, z_fixed):
     """Residuals r (m,), Jacobian J (m, q) and the model's pressure (m,) Pa of one model at its fitted
-    coordinates w (q,), in one forward-mode pass (as :func:`growjax.fit.linearise`). The candidate is data
+    coordinates w (q,), in one forward-mode pass (as :func:`growjax.calibration.fit.linearise`). The candidate is data
     (``mask``, ``select``, ``z_fixed``), so one compiled program serves every fit with the same q: q = p + 1 for the
     base fit, the first round and the base-held fits, p + 2 for the second round (each tangent direction costs a
     share of a linearisation, so a fit carries only as many as it can move). The traces
     reported come from it too."""
     units = jnp.eye(w.shape[0], dtype=w.dtype)
-    (r, pressure), (jac_t, _) = jax.vmap(lambda v: jax.jvp(lambda x: problem.residuals(x, (mask, select, z_fixed)),
-                                                           (w,), (v,)),
-                                         out_axes=((None, None), 0))(units)
+    (r, pressure), (jac_t, _) = jax.vmap(
+        lambda v: jax.jvp(lambda x: problem.residuals(x, (mask, select, z_fixed)), (w,), (v,)),
+        out_axes=((None, None), 0),
+    )(units)
     return r, jac_t.T, pressure
 
 
 def _fit_model(problem: Candidates, w0, mask, select, z_fixed, max_steps: int, resolution: float = 0.0):
-    """Levenberg–Marquardt for one model (:func:`growjax.fit.levenberg_marquardt` around :func:`_linearised`),
+    """Levenberg–Marquardt for one model (:func:`growjax.calibration.fit.levenberg_marquardt` around :func:`_linearised`),
     each fitted coordinate kept in its physical range (:meth:`Candidates.bounds`), stopping at the cost's
     ``resolution`` (mm², absolute) or :data:`COST_NOISE` of itself: (z (p + K,),
     residuals (m,), Jacobian (m, q), converged, pressure (m,) Pa at the optimum, linearisations run)."""
@@ -143,9 +144,15 @@ def _fit_model(problem: Candidates, w0, mask, select, z_fixed, max_steps: int, r
         runs += 1
         return r, jac
 
-    w, _, ok, r, jac = levenberg_marquardt(linearised, w0, max_steps, LM_TOLERANCE, bounds=w_bounds,
-                                           cost_resolution=resolution,
-                                           relative_resolution=COST_NOISE if resolution > 0.0 else 0.0)
+    w, _, ok, r, jac = levenberg_marquardt(
+        linearised,
+        w0,
+        max_steps,
+        LM_TOLERANCE,
+        bounds=w_bounds,
+        cost_resolution=resolution,
+        relative_resolution=COST_NOISE if resolution > 0.0 else 0.0,
+    )
     pressure = pressures.get(np.asarray(jnp.asarray(w)).tobytes())
     if pressure is None:  # not expected: the optimum is always an evaluated point
         pressure = _linearised(jnp.asarray(w), problem, mask, select, z_fixed)[2]
@@ -153,8 +160,9 @@ def _fit_model(problem: Candidates, w0, mask, select, z_fixed, max_steps: int, r
     return np.asarray(z_fixed) + np.asarray(select) @ w, r, jac, ok, np.asarray(pressure), runs
 
 
-def make_candidates(times, length, inputs, effect_names: Sequence[str], base: gp.Parameters,
-                    base_names: Sequence[str], config: Config) -> Candidates:
+def make_candidates(
+    times, length, inputs, effect_names: Sequence[str], base: gp.Parameters, base_names: Sequence[str], config: Config
+) -> Candidates:
     """The :class:`Candidates` problem on the data (times (m,) s, length (m,) m)."""
     superset = gp.with_effects(base, *[fx.CATALOGUE[n]() for n in effect_names])
     base_names = tuple(gp.resolve_name(superset, n) for n in base_names)
@@ -166,8 +174,19 @@ def make_candidates(times, length, inputs, effect_names: Sequence[str], base: gp
     scales = jnp.asarray([0.1 * hi for lo, hi in ranges])
     signed = jnp.asarray([lo < 0 for lo, hi in ranges])
     config = config.replace(adjoint="forward")
-    return Candidates(superset, inputs, refs, scales, signed, jnp.asarray(times, float), jnp.asarray(length, float),
-                      input_breaks(inputs, config), base_names, qualified, config)
+    return Candidates(
+        superset,
+        inputs,
+        refs,
+        scales,
+        signed,
+        jnp.asarray(times, float),
+        jnp.asarray(length, float),
+        input_breaks(inputs, config),
+        base_names,
+        qualified,
+        config,
+    )
 
 
 @dataclasses.dataclass
@@ -218,13 +237,30 @@ def _summarise(problem: Candidates, z, r, jac, mask, select, sigma_m, converged,
     cov = cov_free * np.outer(d, d)
     sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     estimate = dict(zip(names, map(float, values)))
-    interval = {n: (float(max(values[i] - Z90 * sd[i], ranges[i][0])), float(min(values[i] + Z90 * sd[i], ranges[i][1])))
-                for i, n in enumerate(names)}
-    corr = {n: {b: float(cov[i, jb] / max(sd[i] * sd[jb], 1e-300)) for jb, b in enumerate(names)
-                if b in problem.base_names}
-            for i, n in enumerate(names) if n not in problem.base_names}
-    return CandidateFit(effects, estimate, interval, corr, float(np.sum(r**2)), r * 1e-3, bool(converged), z,
-                        np.asarray(mask), j, d, np.arange(len(names)) < sum(i < p for i in moved), tuple(ranges))
+    interval = {
+        n: (float(max(values[i] - Z90 * sd[i], ranges[i][0])), float(min(values[i] + Z90 * sd[i], ranges[i][1])))
+        for i, n in enumerate(names)
+    }
+    corr = {
+        n: {b: float(cov[i, jb] / max(sd[i] * sd[jb], 1e-300)) for jb, b in enumerate(names) if b in problem.base_names}
+        for i, n in enumerate(names)
+        if n not in problem.base_names
+    }
+    return CandidateFit(
+        effects,
+        estimate,
+        interval,
+        corr,
+        float(np.sum(r**2)),
+        r * 1e-3,
+        bool(converged),
+        z,
+        np.asarray(mask),
+        j,
+        d,
+        np.arange(len(names)) < sum(i < p for i in moved),
+        tuple(ranges),
+    )
 
 
 def _held_start(problem: Candidates, joint, k: int, u_floor: float) -> float:

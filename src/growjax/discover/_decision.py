@@ -22,8 +22,13 @@ def confounded_with_base(scores: dict) -> dict:
     for name, s in scores.items():
         if s["confounded"]:
             worst, c = max(s["correlation_with_base"].items(), key=lambda kv: abs(kv[1]), default=(None, 0.0))
-            out[name] = {"parameter": worst, "correlation": c, "lr_statistic": s["lr_statistic"],
-                         "lr_statistic_base_held": s["lr_statistic_base_held"], "separate_by": SEPARATING.get(name, "")}
+            out[name] = {
+                "parameter": worst,
+                "correlation": c,
+                "lr_statistic": s["lr_statistic"],
+                "lr_statistic_base_held": s["lr_statistic_base_held"],
+                "separate_by": SEPARATING.get(name, ""),
+            }
     return out
 
 
@@ -37,16 +42,23 @@ def choose(scores: dict, threshold: float, confounded: dict) -> str | None:
         return None
     best = max(clean, key=lambda n: clean[n]["lr_statistic"])
     lr_best = scores[best]["lr_statistic"]
-    rivals = [n for n, s in scores.items()
-              if n != best and s["clears_threshold"] and s["lr_statistic"] > lr_best - threshold]
+    rivals = [
+        n for n, s in scores.items() if n != best and s["clears_threshold"] and s["lr_statistic"] > lr_best - threshold
+    ]
     if not rivals:
         return best
     for name in (best, *rivals):  # another effect explains the data about as well: name neither
         others = [r for r in (best, *rivals) if r != name]
-        confounded.setdefault(name, {"parameter": None, "correlation": None,
-                                     "lr_statistic": scores[name]["lr_statistic"],
-                                     "lr_statistic_base_held": scores[name]["lr_statistic_base_held"],
-                                     "separate_by": SEPARATING.get(name, "")})
+        confounded.setdefault(
+            name,
+            {
+                "parameter": None,
+                "correlation": None,
+                "lr_statistic": scores[name]["lr_statistic"],
+                "lr_statistic_base_held": scores[name]["lr_statistic_base_held"],
+                "separate_by": SEPARATING.get(name, ""),
+            },
+        )
         confounded[name]["rival_effects"] = others
     return None
 

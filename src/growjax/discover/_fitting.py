@@ -34,8 +34,13 @@ class Fitter:
         self.p, self.k_all = len(problem.base_names), len(problem.effect_names)
         # u of each start (K, starts): η = s·softplus(u) with s a tenth of the top; signed effects start at 0, ±5 %.
         fractions = START_FRACTIONS if multistart else START_FRACTIONS[:1]
-        self.u_starts = np.stack([np.where(np.asarray(problem.signed), u_signed, math.log(math.expm1(10.0 * f)))
-                                  for f, u_signed in zip(fractions, (0.0, -0.5, 0.5))], axis=1)
+        self.u_starts = np.stack(
+            [
+                np.where(np.asarray(problem.signed), u_signed, math.log(math.expm1(10.0 * f)))
+                for f, u_signed in zip(fractions, (0.0, -0.5, 0.5))
+            ],
+            axis=1,
+        )
         # a fit's cost (½RSS, mm²) worth LR_RESOLUTION of 2ΔlogL, σ from the data's second differences (var 6σ²)
         sigma_data = noise_from_differences(np.diff(length)) / math.sqrt(3.0)
         self.resolution = 0.5 * LR_RESOLUTION * (sigma_data / 1e-3) ** 2
@@ -76,7 +81,7 @@ class Fitter:
             for start in starts:
                 if base_only:
                     z_start = np.array(z_now, float)
-                    z_start[:self.p] += math.log(BASE_START_FACTORS[start])
+                    z_start[: self.p] += math.log(BASE_START_FACTORS[start])
                     jobs.append((i, self.model(effects_on, fit_base, z_start, None)))
                 else:
                     jobs.append((i, self.model(effects_on, fit_base, z_now, start)))
@@ -91,13 +96,16 @@ class Fitter:
 
         def run(job):
             m = job[1]
-            z, r, jac, ok, pressure, runs = _fit_model(self.problem, *(jnp.asarray(a) for a in m), self.max_steps,
-                                                       self.resolution)
+            z, r, jac, ok, pressure, runs = _fit_model(
+                self.problem, *(jnp.asarray(a) for a in m), self.max_steps, self.resolution
+            )
             return job[0], (np.asarray(z), np.asarray(r), np.asarray(jac), bool(ok), m, pressure), runs
 
         fits = [[] for _ in specs]
         q = jobs[0][1][0].size if jobs else None  # the program these fits run: new, it is compiled by the first alone
-        for i, fitted, runs in _map_jobs(run, jobs, self.workers, self.progress, desc, first_alone=q not in self.compiled):
+        for i, fitted, runs in _map_jobs(
+            run, jobs, self.workers, self.progress, desc, first_alone=q not in self.compiled
+        ):
             fits[i].append(fitted)
             self.linearisations += runs
         self.compiled.add(q)
@@ -119,7 +127,7 @@ def _map_jobs(run, jobs, workers: int, progress: bool, desc: str, first_alone: b
     if jobs and (first_alone or workers == 1):
         results.append(run(jobs[0]))
         bar.update(1)
-    rest = jobs[len(results):]
+    rest = jobs[len(results) :]
     if workers > 1 and len(rest) > 1:
         with concurrent.futures.ThreadPoolExecutor(max_workers=workers) as pool:
             futures = [pool.submit(run, job) for job in rest]

@@ -17,8 +17,13 @@ def phases(times, length, pressure, rate_tol: float = 2e-4) -> dict[str, np.ndar
     t = np.asarray(times, float)
     v = np.gradient(np.asarray(length, float), t)
     dp = np.gradient(np.asarray(pressure, float), t)
-    return {"growing": v > rate_tol, "holding": np.abs(v) <= rate_tol, "retracting": v < -rate_tol,
-            "pressure_rising": dp > 0, "pressure_falling": dp < 0}
+    return {
+        "growing": v > rate_tol,
+        "holding": np.abs(v) <= rate_tol,
+        "retracting": v < -rate_tol,
+        "pressure_rising": dp > 0,
+        "pressure_falling": dp < 0,
+    }
 
 
 def locate(times, residual, length, pressure) -> dict:
@@ -28,16 +33,24 @@ def locate(times, residual, length, pressure) -> dict:
     out = {}
     for name, mask in phases(t, length, pressure).items():
         n = int(mask.sum())
-        out[name] = {"share_of_time": n / r.size,
-                     "rmse_m": float(np.sqrt(np.mean(r[mask] ** 2))) if n else None,
-                     "mean_m": float(np.mean(r[mask])) if n else None}
+        out[name] = {
+            "share_of_time": n / r.size,
+            "rmse_m": float(np.sqrt(np.mean(r[mask] ** 2))) if n else None,
+            "mean_m": float(np.mean(r[mask])) if n else None,
+        }
     edges = np.arange(math.floor(t[0]), math.ceil(t[-1]) + 1.0)
     by_second = []
     for a, b in itertools.pairwise(edges):
         mask = (t >= a) & (t < b)
         if mask.any():
-            by_second.append({"t0_s": float(a), "t1_s": float(b), "rmse_m": float(np.sqrt(np.mean(r[mask] ** 2))),
-                              "mean_m": float(np.mean(r[mask]))})
+            by_second.append(
+                {
+                    "t0_s": float(a),
+                    "t1_s": float(b),
+                    "rmse_m": float(np.sqrt(np.mean(r[mask] ** 2))),
+                    "mean_m": float(np.mean(r[mask])),
+                }
+            )
     return {"by_phase": out, "by_second": by_second}
 
 
@@ -72,8 +85,13 @@ class DiscoveryResult:
 
 
 def _unit(name: str) -> str:
-    return {"robot.yield_pressure": "Pa", "robot.extensibility": "(m/s)·Pa^(-1/n)", "robot.growth_exponent": "-",
-            "robot.lockhart_rate": "m/s", "robot.lockhart_exponent": "-"}.get(name, "")
+    return {
+        "robot.yield_pressure": "Pa",
+        "robot.extensibility": "(m/s)·Pa^(-1/n)",
+        "robot.growth_exponent": "-",
+        "robot.lockhart_rate": "m/s",
+        "robot.lockhart_exponent": "-",
+    }.get(name, "")
 
 
 def confounded_lines(confounded_with: dict) -> list[str]:
@@ -88,9 +106,13 @@ def confounded_lines(confounded_with: dict) -> list[str]:
 
 def summary_text(result: DiscoveryResult) -> str:
     """A readable summary of a :class:`DiscoveryResult` for the terminal."""
-    lines = [f"effect: {result.effect}" + (f" (added: {', '.join(result.effects)})" if result.effects else ""),
-             (f"length RMSE {1e3 * result.rmse_before_m:.3f} mm before, {1e3 * result.rmse_after_m:.3f} mm after; "
-              f"noise σ {1e3 * result.noise_sigma_m:.3f} mm; threshold 2ΔlogL > {result.threshold:.2f}")]
+    lines = [
+        f"effect: {result.effect}" + (f" (added: {', '.join(result.effects)})" if result.effects else ""),
+        (
+            f"length RMSE {1e3 * result.rmse_before_m:.3f} mm before, {1e3 * result.rmse_after_m:.3f} mm after; "
+            f"noise σ {1e3 * result.noise_sigma_m:.3f} mm; threshold 2ΔlogL > {result.threshold:.2f}"
+        ),
+    ]
     for name, p in result.parameters.items():
         lo, hi = p["interval_90"]
         lines.append(f"  {name} = {p['estimate']:.4g} {p['unit']} (90 %: {lo:.4g} – {hi:.4g})")
@@ -98,8 +120,10 @@ def summary_text(result: DiscoveryResult) -> str:
         lines.append(f"round {k + 1}:")
         for name, s in sorted(scores.items(), key=lambda kv: -kv[1]["lr_statistic"]):
             flag = "confounded" if s["confounded"] else ("clears" if s["clears_threshold"] else "")
-            lines.append(f"  {name:22s} 2ΔlogL {s['lr_statistic']:8.2f}  {s['parameter']} = {s['estimate']:.3g} "
-                         f"{s['unit']}  {flag}")
+            lines.append(
+                f"  {name:22s} 2ΔlogL {s['lr_statistic']:8.2f}  {s['parameter']} = {s['estimate']:.3g} "
+                f"{s['unit']}  {flag}"
+            )
     lines += confounded_lines(result.confounded_with)
     lines.append(f"{result.wall_s:.1f} s: {result.fits} fits, {result.linearisations} linearisations of the model")
     return "\n".join(lines)

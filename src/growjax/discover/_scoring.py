@@ -10,9 +10,9 @@ import jax.numpy as jnp
 import numpy as np
 from scipy import stats
 
-from growjax import discrepancy as dc
-from growjax import experiment
-from growjax import fit as gf
+from growjax.calibration import discrepancy as dc
+from growjax.calibration import fit as gf
+from growjax.data import experiment
 
 from ._candidates import Z90, CandidateFit, candidate_parameter
 
@@ -24,7 +24,7 @@ _log_likelihood = jax.jit(dc.log_likelihood)
 
 def shared_intervals(fit: CandidateFit, scorer: Scorer, model_error: float) -> dict:
     """{name: (low, high)} SI: the 90 % intervals of ``fit``'s parameters under the scorer's likelihood, treated as
-    :func:`growjax.fit.fit` treats them: the generalised least-squares covariance under the discrepancy and
+    :func:`growjax.calibration.fit.fit` treats them: the generalised least-squares covariance under the discrepancy and
     noise at their mode, the rig's tolerances inferred (marginalised under their priors), the fitted
     configuration's own error ``model_error`` (m) propagated, and the spread over the hyperparameters. A
     parameter fitted in ln θ gets θ·exp(±z σ), an effect's θ ± z σ within its range."""
@@ -33,13 +33,13 @@ def shared_intervals(fit: CandidateFit, scorer: Scorer, model_error: float) -> d
     hyper = scorer.profile(fit.residual_m)[1]
     n = len(scorer.times)
     used = np.ones(n, bool) if scorer.observed is None else np.asarray(scorer.observed, bool)
-    likelihood = gf.Likelihood(jnp.asarray(scorer.times), jnp.asarray(used), jnp.asarray(np.flatnonzero(used)),
-                               1e-3, n)
+    likelihood = gf.Likelihood(jnp.asarray(scorer.times), jnp.asarray(used), jnp.asarray(np.flatnonzero(used)), 1e-3, n)
     q = 0
     if scorer.sensitivity is not None:
         q = len(scorer.tolerance)
-        likelihood = likelihood.with_tolerances(scorer.sensitivity, {f"rig_{j}": u for j, u in
-                                                                     enumerate(scorer.tolerance)}, inferred=True)
+        likelihood = likelihood.with_tolerances(
+            scorer.sensitivity, {f"rig_{j}": u for j, u in enumerate(scorer.tolerance)}, inferred=True
+        )
     raw = (jnp.asarray(np.asarray(fit.residual_m) / 1e-3), jnp.asarray(fit.jacobian))
     b = np.zeros(q)
     cov, _, _ = likelihood.covariance(raw, hyper, b, model_error)
@@ -76,12 +76,18 @@ def misfit_test(residual, sigma: float, z_limit: float = 4.0, ratio_limit: float
     z = rho * math.sqrt(m)
     rmse = float(np.sqrt(np.mean(r**2)))
     ratio = rmse / sigma if sigma > 0 else math.inf
-    return {"rmse_m": rmse, "noise_sigma_m": float(sigma), "rmse_over_noise": ratio, "lag1_autocorrelation": rho,
-            "autocorrelation_z": z, "structured": bool(z > z_limit or ratio > ratio_limit)}
+    return {
+        "rmse_m": rmse,
+        "noise_sigma_m": float(sigma),
+        "rmse_over_noise": ratio,
+        "lag1_autocorrelation": rho,
+        "autocorrelation_z": z,
+        "structured": bool(z > z_limit or ratio > ratio_limit),
+    }
 
 
 class Scorer:
-    """Likelihood-ratio scores and the misfit test under the fit's likelihood (:mod:`growjax.discrepancy`).
+    """Likelihood-ratio scores and the misfit test under the fit's likelihood (:mod:`growjax.calibration.discrepancy`).
 
     ``discrepancy="matern32"``: a model's score is its log-likelihood with the residual model's
     hyperparameters at their mode for that model's residuals, and the rig's tolerances marginalised (after
@@ -168,10 +174,16 @@ class Scorer:
         white = self.profile(residual, "none")[0]
         out = misfit_test(residual, float(hyper.noise))
         lr = 2.0 * (smooth - white)
-        out.update({"discrepancy": hyper.as_dict(), "discrepancy_lr": lr, "noise_sigma_m": float(hyper.noise),
-                    "rmse_over_noise": out["rmse_m"] / float(hyper.noise),
-                    "structured": bool(lr > STRUCTURE_THRESHOLD and float(hyper.amplitude) > float(hyper.noise)),
-                    "material": bool(float(hyper.amplitude) > self.material)})
+        out.update(
+            {
+                "discrepancy": hyper.as_dict(),
+                "discrepancy_lr": lr,
+                "noise_sigma_m": float(hyper.noise),
+                "rmse_over_noise": out["rmse_m"] / float(hyper.noise),
+                "structured": bool(lr > STRUCTURE_THRESHOLD and float(hyper.amplitude) > float(hyper.noise)),
+                "material": bool(float(hyper.amplitude) > self.material),
+            }
+        )
         return out
 
 
@@ -181,13 +193,25 @@ def _pinned(estimate: float, interval) -> bool:
     end) and the pseudo-inverse dropped its variance instead of making it infinite."""
     lo, hi = interval
     size = abs(estimate)
-    return (lo * hi > 0 and hi - lo > 1e-6 * size and min(abs(lo), abs(hi)) >= size / PINNED_FACTOR
-            and max(abs(lo), abs(hi)) <= PINNED_FACTOR * size)
+    return (
+        lo * hi > 0
+        and hi - lo > 1e-6 * size
+        and min(abs(lo), abs(hi)) >= size / PINNED_FACTOR
+        and max(abs(lo), abs(hi)) <= PINNED_FACTOR * size
+    )
 
 
-def score_candidate(name: str, fitted: CandidateFit, residual, scorer: Scorer, threshold: float,
-                    confounding_correlation: float, held_lr: float = 0.0, trades: bool = False,
-                    allowance: float = 0.0) -> dict:
+def score_candidate(
+    name: str,
+    fitted: CandidateFit,
+    residual,
+    scorer: Scorer,
+    threshold: float,
+    confounding_correlation: float,
+    held_lr: float = 0.0,
+    trades: bool = False,
+    allowance: float = 0.0,
+) -> dict:
     """The evidence for candidate ``name`` from its fit ``fitted`` on top of the current model (residuals ``residual``,
     m): 2ΔlogL and its p-value, the Laplace log Bayes factor against a uniform prior on the effect's range, the
     estimate and interval, the correlation with the base parameters, and whether it clears ``threshold``, is pinned,
@@ -203,25 +227,49 @@ def score_candidate(name: str, fitted: CandidateFit, residual, scorer: Scorer, t
     bar = threshold + (allowance if abs(c) > confounding_correlation else 0.0)
     pinned = lr > bar and _pinned(fitted.estimate[qname], fitted.interval_90[qname])
     return {
-        "parameter": qname, "unit": unit, "estimate": fitted.estimate[qname],
-        "interval_90": fitted.interval_90[qname], "lr_statistic": lr,
+        "parameter": qname,
+        "unit": unit,
+        "estimate": fitted.estimate[qname],
+        "interval_90": fitted.interval_90[qname],
+        "lr_statistic": lr,
         "p_value": float(0.5 * stats.chi2.sf(lr, df=1)) if lr > 0 else 1.0,
         "log_bayes_factor": 0.5 * lr + math.log(math.sqrt(2 * math.pi) * sd / (rng[1] - max(rng[0], 0.0))),
         "rmse_m": float(np.sqrt(np.mean(fitted.residual_m**2))),
-        "lr_statistic_base_held": held_lr, "correlation_with_base": corr,
-        "clears_threshold": bool(lr > bar), "pinned": bool(pinned),
+        "lr_statistic_base_held": held_lr,
+        "correlation_with_base": corr,
+        "clears_threshold": bool(lr > bar),
+        "pinned": bool(pinned),
         # the fit pressed against its range's top (or a signed effect's bottom): the data ask for more
-        "at_range_edge": bool(fitted.estimate[qname] >= rng[1] * (1 - 1e-6)
-                              or (rng[0] < 0 and fitted.estimate[qname] <= rng[0] * (1 - 1e-6))),
+        "at_range_edge": bool(
+            fitted.estimate[qname] >= rng[1] * (1 - 1e-6)
+            or (rng[0] < 0 and fitted.estimate[qname] <= rng[0] * (1 - 1e-6))
+        ),
         "confounded": bool(abs(c) > confounding_correlation and (lr > bar or trades) and not pinned),
     }
 
 
-def score_round(fits: dict, residual, scorer: Scorer, threshold: float, confounding_correlation: float,
-                held: dict | None = None, allowance: float = 0.0) -> dict:
+def score_round(
+    fits: dict,
+    residual,
+    scorer: Scorer,
+    threshold: float,
+    confounding_correlation: float,
+    held: dict | None = None,
+    allowance: float = 0.0,
+) -> dict:
     """{candidate: :func:`score_candidate`} of a round's ``fits`` {candidate: CandidateFit} on top of the current
     model (residuals ``residual``, m). ``held`` {candidate: (2ΔlogL with the base held, trades)}: the first round's
     base-held evidence (None in later rounds)."""
-    return {name: score_candidate(name, fitted, residual, scorer, threshold, confounding_correlation,
-                                  *(held[name] if held is not None else (0.0, False)), allowance)
-            for name, fitted in fits.items()}
+    return {
+        name: score_candidate(
+            name,
+            fitted,
+            residual,
+            scorer,
+            threshold,
+            confounding_correlation,
+            *(held[name] if held is not None else (0.0, False)),
+            allowance,
+        )
+        for name, fitted in fits.items()
+    }

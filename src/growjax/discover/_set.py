@@ -11,10 +11,10 @@ from collections.abc import Sequence
 import numpy as np
 from scipy import optimize, special, stats
 
-from growjax import effects as fx
-from growjax import joint
-from growjax.config import Config
-from growjax.experiments import SCOPES, ExperimentSet, Scope
+from growjax.calibration import joint
+from growjax.data.sets import SCOPES, ExperimentSet, Scope
+from growjax.model import effects as fx
+from growjax.simulation.config import Config
 
 from ._candidates import START_FRACTIONS, candidate_parameter
 from ._decision import SEPARATING, choose, confounded_with_base, final_effect
@@ -87,10 +87,10 @@ def discover_set(
 
     The procedure, one round (at most one effect is added):
 
-    1. **Base fit.** :func:`growjax.joint.fit_set` of ``base_free`` (default one yield pressure per robot), the rig's
+    1. **Base fit.** :func:`growjax.calibration.joint.fit_set` of ``base_free`` (default one yield pressure per robot), the rig's
        errors shared per rig and inferred under their tolerances (``tolerances``: as there), each run with its own
        discrepancy (``discrepancy``). Its score is the set's total log-likelihood
-       (:attr:`growjax.joint.SetFitResult.log_likelihood`): every run's under its discrepancy and noise at
+       (:attr:`growjax.calibration.joint.SetFitResult.log_likelihood`): every run's under its discrepancy and noise at
        their mode, the rig's errors marginalised.
     2. **Each candidate** (default the whole catalogue) is one more joint fit, one batched program over the runs:
        the base parameters and the effect's parameter freed together, fitted from the best of the joint fit's
@@ -132,15 +132,17 @@ def discover_set(
     base_scopes = [s if isinstance(s, Scope) else Scope.parse(s, base_params, default="robot") for s in base_free]
     copies = len(dict.fromkeys(experiments.group_of(effect_scope)))
     threshold = boundary_threshold(false_positive_rate / len(candidates), copies)
-    options = dict(config=config, discrepancy=discrepancy, tolerances=tolerances, sweep_n=sweep_n, seed=seed,
-                   max_steps=max_steps)
+    options = dict(
+        config=config, discrepancy=discrepancy, tolerances=tolerances, sweep_n=sweep_n, seed=seed, max_steps=max_steps
+    )
     base = joint.fit_set(experiments, free=base_scopes, **options)
     fits = {}
     for name in candidates:
         qname, _, (_, top) = candidate_parameter(name)
         effect = fx.CATALOGUE[name](**{qname.split(".")[1]: EFFECT_START * top})
-        fits[name] = joint.fit_set(experiments, free=[*base_scopes, Scope(qname, effect_scope)],
-                                   effects=(effect,), **options)
+        fits[name] = joint.fit_set(
+            experiments, free=[*base_scopes, Scope(qname, effect_scope)], effects=(effect,), **options
+        )
     scores = {name: _score(name, fit, base, threshold, confounding_correlation, copies) for name, fit in fits.items()}
     confounded = confounded_with_base(scores)
     best = choose(scores, threshold, confounded)
@@ -150,20 +152,49 @@ def discover_set(
     misfit_after = _misfit(final, windows, discrepancy, material_misfit)
     added = [best] if best is not None else []
     units = {candidate_parameter(n)[0]: candidate_parameter(n)[1] for n in candidates}
-    parameters = {lab: {"estimate": final.estimate[lab], "interval_90": final.interval_90[lab],
-                        "unit": units.get(lab.split("@")[0], _unit(lab.split("@")[0]))} for lab in final.labels}
-    runs = [{"name": a["name"], "robot": a["robot"], "rig": a["rig"], "rmse_before_m": a["rmse_length_m"],
-             "rmse_after_m": b["rmse_length_m"]} for a, b in zip(base.runs, final.runs)]
+    parameters = {
+        lab: {
+            "estimate": final.estimate[lab],
+            "interval_90": final.interval_90[lab],
+            "unit": units.get(lab.split("@")[0], _unit(lab.split("@")[0])),
+        }
+        for lab in final.labels
+    }
+    runs = [
+        {
+            "name": a["name"],
+            "robot": a["robot"],
+            "rig": a["rig"],
+            "rmse_before_m": a["rmse_length_m"],
+            "rmse_after_m": b["rmse_length_m"],
+        }
+        for a, b in zip(base.runs, final.runs)
+    ]
     return SetDiscoveryResult(
-        effect=final_effect(added, misfit_after, confounded), effects=added, parameters=parameters,
-        threshold=threshold, evidence=[scores], confounded_with=confounded, misfit_before=misfit_before,
-        misfit_after=misfit_after, separating_measurement={n: SEPARATING.get(n, "") for n in confounded},
-        log_likelihood_base=base.log_likelihood, runs=runs, fits=1 + len(fits),
-        wall_s=time.perf_counter() - started)
+        effect=final_effect(added, misfit_after, confounded),
+        effects=added,
+        parameters=parameters,
+        threshold=threshold,
+        evidence=[scores],
+        confounded_with=confounded,
+        misfit_before=misfit_before,
+        misfit_after=misfit_after,
+        separating_measurement={n: SEPARATING.get(n, "") for n in confounded},
+        log_likelihood_base=base.log_likelihood,
+        runs=runs,
+        fits=1 + len(fits),
+        wall_s=time.perf_counter() - started,
+    )
 
 
-def _score(name: str, fit: joint.SetFitResult, base: joint.SetFitResult, threshold: float,
-           confounding_correlation: float, copies: int) -> dict:
+def _score(
+    name: str,
+    fit: joint.SetFitResult,
+    base: joint.SetFitResult,
+    threshold: float,
+    confounding_correlation: float,
+    copies: int,
+) -> dict:
     """A candidate's evidence from its joint fit ``fit`` against the base fit: the keys of
     :func:`growjax.discover.score_candidate` (its estimate and interval per copy)."""
     qname, unit, (lo, hi) = candidate_parameter(name)
@@ -183,10 +214,18 @@ def _score(name: str, fit: joint.SetFitResult, base: joint.SetFitResult, thresho
     interval = {fit.labels[k]: fit.interval_90[fit.labels[k]] for k in mine}
     pinned = lr > threshold and all(iv is not None and _pinned(estimate[lab], iv) for lab, iv in interval.items())
     return {
-        "parameter": qname, "unit": unit, "estimate": estimate, "interval_90": interval, "lr_statistic": lr,
-        "p_value": boundary_p_value(lr, copies), "log_likelihood": fit.log_likelihood,
-        "rmse_m": [r["rmse_length_m"] for r in fit.runs], "lr_statistic_base_held": None,
-        "correlation_with_base": corr, "clears_threshold": bool(lr > threshold), "pinned": bool(pinned),
+        "parameter": qname,
+        "unit": unit,
+        "estimate": estimate,
+        "interval_90": interval,
+        "lr_statistic": lr,
+        "p_value": boundary_p_value(lr, copies),
+        "log_likelihood": fit.log_likelihood,
+        "rmse_m": [r["rmse_length_m"] for r in fit.runs],
+        "lr_statistic_base_held": None,
+        "correlation_with_base": corr,
+        "clears_threshold": bool(lr > threshold),
+        "pinned": bool(pinned),
         "at_range_edge": bool(any(v >= hi * (1 - 1e-6) for v in estimate.values())),
         "confounded": bool(abs(c_max) > confounding_correlation and lr > threshold and not pinned),
         "status": fit.status,
@@ -209,21 +248,28 @@ def _misfit(fit: joint.SetFitResult, measured: list, discrepancy: str, material:
     for (t, r), length, run in zip(fit.residuals, measured, fit.runs):
         scorer = Scorer(t, length, noise_from_differences(r), discrepancy, material)
         per_run.append({"name": run["name"], **scorer.misfit(r)})
-    return {"structured": any(m["structured"] for m in per_run),
-            "material": any(m["structured"] and m.get("material", True) for m in per_run), "runs": per_run}
+    return {
+        "structured": any(m["structured"] for m in per_run),
+        "material": any(m["structured"] and m.get("material", True) for m in per_run),
+        "runs": per_run,
+    }
 
 
 def set_summary_text(result: SetDiscoveryResult) -> str:
     """A readable summary of a :class:`SetDiscoveryResult` for the terminal."""
-    lines = [f"effect: {result.effect}" + (f" (added: {', '.join(result.effects)})" if result.effects else ""),
-             f"threshold 2ΔlogL > {result.threshold:.2f} (the set's joint fits, one round)"]
+    lines = [
+        f"effect: {result.effect}" + (f" (added: {', '.join(result.effects)})" if result.effects else ""),
+        f"threshold 2ΔlogL > {result.threshold:.2f} (the set's joint fits, one round)",
+    ]
     for name, p in result.parameters.items():
         iv = p["interval_90"]
         shown = "undetermined" if iv is None else f"90 %: {iv[0]:.4g} – {iv[1]:.4g}"
         lines.append(f"  {name} = {p['estimate']:.4g} {p['unit']} ({shown})")
     for r in result.runs:
-        lines.append(f"  {r['name']}: length RMSE {1e3 * r['rmse_before_m']:.3f} mm before, "
-                     f"{1e3 * r['rmse_after_m']:.3f} mm after")
+        lines.append(
+            f"  {r['name']}: length RMSE {1e3 * r['rmse_before_m']:.3f} mm before, "
+            f"{1e3 * r['rmse_after_m']:.3f} mm after"
+        )
     lines.append("round 1:")
     for name, s in sorted(result.evidence[0].items(), key=lambda kv: -kv[1]["lr_statistic"]):
         flag = "confounded" if s["confounded"] else ("clears" if s["clears_threshold"] else "")

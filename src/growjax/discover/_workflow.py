@@ -11,12 +11,12 @@ import numpy as np
 from jaxtyping import ArrayLike, Float
 from scipy import stats
 
-from growjax import discrepancy as dc
-from growjax import effects as fx
-from growjax import params as gp
-from growjax import tolerance as tl
-from growjax.config import Config
-from growjax.fit import MODEL_ERROR_TIME, default_model_error
+from growjax.calibration import discrepancy as dc
+from growjax.calibration import tolerance as tl
+from growjax.calibration.fit import MODEL_ERROR_TIME, default_model_error
+from growjax.model import effects as fx
+from growjax.model import params as gp
+from growjax.simulation.config import Config
 
 from ._candidates import CandidateFit, _held_start, candidate_parameter, make_candidates
 from ._decision import SEPARATING, choose, confounded_with_base, final_effect
@@ -54,11 +54,11 @@ def discover(
     candidate; ``multistart``: fit each new candidate from every start in ``START_FRACTIONS`` (False:
     from the first only, a third of the fits); ``workers``: fits run at a time (default one per CPU core; each
     fit is deterministic, so the result does not depend on it); ``model_error``: the fitted configuration's
-    length error against the reference, m (default :data:`growjax.fit.FAST_MODEL_ERROR` for the fast
+    length error against the reference, m (default :data:`growjax.calibration.fit.FAST_MODEL_ERROR` for the fast
     configuration, 0 for the reference), allowed for in the confounding test. ``discrepancy``: the likelihood
-    of every test (:mod:`growjax.discrepancy`; ``"none"``: independent noise); ``material_misfit`` (m): a smooth
+    of every test (:mod:`growjax.calibration.discrepancy`; ``"none"``: independent noise); ``material_misfit`` (m): a smooth
     misfit below it is left to the discrepancy; ``tolerances`` {parameter: relative sd}: the rig's uncertainty,
-    marginalised in every score (:mod:`growjax.tolerance`; None: its default budget with the discrepancy).
+    marginalised in every score (:mod:`growjax.calibration.tolerance`; None: its default budget with the discrepancy).
     See the module docstring for the procedure and its thresholds.
     """
     if discrepancy not in dc.KINDS:
@@ -86,25 +86,43 @@ def discover(
     # (or a confounding) needs the threshold cleared with the base refitted, never a trade with the base held.
     misfit_open = discrepancy == "none" or (misfit_before["structured"] and misfit_before["material"])
     held = {name: (h, h > threshold + allowance and held_trades[name] and misfit_open) for name, h in held_lr.items()}
-    current, added, evidence, confounded = _rounds(fitter, first, candidates, held, threshold, confounding_correlation,
-                                                   max_effects, allowance)
+    current, added, evidence, confounded = _rounds(
+        fitter, first, candidates, held, threshold, confounding_correlation, max_effects, allowance
+    )
     misfit_after = first.scorer.misfit(current.residual_m)
     # The model's traces at the data's times: the length is the data plus the residual, the pressure comes with the fit.
     before_trace, after_trace = length + first.base_fit.residual_m, length + current.residual_m
     units = {candidate_parameter(n)[0]: candidate_parameter(n)[1] for n in candidates}
     intervals = shared_intervals(current, first.scorer, model_error)
-    parameters = {n: {"estimate": v, "interval_90": intervals[n], "unit": units.get(n, _unit(n))}
-                  for n, v in current.estimate.items()}
+    parameters = {
+        n: {"estimate": v, "interval_90": intervals[n], "unit": units.get(n, _unit(n))}
+        for n, v in current.estimate.items()
+    }
     return DiscoveryResult(
-        effect=final_effect(added, misfit_after, confounded), effects=added, parameters=parameters,
-        rmse_before_m=misfit_before["rmse_m"], rmse_after_m=misfit_after["rmse_m"], noise_sigma_m=first.sigma,
-        threshold=threshold, evidence=evidence, confounded_with=confounded,
-        where={"before": locate(times, first.base_fit.residual_m, before_trace, first.pressure),
-               "after": locate(times, current.residual_m, after_trace, first.pressure)},
-        misfit_before=misfit_before, misfit_after=misfit_after,
+        effect=final_effect(added, misfit_after, confounded),
+        effects=added,
+        parameters=parameters,
+        rmse_before_m=misfit_before["rmse_m"],
+        rmse_after_m=misfit_after["rmse_m"],
+        noise_sigma_m=first.sigma,
+        threshold=threshold,
+        evidence=evidence,
+        confounded_with=confounded,
+        where={
+            "before": locate(times, first.base_fit.residual_m, before_trace, first.pressure),
+            "after": locate(times, current.residual_m, after_trace, first.pressure),
+        },
+        misfit_before=misfit_before,
+        misfit_after=misfit_after,
         separating_measurement={n: SEPARATING.get(n, "") for n in confounded},
-        wall_s=time.perf_counter() - start, trade_allowance=allowance, fits=fitter.fits,
-        linearisations=fitter.linearisations, times=times, measured=length, before=before_trace, after=after_trace,
+        wall_s=time.perf_counter() - start,
+        trade_allowance=allowance,
+        fits=fitter.fits,
+        linearisations=fitter.linearisations,
+        times=times,
+        measured=length,
+        before=before_trace,
+        after=after_trace,
     )
 
 
@@ -121,8 +139,9 @@ class _FirstRound:
     pressure: np.ndarray
 
 
-def _first_round(fitter: Fitter, candidates, times, length, discrepancy: str, material_misfit: float,
-                 rig) -> _FirstRound:
+def _first_round(
+    fitter: Fitter, candidates, times, length, discrepancy: str, material_misfit: float, rig
+) -> _FirstRound:
     """The base model, then every candidate on it with the base parameters refitted jointly, each starting from the
     base fit (the extended model then starts within its new term of the base optimum, not in a side minimum of the
     base parameters that the given values may lie nearer to). ``rig`` = (base, inputs, config, tolerances): the
@@ -154,18 +173,32 @@ def _held_round(fitter: Fitter, first: _FirstRound, candidates, threshold: float
     p, k_all, outs = fitter.p, fitter.k_all, first.outs
     z0 = np.concatenate([np.zeros(p), np.zeros(k_all)])
     u_held = [_held_start(fitter.problem, outs[k + 1], k, fitter.u_starts[k, 0]) for k in range(k_all)]
-    held = fitter.batch([((), False, z0)] + [((k,), False, np.where(np.arange(p + k_all) == p + k, u_held[k], z0))
-                                             for k in range(k_all)], "base held", warm=set(range(1, k_all + 1)))
+    held = fitter.batch(
+        [((), False, z0)]
+        + [((k,), False, np.where(np.arange(p + k_all) == p + k, u_held[k], z0)) for k in range(k_all)],
+        "base held",
+        warm=set(range(1, k_all + 1)),
+    )
     held_res = [h[1] * 1e-3 for h in held]
     scorer = first.scorer
     held_lr = {candidates[k]: scorer.lr(held_res[0], held_res[k + 1]) for k in range(k_all)}
-    held_trades = {candidates[k]: scorer.lr(held_res[k + 1], first.base_fit.residual_m, signed=True) < threshold
-                   for k in range(k_all)}
+    held_trades = {
+        candidates[k]: scorer.lr(held_res[k + 1], first.base_fit.residual_m, signed=True) < threshold
+        for k in range(k_all)
+    }
     return held_lr, held_trades
 
 
-def _rounds(fitter: Fitter, first: _FirstRound, candidates, held: dict, threshold: float,
-            confounding_correlation: float, max_effects: int, allowance: float = 0.0):
+def _rounds(
+    fitter: Fitter,
+    first: _FirstRound,
+    candidates,
+    held: dict,
+    threshold: float,
+    confounding_correlation: float,
+    max_effects: int,
+    allowance: float = 0.0,
+):
     """(the final model's fit, the effects added, the evidence per round, {candidate: confounding record}): each
     round scores the remaining candidates on top of the current model (the first round's with ``held``, its
     base-held evidence), records the confounded ones and adds the best clean one, until none clears the threshold,
@@ -177,12 +210,22 @@ def _rounds(fitter: Fitter, first: _FirstRound, candidates, held: dict, threshol
             if not scorer.misfit(current.residual_m)["structured"]:
                 break
             others = [k for k in range(fitter.k_all) if k not in fitter.added_index]
-            outs = fitter.batch([(tuple(fitter.added_index) + (k,), True, current.z) for k in others],
-                                f"round {round_no + 1}")
-            fits = {candidates[k]: fitter.summarise(o, first.sigma, tuple(added) + (candidates[k],))
-                    for k, o in zip(others, outs)}
-        scores = score_round(fits, current.residual_m, scorer, threshold, confounding_correlation,
-                             held if round_no == 0 else None, allowance)
+            outs = fitter.batch(
+                [(tuple(fitter.added_index) + (k,), True, current.z) for k in others], f"round {round_no + 1}"
+            )
+            fits = {
+                candidates[k]: fitter.summarise(o, first.sigma, tuple(added) + (candidates[k],))
+                for k, o in zip(others, outs)
+            }
+        scores = score_round(
+            fits,
+            current.residual_m,
+            scorer,
+            threshold,
+            confounding_correlation,
+            held if round_no == 0 else None,
+            allowance,
+        )
         confounded.update(confounded_with_base(scores))
         evidence.append(scores)
         best = choose(scores, threshold, confounded)

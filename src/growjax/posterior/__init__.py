@@ -8,7 +8,7 @@ The statistical model reads like its maths::
     δ ~ GP(0, Matérn-3/2(a, ℓ)),  b_j ~ N(0, u_j²),  ε_i ~ N(0, σ²)
 
 δ (the model discrepancy) and b (the rig's tolerances) are marginalised exactly by a Kalman filter
-(:mod:`growjax.discrepancy`); ``discrepancy="none"`` keeps L_obs(t_i) ~ Normal(L_model(t_i), σ).
+(:mod:`growjax.calibration.discrepancy`); ``discrepancy="none"`` keeps L_obs(t_i) ~ Normal(L_model(t_i), σ).
 
 NumPyro samples the bounded priors in unconstrained (logit) coordinates, which are O(1).
 The model runs in the fast configuration by default, with forward-mode gradients (or through an
@@ -71,11 +71,42 @@ from ._record import inference_data
 from ._sample import PosteriorResult, build_residuals, observation_draws, sample
 
 __all__ = [
-    "BOUND_FRACTION", "LAPLACE_DECREMENT", "LAPLACE_MAX_STEPS", "LAPLACE_STALL", "PRIOR_CURVATURE_FLOOR",
-    "DirectMean", "PosteriorResult", "Prior", "Residuals", "RidgePrior", "SoftplusPrior",
-    "bound_coordinates", "bound_start", "build_emulator", "build_residuals", "compare_loo", "coordinate",
-    "diagnostics", "direct_mean", "emulated_mean", "forecast", "fraction", "growth_model", "inference_data",
-    "laplace", "laplace_unconstrained", "lockhart_priors", "nuts_chain", "observation_draws", "paper_priors", "precondition", "predict",
-    "predictive_band", "ridge_coordinates", "sample", "sbc", "value_and_jacobian",
+    "BOUND_FRACTION",
+    "LAPLACE_DECREMENT",
+    "LAPLACE_MAX_STEPS",
+    "LAPLACE_STALL",
+    "PRIOR_CURVATURE_FLOOR",
+    "DirectMean",
+    "PosteriorResult",
+    "Prior",
+    "Residuals",
+    "RidgePrior",
+    "SoftplusPrior",
+    "bound_coordinates",
+    "bound_start",
+    "build_emulator",
+    "build_residuals",
+    "compare_loo",
+    "coordinate",
+    "diagnostics",
+    "direct_mean",
+    "emulated_mean",
+    "forecast",
+    "fraction",
+    "growth_model",
+    "inference_data",
+    "laplace",
+    "laplace_unconstrained",
+    "lockhart_priors",
+    "nuts_chain",
+    "observation_draws",
+    "paper_priors",
+    "precondition",
+    "predict",
+    "predictive_band",
+    "ridge_coordinates",
+    "sample",
+    "sbc",
+    "value_and_jacobian",
     "with_model_tangents",
 ]

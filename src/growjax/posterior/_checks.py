@@ -10,11 +10,11 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike, Float
 
-from growjax import discrepancy as dc
-from growjax import emulator as em
-from growjax import tolerance as tl
-from growjax import xla_flags
-from growjax.emulator import predicted_length
+from growjax.calibration import discrepancy as dc
+from growjax.calibration import tolerance as tl
+from growjax.posterior import emulator as em
+from growjax.posterior.emulator import predicted_length
+from growjax.simulation import xla_flags
 
 from ._model import Residuals, emulated_mean, growth_model
 from ._priors import Prior
@@ -42,9 +42,14 @@ def diagnostics(idata, priors, observed, mcmc=None, residuals: Residuals | None 
     params = {}
     for s in sites:
         x = np.asarray(post[s]).ravel()
-        params[s] = {"mean": float(x.mean()), "sd": float(x.std()),
-                     "interval_90": [float(np.quantile(x, 0.05)), float(np.quantile(x, 0.95))],
-                     "rhat": float(rhat[s]), "ess_bulk": float(ess_bulk[s]), "ess_tail": float(ess_tail[s])}
+        params[s] = {
+            "mean": float(x.mean()),
+            "sd": float(x.std()),
+            "interval_90": [float(np.quantile(x, 0.05)), float(np.quantile(x, 0.95))],
+            "rhat": float(rhat[s]),
+            "ess_bulk": float(ess_bulk[s]),
+            "ess_tail": float(ess_tail[s]),
+        }
     div = int(np.asarray(idata.sample_stats["diverging"]).sum()) if "diverging" in idata.sample_stats else 0
     observed = np.asarray(observed)
 
@@ -54,8 +59,9 @@ def diagnostics(idata, priors, observed, mcmc=None, residuals: Residuals | None 
         return float(np.mean((observed >= lo) & (observed <= hi)))
 
     coverage = coverage_of("length")
-    coverage_new = coverage_of("length_new_experiment") if "length_new_experiment" in idata.posterior_predictive \
-        else coverage
+    coverage_new = (
+        coverage_of("length_new_experiment") if "length_new_experiment" in idata.posterior_predictive else coverage
+    )
     return {
         "parameters": params,
         "rhat_max": float(max(p["rhat"] for p in params.values())),
@@ -80,8 +86,9 @@ def predict(idata, priors, base, inputs, config, times, seed: int = 0, max_draws
     return np.asarray(mu) + noise
 
 
-def forecast(result, priors, base, inputs, config, times: Float[ArrayLike, " T"], seed: int = 0,
-             max_draws: int = 400) -> Float[np.ndarray, "S T"]:
+def forecast(
+    result, priors, base, inputs, config, times: Float[ArrayLike, " T"], seed: int = 0, max_draws: int = 400
+) -> Float[np.ndarray, "S T"]:
     """Posterior predictive length draws (S, T), m, at ``times`` (s) beyond or between the data the posterior was
     fitted on, conditioned on them: each draw's model run over the fitted and the new times, its discrepancy
     (and rig terms) at the new times given its residuals at the fitted samples (the Kalman forecast), and fresh
@@ -96,7 +103,9 @@ def forecast(result, priors, base, inputs, config, times: Float[ArrayLike, " T"]
     res = result.residuals
     if res is not None:  # the model runs where the posterior linearised the rig
         base = tl.rig_at(base, res.tolerance_names, res.centre)
-    mu = np.asarray(jax.jit(jax.vmap(lambda th: predicted_length(th, base, inputs, config, jnp.asarray(union))))(thetas))
+    mu = np.asarray(
+        jax.jit(jax.vmap(lambda th: predicted_length(th, base, inputs, config, jnp.asarray(union))))(thetas)
+    )
     at_fit, at_new = np.searchsorted(union, t_fit), np.searchsorted(union, t_new)
     rng = np.random.default_rng(seed + 1)
     if res is None:
@@ -106,21 +115,31 @@ def forecast(result, priors, base, inputs, config, times: Float[ArrayLike, " T"]
     g = u = None
     if res.sensitivity is not None:
         mean_theta = {n: float(np.mean(v)) for n, v in thetas.items()}
-        g_np = tl.length_sensitivity(mean_theta, base, inputs, config, union,
-                                     dict(zip(res.tolerance_names, map(float, res.tolerance))),
-                                     central=res.centre is not None)
+        g_np = tl.length_sensitivity(
+            mean_theta,
+            base,
+            inputs,
+            config,
+            union,
+            dict(zip(res.tolerance_names, map(float, res.tolerance))),
+            central=res.centre is not None,
+        )
         g, u = jnp.asarray(g_np), jnp.asarray(res.tolerance)
         offset = np.asarray(res.rig_mean(g_np))  # the rig term's prior mean where the rig is not nominal
         mu = mu + offset
     flat = lambda site: jnp.asarray(np.asarray(post[site]).ravel()[take]) if site in post else None
     amp, ell, tau = flat("delta_amplitude"), flat("delta_time_scale"), flat("noise_time")
-    hyper = dc.Hyper(jnp.zeros(take.size) if amp is None else amp, jnp.ones(take.size) if ell is None else ell,
-                     jnp.asarray(np.sqrt(sigma[take] ** 2 + result.summary.get("model_error_m", 0.0) ** 2)),
-                     jnp.zeros(take.size) if tau is None else tau)
+    hyper = dc.Hyper(
+        jnp.zeros(take.size) if amp is None else amp,
+        jnp.ones(take.size) if ell is None else ell,
+        jnp.asarray(np.sqrt(sigma[take] ** 2 + result.summary.get("model_error_m", 0.0) ** 2)),
+        jnp.zeros(take.size) if tau is None else tau,
+    )
     r = np.zeros_like(mu)
     r[:, at_fit] = y_fit[None, :] - mu[:, at_fit]
     mean, var = jax.jit(jax.vmap(lambda ri, h: dc.forecast(ri, jnp.asarray(union), jnp.asarray(observed), h, g, u)))(
-        jnp.asarray(r), hyper)
+        jnp.asarray(r), hyper
+    )
     scale = np.sqrt(np.asarray(var)[:, at_new])  # the filter's predictive variance includes the noise
     return mu[:, at_new] + np.asarray(mean)[:, at_new] + scale * rng.standard_normal(scale.shape)
 
@@ -148,9 +167,18 @@ def nuts_chain(info, warmup: int, samples: int, target_accept_prob: float):
     return chain
 
 
-def sbc(emulator: em.Emulator, priors: Sequence[Prior], replicates: int = 100, warmup: int = 200,
-        samples: int = 200, seed: int = 0, noise_scale: float = 1e-3, level: float = 0.9,
-        truth_model=None, model_error: float = 0.0) -> dict:
+def sbc(
+    emulator: em.Emulator,
+    priors: Sequence[Prior],
+    replicates: int = 100,
+    warmup: int = 200,
+    samples: int = 200,
+    seed: int = 0,
+    noise_scale: float = 1e-3,
+    level: float = 0.9,
+    truth_model=None,
+    model_error: float = 0.0,
+) -> dict:
     """Simulation-based calibration (Talts et al. 2018) of NUTS on :func:`growth_model`, all replicates at once.
 
     Each replicate draws θ and σ from the prior and a data set from the model (here its
@@ -162,7 +190,7 @@ def sbc(emulator: em.Emulator, priors: Sequence[Prior], replicates: int = 100, w
     ``truth_model({qualified name: (replicates,) values}) → (replicates, m)`` clean lengths (m) at the emulator's
     times: data from another configuration (the reference), plus σ-noise, so the check also sees the
     emulated configuration's error against it; the likelihood then carries the emulator's RMS error and
-    ``model_error`` (m, e.g. :data:`growjax.fit.FAST_MODEL_ERROR`, the fast configuration's against the
+    ``model_error`` (m, e.g. :data:`growjax.calibration.fit.FAST_MODEL_ERROR`, the fast configuration's against the
     reference), both as independent noise.
 
     Returns ``ranks`` {site: (replicates,) ints in [0, samples]}, ``coverage`` {site: share},
@@ -174,10 +202,17 @@ def sbc(emulator: em.Emulator, priors: Sequence[Prior], replicates: int = 100, w
     if truth_model is not None:
         model_error = float(np.hypot(float(emulator.error_rms), model_error))
         if not np.isfinite(model_error):
-            raise ValueError("sbc with a truth_model needs a validated emulator (growjax.emulator.validate): its "
-                             "error joins the noise")
-    model = functools.partial(growth_model, mean_length=emulated_mean(emulator), priors=priors,
-                              noise_scale=noise_scale, model_error=model_error)
+            raise ValueError(
+                "sbc with a truth_model needs a validated emulator (growjax.posterior.emulator.validate): its "
+                "error joins the noise"
+            )
+    model = functools.partial(
+        growth_model,
+        mean_length=emulated_mean(emulator),
+        priors=priors,
+        noise_scale=noise_scale,
+        model_error=model_error,
+    )
     k_prior, k_init, k_run, k_noise = jax.random.split(jax.random.PRNGKey(seed), 4)
     truth = Predictive(model, num_samples=replicates)(k_prior)
     if truth_model is not None:
@@ -219,10 +254,16 @@ def compare_loo(results: dict) -> dict:
     table = azs.compare(loos, method="stacking")
     out = {}
     for label, loo in loos.items():
-        out[label] = {"elpd_loo": float(loo.elpd), "se": float(loo.se), "p_loo": float(loo.p),
-                      "pareto_k_max": float(np.max(np.asarray(loo.pareto_k))),
-                      "rank": int(table.loc[label, "rank"]), "elpd_diff": float(table.loc[label, "elpd_diff"]),
-                      "dse": float(table.loc[label, "dse"]), "weight": float(table.loc[label, "weight"])}
+        out[label] = {
+            "elpd_loo": float(loo.elpd),
+            "se": float(loo.se),
+            "p_loo": float(loo.p),
+            "pareto_k_max": float(np.max(np.asarray(loo.pareto_k))),
+            "rank": int(table.loc[label, "rank"]),
+            "elpd_diff": float(table.loc[label, "elpd_diff"]),
+            "dse": float(table.loc[label, "dse"]),
+            "weight": float(table.loc[label, "weight"]),
+        }
     return out
 
 

@@ -48,16 +48,22 @@ def bound_start(make_model, priors, mean_length, length, mode: dict, inverse_mas
     sampled = bound_coordinates(priors, mode)
     if sampled == tuple(priors):
         return tuple(priors), mode, inverse_mass
-    start = {("u_" + p.site if isinstance(p, SoftplusPrior) else p.site):
-             (p.start() if isinstance(p, SoftplusPrior) else mode[p.site]) for p in sampled}
+    start = {
+        ("u_" + p.site if isinstance(p, SoftplusPrior) else p.site): (
+            p.start() if isinstance(p, SoftplusPrior) else mode[p.site]
+        )
+        for p in sampled
+    }
     start.update({k: v for k, v in mode.items() if k not in {p.site for p in priors}})  # σ and the discrepancy's
     start, hess = laplace_unconstrained(lambda m: make_model(m, sampled), sampled, mean_length, length, start)
     ridged = ridge_coordinates(sampled, start, hess)
     if ridged == sampled:
         return sampled, start, jnp.asarray(_inverse_floored(hess))
-    start = {**{"u_" + p.site: start["u_" + p.site] for p in ridged if isinstance(p, SoftplusPrior)},
-             **{"v_" + p.site: 0.0 for p in ridged if isinstance(p, RidgePrior)},
-             **{k: v for k, v in start.items() if not k.startswith("u_") and k not in {p.site for p in sampled}}}
+    start = {
+        **{"u_" + p.site: start["u_" + p.site] for p in ridged if isinstance(p, SoftplusPrior)},
+        **{"v_" + p.site: 0.0 for p in ridged if isinstance(p, RidgePrior)},
+        **{k: v for k, v in start.items() if not k.startswith("u_") and k not in {p.site for p in sampled}},
+    }
     start, hess = laplace_unconstrained(lambda m: make_model(m, ridged), ridged, mean_length, length, start)
     return ridged, start, jnp.asarray(_inverse_floored(hess))
 
@@ -91,8 +97,17 @@ def ridge_coordinates(sampled: Sequence[Prior], start: dict, hess) -> tuple[Prio
     return tuple(out)
 
 
-def precondition(model, priors, mean_length, length, seed=0, n_scout: int = 64, optimise: bool = True,
-                 make_model=None, extra_init: dict | None = None):
+def precondition(
+    model,
+    priors,
+    mean_length,
+    length,
+    seed=0,
+    n_scout: int = 64,
+    optimise: bool = True,
+    make_model=None,
+    extra_init: dict | None = None,
+):
     """Start point and inverse mass matrix for NUTS.
 
     The data fix Y to ~0.2 % of its prior width while ext and n stay at their priors, a
@@ -116,9 +131,14 @@ def precondition(model, priors, mean_length, length, seed=0, n_scout: int = 64, 
     if make_model is not None:
         init, hess = laplace_unconstrained(make_model, priors, mean_length, length, init)
         return init, jnp.asarray(_inverse_floored(hess))
-    info = initialize_model(jax.random.PRNGKey(seed), model, model_args=(jnp.asarray(length),),
-                            init_strategy=numpyro.infer.init_to_value(values=init),
-                            forward_mode_differentiation=not optimise, validate_grad=False)
+    info = initialize_model(
+        jax.random.PRNGKey(seed),
+        model,
+        model_args=(jnp.asarray(length),),
+        init_strategy=numpyro.infer.init_to_value(values=init),
+        forward_mode_differentiation=not optimise,
+        validate_grad=False,
+    )
     z0, unravel = ravel_pytree(info.param_info.z)
     potential = jax.jit(lambda z: info.potential_fn(unravel(z)))
     if optimise:
@@ -154,7 +174,7 @@ def laplace_unconstrained(make_model, priors, mean_length, length, init: dict):
     around the current point, μ(θ) ≈ μ₀ + J(θ − θ₀) (one forward-mode Jacobian), and takes a damped
     Newton step on the resulting potential, exact in everything else (priors, transforms, σ); a step the
     true potential does not confirm raises the damping. At the fixed point the gradient is the true one and
-    the Hessian is Gauss–Newton in θ, exact in the transforms. Not :func:`growjax._least_squares.levenberg_marquardt`:
+    the Hessian is Gauss–Newton in θ, exact in the transforms. Not :func:`growjax.calibration.least_squares.levenberg_marquardt`:
     the potential is no sum of squares plus a prior, its normaliser n·ln σ (with a discrepancy also ½ ln det
     of its covariance) has no residual form (on the tests' 200-sample saturating problem the potential at the
     mode is −1278 nats: n·ln σ −1573, the squared residuals +100).

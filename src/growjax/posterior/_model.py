@@ -12,18 +12,25 @@ import numpy as np
 import numpyro
 import numpyro.distributions as dist
 
-from growjax import discrepancy as dc
-from growjax import emulator as em
-from growjax import params as gp
-from growjax.emulator import predicted_length, sample_times
-from growjax.simulate import input_breaks, length_jacobian
-from growjax.trajectory import OK
+from growjax.calibration import discrepancy as dc
+from growjax.model import params as gp
+from growjax.posterior import emulator as em
+from growjax.posterior.emulator import predicted_length, sample_times
+from growjax.simulation.simulate import input_breaks, length_jacobian
+from growjax.simulation.trajectory import OK
 
 from ._priors import Prior
 
 
-def growth_model(length=None, *, mean_length, priors: Sequence[Prior], noise_scale=1e-3, model_error=0.0,
-                 residuals: Residuals | None = None):
+def growth_model(
+    length=None,
+    *,
+    mean_length,
+    priors: Sequence[Prior],
+    noise_scale=1e-3,
+    model_error=0.0,
+    residuals: Residuals | None = None,
+):
     """NumPyro model of the measured length (m)::
 
         θ_j ~ prior_j,   σ ~ HalfNormal(noise_scale),
@@ -34,7 +41,7 @@ def growth_model(length=None, *, mean_length, priors: Sequence[Prior], noise_sca
     ``mean_length(theta)`` is the model (or its emulator) at the measured times; ``e`` (m) is the
     emulator's RMS error (0 for the model itself). ``residuals`` (:class:`Residuals`) sets the discrepancy,
     the rig's tolerances and the samples scored; None: independent noise, every sample (δ and b absent).
-    δ and b are marginalised exactly (:mod:`growjax.discrepancy`). A failed solve has zero likelihood.
+    δ and b are marginalised exactly (:mod:`growjax.calibration.discrepancy`). A failed solve has zero likelihood.
     """
     theta = {}
     for p in priors:
@@ -51,8 +58,9 @@ def growth_model(length=None, *, mean_length, priors: Sequence[Prior], noise_sca
         return
     if residuals.discrepancy == "matern32":
         amplitude = numpyro.sample("delta_amplitude", dist.HalfNormal(dc.AMPLITUDE_SCALE))
-        time_scale = numpyro.sample("delta_time_scale",
-                                    dist.LogNormal(np.log(dc.TIME_SCALE_MEDIAN), dc.TIME_SCALE_LOG_SD))
+        time_scale = numpyro.sample(
+            "delta_time_scale", dist.LogNormal(np.log(dc.TIME_SCALE_MEDIAN), dc.TIME_SCALE_LOG_SD)
+        )
         noise_time = numpyro.sample("noise_time", dist.LogNormal(np.log(dc.NOISE_TIME_MEDIAN), dc.NOISE_TIME_LOG_SD))
     else:
         amplitude, time_scale, noise_time = jnp.zeros(()), jnp.ones(()), jnp.zeros(())
@@ -112,7 +120,7 @@ class Residuals:
 
     def conditional(self, y, mu, hyper):
         """Mean (n,) m and variance (n,) m² of the discrepancy and rig term at every sample given the data ``y``
-        (n,) at the scored samples (:func:`growjax.discrepancy.smooth`)."""
+        (n,) at the scored samples (:func:`growjax.calibration.discrepancy.smooth`)."""
         t, g, u, offset = self._terms(np.arange(len(self.times)))
         mean, var = dc.smooth(jnp.asarray(y) - mu - offset, t, hyper, g, u, jnp.asarray(self.observed))
         return mean + offset, var
@@ -127,8 +135,11 @@ class Residuals:
         """Start values {site: value} of the hyperparameters' sites."""
         if self.discrepancy != "matern32":
             return {}
-        return {"delta_amplitude": max(float(hyper.amplitude), 1e-7), "delta_time_scale": float(hyper.time_scale),
-                "noise_time": max(float(hyper.noise_time), 1e-4)}
+        return {
+            "delta_amplitude": max(float(hyper.amplitude), 1e-7),
+            "delta_time_scale": float(hyper.time_scale),
+            "noise_time": max(float(hyper.noise_time), 1e-4),
+        }
 
 
 class DirectMean:
@@ -142,7 +153,7 @@ class DirectMean:
         return predicted_length(theta, self.base, self.inputs, self.config, self.times)
 
     def value_and_jacobian(self, names):
-        """``v (d,) → (μ (m,), ∂μ/∂v (m, d))`` over θ = ``dict(zip(names, v))`` (:func:`growjax.simulate.length_jacobian`:
+        """``v (d,) → (μ (m,), ∂μ/∂v (m, d))`` over θ = ``dict(zip(names, v))`` (:func:`growjax.simulation.simulate.length_jacobian`:
         a solve fewer than a forward-mode derivative of :meth:`__call__`; NaN where the run failed)."""
         names, base = tuple(names), self.base
         breaks = input_breaks(self.inputs, self.config)
@@ -178,8 +189,8 @@ def build_emulator(priors: Sequence[Prior], base, inputs, config, times, seed: i
 def value_and_jacobian(mean_length, names):
     """``v (d,) → (μ (m,), ∂μ/∂v (m, d))`` for ``mean_length`` over θ = ``dict(zip(names, v))``: the model's own
     (:meth:`DirectMean.value_and_jacobian`, one solve) where it has one, else one forward-mode pass carrying d
-    tangent directions (:func:`growjax.fit.linearise`)."""
-    from growjax.fit import linearise
+    tangent directions (:func:`growjax.calibration.fit.linearise`)."""
+    from growjax.calibration.fit import linearise
 
     names = tuple(names)
     if hasattr(mean_length, "value_and_jacobian"):

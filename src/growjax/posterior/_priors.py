@@ -11,7 +11,7 @@ import numpy as np
 import numpyro
 import numpyro.distributions as dist
 
-from growjax import emulator as em
+from growjax.posterior import emulator as em
 
 
 @dataclasses.dataclass(frozen=True)
@@ -19,7 +19,7 @@ class Prior:
     """Prior of one parameter: site name in the NumPyro model, qualified name, SI bounds.
 
     Uniform on [low, high], or log-uniform when ``log``. ``nodes`` is the emulator's node
-    count along this parameter (see :mod:`growjax.emulator`).
+    count along this parameter (see :mod:`growjax.posterior.emulator`).
     """
 
     site: str
@@ -154,7 +154,7 @@ def paper_priors() -> tuple[Prior, ...]:
 
 
 def lockhart_priors() -> tuple[Prior, ...]:
-    """Priors of the Lockhart growth law (:mod:`growjax.robot`): Y on the paper's box, φ_L and n_L log-uniform.
+    """Priors of the Lockhart growth law (:mod:`growjax.model.robot`): Y on the paper's box, φ_L and n_L log-uniform.
 
     φ_L, the growth speed 1 kPa above the rest pressure, spans 0.1–10 mm/s: from a robot
     that barely moves within the experiment to one whose speed the check valve alone sets.

@@ -34,10 +34,16 @@ MODEL_SITE = "length_model"  # the deterministic site growth_model records the m
 NUTS_STATS = {"diverging": "diverging", "energy": "energy", "num_steps": "n_steps"}  # NumPyro's → ArviZ's names
 
 
-def inference_data(samples: dict, extra_fields: dict, times: Float[ArrayLike, " T"], observed: Float[ArrayLike, " T"],
-                   scored: Bool[ArrayLike, " T"], loglik: Float[ArrayLike, "C S T"],
-                   predicted: Float[ArrayLike, "C S T"],
-                   new_experiment: Float[ArrayLike, "C S T"] | None = None) -> xr.DataTree:
+def inference_data(
+    samples: dict,
+    extra_fields: dict,
+    times: Float[ArrayLike, " T"],
+    observed: Float[ArrayLike, " T"],
+    scored: Bool[ArrayLike, " T"],
+    loglik: Float[ArrayLike, "C S T"],
+    predicted: Float[ArrayLike, "C S T"],
+    new_experiment: Float[ArrayLike, "C S T"] | None = None,
+) -> xr.DataTree:
     """One NUTS run as an xarray DataTree (ArviZ 1.x's data structure), laid out for ArviZ's standard calls.
 
     ``posterior``: the sampled sites; ``posterior_predictive``: ``length`` (replicated data) and ``length_model``
@@ -73,14 +79,17 @@ def inference_data(samples: dict, extra_fields: dict, times: Float[ArrayLike, " 
     library = {"inference_library": "numpyro", "inference_library_version": numpyro.__version__}
 
     def group(data, at=times, sampled=True, attrs=None):
-        return azb.dict_to_dataset(data, coords={"time": at}, dims=dims, attrs=attrs,
-                                   sample_dims=["chain", "draw"] if sampled else [])
+        return azb.dict_to_dataset(
+            data, coords={"time": at}, dims=dims, attrs=attrs, sample_dims=["chain", "draw"] if sampled else []
+        )
 
-    return xr.DataTree.from_dict({
-        "posterior": group(samples, attrs=library),
-        "posterior_predictive": group(predictive),
-        "log_likelihood": group({"length": np.asarray(loglik)[..., scored]}, at=times[scored]),
-        "sample_stats": group(stats, attrs=library),
-        "observed_data": group({"length": np.asarray(observed, float)}, sampled=False),
-        "constant_data": group({"scored": scored}, sampled=False),
-    })
+    return xr.DataTree.from_dict(
+        {
+            "posterior": group(samples, attrs=library),
+            "posterior_predictive": group(predictive),
+            "log_likelihood": group({"length": np.asarray(loglik)[..., scored]}, at=times[scored]),
+            "sample_stats": group(stats, attrs=library),
+            "observed_data": group({"length": np.asarray(observed, float)}, sampled=False),
+            "constant_data": group({"scored": scored}, sampled=False),
+        }
+    )

@@ -17,12 +17,12 @@ import numpyro
 from jaxtyping import ArrayLike, Float
 
 from growjax import _progress
-from growjax import discrepancy as dc
-from growjax import emulator as em
-from growjax import experiment
-from growjax import params as gp
-from growjax import tolerance as tl
-from growjax.config import Config
+from growjax.calibration import discrepancy as dc
+from growjax.calibration import tolerance as tl
+from growjax.data import experiment
+from growjax.model import params as gp
+from growjax.posterior import emulator as em
+from growjax.simulation.config import Config
 
 from ._checks import diagnostics
 from ._laplace import _scout, bound_start, precondition
@@ -80,7 +80,7 @@ def sample(
 ) -> PosteriorResult:
     """NUTS over the priors and σ given a measured length (m) at ``times`` (s).
 
-    ``emulate``: True samples through an :class:`~growjax.emulator.Emulator` of the model built over
+    ``emulate``: True samples through an :class:`~growjax.posterior.emulator.Emulator` of the model built over
     the prior box (its validated RMS error joins the noise); an ``Emulator`` is used as given; False
     (default) runs the model in every gradient (forward mode). ``max_tree_depth``: NUTS's cap on the
     tree (at most 2^depth − 1 leapfrog steps per draw). ``chain_method``: NumPyro's; None runs the chains
@@ -94,10 +94,10 @@ def sample(
     on stderr where it is a terminal; elsewhere (a log) the bars' progress as a plain line every ~10 % of each
     chain's draws. The draws do not depend on where stderr goes.
 
-    ``discrepancy`` and ``tolerances``: the likelihood, as in :func:`growjax.fit.fit` (:func:`growth_model`): the
+    ``discrepancy`` and ``tolerances``: the likelihood, as in :func:`growjax.calibration.fit.fit` (:func:`growth_model`): the
     discrepancy's amplitude and time scale are sampled with the parameters; the rig's tolerances enter through
     the length's sensitivities (linearised), marginalised exactly. The rig is linearised where the fit puts it:
-    ``rig_centre`` {tolerance: ln(ψ/ψ₀)}, or None to take it from :func:`growjax.fit.fit` on the same data and
+    ``rig_centre`` {tolerance: ln(ψ/ψ₀)}, or None to take it from :func:`growjax.calibration.fit.fit` on the same data and
     likelihood (its ``rig_offset``), so that the fit and the posterior
     linearise the rig alike. The model runs with the rig there, and the rig's errors keep their prior about
     nominal.
@@ -120,44 +120,76 @@ def sample(
         _progress.note("posterior: building the emulator", progress)
     if discrepancy not in dc.KINDS:
         raise ValueError(f"discrepancy must be one of {dc.KINDS}, got {discrepancy!r}")
-    tol = tl.budget(base, tolerances, [p.name for p in priors], use_default=tolerances is None and discrepancy != "none")
-    centre, linearisations = _rig_centre(rig_centre, tol, times, length, inputs, priors, base, config, window,
-                                         discrepancy, tolerances, seed, progress)
+    tol = tl.budget(
+        base, tolerances, [p.name for p in priors], use_default=tolerances is None and discrepancy != "none"
+    )
+    centre, linearisations = _rig_centre(
+        rig_centre, tol, times, length, inputs, priors, base, config, window, discrepancy, tolerances, seed, progress
+    )
     base = tl.rig_at(base, tol, centre)
     mean, model_error, emu_info = _mean_length(emulate, priors, base, inputs, config, t, seed, start)
     _progress.note(f"posterior: the likelihood ({discrepancy} discrepancy)", progress)
     residuals, extra_init = _likelihood_terms(discrepancy, tol, t, y, mean, priors, base, inputs, config, seed, centre)
 
     def make_model(mean_length, priors=priors):
-        return functools.partial(growth_model, mean_length=mean_length, priors=priors, model_error=model_error,
-                                 residuals=residuals)
+        return functools.partial(
+            growth_model, mean_length=mean_length, priors=priors, model_error=model_error, residuals=residuals
+        )
 
     start_precondition = time.perf_counter()
     _progress.note("posterior: start point and mass matrix", progress)
     sampled, init_values, inverse_mass = _nuts_start(make_model, priors, mean, y, seed, emulate, extra_init)
     precondition_s = time.perf_counter() - start_precondition
-    nuts = {"dense_mass": dense_mass, "target_accept": target_accept, "max_tree_depth": max_tree_depth,
-            "chains": chains, "warmup": warmup, "samples": samples, "progress": progress,
-            "chain_method": chain_method or _chain_method(chains, emulate is not False)}
-    _progress.note(f"posterior: NUTS, {chains} chains of {warmup} warm-up and {samples} kept draws "
-                   f"({nuts['chain_method']})", progress)
+    nuts = {
+        "dense_mass": dense_mass,
+        "target_accept": target_accept,
+        "max_tree_depth": max_tree_depth,
+        "chains": chains,
+        "warmup": warmup,
+        "samples": samples,
+        "progress": progress,
+        "chain_method": chain_method or _chain_method(chains, emulate is not False),
+    }
+    _progress.note(
+        f"posterior: NUTS, {chains} chains of {warmup} warm-up and {samples} kept draws ({nuts['chain_method']})",
+        progress,
+    )
     start_nuts = time.perf_counter()
     with _numpyro_progress(progress):
         mcmc = _run_nuts(make_model(mean, sampled), init_values, inverse_mass, y, seed, emulate is False, **nuts)
     _progress.note(f"posterior: NUTS done in {time.perf_counter() - start_nuts:.1f} s", progress)
     post = mcmc.get_samples(group_by_chain=True)
-    loglik, predicted, new = observation_draws(post["length_model"], post["sigma"], model_error, y, seed + 1,
-                                               residuals, post.get("delta_amplitude"), post.get("delta_time_scale"),
-                                               post.get("noise_time"))
+    loglik, predicted, new = observation_draws(
+        post["length_model"],
+        post["sigma"],
+        model_error,
+        y,
+        seed + 1,
+        residuals,
+        post.get("delta_amplitude"),
+        post.get("delta_time_scale"),
+        post.get("noise_time"),
+    )
     scored = residuals.observed if residuals is not None else np.ones(len(y), bool)
     idata = inference_data(post, mcmc.get_extra_fields(group_by_chain=True), t, y, scored, loglik, predicted, new)
     wall = time.perf_counter() - start
     summary = diagnostics(idata, priors, y, mcmc, residuals)
-    summary.update({"wall_s": wall, "emulator": emu_info, "laplace_s": precondition_s if emulate is False else None,
-                    "chain_method": mcmc.chain_method, "coordinates": {p.site: coordinate(p) for p in sampled},
-                    "chains": chains, "warmup": warmup, "samples": samples, "discrepancy": discrepancy,
-                    "rig_centre": dict(zip(tol, map(float, centre))) if centre is not None else {},
-                    "linearisations": linearisations, **_likelihood_record(residuals, y)})
+    summary.update(
+        {
+            "wall_s": wall,
+            "emulator": emu_info,
+            "laplace_s": precondition_s if emulate is False else None,
+            "chain_method": mcmc.chain_method,
+            "coordinates": {p.site: coordinate(p) for p in sampled},
+            "chains": chains,
+            "warmup": warmup,
+            "samples": samples,
+            "discrepancy": discrepancy,
+            "rig_centre": dict(zip(tol, map(float, centre))) if centre is not None else {},
+            "linearisations": linearisations,
+            **_likelihood_record(residuals, y),
+        }
+    )
     return PosteriorResult(idata, summary, wall, residuals, (t, y))
 
 
@@ -171,8 +203,12 @@ def _mean_length(emulate, priors, base, inputs, config, t, seed: int, start: flo
     emu = emulate if isinstance(emulate, em.Emulator) else build_emulator(priors, base, inputs, config, t, seed)
     if emu.times.shape != t.shape or not np.allclose(np.asarray(emu.times), t):
         raise ValueError("the emulator was built for other measurement times than these data")
-    emu_info = {"error_rms_m": float(emu.error_rms), "error_max_m": float(emu.error_max),
-                "nodes": dict(zip(emu.names, emu.nodes)), "build_s": time.perf_counter() - start}
+    emu_info = {
+        "error_rms_m": float(emu.error_rms),
+        "error_max_m": float(emu.error_max),
+        "nodes": dict(zip(emu.names, emu.nodes)),
+        "build_s": time.perf_counter() - start,
+    }
     return emulated_mean(emu), float(emu.error_rms), emu_info
 
 
@@ -184,8 +220,21 @@ def _likelihood_terms(discrepancy: str, tol: dict, t, y, mean, priors, base, inp
     return residuals, {**residuals.hyper_sites(hyper), "sigma": float(hyper.noise)}
 
 
-def _rig_centre(given, tol: dict, times, length, inputs, priors, base, config, window, discrepancy: str, tolerances,
-                seed: int, progress: bool):
+def _rig_centre(
+    given,
+    tol: dict,
+    times,
+    length,
+    inputs,
+    priors,
+    base,
+    config,
+    window,
+    discrepancy: str,
+    tolerances,
+    seed: int,
+    progress: bool,
+):
     """(the rig's errors (q,) ln(ψ/ψ₀) where the posterior linearises it, or None at nominal; the fit's number of
     linearisations, 0 when given or without tolerances): ``given`` {tolerance: value}, or the fit's."""
     if not tol:
@@ -196,11 +245,22 @@ def _rig_centre(given, tol: dict, times, length, inputs, priors, base, config, w
             raise ValueError(f"rig_centre names {unknown}, which carry no tolerance here (tolerances: {sorted(tol)})")
         centre = np.array([float(given.get(name, 0.0)) for name in tol])
         return (centre if np.any(centre != 0) else None), 0
-    from growjax import fit as gf
+    from growjax.calibration import fit as gf
 
     _progress.note("posterior: the fit, for where the data put the rig", progress)
-    fitted = gf.fit(times, length, inputs, free=[p.name for p in priors], base=base, config=config, window=window,
-                    seed=seed, discrepancy=discrepancy, tolerances=tolerances, relinearise=True)
+    fitted = gf.fit(
+        times,
+        length,
+        inputs,
+        free=[p.name for p in priors],
+        base=base,
+        config=config,
+        window=window,
+        seed=seed,
+        discrepancy=discrepancy,
+        tolerances=tolerances,
+        relinearise=True,
+    )
     centre = np.array([fitted.rig_offset.get(name, 0.0) for name in tol])
     if not np.all(np.isfinite(centre)) or not np.any(centre):  # the rig stayed at nominal
         return None, fitted.linearisations
@@ -210,9 +270,16 @@ def _rig_centre(given, tol: dict, times, length, inputs, priors, base, config, w
 def _nuts_start(make_model, priors, mean, y, seed: int, emulate, extra_init: dict):
     """(priors as sampled, start, inverse mass matrix): :func:`precondition`, then through the model
     :func:`bound_start`."""
-    init_values, inverse_mass = precondition(make_model(mean), priors, mean, y, seed, optimise=emulate is not False,
-                                             make_model=make_model if emulate is False else None,
-                                             extra_init=extra_init)
+    init_values, inverse_mass = precondition(
+        make_model(mean),
+        priors,
+        mean,
+        y,
+        seed,
+        optimise=emulate is not False,
+        make_model=make_model if emulate is False else None,
+        extra_init=extra_init,
+    )
     if emulate is not False:
         return priors, init_values, inverse_mass
     return bound_start(make_model, priors, mean, y, init_values, inverse_mass)
@@ -233,42 +300,74 @@ def _numpyro_progress(progress: bool):
         return _progress.Lines(n, "posterior: NUTS", "draw", iterable=range(n))
 
     def auto(iterable, position=0, **_):
-        return _progress.Lines(len(iterable), f"posterior: NUTS chain {position}", "draw", iterable=iterable,
-                               phases=False)  # NumPyro's descriptions there name the chain again
+        return _progress.Lines(
+            len(iterable), f"posterior: NUTS chain {position}", "draw", iterable=iterable, phases=False
+        )  # NumPyro's descriptions there name the chain again
 
     with mock.patch.object(nu, "tqdm", types.SimpleNamespace(trange=trange)), mock.patch.object(nu, "tqdm_auto", auto):
         yield
 
 
-def _run_nuts(model, init_values, inverse_mass, y, seed: int, forward_mode: bool, *, dense_mass: bool,
-              target_accept: float, max_tree_depth: int, chains: int, warmup: int, samples: int, progress: bool,
-              chain_method: str):
+def _run_nuts(
+    model,
+    init_values,
+    inverse_mass,
+    y,
+    seed: int,
+    forward_mode: bool,
+    *,
+    dense_mass: bool,
+    target_accept: float,
+    max_tree_depth: int,
+    chains: int,
+    warmup: int,
+    samples: int,
+    progress: bool,
+    chain_method: str,
+):
     """NumPyro's MCMC run of NUTS on ``model`` from ``init_values`` with ``inverse_mass`` (dense, or its diagonal)."""
     from numpyro.infer import MCMC, NUTS
 
-    kernel = NUTS(model, dense_mass=dense_mass, target_accept_prob=target_accept, max_tree_depth=max_tree_depth,
-                  inverse_mass_matrix=inverse_mass if dense_mass else jnp.diag(inverse_mass),
-                  init_strategy=numpyro.infer.init_to_value(values=init_values),
-                  # through the ODE, forward mode is 5× cheaper than reverse mode through the scan
-                  forward_mode_differentiation=forward_mode)
-    mcmc = MCMC(kernel, num_warmup=warmup, num_samples=samples, num_chains=chains, chain_method=chain_method,
-                progress_bar=progress)
+    kernel = NUTS(
+        model,
+        dense_mass=dense_mass,
+        target_accept_prob=target_accept,
+        max_tree_depth=max_tree_depth,
+        inverse_mass_matrix=inverse_mass if dense_mass else jnp.diag(inverse_mass),
+        init_strategy=numpyro.infer.init_to_value(values=init_values),
+        # through the ODE, forward mode is 5× cheaper than reverse mode through the scan
+        forward_mode_differentiation=forward_mode,
+    )
+    mcmc = MCMC(
+        kernel,
+        num_warmup=warmup,
+        num_samples=samples,
+        num_chains=chains,
+        chain_method=chain_method,
+        progress_bar=progress,
+    )
     mcmc.run(jax.random.PRNGKey(seed), jnp.asarray(y), extra_fields=("diverging", "energy", "num_steps"))
     return mcmc
 
 
 def _likelihood_record(residuals: Residuals | None, y) -> dict:
     """The summary's ``tolerances`` {name: relative sd} and ``samples_used``."""
-    tolerances = dict(zip(residuals.tolerance_names, map(float, residuals.tolerance))) if (
-        residuals is not None and residuals.tolerance is not None) else {}
-    return {"tolerances": tolerances,
-            "samples_used": int(np.sum(residuals.observed)) if residuals is not None else int(y.size)}
+    tolerances = (
+        dict(zip(residuals.tolerance_names, map(float, residuals.tolerance)))
+        if (residuals is not None and residuals.tolerance is not None)
+        else {}
+    )
+    return {
+        "tolerances": tolerances,
+        "samples_used": int(np.sum(residuals.observed)) if residuals is not None else int(y.size),
+    }
 
 
-def build_residuals(discrepancy: str, times, length, mean_length, priors, base, inputs, config, tol: dict,
-                    seed: int = 0, centre=None) -> tuple[Residuals, dc.Hyper]:
+def build_residuals(
+    discrepancy: str, times, length, mean_length, priors, base, inputs, config, tol: dict, seed: int = 0, centre=None
+) -> tuple[Residuals, dc.Hyper]:
     """The :class:`Residuals` of a posterior and its hyperparameters' start: the samples scored
-    (:func:`growjax.experiment.informative_samples` with a discrepancy), the rig's sensitivities at the scout's
+    (:func:`growjax.data.experiment.informative_samples` with a discrepancy), the rig's sensitivities at the scout's
     best θ (``base`` holds the rig where it is linearised; ``centre`` (q,) its errors ln(ψ/ψ₀) there, None at
     nominal: the slope there, as the fit takes it, rather than the secant from nominal), and the hyperparameters'
     mode given the residuals there."""
@@ -278,16 +377,35 @@ def build_residuals(discrepancy: str, times, length, mean_length, priors, base, 
     if tol:
         g = tl.length_sensitivity(theta, base, inputs, config, times, tol, central=centre is not None)
         u = np.asarray(list(tol.values()))
-    residuals = Residuals(discrepancy, np.asarray(times), observed, g, u, tuple(tol),
-                          None if centre is None else np.asarray(centre, float))
-    r = (np.asarray(length) - np.asarray(jax.jit(mean_length)({k: jnp.asarray(v) for k, v in theta.items()}))
-         - residuals.rig_mean())
+    residuals = Residuals(
+        discrepancy,
+        np.asarray(times),
+        observed,
+        g,
+        u,
+        tuple(tol),
+        None if centre is None else np.asarray(centre, float),
+    )
+    r = (
+        np.asarray(length)
+        - np.asarray(jax.jit(mean_length)({k: jnp.asarray(v) for k, v in theta.items()}))
+        - residuals.rig_mean()
+    )
     hyper = dc.estimate(r, times, discrepancy, g, u, observed)
     return residuals, hyper
 
 
-def observation_draws(mean_length, sigma, model_error: float, observed, seed: int, residuals: Residuals | None = None,
-                      amplitude=None, time_scale=None, noise_time=None):
+def observation_draws(
+    mean_length,
+    sigma,
+    model_error: float,
+    observed,
+    seed: int,
+    residuals: Residuals | None = None,
+    amplitude=None,
+    time_scale=None,
+    noise_time=None,
+):
     """Pointwise log-likelihood and two posterior predictives of the length (m), all (C, S, T), of every draw.
 
     ``mean_length`` (C, S, T): the model's length (m) at each draw, which :func:`growth_model` records as
@@ -296,7 +414,7 @@ def observation_draws(mean_length, sigma, model_error: float, observed, seed: in
     correlation time and the tolerances, if any. The
     pointwise terms are then the one-step-ahead log-densities log p(yᵢ | earlier y) (0 at samples not scored).
     Returns (log-likelihood, this experiment replicated, a new experiment): a replication keeps this experiment's
-    discrepancy and rig error as the data determine them (:func:`growjax.discrepancy.smooth`, each sample drawn
+    discrepancy and rig error as the data determine them (:func:`growjax.calibration.discrepancy.smooth`, each sample drawn
     from its marginal) with fresh sensor noise; a new experiment draws a fresh discrepancy and rig error (the
     band for running the rig again). Nothing is simulated again: NumPyro's ``Predictive`` and ArviZ's
     log-likelihood would each run the model once more per draw. Seeded by ``seed``.
@@ -307,8 +425,11 @@ def observation_draws(mean_length, sigma, model_error: float, observed, seed: in
     scale = np.sqrt(np.asarray(sigma, float) ** 2 + model_error**2)
     finite = np.isfinite(mean_length)
     if residuals is None:
-        loglik = np.where(finite, norm.logpdf(np.asarray(observed, float), np.where(finite, mean_length, 0.0),
-                                              scale[..., None]), -np.inf)
+        loglik = np.where(
+            finite,
+            norm.logpdf(np.asarray(observed, float), np.where(finite, mean_length, 0.0), scale[..., None]),
+            -np.inf,
+        )
         noise = np.random.default_rng(seed).standard_normal(mean_length.shape)
         predicted = mean_length + scale[..., None] * noise
         return loglik, predicted, predicted
@@ -318,8 +439,9 @@ def observation_draws(mean_length, sigma, model_error: float, observed, seed: in
     amp = np.zeros(shape[:-1]) if amplitude is None else np.asarray(amplitude, float)
     ell = ones if time_scale is None else np.asarray(time_scale, float)
     tau = np.zeros(shape[:-1]) if noise_time is None else np.asarray(noise_time, float)
-    hyper = dc.Hyper(jnp.asarray(amp.ravel()), jnp.asarray(ell.ravel()), jnp.asarray(scale.ravel()),
-                     jnp.asarray(tau.ravel()))
+    hyper = dc.Hyper(
+        jnp.asarray(amp.ravel()), jnp.asarray(ell.ravel()), jnp.asarray(scale.ravel()), jnp.asarray(tau.ravel())
+    )
     y = jnp.asarray(observed, float)
 
     def one(args):

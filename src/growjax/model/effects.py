@@ -1,0 +1,412 @@
+"""Physical effects beyond the published model: the one extension point of both configurations.
+
+An effect is an ``equinox.Module`` that lives in ``Parameters.effects``, so its parameters
+are leaves of the parameter pytree: they can be differentiated, swept, fitted and sampled
+like Y. Every effect's parameters are in SI units and zero means absent, so the extended
+model reduces exactly to the base model. An effect contributes through any of five hooks,
+each called by both configurations (:mod:`growjax.simulation.reference` and :mod:`growjax.simulation.fast`) from
+this one definition:
+
+* :meth:`Effect.apply`: a changed parameter (e.g. the air fraction);
+* :meth:`Effect.rod_force`: a force (N) opposing growth in the rod balance of the growing element;
+* :meth:`Effect.chamber_outflow`: a flow (m³/s) out of the pressurised chamber;
+* :meth:`Effect.drive`: the drive force or torque actually applied, given the commanded one;
+* states of its own (``state_names``), with :meth:`Effect.rates` and :meth:`Effect.length_offset`.
+
+A rod force must not decrease with the robot velocity (friction-like); the rod balance
+relies on that monotonicity to have one root. An effect whose rod force depends on the velocity
+says so (``velocity_dependent``): the fast configuration then solves the rod balance by Newton
+iterations instead of one fixed-point pass.
+
+The catalogue (:data:`CATALOGUE`, name → class): ``active_channel_force``, ``fluid_leak``,
+``actuation_lag``, ``trapped_air``, ``catheter_friction``, ``lumen_friction``,
+``growth_rate_limit``, ``retraction_folding``. :func:`register` adds an effect of your own.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import ClassVar
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from growjax.model._smooth import smooth_ramp
+from growjax.model.robot import LOCKHART_PRESSURE_SCALE, lockhart_pressure
+
+FRICTION_VELOCITY = 1e-4  # m/s: velocity over which a friction force turns from one sign to the other
+RAMP_VELOCITY = 1e-6  # m/s: C¹ band of the ramps max(v, 0) of the velocity
+
+
+class Rod(eqx.Module):
+    """The growing element as an effect sees it in the rod balance (SI units); built by keyword only.
+
+    t: s.  pressure: sensed pressure P before the check valve, Pa.  velocity: robot
+    velocity (inflow / A_r), m/s.  length: robot length, m.  catheter_length: m.
+    inner_radius: r_i of the robot, m.  area: its annular piston area A_r = π(r_o² − r_i²), m².
+    """
+
+    _: dataclasses.KW_ONLY
+    t: jax.Array
+    pressure: jax.Array
+    velocity: jax.Array
+    length: jax.Array
+    catheter_length: jax.Array
+    inner_radius: jax.Array
+    area: jax.Array
+
+
+class Instant(eqx.Module):
+    """The solved model at one instant, for the rates of effect states (SI units); built by keyword only.
+
+    t: s.  pressure: sensed pressure, Pa.  robot_pressure: Pa.  robot_flow: m³/s.  velocity: robot velocity, m/s.
+    length: robot length, m.  drive: the commanded drive (forward: force on the platform, N; inverse: motor
+    torque, N·m).
+    """
+
+    _: dataclasses.KW_ONLY
+    t: jax.Array
+    pressure: jax.Array
+    robot_pressure: jax.Array
+    robot_flow: jax.Array
+    velocity: jax.Array
+    length: jax.Array
+    drive: jax.Array
+
+
+class Effect(eqx.Module):
+    """Base class of a physical effect; override only the hooks the effect uses.
+
+    Class attributes: ``name`` (catalogue name, used in parameter names ``name.field``),
+    ``description`` (one line), ``units`` and ``ranges`` (per parameter field),
+    ``state_names`` (states of its own; their typical magnitudes from :meth:`state_scales`),
+    ``velocity_dependent`` (whether :meth:`rod_force` depends on the robot velocity).
+    """
+
+    name: ClassVar[str] = ""
+    description: ClassVar[str] = ""
+    units: ClassVar[dict] = {}
+    ranges: ClassVar[dict] = {}
+    state_names: ClassVar[tuple] = ()
+    velocity_dependent: ClassVar[bool] = False  # does rod_force depend on the robot velocity?
+
+    def state_scales(self, drive: str) -> tuple:
+        """Typical magnitude of each state (for error control), in its SI unit."""
+        return ()
+
+    def present(self) -> jax.Array:
+        """Whether any parameter of the effect is nonzero (bool array; every parameter at 0 means absent)."""
+        leaves = [jnp.any(jnp.asarray(x) != 0) for x in jax.tree_util.tree_leaves(self)]
+        return jnp.any(jnp.stack(leaves)) if leaves else jnp.asarray(False)
+
+    def apply(self, params):
+        """The parameters as changed by this effect (default: unchanged)."""
+        return params
+
+    def rod_force(self, rod: Rod, state) -> jax.Array:
+        """Force opposing growth on the rod, N (default 0); non-decreasing in ``rod.velocity``."""
+        return jnp.zeros_like(rod.pressure)
+
+    def chamber_outflow(self, t, pressure, state) -> jax.Array:
+        """Flow out of the pressurised chamber at gauge ``pressure`` (Pa), m³/s (default 0)."""
+        return jnp.zeros_like(pressure)
+
+    def drive(self, commanded, state) -> jax.Array:
+        """Drive force (N) or torque (N·m) applied, given the ``commanded`` one (default: as commanded)."""
+        return commanded
+
+    def initial_state(self, params, drive: str) -> jax.Array:
+        """States at t0, shape (len(state_names),)."""
+        return jnp.zeros(len(self.state_names))
+
+    def rates(self, instant: Instant, state) -> jax.Array:
+        """Time derivatives of the states, shape (len(state_names),)."""
+        return jnp.zeros(len(self.state_names))
+
+    def length_offset(self, state) -> jax.Array:
+        """Everted length (m) not produced by the volume in the robot (default 0)."""
+        return jnp.asarray(0.0)
+
+
+class ActiveChannelForce(Effect):
+    """Constant axial pull of the active channel on the robot, opposing growth.
+
+    Attributes:
+        force: F_ac, N (0 = absent).
+    """
+
+    name: ClassVar[str] = "active_channel_force"
+    description: ClassVar[str] = "constant axial force of the active channel pulling the robot back"
+    units: ClassVar[dict] = {"force": "N"}
+    ranges: ClassVar[dict] = {"force": (0.0, 0.5)}
+    force: float = 0.0
+
+    def rod_force(self, rod, state):
+        return self.force + jnp.zeros_like(rod.pressure)
+
+
+class FluidLeak(Effect):
+    """Laminar leak from the pressurised chamber to ambient, q = G·p.
+
+    Attributes:
+        conductance: G, m³/(s·Pa) (0 = absent).
+    """
+
+    name: ClassVar[str] = "fluid_leak"
+    description: ClassVar[str] = "leak q = G·p from the pressurised chamber to ambient"
+    units: ClassVar[dict] = {"conductance": "m^3/(s*Pa)"}
+    ranges: ClassVar[dict] = {"conductance": (0.0, 1e-12)}
+    conductance: float = 0.0
+
+    def chamber_outflow(self, t, pressure, state):
+        return self.conductance * pressure
+
+
+class ActuationLag(Effect):
+    """First-order lag τ between the commanded and the applied screw drive (force or torque).
+
+    Attributes:
+        time_constant: τ, s (0 = absent: the drive is applied as commanded).
+    """
+
+    name: ClassVar[str] = "actuation_lag"
+    description: ClassVar[str] = "first-order lag between the commanded and the applied screw torque"
+    units: ClassVar[dict] = {"time_constant": "s"}
+    ranges: ClassVar[dict] = {"time_constant": (0.0, 0.5)}
+    state_names: ClassVar[tuple] = ("applied_drive",)
+    time_constant: float = 0.0
+
+    def state_scales(self, drive):
+        return (10.0,) if drive == "forward" else (1e-2,)
+
+    def drive(self, commanded, state):
+        return jnp.where(self.time_constant > 0.0, state[0], commanded)
+
+    def rates(self, instant, state):
+        tau = jnp.where(self.time_constant > 0.0, self.time_constant, 1.0)
+        rate = jnp.where(self.time_constant > 0.0, (instant.drive - state[0]) / tau, 0.0)
+        return jnp.stack([rate])
+
+
+class TrappedAir(Effect):
+    """Entrained air beyond the base model's: α = α_base + Δα.
+
+    Attributes:
+        extra_fraction: Δα, relative air volume at atmospheric pressure (–) (0 = absent).
+    """
+
+    name: ClassVar[str] = "trapped_air"
+    description: ClassVar[str] = "an entrained-air fraction different from the base model's"
+    units: ClassVar[dict] = {"extra_fraction": "-"}
+    ranges: ClassVar[dict] = {"extra_fraction": (-0.005, 0.05)}
+    extra_fraction: float = 0.0
+
+    def apply(self, params):
+        fluid = dataclasses.replace(params.fluid, air_fraction=params.fluid.air_fraction + self.extra_fraction)
+        return dataclasses.replace(params, fluid=fluid)
+
+
+def friction_sign(velocity):
+    """Smooth sign of the robot velocity (m/s), tanh(v / 1e-4 m/s): increasing, odd, ±1 beyond ~0.3 mm/s."""
+    return jnp.tanh(velocity / FRICTION_VELOCITY)
+
+
+class CatheterFriction(Effect):
+    """Friction between catheter and membrane that resists the motion, of the paper's eq. 4 form.
+
+    F = μ·P·2π r_i·L_c·s(v), with P the sensed pressure (taken ≥ 0: the contact cannot pull),
+    r_i the robot's inner radius, L_c the catheter length in contact and s the smooth sign of the
+    robot velocity (:func:`friction_sign`). The shipped model's own catheter term (μ_c = 0.01)
+    *assists* growth; this one opposes growth and retraction alike.
+
+    Attributes:
+        coefficient: μ (–) (0 = absent).
+    """
+
+    name: ClassVar[str] = "catheter_friction"
+    description: ClassVar[str] = "catheter-membrane friction μ·P·2π r_i·L_c resisting the motion (paper eq. 4)"
+    units: ClassVar[dict] = {"coefficient": "-"}
+    ranges: ClassVar[dict] = {"coefficient": (0.0, 0.1)}
+    velocity_dependent: ClassVar[bool] = True
+    coefficient: float = 0.0
+
+    def rod_force(self, rod, state):
+        normal = jnp.maximum(rod.pressure, 0.0) * 2.0 * jnp.pi * rod.inner_radius * rod.catheter_length  # N
+        return self.coefficient * normal * friction_sign(rod.velocity)
+
+
+class LumenFriction(Effect):
+    """Friction of the duct wall on the everted robot, opposing the tip's motion: F = c·L·s(v).
+
+    c = μ_s·w is the friction force per unit everted length (μ_s the wall friction coefficient,
+    w the wall's normal load per unit length), L the robot length, s the smooth sign of the
+    robot velocity (:func:`friction_sign`).
+
+    Attributes:
+        force_per_length: c, N/m (0 = absent).
+    """
+
+    name: ClassVar[str] = "lumen_friction"
+    description: ClassVar[str] = "duct-wall friction c·L on the everted length, opposing the tip's motion"
+    units: ClassVar[dict] = {"force_per_length": "N/m"}
+    ranges: ClassVar[dict] = {"force_per_length": (0.0, 10.0)}
+    velocity_dependent: ClassVar[bool] = True
+    force_per_length: float = 0.0
+
+    def rod_force(self, rod, state):
+        return self.force_per_length * rod.length * friction_sign(rod.velocity)
+
+
+class GrowthRateLimit(Effect):
+    """Membrane-limited growth speed: growing at v > 0 needs Δp = p_ref·(κ·v)^m more rod pressure.
+
+    The inverse of a Lockhart-type law v = (Δp/p_ref)^(1/m)/κ (:func:`growjax.model.robot.lockhart_pressure`), with
+    p_ref = 1 kPa and m = 4 fixed (the calibration found Lockhart's exponent n_L ≈ 0.25, m = 1/n_L). Zero while
+    the robot holds or retracts (a C¹ ramp of v). Rod force A_r·Δp.
+
+    Attributes:
+        inverse_speed: κ, s/m: the inverse of the growth speed at 1 kPa of excess pressure (0 = absent).
+    """
+
+    name: ClassVar[str] = "growth_rate_limit"
+    description: ClassVar[str] = "membrane-limited growth: extra pressure p_ref·(κ·v)^4 to grow at speed v"
+    units: ClassVar[dict] = {"inverse_speed": "s/m"}
+    ranges: ClassVar[dict] = {"inverse_speed": (0.0, 2000.0)}
+    velocity_dependent: ClassVar[bool] = True
+    reference_pressure: ClassVar[float] = LOCKHART_PRESSURE_SCALE  # Pa: p_ref
+    exponent: ClassVar[float] = 4.0  # m = 1/n_L
+    inverse_speed: float = 0.0
+
+    def rod_force(self, rod, state):
+        return rod.area * lockhart_pressure(rod.velocity, self.inverse_speed, self.exponent, RAMP_VELOCITY)
+
+
+class RetractionFolding(Effect):
+    """Folding on retraction: only k = 1 − f of the volume returned while retracting shortens the robot.
+
+    The rest folds inside the robot (``folded_length``, F) and is not recovered when it grows
+    again: dF/dt = f·max(−v, 0) (a C¹ ramp) and the length is L0 + ξ + F, with ξ the robot
+    displacement the volume makes.
+
+    Attributes:
+        folding_fraction: f = 1 − k (–), in [0, 1] (0 = absent).
+    """
+
+    name: ClassVar[str] = "retraction_folding"
+    description: ClassVar[str] = "a fraction f of the retracting robot folds inside instead of shortening it"
+    units: ClassVar[dict] = {"folding_fraction": "-"}
+    ranges: ClassVar[dict] = {"folding_fraction": (0.0, 1.0)}
+    state_names: ClassVar[tuple] = ("folded_length",)
+    folding_fraction: float = 0.0
+
+    def state_scales(self, drive):
+        return (1e-4,) if drive == "forward" else (1e-3,)  # m, as the robot displacement
+
+    def rates(self, instant, state):
+        return jnp.stack([self.folding_fraction * smooth_ramp(-instant.velocity, RAMP_VELOCITY)])
+
+    def length_offset(self, state):
+        return -state[0]  # length = L0 + ξ − offset = L0 + ξ + F
+
+
+CATALOGUE = {
+    cls.name: cls
+    for cls in (
+        ActiveChannelForce,
+        FluidLeak,
+        ActuationLag,
+        TrappedAir,
+        CatheterFriction,
+        LumenFriction,
+        GrowthRateLimit,
+        RetractionFolding,
+    )
+}
+
+
+def register(cls: type[Effect]) -> type[Effect]:
+    """Add an :class:`Effect` subclass to :data:`CATALOGUE`, so that :func:`growjax.discover.discover` tests it.
+
+    The class needs a ``name`` not already in the catalogue, a one-line ``description``, and exactly one
+    parameter field with its unit (``units``) and physical range (``ranges``), the range including 0 (absent).
+    Usable as a class decorator; returns the class.
+    """
+    if not (isinstance(cls, type) and issubclass(cls, Effect)):
+        raise TypeError(f"register expects an Effect subclass, got {cls!r}")
+    if not cls.name or cls.name in CATALOGUE:
+        raise ValueError(f"an effect needs a name not in the catalogue ({sorted(CATALOGUE)}), got {cls.name!r}")
+    if len(cls.ranges) != 1:
+        raise ValueError(f"{cls.name}: discover fits one parameter per effect; ranges has {len(cls.ranges)}")
+    ((field, (low, high)),) = cls.ranges.items()
+    if field not in cls.units or not low <= 0.0 <= high:
+        raise ValueError(f"{cls.name}.{field}: needs a unit in `units` and a range that includes 0")
+    CATALOGUE[cls.name] = cls
+    return cls
+
+
+# -- what the assemblies call: the sum over a tuple of effects -------------------------------------------
+
+
+def split_states(effects, states):
+    """The state vector of all effects (K,) → one array per effect."""
+    out, k = [], 0
+    for e in effects:
+        m = len(e.state_names)
+        out.append(states[k : k + m])
+        k += m
+    return out
+
+
+def state_size(effects) -> int:
+    return sum(len(e.state_names) for e in effects)
+
+
+def state_scales(effects, drive: str) -> tuple:
+    return tuple(s for e in effects for s in e.state_scales(drive))
+
+
+def initial_states(effects, params, drive: str) -> jax.Array:
+    parts = [jnp.asarray(e.initial_state(params, drive), float) for e in effects if e.state_names]
+    return jnp.concatenate(parts) if parts else jnp.zeros(0)
+
+
+def apply_all(params):
+    """The parameters with every effect's parameter change applied."""
+    for e in params.effects:
+        params = e.apply(params)
+    return params
+
+
+def rod_force(effects, states, rod: Rod):
+    total = jnp.zeros_like(rod.pressure)
+    for e, s in zip(effects, split_states(effects, states)):
+        total = total + e.rod_force(rod, s)
+    return total
+
+
+def chamber_outflow(effects, states, t, pressure):
+    total = jnp.zeros_like(pressure)
+    for e, s in zip(effects, split_states(effects, states)):
+        total = total + e.chamber_outflow(t, pressure, s)
+    return total
+
+
+def applied_drive(effects, states, commanded):
+    for e, s in zip(effects, split_states(effects, states)):
+        commanded = e.drive(commanded, s)
+    return commanded
+
+
+def length_offset(effects, states):
+    total = jnp.asarray(0.0)
+    for e, s in zip(effects, split_states(effects, states)):
+        total = total + e.length_offset(s)
+    return total
+
+
+def rates(effects, states, instant: Instant):
+    parts = [
+        jnp.asarray(e.rates(instant, s), float) for e, s in zip(effects, split_states(effects, states)) if e.state_names
+    ]
+    return jnp.concatenate(parts) if parts else jnp.zeros(0)

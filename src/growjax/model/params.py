@@ -1,0 +1,244 @@
+"""All model parameters as one typed pytree, with override by name and validation.
+
+Values are the shipped model's, SI units throughout. A parameter
+is addressed as ``block.field`` (``robot.yield_pressure``), by its bare field name
+when that is unique, or by the published symbol (``Y``, ``ext``, ``n``, ``As`` …).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import equinox as eqx
+import jax
+import numpy as np
+
+from growjax.model.fluid import Fluid
+from growjax.model.hydraulics import (
+    CheckValve,
+    DirectionalValve,
+    Nozzle,
+    Orifice,
+    Pipeline,
+    circular_pipeline,
+)
+from growjax.model.motor import PID, StepperMotor
+from growjax.model.pump import SyringePump
+from growjax.model.robot import GrowingRobot
+from growjax.simulation.config import DRIVES
+
+
+class Parameters(eqx.Module):
+    """Every physical parameter of the MAMMOBOT drive chain, grouped by subsystem (see each block's docstring).
+
+    ``effects`` holds the physical effects added to the published model (:mod:`growjax.model.effects`);
+    their parameters are addressed as ``effect_name.field``.
+    """
+
+    fluid: Fluid
+    pump: SyringePump
+    tube: Pipeline
+    orifice: Orifice
+    tank: Pipeline
+    nozzle: Nozzle
+    check_valve: CheckValve
+    valve: DirectionalValve
+    robot: GrowingRobot
+    pid: PID
+    motor: StepperMotor
+    effects: tuple = ()
+
+
+ALIASES = {
+    "Y": "robot.yield_pressure",
+    "ext": "robot.extensibility",
+    "phi": "robot.extensibility",
+    "n": "robot.growth_exponent",
+    "phi_L": "robot.lockhart_rate",
+    "n_L": "robot.lockhart_exponent",
+    "ri": "robot.inner_radius",
+    "ro": "robot.outer_radius",
+    "t": "robot.membrane_thickness",
+    "yieldstress": "robot.membrane_yield_stress",
+    "mu_c": "robot.catheter_friction",
+    "F_AC": "robot.active_channel_force",
+    "As": "pump.syringe_area",
+    "Kp": "pid.proportional",
+    "Ki": "pid.integral",
+    "Kd": "pid.derivative",
+    "f": "motor.controller_rate",
+}
+
+
+def reference(drive: str = "forward", growth_law: str = "reference") -> Parameters:
+    """The shipped Simscape model's parameters for the ``forward`` (ideal torque) or ``inverse`` (stepper) drive.
+
+    ``growth_law="lockhart"`` swaps the published velocity term for Lockhart's law (see :mod:`growjax.model.robot`).
+    """
+    if drive not in DRIVES:
+        raise ValueError(f"drive must be one of {DRIVES}, got {drive!r}")
+    tube_length = 0.3 if drive == "forward" else 0.1
+    stroke = 0.08 if drive == "forward" else 0.1
+    tube = circular_pipeline(
+        4e-3, tube_length, diameter_compliance=2e-12, wall_time_constant=0.01, initial_pressure=200.0
+    )
+    tank = Pipeline(area=1.695e-4, hydraulic_diameter=0.015, length=0.122, initial_pressure=1.0)
+    return Parameters(
+        fluid=Fluid(),
+        pump=SyringePump(),
+        tube=tube,
+        orifice=Orifice(),
+        tank=tank,
+        nozzle=Nozzle(),
+        check_valve=CheckValve(),
+        valve=DirectionalValve(),
+        robot=GrowingRobot(stroke=stroke, hard_stop_bound=stroke, growth_law=growth_law),
+        pid=PID(),
+        motor=StepperMotor(),
+    )
+
+
+def _blocks(params: Parameters):
+    """{name: module} of every parameter block, effects included (by their catalogue name)."""
+    blocks = {f.name: getattr(params, f.name) for f in dataclasses.fields(params) if f.name != "effects"}
+    for effect in params.effects:
+        if effect.name in blocks:
+            raise ValueError(f"effect {effect.name!r} appears twice or clashes with a parameter block")
+        blocks[effect.name] = effect
+    return blocks
+
+
+def parameter_names(params: Parameters) -> list[str]:
+    """Qualified names ``block.field`` of every numeric parameter (effects as ``effect_name.field``)."""
+    names = []
+    for block_name, block in _blocks(params).items():
+        for f in dataclasses.fields(block):
+            if not f.metadata.get("static", False):
+                names.append(f"{block_name}.{f.name}")
+    return names
+
+
+def resolve_name(params: Parameters, name: str) -> str:
+    """Qualified name for ``name`` (alias, bare field or ``block.field``); ValueError if unknown or ambiguous."""
+    name = ALIASES.get(name, name)
+    names = parameter_names(params)
+    if name in names:
+        return name
+    matches = [q for q in names if q.split(".", 1)[1] == name]
+    if len(matches) == 1:
+        return matches[0]
+    if len(matches) > 1:
+        raise ValueError(f"parameter name {name!r} is ambiguous: use one of {matches}")
+    raise ValueError(f"unknown parameter {name!r}; known: {sorted(ALIASES)} or block.field from {names}")
+
+
+def get(params: Parameters, name: str):
+    """Value of the parameter ``name``."""
+    block, field = resolve_name(params, name).split(".")
+    return getattr(_blocks(params)[block], field)
+
+
+def replace(params: Parameters, **values) -> Parameters:
+    """A copy of ``params`` with the named parameters replaced (names as in :func:`resolve_name`)."""
+    by_block: dict[str, dict] = {}
+    for name, value in values.items():
+        block, field = resolve_name(params, name).split(".")
+        by_block.setdefault(block, {})[field] = value
+    effects = tuple(dataclasses.replace(e, **by_block.pop(e.name)) if e.name in by_block else e for e in params.effects)
+    updates = {b: dataclasses.replace(getattr(params, b), **kw) for b, kw in by_block.items()}
+    return dataclasses.replace(params, effects=effects, **updates)
+
+
+def with_effects(params: Parameters, *effects) -> Parameters:
+    """``params`` with the given effects added (or replaced, by catalogue name)."""
+    names = {e.name for e in effects}
+    kept = tuple(e for e in params.effects if e.name not in names)
+    return dataclasses.replace(params, effects=kept + tuple(effects))
+
+
+def as_dict(params: Parameters) -> dict[str, float]:
+    """Flat ``{block.field: value}`` of every scalar parameter (for JSON and tables)."""
+    out = {}
+    for q in parameter_names(params):
+        v = get(params, q)
+        if v is None:
+            continue
+        a = np.asarray(v)
+        out[q] = float(a) if a.ndim == 0 else a.tolist()
+    return out
+
+
+# Physical admissible ranges of the parameters most often changed by hand or by a sampler.
+_RANGES = {
+    "robot.yield_pressure": (0.0, 1e6, "Pa"),
+    "robot.extensibility": (1e-12, math.inf, "(m/s)·Pa^(-1/n)"),
+    "robot.growth_exponent": (0.05, 5.0, "-"),
+    "robot.lockhart_rate": (1e-12, 10.0, "m/s"),
+    "robot.lockhart_exponent": (0.05, 5.0, "-"),
+    "robot.inner_radius": (0.0, 0.05, "m"),
+    "robot.outer_radius": (1e-5, 0.05, "m"),
+    "robot.membrane_thickness": (1e-7, 1e-2, "m"),
+    "robot.catheter_friction": (0.0, 10.0, "-"),
+    "robot.initial_length": (0.0, 1.0, "m"),
+    "robot.stroke": (1e-4, 2.0, "m"),
+    "pump.syringe_area": (1e-7, 1e-1, "m^2"),
+    "fluid.density": (100.0, 5000.0, "kg/m^3"),
+    "fluid.air_fraction": (0.0, 0.5, "-"),
+    "motor.controller_rate": (1e-3, 1e5, "Hz"),
+}
+
+
+def physical_ranges(params: Parameters) -> dict:
+    """{qualified name: (low, high, unit)}: the physical range of each parameter that has one (effects included)."""
+    ranges = dict(_RANGES)
+    for e in params.effects:
+        for field, (lo, hi) in e.ranges.items():
+            ranges[f"{e.name}.{field}"] = (lo, hi, e.units.get(field, ""))
+    return ranges
+
+
+def admissible_rows(base: Parameters, names, values) -> np.ndarray:
+    """Which rows of ``values`` (n, d) for the parameters ``names`` are finite and in their physical ranges.
+
+    Vectorised over rows (a batch is checked in one pass, not one :func:`validate` per row); the
+    parameters not in ``names`` are validated once, and a problem there raises ValueError.
+    """
+    values = np.atleast_2d(np.asarray(values, float))
+    names = [resolve_name(base, n) for n in names]
+    ranges = physical_ranges(base)
+    ok = np.all(np.isfinite(values), axis=1)
+    for j, q in enumerate(names):
+        if q in ranges:
+            lo, hi, _ = ranges[q]
+            ok &= (values[:, j] >= lo) & (values[:, j] <= hi)
+    radii = {q: values[:, j] for j, q in enumerate(names) if q in ("robot.inner_radius", "robot.outer_radius")}
+    if radii:
+        inner = radii.get("robot.inner_radius", float(base.robot.inner_radius))
+        outer = radii.get("robot.outer_radius", float(base.robot.outer_radius))
+        ok &= np.asarray(inner < outer)
+    if np.any(ok):
+        validate(replace(base, **dict(zip(names, map(float, values[np.argmax(ok)])))))
+    return ok
+
+
+def validate(params: Parameters) -> None:
+    """Raise ValueError naming the first parameter that is non-finite or outside its physical range.
+
+    Works on concrete (possibly batched) values, never inside ``jit``.
+    """
+    ranges = physical_ranges(params)
+    for q in parameter_names(params):
+        v = get(params, q)
+        if v is None or isinstance(v, jax.core.Tracer):
+            continue
+        a = np.asarray(v, dtype=float)
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"parameter {q} is not finite: {v}")
+        if q in ranges:
+            lo, hi, unit = ranges[q]
+            if np.any(a < lo) or np.any(a > hi):
+                raise ValueError(f"parameter {q} = {v} {unit} is outside its physical range [{lo}, {hi}] {unit}")
+    r = params.robot
+    if np.any(np.asarray(r.inner_radius) >= np.asarray(r.outer_radius)):
+        raise ValueError("parameter robot.inner_radius must be smaller than robot.outer_radius")

@@ -1,0 +1,113 @@
+"""Syringe pump: two syringes on one platform driven by two lead screws.
+
+The platform position x_p (m) is positive when it pushes the plungers in; each
+syringe then delivers q = A_s ẋ_p into its hose. The syringes start on their
+full-volume end stop (x_p = 0).
+"""
+
+from __future__ import annotations
+
+import math
+
+import equinox as eqx
+import jax.numpy as jnp
+
+from growjax.model._smooth import smooth_ramp
+
+
+class SyringePump(eqx.Module):
+    """Syringe pump.
+
+    Attributes:
+        syringe_area: plunger area A_s of each syringe, m².
+        syringe_stroke: plunger stroke, m (the syringe starts full, at its extend stop).
+        n_syringes: syringes on the platform (static).
+        lead: lead-screw lead, m/rev.
+        screw_viscous_friction: viscous friction μ_S on each screw, N·m/(rad/s).
+        platform_mass: carrier platform mass m_p, kg.
+        penetration_coefficient: end-stop penetration coefficient K_p, N·s/m² (Simscape 'Simple' cylinder).
+    """
+
+    syringe_area: float = 2.5e-4
+    syringe_stroke: float = 0.05
+    lead: float = 0.008
+    screw_viscous_friction: float = 0.1
+    platform_mass: float = 1e-3
+    penetration_coefficient: float = 1e12
+    n_syringes: int = eqx.field(static=True, default=2)
+
+    @property
+    def screw_ratio(self):
+        """R_NS = 2π/lead, rad/m: screw angle per nut travel."""
+        return 2.0 * math.pi / self.lead
+
+    @property
+    def screw_damping(self):
+        """Viscous damping of all screws seen at the platform, b_p = n μ_S R_NS², N·s/m."""
+        return self.n_syringes * self.screw_viscous_friction * self.screw_ratio**2
+
+
+def cylinder_stop_force(penetration_coefficient, displacement, velocity, extend_limit, retract_limit, width):
+    """End-stop force F_c (N) of a Simscape single-acting 'Simple' cylinder, regularised.
+
+    F_c = K_p |ξ − ξ_E| ξ̇ beyond the extend limit while extending, K_p |ξ − ξ_R| ξ̇ beyond
+    the retract limit while retracting, zero otherwise (fully inelastic stop). The
+    penetration and the velocity gate are C¹ ramps of ``width`` (m) and ``width``/s.
+    """
+    pen_e = smooth_ramp(displacement - extend_limit, width)
+    pen_r = smooth_ramp(retract_limit - displacement, width)
+    v_out = smooth_ramp(velocity, width)
+    v_in = smooth_ramp(-velocity, width)
+    return penetration_coefficient * (pen_e * v_out - pen_r * v_in)
+
+
+def syringe_stop_force(pump: SyringePump, x_platform, v_platform, width):
+    """End-stop force of one syringe on the platform (N, +x pushes the plunger in).
+
+    Syringe displacement ξ = −x_p (orientation −1); extend limit ξ_E = 0 (full), retract limit −stroke (empty).
+    """
+    f_c = cylinder_stop_force(pump.penetration_coefficient, -x_platform, -v_platform, 0.0, -pump.syringe_stroke, width)
+    return f_c
+
+
+def syringe_load_force(pump: SyringePump, syringe_pressure, x_platform, v_platform, width):
+    """Force of all syringes on the platform (N, +x pushes the plungers in): −n (A_s p_s − F_c)."""
+    stop = syringe_stop_force(pump, x_platform, v_platform, width)
+    return -pump.n_syringes * (pump.syringe_area * syringe_pressure - stop)
+
+
+def platform_force(pump: SyringePump, drive_force, syringe_pressure, x_platform, v_platform, width):
+    """Net force on the platform (N): drive − screw damping + syringe load."""
+    load = syringe_load_force(pump, syringe_pressure, x_platform, v_platform, width)
+    return drive_force - pump.screw_damping * v_platform + load
+
+
+def syringe_volume_delivered(pump: SyringePump, x_platform):
+    """Liquid volume pushed out of all syringes, m³."""
+    return pump.n_syringes * pump.syringe_area * x_platform
+
+
+def _ramp_balance(damping, stop, drive, width):
+    """u ≥ 0 with damping·u + stop·smooth_ramp(u, width) = drive ≥ 0 (exact: quadratic inside the band, linear beyond)."""
+    quadratic = 2.0 * drive / (damping + jnp.sqrt(damping * damping + 2.0 * stop * drive / width))
+    linear = (drive + 0.5 * stop * width) / (damping + stop)
+    return jnp.where(drive <= (damping + 0.5 * stop) * width, quadratic, linear)
+
+
+def platform_velocity(pump: SyringePump, drive_force, line_pressure, line_resistance, x_platform, width):
+    """Velocity (m/s) of a massless platform: the exact root of :func:`platform_force` = 0.
+
+    The syringes see the line pressure plus a linear line drop, p_s = P + R·n·A_s·v
+    (``line_resistance`` R in Pa·s/m³ of total flow). The balance
+    F₀ − B v + n K_p (pen_E·ramp(−v) − pen_R·ramp(v)) = 0, with F₀ = drive − n A_s P and
+    B = b_p + n² A_s² R, is linear outside the end stops' velocity band and quadratic inside
+    it, so the root has a closed form on each side of v = 0.
+    """
+    n, a_s = pump.n_syringes, pump.syringe_area
+    damping = pump.screw_damping + n * n * a_s * a_s * line_resistance
+    f0 = drive_force - n * a_s * line_pressure
+    pen_full = smooth_ramp(-x_platform, width)  # beyond the full mark: resists withdrawal
+    pen_empty = smooth_ramp(x_platform - pump.syringe_stroke, width)  # beyond the empty mark: resists pushing
+    push = _ramp_balance(damping, n * pump.penetration_coefficient * pen_empty, jnp.maximum(f0, 0.0), width)
+    pull = _ramp_balance(damping, n * pump.penetration_coefficient * pen_full, jnp.maximum(-f0, 0.0), width)
+    return jnp.where(f0 >= 0.0, push, -pull)

@@ -1,0 +1,2 @@
+"""Solving the model: the configurations (fast and reference), their solvers, :func:`simulate` and the
+trajectories it returns."""

@@ -1,0 +1,87 @@
+"""What a simulation returns, and how a solver's raw output becomes it (written once for both configurations).
+
+No diffrax here: the fast configuration runs without importing it (the reference's diffrax glue is in
+:mod:`growjax.simulation.reference`)."""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array, Float, Int
+
+# Status codes of a trajectory.
+OK, PRESSURE_LIMIT, SOLVER_FAILED = 0, 1, 2
+STATUS_NAMES = {OK: "ok", PRESSURE_LIMIT: "pressure_limit", SOLVER_FAILED: "solver_failed"}
+
+
+def status_name(code) -> str:
+    """Human-readable status of a trajectory."""
+    return STATUS_NAMES.get(int(code), f"unknown({int(code)})")
+
+
+class Trajectory(eqx.Module):
+    """Simulated outputs on the save grid (arrays of shape (T,), NaN after a stop) and run status; a batch
+    (:func:`growjax.simulate_members`, ``jax.vmap``) adds leading axes ``*B`` to every field.
+
+    Attributes:
+        time: s.  length: robot length, m.  pressure: sensed pressure P before the check valve, Pa.
+        robot_flow: m³/s into the robot.  syringe_displacement: platform travel, m.
+        robot_pressure: Pa inside the robot.  pressure_demand: Pa (forward drive).
+        status: 0 ok, 1 pressure limit crossed (the run stopped there unless configured not to),
+            2 solver failure (non-finite state, step budget, NaN parameters).
+        limit_time: s at which the pressure limit was first crossed (NaN if never).
+        t_final: s where the integration ended.  n_steps: accepted solver steps.
+        final_state: the solver's state at ``t_final`` (layout per configuration, see its ``STATES``).
+    """
+
+    time: Float[Array, "*B T"]
+    length: Float[Array, "*B T"]
+    pressure: Float[Array, "*B T"]
+    robot_flow: Float[Array, "*B T"]
+    syringe_displacement: Float[Array, "*B T"]
+    robot_pressure: Float[Array, "*B T"]
+    pressure_demand: Float[Array, "*B T"]
+    status: Int[Array, "*B"]
+    limit_time: Float[Array, "*B"]
+    t_final: Float[Array, "*B"]
+    n_steps: Int[Array, "*B"]
+    final_state: Float[Array, "*B n"]
+
+
+def finish(
+    ts, outputs: dict, limit, demand, stop_at_limit: bool, *, t_final, status, n_steps, final_state
+) -> Trajectory:
+    """A :class:`Trajectory` from the outputs on ``ts`` (field → (T,) array) and the integrator's end.
+
+    ``status`` is the integrator's: 0 reached t1, 1 stopped by the pressure-limit event, 2 failed.
+    Samples after ``t_final`` are NaN. The pressure limit is flagged at the event (when it stopped
+    the run) or at the first save time above it (when it did not).
+    """
+    event = status == 1
+    after = ts > t_final + 1e-12
+    clean = {k: jnp.where(after, jnp.nan, v) for k, v in outputs.items()}
+    finite = jnp.all(jnp.stack([jnp.all(jnp.isfinite(v) | after) for v in clean.values()]))
+    above = clean["pressure"] > limit
+    first_above = ts[jnp.argmax(above)]
+    stopped = event & stop_at_limit
+    limit_time = jnp.where(stopped, t_final, jnp.where(jnp.any(above), first_above, jnp.nan))
+    failed = (status == 2) | ~finite
+    code = jnp.where(
+        stopped,
+        PRESSURE_LIMIT,
+        jnp.where(failed, SOLVER_FAILED, jnp.where(jnp.isfinite(limit_time), PRESSURE_LIMIT, OK)),
+    )
+    return Trajectory(
+        time=ts,
+        length=clean["length"],
+        pressure=clean["pressure"],
+        robot_flow=clean["robot_flow"],
+        syringe_displacement=clean["syringe_displacement"],
+        robot_pressure=clean["robot_pressure"],
+        pressure_demand=demand,
+        status=code,
+        limit_time=limit_time,
+        t_final=t_final,
+        n_steps=n_steps,
+        final_state=final_state,
+    )
