@@ -7,7 +7,6 @@ import pytest
 
 import growjax as gj
 from growjax.model import hydraulics as hy
-from growjax.model._smooth import bracketed_root, smooth_ramp, smooth_step
 from growjax.model.fluid import (
     Fluid,
     bulk_modulus,
@@ -16,6 +15,7 @@ from growjax.model.fluid import (
     water,
 )
 from growjax.model.robot import catheter_friction_gain, rod_balance, rod_pressure
+from growjax.model.smooth import bracketed_root, smooth_ramp, smooth_step
 
 
 def test_water_properties_match_the_stock_table():

@@ -12,7 +12,7 @@ from pathlib import Path
 PACKAGE = Path(__file__).resolve().parents[1] / "src" / "growjax"
 REPO = PACKAGE.parents[1]
 
-UTILITIES = ("_hash", "_progress", "plotting")
+UTILITIES = ("hashing", "progress", "plotting")
 WORKFLOWS = ("sweep", "posterior", "discover", "design", "control", "track")
 # rank of each top-level name: a module may import names of a lower rank, and of its own folder
 RANKS = {
@@ -23,6 +23,7 @@ RANKS = {
     "calibration": 4,
     **dict.fromkeys(WORKFLOWS, 5),
     "cli": 6,
+    "__main__": 7,  # ``python -m growjax`` runs the command line
 }
 
 

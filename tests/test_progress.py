@@ -4,7 +4,7 @@ import io
 
 from tqdm import tqdm
 
-from growjax import _progress
+from growjax import progress as prog
 
 
 class _Terminal(io.StringIO):
@@ -14,7 +14,7 @@ class _Terminal(io.StringIO):
 
 def test_a_non_terminal_stream_gets_a_plain_line_every_tenth():
     stream = io.StringIO()
-    with _progress.bar(200, "sweep", "chunk", stream=stream) as shown:
+    with prog.bar(200, "sweep", "chunk", stream=stream) as shown:
         for _ in range(200):
             shown.update(1)
     lines = stream.getvalue().splitlines()
@@ -26,7 +26,7 @@ def test_a_non_terminal_stream_gets_a_plain_line_every_tenth():
 
 def test_a_stopped_run_ends_with_how_far_it_got_and_few_steps_give_a_line_each():
     stream = io.StringIO()
-    shown = _progress.bar(40, "fits", "fit", stream=stream)
+    shown = prog.bar(40, "fits", "fit", stream=stream)
     for _ in range(9):
         shown.update(1)
     shown.close()
@@ -37,7 +37,7 @@ def test_a_stopped_run_ends_with_how_far_it_got_and_few_steps_give_a_line_each()
         "fits: 9/40 fits",
     ]
     stream = io.StringIO()
-    with _progress.bar(3, "x", stream=stream) as shown:
+    with prog.bar(3, "x", stream=stream) as shown:
         for _ in range(3):
             shown.update(1)
     assert [line.split(" (")[0] for line in stream.getvalue().splitlines()] == ["x: 1/3", "x: 2/3", "x: 3/3"]
@@ -45,19 +45,19 @@ def test_a_stopped_run_ends_with_how_far_it_got_and_few_steps_give_a_line_each()
 
 def test_quiet_prints_nothing_and_a_terminal_gets_a_bar():
     stream = io.StringIO()
-    with _progress.bar(50, "sweep", stream=stream, enabled=False) as shown:
+    with prog.bar(50, "sweep", stream=stream, enabled=False) as shown:
         shown.update(50)
-    _progress.note("posterior: NUTS", enabled=False, stream=stream)
+    prog.note("posterior: NUTS", enabled=False, stream=stream)
     assert stream.getvalue() == ""
-    _progress.note("posterior: NUTS", stream=stream)
+    prog.note("posterior: NUTS", stream=stream)
     assert stream.getvalue() == "posterior: NUTS\n"
     terminal = _Terminal()
-    shown = _progress.bar(5, "sweep", "chunk", stream=terminal)
+    shown = prog.bar(5, "sweep", "chunk", stream=terminal)
     assert isinstance(shown, tqdm)
     shown.update(5)
     shown.close()
     assert "\r" in terminal.getvalue() and "5/5" in terminal.getvalue()
-    assert _progress.terminal(terminal) and not _progress.terminal(io.StringIO())
+    assert prog.terminal(terminal) and not prog.terminal(io.StringIO())
 
 
 def test_numpyro_progress_in_a_log_is_plain_lines_with_the_same_draws(monkeypatch, capsys):

@@ -333,9 +333,9 @@ def _out(args) -> Path:
 
 def _progress_note(args, text: str) -> float:
     """One line of progress on stderr (none with ``--quiet``); the time, s (``time.perf_counter``)."""
-    from growjax import _progress
+    from growjax import progress as prog
 
-    _progress.note(text, not args.quiet)
+    prog.note(text, not args.quiet)
     return time.perf_counter()
 
 

@@ -52,8 +52,8 @@ import jax.numpy as jnp
 import numpy as np
 
 import growjax as gj
-from growjax._hash import content_key
 from growjax.data import experiment as ex
+from growjax.hashing import content_key
 from growjax.model import effects as fx
 from growjax.model.effects import Effect
 

@@ -17,7 +17,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from growjax import _progress
+from growjax import progress as prog
 from growjax.design import constraints as dcon
 from growjax.design import discrimination as ddis
 from growjax.design import problem as dprob
@@ -105,7 +105,7 @@ def multistart(
         return dprob.smoothed_gradient(problem, np.asarray(x))
 
     runs = []
-    with _progress.bar(len(starts) * (iterations + 1), "design: descent", "step", progress) as bar:
+    with prog.bar(len(starts) * (iterations + 1), "design: descent", "step", progress) as bar:
         for x0 in starts:
             runs.append(adam(vg, x0, iterations, learning_rate, progress=bar))
     return sorted(runs, key=lambda r: r.value)
@@ -152,7 +152,7 @@ def local_search(
     starts = np.atleast_2d(np.asarray(starts, float))
     rng = np.random.default_rng([seed, 5])
     runs = []
-    with _progress.bar(len(starts) * moves, "design: local search", "move", progress) as bar:
+    with prog.bar(len(starts) * moves, "design: local search", "move", progress) as bar:
         for x0 in starts:
             x, f = x0.copy(), float(dprob.values(problem, x0[None])[0])
             history = [f]
@@ -232,7 +232,7 @@ def random_admissible(
             "for every draw of the rig: lower p_max or shorten the run"
         )
     designs = np.asarray(kept[:n])
-    _progress.note(f"design: scoring {len(designs)} random admissible inputs", progress)
+    prog.note(f"design: scoring {len(designs)} random admissible inputs", progress)
     crit = dprob.evaluate_many(problem, designs)[:, 0]
     crit = np.where(np.isfinite(crit), crit, np.inf)
     return RandomBatch(designs, crit, total, time.perf_counter() - clock)

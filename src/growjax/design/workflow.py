@@ -12,7 +12,7 @@ from concurrent.futures import ThreadPoolExecutor
 import jax
 import numpy as np
 
-from growjax import _progress
+from growjax import progress as prog
 from growjax.calibration import fit as gf
 from growjax.design import constraints as dcon
 from growjax.design import criterion as dcrit
@@ -319,7 +319,7 @@ def _search(
                 ),
             )
         )
-        _progress.note(f"design: {random} random admissible inputs, each checked over {n_draws} draws", progress)
+        prog.note(f"design: {random} random admissible inputs, each checked over {n_draws} draws", progress)
         batch = dopt.random_admissible(problem, space, knowledge, random, seed, drawn, progress=progress)
         wall["random_s"] = batch.wall_s
         t = time.perf_counter()

@@ -152,6 +152,6 @@ def _cores() -> int:
 
 def _bar(enabled: bool, desc: str, total: int):
     """Progress of ``total`` fits when ``enabled``: a bar on a terminal, a line every ~10 % elsewhere."""
-    from growjax import _progress
+    from growjax import progress as prog
 
-    return _progress.bar(total, desc, "fit", enabled)
+    return prog.bar(total, desc, "fit", enabled)

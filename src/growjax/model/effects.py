@@ -32,8 +32,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from growjax.model._smooth import smooth_ramp
 from growjax.model.robot import LOCKHART_PRESSURE_SCALE, lockhart_pressure
+from growjax.model.smooth import smooth_ramp
 
 FRICTION_VELOCITY = 1e-4  # m/s: velocity over which a friction force turns from one sign to the other
 RAMP_VELOCITY = 1e-6  # m/s: C¹ band of the ramps max(v, 0) of the velocity

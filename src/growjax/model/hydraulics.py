@@ -15,8 +15,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from growjax.model._smooth import smooth_ramp, smooth_step
 from growjax.model.fluid import P_ATM, Fluid, bulk_modulus
+from growjax.model.smooth import smooth_ramp, smooth_step
 
 
 def critical_pressure(p_avg, b_lam):

@@ -12,7 +12,7 @@ import math
 import equinox as eqx
 import jax.numpy as jnp
 
-from growjax.model._smooth import smooth_ramp
+from growjax.model.smooth import smooth_ramp
 
 
 class SyringePump(eqx.Module):

@@ -29,8 +29,8 @@ import jax
 import jax.numpy as jnp
 
 from growjax.model import hydraulics as hy
-from growjax.model._smooth import smooth_abs_power, smooth_ramp
 from growjax.model.pump import cylinder_stop_force
+from growjax.model.smooth import smooth_abs_power, smooth_ramp
 
 GROWTH_LAWS = ("reference", "lockhart")
 LOCKHART_PRESSURE_SCALE = 1e3  # Pa: p_ref of the Lockhart law

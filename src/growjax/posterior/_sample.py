@@ -16,7 +16,7 @@ import numpy as np
 import numpyro
 from jaxtyping import ArrayLike, Float
 
-from growjax import _progress
+from growjax import progress as prog
 from growjax.calibration import discrepancy as dc
 from growjax.calibration import tolerance as tl
 from growjax.data import experiment
@@ -117,7 +117,7 @@ def sample(
     t, y = _window(times, length, config, window)
     start = time.perf_counter()
     if emulate is True:
-        _progress.note("posterior: building the emulator", progress)
+        prog.note("posterior: building the emulator", progress)
     if discrepancy not in dc.KINDS:
         raise ValueError(f"discrepancy must be one of {dc.KINDS}, got {discrepancy!r}")
     tol = tl.budget(
@@ -128,7 +128,7 @@ def sample(
     )
     base = tl.rig_at(base, tol, centre)
     mean, model_error, emu_info = _mean_length(emulate, priors, base, inputs, config, t, seed, start)
-    _progress.note(f"posterior: the likelihood ({discrepancy} discrepancy)", progress)
+    prog.note(f"posterior: the likelihood ({discrepancy} discrepancy)", progress)
     residuals, extra_init = _likelihood_terms(discrepancy, tol, t, y, mean, priors, base, inputs, config, seed, centre)
 
     def make_model(mean_length, priors=priors):
@@ -137,7 +137,7 @@ def sample(
         )
 
     start_precondition = time.perf_counter()
-    _progress.note("posterior: start point and mass matrix", progress)
+    prog.note("posterior: start point and mass matrix", progress)
     sampled, init_values, inverse_mass = _nuts_start(make_model, priors, mean, y, seed, emulate, extra_init)
     precondition_s = time.perf_counter() - start_precondition
     nuts = {
@@ -150,14 +150,14 @@ def sample(
         "progress": progress,
         "chain_method": chain_method or _chain_method(chains, emulate is not False),
     }
-    _progress.note(
+    prog.note(
         f"posterior: NUTS, {chains} chains of {warmup} warm-up and {samples} kept draws ({nuts['chain_method']})",
         progress,
     )
     start_nuts = time.perf_counter()
     with _numpyro_progress(progress):
         mcmc = _run_nuts(make_model(mean, sampled), init_values, inverse_mass, y, seed, emulate is False, **nuts)
-    _progress.note(f"posterior: NUTS done in {time.perf_counter() - start_nuts:.1f} s", progress)
+    prog.note(f"posterior: NUTS done in {time.perf_counter() - start_nuts:.1f} s", progress)
     post = mcmc.get_samples(group_by_chain=True)
     loglik, predicted, new = observation_draws(
         post["length_model"],
@@ -247,7 +247,7 @@ def _rig_centre(
         return (centre if np.any(centre != 0) else None), 0
     from growjax.calibration import fit as gf
 
-    _progress.note("posterior: the fit, for where the data put the rig", progress)
+    prog.note("posterior: the fit, for where the data put the rig", progress)
     fitted = gf.fit(
         times,
         length,
@@ -288,19 +288,19 @@ def _nuts_start(make_model, priors, mean, y, seed: int, emulate, extra_init: dic
 @contextlib.contextmanager
 def _numpyro_progress(progress: bool):
     """NumPyro's progress bars where stderr is a terminal; elsewhere its bars' updates as plain lines every ~10 %
-    (:class:`growjax._progress.Lines`, standing in for tqdm in ``numpyro.util``). Either way NumPyro runs the
+    (`growjax.progress.Lines`, standing in for tqdm in ``numpyro.util``). Either way NumPyro runs the
     loop it runs with ``progress_bar=True``, so the draws do not depend on where stderr goes."""
     import numpyro.util as nu
 
-    if not progress or _progress.terminal() or not (hasattr(nu, "tqdm") and hasattr(nu, "tqdm_auto")):
+    if not progress or prog.terminal() or not (hasattr(nu, "tqdm") and hasattr(nu, "tqdm_auto")):
         yield
         return
 
     def trange(n, **_):
-        return _progress.Lines(n, "posterior: NUTS", "draw", iterable=range(n))
+        return prog.Lines(n, "posterior: NUTS", "draw", iterable=range(n))
 
     def auto(iterable, position=0, **_):
-        return _progress.Lines(
+        return prog.Lines(
             len(iterable), f"posterior: NUTS chain {position}", "draw", iterable=iterable, phases=False
         )  # NumPyro's descriptions there name the chain again
 

@@ -21,10 +21,10 @@ import jax.numpy as jnp
 
 from growjax.model import effects as fx
 from growjax.model import hydraulics as hy
-from growjax.model._smooth import bracketed_root
 from growjax.model.params import Parameters
 from growjax.model.pump import platform_force
 from growjax.model.robot import RodBalance, pressure_limit, rod_pressure
+from growjax.model.smooth import bracketed_root
 from growjax.simulation import _assembly as assembly
 from growjax.simulation.config import Config
 from growjax.simulation.trajectory import finish

@@ -33,8 +33,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from growjax import _progress
-from growjax._hash import content_key
+from growjax import progress as prog
+from growjax.hashing import content_key
 from growjax.model import params as gp
 from growjax.simulation import xla_flags
 from growjax.simulation.config import Config
@@ -346,7 +346,7 @@ def evaluate(
     plan = _plan(values, names, base, inputs, config, measured, window, chunk_size, devices, memory_budget_bytes)
     outs = []
     start = time.perf_counter()
-    with _progress.bar(plan.n_chunks, "sweep", "chunk", progress and plan.n_chunks > 1 and _leader()) as shown:
+    with prog.bar(plan.n_chunks, "sweep", "chunk", progress and plan.n_chunks > 1 and _leader()) as shown:
         for c in range(plan.n_chunks):
             outs.append(_run_chunk(plan, c))
             shown.update(1)
@@ -558,9 +558,7 @@ def _stored(
         config = config.replace(quick_compile=definition.get("quick_compile"))
     # A signal from here on stops the sweep between chunks (one during compilation: before the first).
     with _stopping.Stopper(announce=_leader()) as stop:
-        _progress.note(
-            f"sweep: {values.shape[0]} sets, kept in {path} as they finish; compiling", progress and _leader()
-        )
+        prog.note(f"sweep: {values.shape[0]} sets, kept in {path} as they finish; compiling", progress and _leader())
         plan = _plan(values, names, base, inputs, config, measured, window, chunk_size, devices, memory_budget_bytes)
         if group is None:
             definition = {
@@ -587,7 +585,7 @@ def _stored(
         done = _from_leader(done)
         todo = [c for c in range(plan.n_chunks) if not done[c]]
         start, ran, stopped = time.perf_counter(), 0, None
-        with _progress.bar(len(todo), "sweep", "chunk", progress and len(todo) > 1 and _leader()) as shown:
+        with prog.bar(len(todo), "sweep", "chunk", progress and len(todo) > 1 and _leader()) as shown:
             for c in todo:
                 signalled = _signal_anywhere(stop.signal)
                 if signalled or (max_chunks is not None and ran >= max_chunks):

@@ -13,6 +13,8 @@ from collections.abc import Callable
 import jax
 import jax.numpy as jnp
 
+__all__ = ["bracketed_root", "newton_root", "smooth_abs_power", "smooth_ramp", "smooth_step"]
+
 
 def smooth_ramp(x, width):
     """C¹ version of max(x, 0): 0 for x ≤ 0, x²/(2w) on (0, w), x − w/2 beyond."""

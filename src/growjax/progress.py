@@ -14,6 +14,8 @@ import sys
 import threading
 import time
 
+__all__ = ["Lines", "Silent", "bar", "is_terminal", "note", "terminal"]
+
 STEP = 0.1  # a line each time this share of the total is passed (non-terminal streams)
 
 

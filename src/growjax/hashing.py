@@ -7,6 +7,8 @@ import hashlib
 import jax
 import numpy as np
 
+__all__ = ["content_key"]
+
 
 def content_key(tree) -> tuple[str, str]:
     """(structure, SHA-1 of every leaf's dtype, shape and values): equal for pytrees of equal structure and leaves.
