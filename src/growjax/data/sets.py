@@ -42,7 +42,6 @@ from growjax.model import params as gp
 
 SCOPES = ("shared", "robot", "rig", "experiment")
 SENSORS = ("length", "pressure")
-DRIVES = ("forward", "inverse")
 _KEYS = {"file", "name", "drive", "robot", "rig", "window", "sensors", "parameters"}
 
 
@@ -224,8 +223,8 @@ def _read(path: Path, catheter: bool) -> Experiment:
 
 def _run(name, exp: Experiment, drive, robot, rig, window, sensors, parameters, label) -> Run:
     """A :class:`Run`, checked: drive, sensors, window inside the data, parameters known."""
-    if drive not in DRIVES:
-        raise ExperimentError(f"{label}: drive must be one of {DRIVES}, got {drive!r}")
+    if drive not in gp.DRIVES:
+        raise ExperimentError(f"{label}: drive must be one of {gp.DRIVES}, got {drive!r}")
     bad = [s for s in sensors if s not in SENSORS]
     if bad:
         raise ExperimentError(f"{label}: unknown sensor(s) {bad} (known: {list(SENSORS)})")

@@ -26,7 +26,8 @@ from growjax.model.hydraulics import (
 from growjax.model.motor import PID, StepperMotor
 from growjax.model.pump import SyringePump
 from growjax.model.robot import GrowingRobot
-from growjax.simulation.config import DRIVES
+
+DRIVES = ("forward", "inverse")  # pressure demand with an ideal torque source; desired length with the stepper
 
 
 class Parameters(eqx.Module):

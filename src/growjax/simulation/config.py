@@ -7,7 +7,8 @@ import math
 
 import numpy as np
 
-DRIVES = ("forward", "inverse")
+from growjax.model.params import DRIVES
+
 FIDELITIES = ("fast", "reference")
 TANGENTS = ("auto", "forward", "differences")
 
@@ -21,8 +22,8 @@ class Config:
     """Static settings of a simulation (hashable: a static argument of ``jit``).
 
     Attributes:
-        fidelity: ``"fast"`` (lumped lines, massless platform, Rosenbrock solver: :mod:`growjax.simulation.fast`)
-            or ``"reference"`` (the shipped network node by node, Kvaerno5: :mod:`growjax.simulation.reference`).
+        fidelity: ``"fast"`` (lumped lines, massless platform, Rosenbrock solver: `growjax.simulation.fast`)
+            or ``"reference"`` (the shipped network node by node, Kvaerno5: `growjax.simulation.reference`).
         drive: ``"forward"`` (pressure demand, PID, ideal torque) or ``"inverse"`` (desired length, stepper).
         t0, t1: integration window, s (the shipped model starts at 0.001 s).
         save_dt: spacing of the default save grid, s.
@@ -44,15 +45,15 @@ class Config:
             where the solver's loop is compiled whole, ``small_loops``, or under the Lockhart law;
             differences otherwise). Both agree to ~1e-5 relative; only the speed differs.
         small_loops: (fast only) the integrator writes its linear solve in elementwise operations so that
-            XLA:CPU can compile its loop into one kernel (:mod:`growjax.simulation.xla_flags`); the rounding differs from
-            LAPACK's. None: whether ``XLA_FLAGS`` sets the small-loop limit, read by :meth:`resolved` where a
+            XLA:CPU can compile its loop into one kernel (`growjax.simulation.xla_flags`); the rounding differs from
+            LAPACK's. None: whether ``XLA_FLAGS`` sets the small-loop limit, read by `resolved` where a
             simulation starts (outside any trace), so the compiled program is keyed on the value in force.
         quick_compile: whether programs are compiled with XLA:CPU's older emitters
-            (:data:`growjax.simulation.xla_flags.QUICK_COMPILE`): quicker compiles, slower runs, other rounding (a 10 s run
+            (`growjax.simulation.xla_flags.QUICK_COMPILE`): quicker compiles, slower runs, other rounding (a 10 s run
             moves by up to 0.3 µm). A program under ``jax.jit`` takes the process's setting (``XLA_FLAGS``, fixed
-            when JAX starts: :func:`growjax.simulation.xla_flags.apply_quick_compile`); a sweep compiles its own and takes
+            when JAX starts: `growjax.simulation.xla_flags.apply_quick_compile`); a sweep compiles its own and takes
             either. None: the setting in force (a sweep: quick up to ``growjax.sweep.QUICK_COMPILE_ROWS`` sets),
-            read by :meth:`resolved`; a value the program cannot take raises ``ValueError`` there.
+            read by `resolved`; a value the program cannot take raises ``ValueError`` there.
 
     A field that does not apply to the chosen fidelity must keep its default (``ValueError`` otherwise).
     """
