@@ -74,7 +74,7 @@ def main():
 
     # forward drive: open-loop profile
     p = gc.plant_params("forward", target)
-    lim = gc.limits(p)
+    lim = gj.limits(p)
     t0 = time.perf_counter()
     prof = gc.optimize_profile(p, target, T, knot_dt=0.2, iterations=args.iterations, lim=lim)
     res["profile_optimisation_s"] = time.perf_counter() - t0

@@ -219,7 +219,7 @@ def safety(known, space, designed, n: int, seed: int) -> dict:
 
     clock = time.perf_counter()
     config = gj.Config(fidelity="reference", drive=space.drive, t1=space.duration)
-    lim = gd.limits(known.base)
+    lim = gj.limits(known.base)
     stroke = float(known.base.robot.stroke)
     drawn = gd.draws(known, n, seed=seed + 1000)
     out = {"draws": n, "configuration": "reference", "limits": lim.summary(), "stroke_m": stroke}
@@ -230,9 +230,9 @@ def safety(known, space, designed, n: int, seed: int) -> dict:
         pressure, length = np.max(res.pressure[0], axis=-1), np.max(res.length[0], axis=-1)
         out[label] = {
             "runs_completed": int(np.sum(np.all(np.isfinite(res.length[0]), axis=-1))),
-            "over_membrane_limit": int(np.sum(pressure > lim.membrane)),
-            "over_pressure_ceiling": int(np.sum(pressure > lim.pressure)),
-            "over_length_ceiling": int(np.sum(length > lim.length)),
+            "over_membrane_limit": int(np.sum(pressure > lim.membrane_limit)),
+            "over_pressure_ceiling": int(np.sum(pressure > lim.pressure_ceiling)),
+            "over_length_ceiling": int(np.sum(length > lim.length_ceiling)),
             "over_stroke": int(np.sum(length > stroke)),
             "peak_pressure_Pa": float(np.max(pressure)),
             "peak_length_m": float(np.max(length)),
@@ -305,7 +305,10 @@ def discriminate(args, known, exp, base) -> dict:
 
     a, b = args.discriminate
     space = gd.DesignSpace(
-        args.duration, gd.limits(base).pressure, gd.catheter_of(exp, args.duration), knot_spacing=args.knot_spacing
+        args.duration,
+        gj.limits(base).pressure_ceiling,
+        gd.catheter_of(exp, args.duration),
+        knot_spacing=args.knot_spacing,
     )
     if args.design_from:  # an earlier run's design
         summary = json.loads(Path(args.design_from).read_text())["design"]
@@ -524,7 +527,10 @@ def main():
         args.inputs = [space.baseline_label if i == "published pulse train" else i for i in args.inputs]
     else:
         space = gd.DesignSpace(
-            args.duration, gd.limits(base).pressure, gd.catheter_of(exp, args.duration), knot_spacing=args.knot_spacing
+            args.duration,
+            gj.limits(base).pressure_ceiling,
+            gd.catheter_of(exp, args.duration),
+            knot_spacing=args.knot_spacing,
         )
     baseline = space.baseline_label
     sensors = tuple(args.sensors.split(","))

@@ -143,7 +143,7 @@ def profile_case(max_steps, t_end=5.0, knot_dt=0.5, smooth=1e-3):
     """``optimize_profile``'s residuals, first guess and box (lead 0, its defaults otherwise), rebuilt here."""
     target = gc.target_from_experiment(ex.read(_data.default_data_path()), t_end)
     params = gc.plant_params("forward", target)
-    lim = gc.limits(params)
+    lim = gj.limits(params)
     config = gj.Config(t1=t_end, adjoint="forward")
     knots = np.arange(0.0, t_end + knot_dt - 1e-9, knot_dt)
     ts = target.time[(target.time >= config.t0) & (target.time <= t_end)]
@@ -154,10 +154,10 @@ def profile_case(max_steps, t_end=5.0, knot_dt=0.5, smooth=1e-3):
     def residuals(x, args=None):
         tr = gj.simulate(params, cp.profile_inputs(target, knots, x * scale), config, ts=ts, breaks=breaks)
         err = (tr.length - ref) / 1e-3
-        over = jax.nn.relu(tr.pressure - lim.max_demand) / 1e3
+        over = jax.nn.relu(tr.pressure - lim.pressure_ceiling) / 1e3
         return jnp.concatenate([err, np.sqrt(smooth) * jnp.diff(x) * 10.0, over])
 
-    hi = lim.max_demand / scale
+    hi = lim.pressure_ceiling / scale
     speed = np.gradient(target.at(knots + knot_dt), knots)
     x0 = np.clip(0.6 + 12.0 * np.maximum(speed, 0.0) / 1e-2 * 0.1, 0.0, hi)
     bounds = (np.zeros(knots.size), np.full(knots.size, hi))
@@ -176,7 +176,7 @@ def profile_case(max_steps, t_end=5.0, knot_dt=0.5, smooth=1e-3):
     case = Case("profile", residuals, x0, bounds, engine, demand, linearised)
     case.description = (
         f"control profile, {knots.size} knots every {knot_dt:g} s over 0–{t_end:g} s, "
-        f"{ts.size} length samples, the demand kept in [0, {lim.max_demand / 1e3:.0f} kPa]"
+        f"{ts.size} length samples, the demand kept in [0, {lim.pressure_ceiling / 1e3:.0f} kPa]"
     )
     return case
 

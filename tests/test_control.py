@@ -57,15 +57,21 @@ def test_linearisation_matches_finite_differences_and_small_step():
 @pytest.mark.slow
 def test_optimised_profile_respects_limits_and_improves(target):
     p = gc.plant_params("forward", target)
-    lim = gc.Limits(max_demand=200e3, pressure_limit=float(gj.pressure_limit(p.robot)), syringe_stroke=0.05)
+    lim = gj.Limits(
+        membrane_limit=float(gj.pressure_limit(p.robot)),
+        pressure_ceiling=200e3,
+        length_ceiling=float(p.robot.stroke),
+        syringe_stroke=0.05,
+        max_pump_speed=5e-3,
+    )
     prof = gc.optimize_profile(p, target, T, knot_dt=0.3, iterations=3, lim=lim)
     assert prof.cost_history[-1] < prof.cost_history[0]
-    assert np.all(prof.demand >= 0.0) and np.all(prof.demand <= lim.max_demand + 1e-6)
+    assert np.all(prof.demand >= 0.0) and np.all(prof.demand <= lim.pressure_ceiling + 1e-6)
     tr = gc.simulate_profile(p, target, prof, gj.Config(t1=T))
-    assert int(tr.status) == 0 and float(np.nanmax(tr.pressure)) < lim.pressure_limit
+    assert int(tr.status) == 0 and float(np.nanmax(tr.pressure)) < lim.membrane_limit
     disp = np.asarray(tr.syringe_displacement)
     assert np.all(np.abs(disp) < lim.syringe_stroke)
-    assert np.max(np.abs(np.diff(disp) / np.diff(np.asarray(tr.time)))) < lim.max_syringe_speed
+    assert np.max(np.abs(np.diff(disp) / np.diff(np.asarray(tr.time)))) < lim.max_pump_speed
     assert prof.rmse_m < 1e-3
 
 
@@ -133,7 +139,7 @@ def test_planned_step_schedule_replays_the_controller_on_the_model_and_respects_
     _, model_rmse, ticks, counts = gc.plan_steps(p, tg, 2.0, controller=ctrl)
     steps = np.diff(np.concatenate([[0.0], counts]))
     assert np.max(steps) >= 1 and np.min(steps) <= -1 and np.max(np.abs(steps)) <= 1
-    assert np.all(np.diff(ticks) >= 1.0 / gc.limits(p).max_step_rate - 1e-12)
+    assert np.all(np.diff(ticks) >= 1.0 / gj.limits(p).max_step_rate - 1e-12)
     ts = tg.time[tg.time <= 2.0]
     replay = gc.simulate_steps(p, tg, ticks, counts, gj.Config(drive="inverse", t1=2.0), ts)
     assert int(replay.status) == 0
@@ -246,8 +252,8 @@ def test_design_builds_its_plant_and_limits_from_base(target, monkeypatch):
             gc.design(target, "forward", "open-loop", T, evaluate_on="fast", base=base)
         assert float(gj.get(seen["params"], "Y")) == float(gj.get(want, "Y"))
         assert float(gj.get(seen["params"], "initial_length")) == target.length[0]  # started on the target
-        assert seen["lim"].pressure_limit == pytest.approx(float(gj.pressure_limit(want.robot)), rel=1e-12)
-    assert seen["lim"].pressure_limit == pytest.approx(0.5 * float(gj.pressure_limit(reference.robot)), rel=1e-12)
+        assert seen["lim"].membrane_limit == pytest.approx(float(gj.pressure_limit(want.robot)), rel=1e-12)
+    assert seen["lim"].membrane_limit == pytest.approx(0.5 * float(gj.pressure_limit(reference.robot)), rel=1e-12)
 
 
 def test_design_tunes_feedback_on_draws_of_the_rig_within_its_tolerances(target, monkeypatch):

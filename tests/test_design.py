@@ -203,7 +203,8 @@ def test_a_singular_precision_gives_no_covariance_instead_of_an_error():
 def test_the_check_flags_exactly_the_inputs_that_cross_a_limit_on_simulation():
     known = _knowledge()
     space = gd.DesignSpace(2.0, 336e3, _catheter(), knot_spacing=1.0)
-    lim = gd.Limits(pressure=200e3, length=0.015, syringe=0.05)
+    membrane = float(gj.pressure_limit(known.base.robot))
+    lim = gj.Limits(membrane_limit=membrane, pressure_ceiling=200e3, length_ceiling=0.015, syringe_stroke=0.05)
     drawn = gd.draws(known, 3, seed=1)
     assert set(drawn) == {Y, *known.tolerances} and all(v.shape == (3,) for v in drawn.values())
     designs = [space.unconstrained(np.full(space.size + 1, v)) for v in (60e3, 150e3, 250e3)]
@@ -229,9 +230,9 @@ def test_the_check_flags_exactly_the_inputs_that_cross_a_limit_on_simulation():
             peaks_l.append(float(jnp.max(tr.length)))
         assert res.peak_pressure[i] == pytest.approx(max(peaks_p), rel=1e-4)  # a batch steps its runs together
         assert res.peak_length[i] == pytest.approx(max(peaks_l), rel=1e-4)
-        assert bool(res.admissible[i]) == (max(peaks_p) <= lim.pressure and max(peaks_l) <= lim.length)
+        assert bool(res.admissible[i]) == (max(peaks_p) <= lim.pressure_ceiling and max(peaks_l) <= lim.length_ceiling)
     assert res.admissible.tolist() == [True, False, False]  # 150 kPa grows past 15 mm; 250 kPa crosses 200 kPa too
-    assert res.peak_pressure[2] > lim.pressure > res.peak_pressure[1]
+    assert res.peak_pressure[2] > lim.pressure_ceiling > res.peak_pressure[1]
     assert res.length.shape == (3, 3, space.times.size)
 
 
@@ -347,7 +348,9 @@ def test_the_design_beats_the_published_pulse_and_the_best_random_input_and_is_a
             p = gj.replace(known.base, **{k: float(v[d]) for k, v in drawn.items()})
             tr = gj.simulate(p, space.inputs(x), space.config(), ts=space.times)
             assert int(tr.status) == gj.OK
-            assert float(jnp.max(tr.pressure)) <= lim.pressure and float(jnp.max(tr.length)) <= lim.length
+            assert (
+                float(jnp.max(tr.pressure)) <= lim.pressure_ceiling and float(jnp.max(tr.length)) <= lim.length_ceiling
+            )
 
 
 @pytest.mark.slow
@@ -438,4 +441,7 @@ def test_a_stepper_design_beats_the_recorded_length_and_the_best_random_schedule
         == 0
     )
     traj = ex.read(tmp_path / "sim" / "trajectory.csv")
-    assert np.max(traj["pressure_Pa"]) <= res.limits.pressure and np.max(traj["robot_length_m"]) <= res.limits.length
+    assert (
+        np.max(traj["pressure_Pa"]) <= res.limits.pressure_ceiling
+        and np.max(traj["robot_length_m"]) <= res.limits.length_ceiling
+    )

@@ -13,6 +13,7 @@ jax.config.update("jax_enable_x64", True)  # the package's one global setting; s
 
 from growjax.model import effects
 from growjax.model.effects import Effect
+from growjax.model.limits import Limits, limits
 from growjax.model.params import (
     Parameters,
     as_dict,
@@ -50,6 +51,7 @@ __all__ = [
     "Constant",
     "Effect",
     "Inputs",
+    "Limits",
     "Parameters",
     "PulseTrain",
     "Sampled",
@@ -59,6 +61,7 @@ __all__ = [
     "effects",
     "get",
     "input_breaks",
+    "limits",
     "parameter_names",
     "pressure_limit",
     "published_pulse",

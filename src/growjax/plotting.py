@@ -300,7 +300,7 @@ def discovery_figure(result, path, title: str = ""):
 
 def control_figure(res, target, path, lim, title: str, drive: str):
     """Command, pressure and length against the target (three panels) of a closed loop ``res``
-    (:class:`growjax.control.ClosedLoopResult`), a :class:`growjax.control.Target` and :class:`growjax.control.Limits`."""
+    (`growjax.control.ClosedLoopResult`), a `growjax.control.Target` and the rig's `growjax.model.limits.Limits`."""
     fig, ax = plt.subplots(3, 1, figsize=(8, 8), sharex=True)
     if drive == "forward":
         ax[0].plot(res.tick_time, np.asarray(res.command) / 1e3, drawstyle="steps-post")
@@ -309,7 +309,7 @@ def control_figure(res, target, path, lim, title: str, drive: str):
         ax[0].step(res.tick_time, res.command, where="post")
         ax[0].set_ylabel("step count")
     ax[1].plot(res.time, res.pressure / 1e3)
-    ax[1].axhline(lim.pressure_limit / 1e3, color="r", ls="--", label="membrane limit")
+    ax[1].axhline(lim.membrane_limit / 1e3, color="r", ls="--", label="membrane limit")
     ax[1].set_ylabel("pressure (kPa)")
     ax[1].legend(loc="upper left")
     ax[2].plot(target.time, 1e3 * target.length, "k", lw=1, label="target")

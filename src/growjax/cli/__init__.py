@@ -768,6 +768,7 @@ def design_command(args) -> dict:
     from growjax.calibration import fit as gf
     from growjax.data import experiment as ex
     from growjax.model import params as gp
+    from growjax.model.limits import limits
 
     stepper = args.next_drive == "inverse"
     if stepper and args.discriminate is not None:
@@ -798,15 +799,15 @@ def design_command(args) -> dict:
     data, exp, base, origin = _setup(args, args.drive, growth_law=args.law)
     names = tuple(dict.fromkeys(gp.resolve_name(base, n) for n in (args.design_for or ["Y"])))
     base_next = base if args.next_drive == args.drive else _setup(args, args.next_drive, growth_law=args.law)[2]
-    lim = gd.limits(base_next, max_speed=args.max_pump_speed)
+    lim = limits(base_next, max_pump_speed=args.max_pump_speed)
     if stepper:
         space = gd.stepper_space(base_next, args.duration, exp)
     else:
-        p_max = lim.pressure if args.p_max is None else args.p_max
-        if p_max > lim.pressure + 1e-9:
+        p_max = lim.pressure_ceiling if args.p_max is None else args.p_max
+        if p_max > lim.pressure_ceiling + 1e-9:
             raise ValueError(
                 f"--p-max {p_max / 1e3:.1f} kPa is above the sensed-pressure ceiling "
-                f"{lim.pressure / 1e3:.1f} kPa (the membrane limit {lim.membrane / 1e3:.1f} kPa × the margin)"
+                f"{lim.pressure_ceiling / 1e3:.1f} kPa (the membrane limit {lim.membrane_limit / 1e3:.1f} kPa × the margin)"
             )
         space = gd.DesignSpace(
             args.duration,

@@ -53,10 +53,7 @@ from growjax.control.profile import (
     step_commands,
 )
 from growjax.control.targets import (
-    PRESSURE_MARGIN,
-    Limits,
     Target,
-    limits,
     plant_params,
     ramp_with_pauses,
     rmse,
@@ -88,11 +85,9 @@ def __getattr__(name):
 __all__ = [
     "DEFAULT_LOG_GAINS",
     "MPC",
-    "PRESSURE_MARGIN",
     "ClosedLoopResult",
     "KnotProfile",
     "LengthPID",
-    "Limits",
     "Plant",
     "ProfileResult",
     "StepController",
@@ -100,7 +95,6 @@ __all__ = [
     "TuneResult",
     "catheter_signal",
     "design",
-    "limits",
     "linearize",
     "operating_point",
     "optimize_profile",

@@ -15,14 +15,15 @@ from jaxtyping import Array, Float
 
 import growjax as gj
 from growjax.control.plant import Plant, catheter_signal, segment_inputs
-from growjax.control.targets import Limits, Target, limits, rmse, step_length
+from growjax.control.targets import Target, rmse, step_length
+from growjax.model.limits import Limits, limits
 from growjax.simulation import fast as fm
 
 
 class LengthPID(eqx.Module):
     """Sampled PI-D on length over the pressure loop (forward drive), with feed-forward and anti-windup.
 
-    demand_k = clip(ff(t_k+1) + Kp e + Ki ∫e + Kd ė_f, 0, max_demand), e = L_ref(t_k) − L_k (m).
+    demand_k = clip(ff(t_k+1) + Kp e + Ki ∫e + Kd ė_f, 0, pressure ceiling), e = L_ref(t_k) − L_k (m).
     Gains as log10 of SI values: Kp Pa/m, Ki Pa/(m·s), Kd Pa·s/m. ``ff``: (knots, values) of a demand profile.
     """
 
@@ -42,7 +43,7 @@ class LengthPID(eqx.Module):
         integral, deriv = state
         ff = jnp.interp(t + self.dt, self.ff_knots, self.ff_values)
         raw = ff + kp * error + ki * integral + kd * deriv
-        u = jnp.clip(raw, 0.0, lim.max_demand)
+        u = jnp.clip(raw, 0.0, lim.pressure_ceiling)
         saturated = (raw != u) & (jnp.sign(error) == jnp.sign(raw - u))
         new_integral = integral + jnp.where(saturated, 0.0, error * self.dt)
         return u, jnp.stack([new_integral, deriv])
@@ -108,7 +109,7 @@ def run_closed_loop(
 def score(ts, length, pressure, command, ticks, target, lim, status, step_s=None) -> ClosedLoopResult:
     keep = ts >= 0.01 - 1e-12
     e = rmse(ts[keep], length[keep], target)
-    crossed = bool(np.any(~np.isfinite(pressure)) or np.nanmax(pressure) > lim.pressure_limit)
+    crossed = bool(np.any(~np.isfinite(pressure)) or np.nanmax(pressure) > lim.membrane_limit)
     return ClosedLoopResult(
         ts, length, pressure, command, ticks, e if np.isfinite(e) else float("nan"), crossed, status, step_s
     )
@@ -173,7 +174,7 @@ class MPC(eqx.Module):
     """Nonlinear model-predictive length control of the forward drive on the fast configuration.
 
     Every ``dt`` s: from the current state estimate, choose the demand at the next ``horizon`` knots (first-order
-    hold, in [0, max_demand]) minimising Σ (L − L_ref)²/(1 mm)² + ``w_move``·Σ(Δu/10 kPa)² + pressure excess over
+    hold, in [0, the pressure ceiling]) minimising Σ (L − L_ref)²/(1 mm)² + ``w_move``·Σ(Δu/10 kPa)² + pressure excess over
     the ceiling, by ``iterations`` Gauss–Newton steps (Jacobian: one batched forward-difference solve of the
     fast model), warm-started from the last plan; apply the first knot. On a plant of another configuration the
     state estimate is the fast model run alongside, with its length and pressure reset to the measured ones.
@@ -236,7 +237,7 @@ class MPC(eqx.Module):
         if plant.config.fidelity != "fast":  # the internal model: the fast configuration of the same parameters
             cfg = gj.Config(drive="forward", t1=t1)
             model = Plant.make(plant.params, cfg)
-        plan_step = self._planner(model, cath, lim.max_demand)
+        plan_step = self._planner(model, cath, lim.pressure_ceiling)
         n, m = self.horizon, self.samples
         sub = max(1, int(round(self.dt / 0.01)))  # noqa: RUF046 (dt may be an array scalar)
 

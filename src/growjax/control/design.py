@@ -19,7 +19,7 @@ from growjax.control.profile import (
     simulate_profile,
     simulate_steps,
 )
-from growjax.control.targets import Target, limits, plant_params
+from growjax.control.targets import Target, plant_params
 from growjax.control.tuning import (
     DEFAULT_LOG_GAINS,
     parameter_draws,
@@ -30,6 +30,7 @@ from growjax.control.tuning import (
     tune_stepper,
 )
 from growjax.model import params as gp
+from growjax.model.limits import limits
 
 
 def design(
@@ -73,8 +74,8 @@ def design(
         "method": method,
         "t_end_s": t1,
         "evaluated_on": evaluate_on,
-        "pressure_limit_Pa": lim.pressure_limit,
-        "max_demand_Pa": lim.max_demand,
+        "pressure_limit_Pa": lim.membrane_limit,
+        "max_demand_Pa": lim.pressure_ceiling,
     }
     start = time.perf_counter()
     if drive == "inverse":

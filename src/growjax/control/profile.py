@@ -14,7 +14,8 @@ from jaxtyping import Float
 import growjax as gj
 from growjax.calibration.least_squares import levenberg_marquardt, linearise
 from growjax.control.plant import catheter_signal
-from growjax.control.targets import Limits, Target, limits, rmse, step_length
+from growjax.control.targets import Target, rmse, step_length
+from growjax.model.limits import Limits, limits
 from growjax.model.params import Parameters
 
 
@@ -63,7 +64,7 @@ def optimize_profile(
     length follow ``target``, by :func:`growjax.calibration.least_squares.levenberg_marquardt` on the tracking residuals.
 
     Residuals: length error on the target's grid (mm), ``smooth``·knot differences (per 10 kPa), and the sensed
-    pressure's excess over ``lim.max_demand`` (per kPa); the knots are kept in [0, ``lim.max_demand``] (the
+    pressure's excess over ``lim.pressure_ceiling`` (per kPa); the knots are kept in [0, ``lim.pressure_ceiling``] (the
     engine's bounds). A trial point is scored by one solve and linearised once accepted: residuals and
     Jacobian in one forward-mode pass through :func:`growjax.simulation.simulate` (all knots in one solve,
     :func:`growjax.calibration.least_squares.linearise`); a step moves each knot by at most :data:`MAX_STEP`.
@@ -84,7 +85,7 @@ def optimize_profile(
         values = x * scale
         tr = gj.simulate(params, profile_inputs(target, knots, values), config, ts=ts, breaks=breaks)
         err = (tr.length - ref) / 1e-3
-        over = jax.nn.relu(tr.pressure - lim.max_demand) / 1e3
+        over = jax.nn.relu(tr.pressure - lim.pressure_ceiling) / 1e3
         return jnp.concatenate([err, np.sqrt(smooth) * jnp.diff(x) * 10.0, over])
 
     scored, linearised = jax.jit(residuals), jax.jit(lambda x: linearise(residuals, x))
@@ -101,7 +102,7 @@ def optimize_profile(
             history.append(last.pop() if last else float(jnp.sum(r**2)))
         return r, jac
 
-    hi = lim.max_demand / scale
+    hi = lim.pressure_ceiling / scale
     x = np.full(knots.size, initial / scale)
     if lead == 0.0:  # a first guess from the target's speed: demand rises with the growth speed needed
         speed = np.gradient(target.at(knots + knot_dt), knots)

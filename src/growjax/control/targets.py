@@ -1,18 +1,15 @@
-"""Targets of length control and the limits a design respects: desired lengths, actuator and membrane limits,
-the stepper's length per step, and the tracking error (SI units: m, Pa, s)."""
+"""Targets of length control: desired lengths, the plant's parameters started on them, the stepper's length per step,
+and the tracking error (SI units: m, Pa, s). The limits a design respects are the model's (`growjax.model.limits`)."""
 
 from __future__ import annotations
 
 import math
 from typing import NamedTuple
 
-import equinox as eqx
 import numpy as np
 from jaxtyping import Float
 
 import growjax as gj
-
-PRESSURE_MARGIN = 0.9  # demand ceiling as a fraction of the membrane limit
 
 
 class Target(NamedTuple):
@@ -51,30 +48,6 @@ def step_sequence(t_end=3.0, dt=0.01, start=0.010, height=2e-3, every=1.0, rise=
     k = np.floor(t / every)
     frac = np.clip((t - k * every) / rise, 0.0, 1.0)
     return Target(t, start + height * (k + frac), np.zeros_like(t))
-
-
-class Limits(eqx.Module):
-    """Actuator and membrane limits a design must respect.
-
-    Attributes:
-        max_demand: Pa, ceiling of the pressure demand (a margin below the membrane limit).
-        pressure_limit: Pa, membrane limit (paper eq. 8).
-        syringe_stroke: m, travel of the syringe plungers.
-        max_syringe_speed: m/s, platform speed the pump can give.
-        max_step_rate: steps/s of the stepper drive.
-    """
-
-    max_demand: float
-    pressure_limit: float
-    syringe_stroke: float
-    max_syringe_speed: float = 5e-3
-    max_step_rate: float = 100.0
-
-
-def limits(params, margin: float = PRESSURE_MARGIN, **kw) -> Limits:
-    """The :class:`Limits` of ``params``: demand ceiling ``margin`` × membrane limit."""
-    plim = float(gj.pressure_limit(params.robot))
-    return Limits(margin * plim, plim, float(params.pump.syringe_stroke), **kw)
 
 
 def plant_params(drive: str, target: Target | None = None, base=None):

@@ -21,7 +21,8 @@ from growjax.control.controllers import (
     run_closed_loop,
 )
 from growjax.control.plant import Plant, catheter_signal
-from growjax.control.targets import Limits, Target, limits
+from growjax.control.targets import Target
+from growjax.model.limits import Limits, limits
 
 DEFAULT_LOG_GAINS = (7.0, 7.0, 4.5)  # Kp 1e7 Pa/m (10 kPa per mm), Ki 1e7 Pa/(m s), Kd 3e4 Pa s/m
 
@@ -103,7 +104,7 @@ def pid_cost_fn(
             plant, ctrl, jnp.asarray(target.time), jnp.asarray(target.length), cath, lim, t1
         )
         err = (length - jnp.interp(ts, jnp.asarray(target.time), jnp.asarray(target.length))) / 1e-3
-        over = jax.nn.relu(pressure - lim.pressure_limit) / 1e3
+        over = jax.nn.relu(pressure - lim.membrane_limit) / 1e3
         return jnp.mean(jnp.nan_to_num(err, nan=1e2) ** 2) + jnp.mean(over**2)
 
     if draws:

@@ -31,7 +31,7 @@ SI units throughout: s, Pa, m; uncertainties of ln θ (relative).
 """
 
 from growjax.design import discrimination
-from growjax.design.constraints import Check, Limits, check, draws, limits, penalty, stack
+from growjax.design.constraints import Check, check, draws, penalty, stack
 from growjax.design.criterion import Precision, Prediction, information, posterior
 from growjax.design.discrimination import Discrimination
 from growjax.design.figure import design_figure
@@ -59,7 +59,6 @@ __all__ = [
     "DesignSpace",
     "Discrimination",
     "Knowledge",
-    "Limits",
     "Precision",
     "Prediction",
     "Problem",
@@ -80,7 +79,6 @@ __all__ = [
     "from_fit",
     "from_summary",
     "information",
-    "limits",
     "local_search",
     "make",
     "multistart",

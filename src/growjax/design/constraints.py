@@ -12,67 +12,23 @@ off unless given.
 
 from __future__ import annotations
 
-import dataclasses
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from growjax.calibration import fit as gf
-from growjax.control.targets import PRESSURE_MARGIN
 from growjax.control.tuning import rig_draws
 from growjax.design.knowledge import Knowledge
 from growjax.design.sensitivity import Sensitivities
 from growjax.model import params as gp
-from growjax.model.robot import pressure_limit
+from growjax.model.limits import Limits
 from growjax.simulation.simulate import as_arrays, simulate
 from growjax.simulation.trajectory import OK
 
-STROKE_MARGIN = 0.95  # the length's ceiling as a share of the robot's stroke
 SPREAD = 2.5  # sds of the linearised spread over the draws the penalty keeps clear of each limit
 DRAWS = 32  # rig and θ draws a design is checked on
 CHUNK = 128  # runs per compiled batch of the check
-
-
-@dataclasses.dataclass(frozen=True)
-class Limits:
-    """``pressure`` Pa: ceiling of the sensed pressure (the membrane limit × the control module's margin);
-    ``length`` m: ceiling of the robot's length; ``syringe`` m: the syringes' travel; ``speed`` m/s or None: the
-    pump platform's."""
-
-    pressure: float
-    length: float
-    syringe: float
-    speed: float | None = None
-    membrane: float = float("nan")  # Pa, the membrane limit itself (for reports)
-
-    def summary(self) -> dict:
-        return {
-            "pressure_ceiling_Pa": self.pressure,
-            "membrane_limit_Pa": self.membrane,
-            "length_ceiling_m": self.length,
-            "syringe_stroke_m": self.syringe,
-            "max_pump_speed_m_s": self.speed,
-        }
-
-
-def limits(
-    base: gp.Parameters,
-    margin: float = PRESSURE_MARGIN,
-    stroke_margin: float = STROKE_MARGIN,
-    max_speed: float | None = None,
-) -> Limits:
-    """The :class:`Limits` of ``base``: sensed pressure ≤ ``margin`` × the membrane limit, length ≤
-    ``stroke_margin`` × the robot's stroke, syringe travel ≤ its stroke, the platform's speed ≤ ``max_speed``."""
-    membrane = float(pressure_limit(base.robot))
-    return Limits(
-        margin * membrane,
-        stroke_margin * float(base.robot.stroke),
-        float(base.pump.syringe_stroke),
-        max_speed,
-        membrane,
-    )
 
 
 def draws(knowledge: Knowledge, n: int = DRAWS, seed: int = 0) -> dict:
@@ -94,8 +50,8 @@ def penalty(s: Sensitivities, prior_covariance, lim: Limits, spread: float = SPR
     # (a floor of 1 nm and 1 mPa keeps the square root's derivative finite where a run does not move)
     sd_l = jnp.sqrt(jnp.einsum("ni,ij,nj->n", s.jac_length, prior_covariance, s.jac_length) + 1e-18)
     sd_p = jnp.sqrt(jnp.einsum("ni,ij,nj->n", s.jac_pressure, prior_covariance, s.jac_pressure) + 1e-6)
-    over_p = jax.nn.relu((s.pressure + spread * sd_p - lim.pressure) / 1e3)
-    over_l = jax.nn.relu((s.length + spread * sd_l - lim.length) / 1e-3)
+    over_p = jax.nn.relu((s.pressure + spread * sd_p - lim.pressure_ceiling) / 1e3)
+    over_l = jax.nn.relu((s.length + spread * sd_l - lim.length_ceiling) / 1e-3)
     return jnp.sum(over_p**2) + jnp.sum(over_l**2)
 
 
@@ -158,9 +114,9 @@ def check(inputs, knowledge: Knowledge, config, ts, breaks, lim: Limits, drawn: 
     worst = lambda a: np.max(np.where(np.isfinite(a), a, np.inf), axis=(1, 2))
     peak_p, peak_l, peak_s, peak_v = worst(pressure), worst(length), worst(np.abs(syringe)), worst(speed)
     completed = np.all(ok, axis=1)
-    admissible = completed & (peak_p <= lim.pressure) & (peak_l <= lim.length) & (peak_s <= lim.syringe)
-    if lim.speed is not None:
-        admissible &= peak_v <= lim.speed
+    admissible = completed & (peak_p <= lim.pressure_ceiling) & (peak_l <= lim.length_ceiling) & (peak_s <= lim.syringe_stroke)
+    if lim.max_pump_speed is not None:
+        admissible &= peak_v <= lim.max_pump_speed
     return Check(
         peak_p,
         peak_l,

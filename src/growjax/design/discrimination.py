@@ -40,6 +40,7 @@ from growjax.design.knowledge import Knowledge
 from growjax.design.space import DesignSpace, demand_at_knots
 from growjax.model import effects as fx
 from growjax.model import params as gp
+from growjax.model.limits import Limits, limits
 from growjax.model.signals import Inputs
 from growjax.simulation.config import Config
 from growjax.simulation.simulate import as_arrays
@@ -89,7 +90,7 @@ class Discrimination(eqx.Module):
     tolerance: jax.Array  # (q,) the rig's relative sds
     prior_covariance: jax.Array  # (m, m) of w = (ln θ, u_A, u_B, b): the penalty's spread
     breaks: tuple
-    limits: dcon.Limits = eqx.field(static=True)
+    limits: Limits = eqx.field(static=True)
     names: tuple = eqx.field(static=True)  # θ, the base parameters refitted
     effects: tuple = eqx.field(static=True)  # (A, B)
     fields: tuple = eqx.field(static=True)  # their parameters, qualified
@@ -169,7 +170,7 @@ def make(
     space: DesignSpace,
     effects,
     sizes=None,
-    limits: dcon.Limits | None = None,
+    limits: Limits | None = None,
     config: Config | None = None,
 ) -> Discrimination:
     """The :class:`Discrimination` of ``effects`` (two catalogue names) on ``space``, θ = ``knowledge``'s
@@ -201,7 +202,7 @@ def make(
         tolerance=jnp.asarray(u),
         prior_covariance=jnp.asarray(prior),
         breaks=space.breaks(),
-        limits=limits if limits is not None else dcon.limits(knowledge.base),
+        limits=limits if limits is not None else limits(knowledge.base),
         names=tuple(knowledge.names),
         effects=effects,
         fields=fields,

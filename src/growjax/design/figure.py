@@ -41,10 +41,10 @@ def design_figure(result, path) -> Path:
             ax.fill_between(t, np.nanmin(runs, axis=0), np.nanmax(runs, axis=0), color=color, alpha=0.25, lw=0)
             ax.plot(t, np.nanmedian(runs, axis=0), color=color, lw=1.4 if label == "design" else 0.9, label=label)
     for ax in (ax_p,) if stepper else (ax_d, ax_p):
-        ax.axhline(lim.pressure / 1e3, color="C1", ls="--", lw=1, label="ceiling (limit × margin)")
-        ax.axhline(lim.membrane / 1e3, color="C3", ls=":", lw=1, label="membrane limit")
+        ax.axhline(lim.pressure_ceiling / 1e3, color="C1", ls="--", lw=1, label="ceiling (limit × margin)")
+        ax.axhline(lim.membrane_limit / 1e3, color="C3", ls=":", lw=1, label="membrane limit")
     for ax in (ax_d, ax_l) if stepper else (ax_l,):
-        ax.axhline(lim.length * 1e3, color="C1", ls="--", lw=1, label="length ceiling (stroke × margin)")
+        ax.axhline(lim.length_ceiling * 1e3, color="C1", ls="--", lw=1, label="length ceiling (stroke × margin)")
     ax_d.set_ylabel("commanded length (mm)" if stepper else "demand (kPa)")
     ax_p.set_ylabel("sensed pressure (kPa)")
     ax_l.set_ylabel("length (mm)")

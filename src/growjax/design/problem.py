@@ -36,6 +36,7 @@ from growjax.design import sensitivity
 from growjax.design.knowledge import Knowledge
 from growjax.design.space import DesignSpace, demand_at_knots, stepper_inputs
 from growjax.model import params as gp
+from growjax.model.limits import Limits, limits
 from growjax.model.signals import Inputs
 from growjax.simulation.config import Config
 from growjax.simulation.simulate import as_arrays
@@ -60,7 +61,7 @@ class Problem(eqx.Module):
     points: jax.Array  # (P, m) points of w the criterion is averaged over (the first: 0)
     offsets: jax.Array  # (D, q) the rig's relative errors at the draws its nonlinearity is measured on
     breaks: tuple
-    limits: dcon.Limits = eqx.field(static=True)
+    limits: Limits = eqx.field(static=True)
     names: tuple = eqx.field(static=True)
     rig: tuple = eqx.field(static=True)
     sensors: tuple = eqx.field(static=True)
@@ -139,7 +140,7 @@ def make(
     criterion: str = "A",
     sensors=("length",),
     pressure_noise: float = dcrit.PRESSURE_NOISE,
-    limits: dcon.Limits | None = None,
+    limits: Limits | None = None,
     points: int = POINTS,
     seed: int = 0,
     config: Config | None = None,
@@ -161,7 +162,7 @@ def make(
     zs = np.concatenate(
         [np.zeros((1, prior.shape[0])), rng.multivariate_normal(np.zeros(prior.shape[0]), prior, size=points - 1)]
     )
-    lim = limits if limits is not None else dcon.limits(knowledge.base)
+    lim = limits if limits is not None else limits(knowledge.base)
     drawn = rig_draws(nonlinear_draws, knowledge.base, knowledge.tolerances, seed + 1) if nonlinear_draws else {}
     offsets = np.zeros((0, len(knowledge.rig)))
     if drawn:

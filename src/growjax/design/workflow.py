@@ -22,6 +22,7 @@ from growjax.design import problem as dprob
 from growjax.design.knowledge import Knowledge
 from growjax.design.space import DesignSpace, StepperSpace
 from growjax.model import effects as fx
+from growjax.model.limits import Limits
 from growjax.model.signals import Inputs
 from growjax.simulation.simulate import input_breaks
 
@@ -54,7 +55,7 @@ class DesignResult:
     checks: dict
     random: dopt.RandomBatch
     descents: list
-    limits: dcon.Limits
+    limits: Limits
     criterion: str
     sensors: tuple
     knowledge: dict
@@ -113,7 +114,7 @@ def design(
     seed: int = 0,
     points: int = dprob.POINTS,
     pressure_noise: float = dcrit.PRESSURE_NOISE,
-    limits: dcon.Limits | None = None,
+    limits: Limits | None = None,
     learning_rate: float = dopt.LEARNING_RATE,
     nonlinear_draws: int = dprob.NONLINEAR_DRAWS,
     gradient: str = "differences",
@@ -140,10 +141,10 @@ def design(
         knowledge, space, criterion, sensors, pressure_noise, limits, points, seed, nonlinear_draws=nonlinear_draws
     )
     lim = problem.limits
-    if space.drive == "forward" and space.p_max > lim.pressure + 1e-9:
+    if space.drive == "forward" and space.p_max > lim.pressure_ceiling + 1e-9:
         raise ValueError(
             f"p_max {space.p_max / 1e3:.1f} kPa is above the sensed-pressure ceiling "
-            f"{lim.pressure / 1e3:.1f} kPa (the membrane limit {lim.membrane / 1e3:.1f} kPa × the margin)"
+            f"{lim.pressure_ceiling / 1e3:.1f} kPa (the membrane limit {lim.membrane_limit / 1e3:.1f} kPa × the margin)"
         )
     sets = [sensors] if sensors == ("length",) else [("length",), sensors]
     rows, batch, descents, x, scaled, checks, wall = _search(
@@ -198,7 +199,7 @@ def discriminate(
     iterations: int = dopt.ITERATIONS,
     n_draws: int = dcon.DRAWS,
     seed: int = 0,
-    limits: dcon.Limits | None = None,
+    limits: Limits | None = None,
     learning_rate: float = dopt.LEARNING_RATE,
     gradient: str = "differences",
     false_positive_rate: float = 0.05,
@@ -222,10 +223,10 @@ def discriminate(
     clock = time.perf_counter()
     problem = ddis.make(knowledge, space, effects, sizes, limits)
     lim = problem.limits
-    if space.p_max > lim.pressure + 1e-9:
+    if space.p_max > lim.pressure_ceiling + 1e-9:
         raise ValueError(
             f"p_max {space.p_max / 1e3:.1f} kPa is above the sensed-pressure ceiling "
-            f"{lim.pressure / 1e3:.1f} kPa (the membrane limit {lim.membrane / 1e3:.1f} kPa × the margin)"
+            f"{lim.pressure_ceiling / 1e3:.1f} kPa (the membrane limit {lim.membrane_limit / 1e3:.1f} kPa × the margin)"
         )
     threshold = boundary_threshold(false_positive_rate / len(fx.CATALOGUE))
     base_t, batch, descents, x, scaled, checks, wall = _search(
@@ -377,8 +378,8 @@ def _admissible(problem, space, knowledge, xs, drawn, lim):
         return scaled[i], SHRINK[i], _one(space, knowledge, scaled[i], drawn, lim)
     raise DesignError(
         f"no admissible design: over the draws the best one reaches {check.peak_pressure[0] / 1e3:.1f} kPa "
-        f"(ceiling {lim.pressure / 1e3:.1f}) and {check.peak_length[0] * 1e3:.1f} mm "
-        f"(ceiling {lim.length * 1e3:.1f}); lower p_max or shorten the run"
+        f"(ceiling {lim.pressure_ceiling / 1e3:.1f}) and {check.peak_length[0] * 1e3:.1f} mm "
+        f"(ceiling {lim.length_ceiling * 1e3:.1f}); lower p_max or shorten the run"
     )
 
 
