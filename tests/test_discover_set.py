@@ -12,6 +12,7 @@ from scipy import stats
 import growjax as gj
 from growjax import cli
 from growjax import discover as gd
+from growjax.calibration import likelihood_ratio as lrt
 from growjax.data import experiment as ex
 from growjax.data import sets as xs
 
@@ -24,15 +25,15 @@ CONFIG = gj.Config(t1=3.0)
 def test_the_threshold_is_the_single_rule_for_one_robot_and_holds_its_rate_for_several():
     """One copy: ½χ²₀ + ½χ²₁ at the Bonferroni share, the single experiment's rule. Several copies (one per robot):
     the boundary mixture, whose false-alarm rate at the threshold matches draws of Σ max(0, Z)²."""
-    assert gd.boundary_threshold(0.05 / 3) == pytest.approx(stats.chi2.isf(2 * 0.05 / 3, df=1), rel=1e-12)
+    assert lrt.boundary_threshold(0.05 / 3) == pytest.approx(stats.chi2.isf(2 * 0.05 / 3, df=1), rel=1e-12)
     rng = np.random.default_rng(20261126)
     for copies in (2, 3):
-        c = gd.boundary_threshold(0.01, copies)
-        assert gd.boundary_p_value(c, copies) == pytest.approx(0.01, rel=1e-6)
+        c = lrt.boundary_threshold(0.01, copies)
+        assert lrt.boundary_p_value(c, copies) == pytest.approx(0.01, rel=1e-6)
         draws = np.sum(np.clip(rng.standard_normal((400_000, copies)), 0.0, None) ** 2, axis=1)
         assert np.mean(draws > c) == pytest.approx(0.01, rel=0.08)
-        assert c > gd.boundary_threshold(0.01, copies - 1)
-    assert gd.boundary_p_value(0.0, 2) == 1.0
+        assert c > lrt.boundary_threshold(0.01, copies - 1)
+    assert lrt.boundary_p_value(0.0, 2) == 1.0
 
 
 def test_bad_input_is_refused_before_any_fit():

@@ -9,9 +9,9 @@ import time
 from collections.abc import Sequence
 
 import numpy as np
-from scipy import optimize, special, stats
 
 from growjax.calibration import joint
+from growjax.calibration.likelihood_ratio import boundary_p_value, boundary_threshold
 from growjax.data.sets import SCOPES, ExperimentSet, Scope
 from growjax.model import effects as fx
 from growjax.simulation.config import Config
@@ -22,23 +22,6 @@ from ._report import _unit, confounded_lines
 from ._scoring import MATERIAL_MISFIT, Scorer, _pinned, noise_from_differences
 
 EFFECT_START = START_FRACTIONS[1]  # an effect's joint fit starts at this fraction of its range's top
-
-
-def boundary_threshold(rate: float, copies: int = 1) -> float:
-    """The 2ΔlogL a nested test clears with probability ``rate`` under the null: an effect absent from all of its
-    ``copies`` (one per robot), each copy's parameter on its boundary 0, so that 2ΔlogL is distributed as the
-    mixture Σⱼ C(c, j) 2⁻ᶜ χ²ⱼ (χ²₀ a point mass at 0). One copy: ½χ²₀ + ½χ²₁, the single experiment's
-    rule."""
-    if copies == 1:
-        return float(stats.chi2.isf(2.0 * rate, df=1))
-    return float(optimize.brentq(lambda c: boundary_p_value(c, copies) - rate, 1e-9, 1e3))
-
-
-def boundary_p_value(lr: float, copies: int = 1) -> float:
-    """P(2ΔlogL > ``lr``) under the null of :func:`boundary_threshold`."""
-    if lr <= 0:
-        return 1.0
-    return float(sum(special.comb(copies, j) * 0.5**copies * stats.chi2.sf(lr, df=j) for j in range(1, copies + 1)))
 
 
 @dataclasses.dataclass
@@ -87,9 +70,9 @@ def discover_set(
 
     The procedure, one round (at most one effect is added):
 
-    1. **Base fit.** :func:`growjax.calibration.joint.fit_set` of ``base_free`` (default one yield pressure per robot), the rig's
-       errors shared per rig and inferred under their tolerances (``tolerances``: as there), each run with its own
-       discrepancy (``discrepancy``). Its score is the set's total log-likelihood
+    1. **Base fit.** `growjax.calibration.joint.fit_set` of ``base_free`` (default one yield pressure per robot),
+       the rig's errors shared per rig and inferred under their tolerances (``tolerances``: as there), each run
+       with its own discrepancy (``discrepancy``). Its score is the set's total log-likelihood
        (:attr:`growjax.calibration.joint.SetFitResult.log_likelihood`): every run's under its discrepancy and noise at
        their mode, the rig's errors marginalised.
     2. **Each candidate** (default the whole catalogue) is one more joint fit, one batched program over the runs:
