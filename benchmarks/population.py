@@ -106,7 +106,7 @@ def one_population(task: tuple) -> dict:
     fit = joint.fit_set(runs, free=["Y@robot"], config=gj.Config(t1=10.0))
     fit_s = time.perf_counter() - t0
     t0 = time.perf_counter()
-    post = pop.sample(fit, "Y", chains=chains, warmup=warmup, samples=samples, seed=seed)
+    post = pop.sample_population(fit, "Y", chains=chains, warmup=warmup, samples=samples, seed=seed)
     nuts_s = time.perf_counter() - t0
     held = xs.Run("held-out", exps[-1], robot="held-out")
     band = pop.predict_new_robot(post, held, gj.Config(t1=10.0), draws=400, seed=seed)

@@ -64,7 +64,7 @@ def _coverage(populations: int, shared_rig: bool):
             j[:ROBOTS, :ROBOTS] = np.diag(np.diag(j[:ROBOTS, :ROBOTS]))
             j[:ROBOTS, ROBOTS:] = j[ROBOTS:, :ROBOTS] = 0.0
             fit.joint_covariance = j
-        post = pop.sample(fit, "Y", chains=1, warmup=200, samples=300, seed=k)
+        post = pop.sample_population(fit, "Y", chains=1, warmup=200, samples=300, seed=k)
         lo, _, hi = post.interval(post.mu)
         hits["mu"].append(lo <= np.log(MEDIAN) <= hi)
         lo, _, hi = post.interval(post.s)
@@ -113,11 +113,11 @@ def test_a_new_robot_band_centres_on_the_population_and_widens_with_its_spread()
     run = exps.runs[1]
     hyper = {"amplitude_m": 2e-5, "time_scale_s": 1.0, "noise_m": 2e-4, "noise_time_s": 0.0}
     fit = _set_fit(np.log([7.5e3, 8e3, 8.5e3]), ("a", "b", "c"), runs=[{"discrepancy": hyper}] * 3)
-    post = pop.sample(fit, "Y", chains=2, warmup=200, samples=100, seed=0)
+    post = pop.sample_population(fit, "Y", chains=2, warmup=200, samples=100, seed=0)
     # two chains from their own starts sample one posterior, without a divergence (the robots are integrated out)
     assert post.mu.size == 200 and post.diagnostics["mu"]["r_hat"] < 1.2 and post.diagnostics["divergences"] == 0
     with pytest.raises(ValueError, match="chains"):
-        pop.sample(fit, "Y", chains=0)
+        pop.sample_population(fit, "Y", chains=0)
     config = gj.Config(t1=3.0)
     band = pop.predict_new_robot(post, run, config, draws=64, seed=0)
     wide = pop.PopulationResult(**{**post.__dict__, "s": post.s + 0.3})

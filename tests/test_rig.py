@@ -244,7 +244,7 @@ def test_a_rig_misfit_that_runs_y_to_zero_with_the_rig_nominal_is_brought_back_b
     inputs = space.baseline_inputs()
     length = np.asarray(gj.simulate(rig, inputs, maker, ts=np.concatenate([[maker.t0], t])).length)[1:]
     length = length + rng.normal(0.0, noise, t.size)
-    length = length + np.asarray(dc.sample(jax.random.PRNGKey(int(rng.integers(2**31))), t, hyper))
+    length = length + np.asarray(dc.draw(jax.random.PRNGKey(int(rng.integers(2**31))), t, hyper))
     res = gf.fit(
         t,
         length,

@@ -93,7 +93,7 @@ def test_hyperparameters_come_back_from_a_known_process():
     # correlated sensor noise (0.2 mm over 0.2 s), no discrepancy: the two processes share it between them
     # (their spectra overlap), the total variance and the likelihood come back
     coloured_truth = dc.Hyper.of(0.0, 1.0, 2e-4, 0.2)
-    coloured = np.asarray(dc.sample(jax.random.PRNGKey(4), t, coloured_truth, noise=True))
+    coloured = np.asarray(dc.draw(jax.random.PRNGKey(4), t, coloured_truth, noise=True))
     est = dc.estimate(coloured, t)
     assert np.hypot(float(est.amplitude), float(est.noise)) == pytest.approx(2e-4, rel=0.3)
     assert 0.03 < float(est.noise_time) < 0.4

@@ -294,7 +294,7 @@ def smooth(
     return jnp.einsum("ni,ni->n", h, m_s), jnp.einsum("ni,nij,nj->n", h, p_s, h)
 
 
-def sample(key, times, hyper: Hyper, shape=(), noise: bool = False):
+def draw(key, times, hyper: Hyper, shape=(), noise: bool = False):
     """Draws of δ at ``times`` (n,) from the Matérn-3/2 prior, plus the sensor noise ε if ``noise``: shape
     ``shape + (n,)`` m."""
     t = jnp.asarray(times, float)
@@ -450,7 +450,7 @@ def distribution(mean, times, hyper: Hyper, sensitivity=None, tolerance=None, ob
 
 class MeasuredLength(_dist.Distribution):
     """y = model + δ + Σ g b + ε over ``times`` (n,): log-density by :func:`log_likelihood` (at the ``observed``
-    samples), draws by :func:`sample` plus the rig terms and the noise."""
+    samples), draws by `draw` plus the rig terms and the noise."""
 
     support = _dist.constraints.real_vector
 
@@ -473,7 +473,7 @@ class MeasuredLength(_dist.Distribution):
     def sample(self, key, sample_shape=()):
         k_delta, k_rig = jax.random.split(key)
         shape = tuple(sample_shape)
-        y = self.model + sample(k_delta, self.times, self.hyper, shape, noise=True)
+        y = self.model + draw(k_delta, self.times, self.hyper, shape, noise=True)
         if self.sensitivity is not None:
             b = jax.random.normal(k_rig, shape + (self.sensitivity.shape[1],)) * self.tolerance
             y = y + b @ self.sensitivity.T

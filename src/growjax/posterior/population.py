@@ -133,7 +133,7 @@ def robots_given(mu, s, z_hat, cov, rng: np.random.Generator) -> np.ndarray:
     return mu + x @ vec.T
 
 
-def sample(
+def sample_population(
     set_fit: SetFitResult,
     name: str = "Y",
     *,
@@ -290,7 +290,7 @@ def predict_new_robot(
     mean, ok = np.asarray(mean), np.asarray(status) == 0
     hyper = _median_hyper(population.set_fit.runs)
     key = jax.random.PRNGKey(seed)
-    noise = np.asarray(dc.sample(key, times, hyper, shape=(theta.size,), noise=True))
+    noise = np.asarray(dc.draw(key, times, hyper, shape=(theta.size,), noise=True))
     model_error = gf.default_model_error(config)
     if model_error > 0:
         k = dc.drift_kernel(times, model_error, gf.MODEL_ERROR_TIME) + 1e-18 * np.eye(times.size)
