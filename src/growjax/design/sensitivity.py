@@ -1,8 +1,8 @@
 """The model's length and pressure under an input, with their sensitivities to w = (ln θ, b): one forward
 sensitivity solve of the fast configuration.
 
-The solve is plain JAX (the Rosenbrock integrator's loop, :func:`growjax.simulation._fast_solve.solve_with_sensitivities`),
-so forward mode differentiates it again: ``jax.jvp`` of :func:`solve` along a change of the input gives the
+The solve is plain JAX (the Rosenbrock integrator's loop, `growjax.simulation.simulate.forward_sensitivities`), so
+forward mode differentiates it again: ``jax.jvp`` of `solve` along a change of the input gives the
 sensitivities' own derivatives, and with them the gradient of any criterion built on them with respect to the
 design (a while loop, so forward mode only: one tangent per design variable).
 """
@@ -11,14 +11,11 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from growjax.model import effects as fx
 from growjax.model import params as gp
-from growjax.simulation import _fast_solve
-from growjax.simulation.simulate import as_arrays, simulate
+from growjax.simulation.simulate import forward_sensitivities, simulate
 from growjax.simulation.trajectory import OK
 
 
@@ -49,21 +46,8 @@ def solve(base: gp.Parameters, inputs, names: tuple, rig: tuple, config, ts, bre
 
 def solve_along(params_of, m: int, inputs, config, ts, breaks) -> Sensitivities:
     """One sensitivity solve along the m coordinates w of ``params_of(w) → Parameters`` (traceable) at w = 0; the
-    rest as :func:`solve`."""
-    w0 = jnp.zeros(m)
-    params = fx.apply_all(as_arrays(params_of(w0)))
-    mask = jax.tree_util.tree_map(eqx.is_inexact_array, params)
-
-    def zeros(x):
-        return jnp.zeros((m,) + jnp.shape(x))
-
-    applied = lambda v: eqx.filter(fx.apply_all(as_arrays(params_of(v))), mask)
-    d_float = jax.vmap(lambda e: jax.jvp(applied, (w0,), (e,))[1])(jnp.eye(m))
-    d_params = eqx.combine(d_float, jax.tree_util.tree_map(zeros, eqx.filter(params, mask, inverse=True)))
-    d_inputs = jax.tree_util.tree_map(zeros, inputs)
-    traj, tangents = _fast_solve.solve_with_sensitivities(
-        params, inputs, config, jnp.asarray(ts), *breaks, (d_params, d_inputs)
-    )
+    rest as `solve`."""
+    traj, tangents = forward_sensitivities(params_of, jnp.zeros(m), inputs, config, jnp.asarray(ts), breaks)
     return Sensitivities(traj.length, traj.pressure, tangents["length"].T, tangents["pressure"].T, traj.status == OK)
 
 

@@ -18,6 +18,18 @@ from growjax.simulation import reference as reference_model
 from growjax.simulation.config import Config
 from growjax.simulation.trajectory import Trajectory
 
+__all__ = [
+    "Breaks",
+    "as_arrays",
+    "forward_sensitivities",
+    "input_breaks",
+    "length_jacobian",
+    "sample_times",
+    "simulate",
+    "simulate_from",
+    "simulate_members",
+]
+
 _PAD_BLOCK = 32
 _DEFAULT_CONFIG = Config()  # Config is immutable: one default instance serves every call
 Breaks = tuple[Float[Array, " J"], Float[Array, " K"]]  # (jump times, slope-break times), s, padded beyond t1
@@ -30,7 +42,8 @@ def _traced(tree) -> bool:
 def as_arrays(tree):
     """Python numbers in a pytree as float arrays, so ``jit`` traces them instead of recompiling per value.
 
-    NumPy scalars, not JAX arrays: making a device array per leaf costs ~0.1 ms each, more than a simulation's step loop.
+    NumPy scalars, not JAX arrays: making a device array per leaf costs ~0.1 ms each, more than a simulation's step
+    loop.
     """
 
     def convert(x):
@@ -206,9 +219,9 @@ def _solve_members(params, inputs, config: Config, ts, jump_ts, step_ts) -> Traj
 
 def length_jacobian(params_of, w, inputs, config: Config, ts, breaks=None) -> tuple[Trajectory, jax.Array]:
     """(trajectory, ∂length/∂w (T, p)) of the fast configuration at ``params_of(w)``, w (p,), on the save grid
-    ``ts`` (s): one solve carries the p sensitivities and gives both (:func:`growjax.simulation._fast_solve.solve_with_sensitivities`),
-    where ``jax.jacfwd`` of :func:`simulate` adds a plain solve for the primal. ``params_of``: w → Parameters
-    (traceable; hashable, the compiled program is kept per function). ``breaks`` as in :func:`simulate`.
+    ``ts`` (s): one solve carries the p sensitivities and gives both (`forward_sensitivities`, compiled here),
+    where ``jax.jacfwd`` of `simulate` adds a plain solve for the primal. ``params_of``: w → Parameters
+    (traceable; hashable, the compiled program is kept per function). ``breaks`` as in `simulate`.
     """
     if config.fidelity != "fast":
         raise ValueError("length_jacobian runs the fast configuration; use jax.jacfwd of simulate for the reference")
@@ -223,6 +236,30 @@ def length_jacobian(params_of, w, inputs, config: Config, ts, breaks=None) -> tu
 
 @eqx.filter_jit
 def _length_jacobian(params_of, w, inputs, config: Config, ts, jump_ts, step_ts):
+    traj, tangents = forward_sensitivities(params_of, w, inputs, config, ts, (jump_ts, step_ts))
+    return traj, tangents["length"].T
+
+
+def forward_sensitivities(params_of, w, inputs, config: Config, ts, breaks) -> tuple[Trajectory, dict]:
+    """The fast configuration's trajectory at ``params_of(w)`` and its sensitivities to w, from one solve that
+    integrates the state with its tangents (one plain solve cheaper than ``jax.jvp`` through `simulate`).
+
+    Traceable and not compiled here: a caller compiles it inside its own program, and may differentiate it again
+    in forward mode (the solver's loop carries the tangents, so a design's gradient goes through them).
+
+    Args:
+        params_of: w → Parameters (traceable); its effects are applied here.
+        w: (p,) the point the sensitivities are taken at.
+        inputs: the inputs, their numbers as arrays (`as_arrays`).
+        config: the fast configuration, resolved (`Config.resolved`).
+        ts: (n,) s, the save times (inside the configuration's window).
+        breaks: (jump times, slope-break times) of the inputs, s (`input_breaks`).
+
+    Returns:
+        (the trajectory on ``ts``, {output: (p, n) its derivative along each coordinate of w}) for the outputs
+        ``"length"`` (m) and ``"pressure"`` (Pa) among others; NaN past a stop.
+    """
+
     def applied(v):
         return fx.apply_all(as_arrays(params_of(v)))
 
@@ -236,7 +273,4 @@ def _length_jacobian(params_of, w, inputs, config: Config, ts, jump_ts, step_ts)
     d_float = jax.vmap(lambda e: jax.jvp(lambda v: eqx.filter(applied(v), mask), (w,), (e,))[1])(jnp.eye(p))
     d_params = eqx.combine(d_float, jax.tree_util.tree_map(zeros, eqx.filter(params, mask, inverse=True)))
     d_inputs = jax.tree_util.tree_map(zeros, inputs)
-    traj, tangents = _fast_solve.solve_with_sensitivities(
-        params, inputs, config, ts, jump_ts, step_ts, (d_params, d_inputs)
-    )
-    return traj, tangents["length"].T
+    return _fast_solve.solve_with_sensitivities(params, inputs, config, ts, *breaks, (d_params, d_inputs))
