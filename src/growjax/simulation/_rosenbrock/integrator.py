@@ -13,7 +13,10 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from growjax.simulation._rosenbrock import linear, method, saving, slopes
+import growjax.simulation._rosenbrock.linear as linear
+import growjax.simulation._rosenbrock.method as method
+import growjax.simulation._rosenbrock.saving as saving
+import growjax.simulation._rosenbrock.slopes as slopes
 from growjax.simulation._rosenbrock.events import locate_event
 from growjax.simulation._rosenbrock.method import ROS34PW2, RosenbrockTableau
 from growjax.simulation._rosenbrock.step_control import error_norm, land, next_size
