@@ -132,13 +132,13 @@ def other_methods(res, record, target, T, ev, p, cfg_ev, lim):
 
 def stepper_methods(res, target, T, ev):
     """The open-loop step schedule, the closed-loop full-step controller and the 1/16-microstep controller,
-    designed on the fast configuration and evaluated on ``ev``: :func:`growjax.control.design`, as the CLI runs them."""
+    designed on the fast configuration and evaluated on ``ev``: `growjax.control.design_controller`, as the CLI runs them."""
     for name, method, microsteps in (
         ("inverse open-loop steps", "open-loop", 1),
         ("inverse feedback (step controller)", "feedback", 1),
         ("inverse feedback, 1/16 microstep", "feedback", 16),
     ):
-        s = gc.design(target, "inverse", method, T, microsteps=microsteps, evaluate_on=ev)
+        s = gc.design_controller(target, "inverse", method, T, microsteps=microsteps, evaluate_on=ev)
         setting = s.get("gains") or {k: s["profile"][k] for k in ("planned_by", "model_rmse_m", "controller")}
         res["methods"][name] = {
             k: s[k] for k in ("tracking_rmse_m", "pressure_limit_crossed", "peak_pressure_Pa", "design_s")

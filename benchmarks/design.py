@@ -101,7 +101,7 @@ def replicate(job: dict) -> dict:
     import growjax as gj
     from growjax.calibration import discrepancy as dc
     from growjax.calibration import fit as gf
-    from growjax.control.profile import KnotProfile
+    from growjax.model.signals import KnotProfile
 
     clock = time.perf_counter()
     rng = np.random.default_rng([job["seed"], job["index"]])
@@ -138,7 +138,7 @@ def replicate(job: dict) -> dict:
         if job.get("discrepancy"):  # δ ~ GP(0, Matérn-3/2), a fresh draw per input
             a, ell = job["discrepancy"]
             key = jax.random.PRNGKey(int(rng.integers(2**31)))
-            length = length + np.asarray(dc.sample(key, times, dc.Hyper.of(a, ell, 0.0, 0.0)))
+            length = length + np.asarray(dc.draw(key, times, dc.Hyper.of(a, ell, 0.0, 0.0)))
         pressure = None
         if job["pressure"]:
             pressure = np.asarray(traj.pressure)[1:] + rng.normal(0.0, job["pressure_noise"], times.size)

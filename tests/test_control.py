@@ -8,6 +8,8 @@ import pytest
 
 import growjax as gj
 from growjax import control as gc
+from growjax.calibration.tolerance import rig_draws
+from growjax.control import workflow as cw
 
 T = 1.5
 
@@ -227,12 +229,6 @@ class _Designed(Exception):
     """Raised by a stand-in to stop a design once it has shown what it was given."""
 
 
-def _design_module():
-    import importlib
-
-    return importlib.import_module("growjax.control.design")  # the package re-exports design(), the function
-
-
 def test_design_builds_its_plant_and_limits_from_base(target, monkeypatch):
     seen = {}
 
@@ -240,7 +236,7 @@ def test_design_builds_its_plant_and_limits_from_base(target, monkeypatch):
         seen["params"], seen["lim"] = params, kw["lim"]
         raise _Designed
 
-    monkeypatch.setattr(_design_module(), "optimize_profile", stop)
+    monkeypatch.setattr(cw, "optimize_profile", stop)
     reference = gj.reference("forward")
     changed = gj.replace(
         reference,
@@ -249,7 +245,7 @@ def test_design_builds_its_plant_and_limits_from_base(target, monkeypatch):
     )
     for base, want in ((None, reference), (changed, changed)):
         with pytest.raises(_Designed):
-            gc.design(target, "forward", "open-loop", T, evaluate_on="fast", base=base)
+            gc.design_controller(target, "forward", "open-loop", T, evaluate_on="fast", base=base)
         assert float(gj.get(seen["params"], "Y")) == float(gj.get(want, "Y"))
         assert float(gj.get(seen["params"], "initial_length")) == target.length[0]  # started on the target
         assert seen["lim"].membrane_limit == pytest.approx(float(gj.pressure_limit(want.robot)), rel=1e-12)
@@ -268,23 +264,25 @@ def test_design_tunes_feedback_on_draws_of_the_rig_within_its_tolerances(target,
         seen["base"], seen["draws"] = base, draws
         raise _Designed
 
-    monkeypatch.setattr(_design_module(), "optimize_profile", profile)
-    monkeypatch.setattr(_design_module(), "pid_cost_fn", stop)
+    monkeypatch.setattr(cw, "optimize_profile", profile)
+    monkeypatch.setattr(cw, "pid_cost_fn", stop)
     with pytest.raises(_Designed):
-        gc.design(target, "forward", "feedback", T, n_draws=64, seed=2, tolerances={"Kp": 0.1, "tank.length": 0.0})
+        gc.design_controller(
+            target, "forward", "feedback", T, n_draws=64, seed=2, tolerances={"Kp": 0.1, "tank.length": 0.0}
+        )
     draws = seen["draws"]
     assert set(draws) == {"pid.proportional"}  # the alias resolved, the zero tolerance dropped
     kp = float(gj.get(seen["base"], "pid.proportional"))
     spread = np.log(draws["pid.proportional"] / kp)
     assert spread.shape == (64,) and 0.07 < np.std(spread) < 0.13 and abs(np.mean(spread)) < 0.04
     with pytest.raises(_Designed):
-        gc.design(target, "forward", "feedback", T, n_draws=64, seed=2)
+        gc.design_controller(target, "forward", "feedback", T, n_draws=64, seed=2)
     assert seen["draws"] is None  # no tolerances: the rig as it is
     np.testing.assert_array_equal(
-        gc.rig_draws(64, seen["base"], {"Kp": 0.1}, seed=2)["pid.proportional"], draws["pid.proportional"]
+        rig_draws(64, seen["base"], {"Kp": 0.1}, seed=2)["pid.proportional"], draws["pid.proportional"]
     )  # seeded
     with pytest.raises(ValueError, match="feedback design only"):
-        gc.design(target, "forward", "mpc", T, tolerances={"Kp": 0.1})
+        gc.design_controller(target, "forward", "mpc", T, tolerances={"Kp": 0.1})
 
 
 @pytest.mark.slow
@@ -293,7 +291,7 @@ def test_design_on_a_changed_base_tracks_differently(target):
     short = gc.Target(*(np.asarray(a)[target.time <= 0.6] for a in target))
     reference = gj.reference("forward")
     runs = [
-        gc.design(short, "forward", "open-loop", 0.6, iterations=1, evaluate_on="fast", base=base)
+        gc.design_controller(short, "forward", "open-loop", 0.6, iterations=1, evaluate_on="fast", base=base)
         for base in (None, gj.replace(reference, Y=30e3))
     ]
     assert runs[0]["profile"]["demand_Pa"] != runs[1]["profile"]["demand_Pa"]

@@ -26,6 +26,9 @@ def _catheter():
     return gj.Sampled(jnp.asarray(t), jnp.asarray(0.004 + 0.004 * t))
 
 
+HYPER = dc.Hyper.of(0.0, 1.0, 2e-4)  # white length noise of 0.2 mm, no discrepancy
+
+
 def _knowledge(sd=0.03, tolerances=None):
     base = gj.replace(gj.reference("forward"), Y=9000.0)
     tol = tl.default_budget(base) if tolerances is None else tolerances
@@ -75,12 +78,9 @@ def test_criterion_is_the_dense_gaussian_posterior():
         np.testing.assert_allclose(np.asarray(pred.covariance), sandwich, rtol=1e-6, atol=1e-14)
     # Alone: no prior on θ, so Y's variance is that of the data with the rig integrated out.
     assert float(pred.covariance_alone[0, 0]) > float(pred.covariance[0, 0])
-    crit = gd.Precision(2, "A")
-    cov = np.array([[4.0, 1.0, 0.0], [1.0, 9.0, 0.0], [0.0, 0.0, 7.0]])
-    assert float(crit.of_covariance(jnp.asarray(cov))) == pytest.approx(np.log(13.0))
-    assert float(gd.Precision(2, "D").of_covariance(jnp.asarray(cov))) == pytest.approx(np.log(35.0))
-    with pytest.raises(ValueError, match="precision criterion"):
-        gd.Precision(1, "E")
+    cov = jnp.asarray([[4.0, 1.0], [1.0, 9.0]])
+    assert float(gd.AOptimal()(cov)) == pytest.approx(np.log(13.0))
+    assert float(gd.DOptimal()(cov)) == pytest.approx(np.log(35.0))
     with pytest.raises(ValueError, match="sensors"):
         gd.information(s, t, hyper, ("pressure",))
 
@@ -198,6 +198,43 @@ def test_a_singular_precision_gives_no_covariance_instead_of_an_error():
     assert all(np.all(np.isnan(c)) for c in out.values())
     prior = SimpleNamespace(precision_known=np.eye(2), precision_alone=np.eye(2))
     np.testing.assert_allclose(dprob.covariances(prior, info, info, none, ("length",))["known"], np.diag([0.5, 1.0]))
+
+
+class EOptimal(gd.Criterion):
+    """E-optimality, defined here and nowhere in the package: the log of the covariance's largest eigenvalue (the
+    relative variance of the worst-determined combination of ln θ)."""
+
+    name = "E"
+
+    def __call__(self, covariance):
+        return jnp.log(jnp.linalg.eigvalsh(covariance)[-1])
+
+
+def test_a_criterion_defined_outside_the_package_runs_through_the_design():
+    """A new criterion is one subclass of gd.Criterion: the design minimises it and its table reports it, the log
+    of the largest eigenvalue of the predicted covariance of the two parameters of interest; its summary names it."""
+    from growjax.design import problem as dprob
+
+    base = gj.replace(gj.reference("forward"), Y=9000.0)
+    names = (Y, "robot.extensibility")
+    known = gd.Knowledge(base, names, np.diag([0.03, 0.3]) ** 2, {"robot.catheter_friction": 0.2}, HYPER, "test")
+    space = gd.DesignSpace(1.0, 336e3, _catheter(), knot_spacing=0.5)
+    res = gd.design(known, space, EOptimal(), random=2, iterations=1, n_draws=2, points=1, nonlinear_draws=0)
+    assert res.summary()["criterion"] == "E"
+    problem = gd.make(known, space, EOptimal(), points=1, nonlinear_draws=0)
+    crit = {r["input"]: r["criterion"] for r in res.rows}
+    best_random = res.random.designs[res.random.best]
+    for label, inputs in (("design", space.inputs(res.x)), ("best random input", space.inputs(best_random))):
+        info_l, info_p, cross = dprob.information(problem, inputs, problem.breaks)[:3]
+        cov = dprob.covariances(problem, info_l, info_p, cross, ("length",))["known"][:2, :2]
+        largest = np.linalg.eigvalsh(cov)[-1]
+        assert crit[label] == pytest.approx(np.log(largest), rel=1e-9, abs=1e-12)
+        assert np.log(np.trace(cov)) > crit[label] + 1e-3  # not the A-criterion: the smaller variance counts there
+        sd = [r["parameters"] for r in res.rows if r["input"] == label][0]
+        np.testing.assert_allclose([sd[n]["sd_log"] for n in names], np.sqrt(np.diag(cov)), rtol=1e-9)
+    assert crit["design"] <= crit["best random input"]  # the search minimised it
+    with pytest.raises(TypeError, match="criterion must be a growjax.design.Criterion"):
+        gd.make(known, space, "E")
 
 
 def test_the_check_flags_exactly_the_inputs_that_cross_a_limit_on_simulation():

@@ -28,6 +28,7 @@ from growjax.model.robot import pressure_limit
 from growjax.model.signals import (
     Constant,
     Inputs,
+    KnotProfile,
     PulseTrain,
     Sampled,
     StepSchedule,
@@ -51,6 +52,7 @@ __all__ = [
     "Constant",
     "Effect",
     "Inputs",
+    "KnotProfile",
     "Limits",
     "Parameters",
     "PulseTrain",

@@ -3,7 +3,7 @@
 Every fixed parameter of the rig is known only to a tolerance (a datasheet value, a measurement, a tuning
 that drifts). A tolerance here is the parameter's **relative standard uncertainty** u (one standard
 deviation of ln ψ): the parameter's true value is taken as ψ·exp(b), b ~ N(0, u²). The likelihood carries it
-(:mod:`growjax.calibration.discrepancy`): the length's sensitivity to each toleranced parameter, g(t) = ∂L/∂ln ψ, enters
+(`growjax.calibration.discrepancy`): the length's sensitivity to each toleranced parameter, g(t) = ∂L/∂ln ψ, enters
 as a random term g(t)·b whose variance the data cannot shrink below what they say of b. The uncertainty
 budget then reports how much of each fitted parameter's interval each tolerance accounts for.
 """
@@ -75,6 +75,26 @@ def budget(base: gp.Parameters, overrides: dict | None = None, free=(), use_defa
     return out
 
 
+def rig_draws(n: int, base: gp.Parameters, tolerances: dict, seed: int = 0) -> dict[str, np.ndarray]:
+    """Draws of the rig within its tolerances.
+
+    Each toleranced parameter is drawn as ψ·exp(u z), z ~ N(0, 1) independent, u its relative standard
+    uncertainty, from a seeded stream of its own (apart from a posterior's draws made with the same seed).
+
+    Args:
+        n: how many draws.
+        base: the rig's parameters (ψ, SI).
+        tolerances: {name: u}, names resolved as in `budget` (aliases allowed, zeros dropped, no default budget).
+        seed: the draws' seed.
+
+    Returns:
+        {qualified name: (n,) values, SI}; {} for no tolerances.
+    """
+    tol = budget(base, tolerances, use_default=False)
+    rng = np.random.default_rng([seed, 1])
+    return {k: float(gp.get(base, k)) * np.exp(u * rng.standard_normal(n)) for k, u in tol.items()}
+
+
 def sensitivity(length_of, base: gp.Parameters, tol: dict, reference=None, central: bool = False) -> np.ndarray:
     """g (n, q): the length's change, m, per unit ln ψ of each toleranced parameter of ``tol`` {name: u}: the secant
     from ψ to ψ·e^u (the effect of an error the size of the tolerance), or with ``central`` from ψ·e^(−u/2) to
@@ -111,7 +131,7 @@ def length_sensitivity(
     theta: dict, base: gp.Parameters, inputs, config, times, tol: dict, central: bool = False
 ) -> np.ndarray:
     """g (n, q): the model's length change (m) at ``times`` (n,) s per unit ln ψ of each toleranced parameter of
-    ``tol``, the secant from ψ to ψ·e^u (``central``: the slope at ψ, :func:`sensitivity`) at the values
+    ``tol``, the secant from ψ to ψ·e^u (``central``: the slope at ψ, `sensitivity`) at the values
     ``theta`` {qualified name: value} (one compiled run of the model, the rig and θ as its arguments: compiled
     once per configuration and shapes)."""
     from growjax.simulation.simulate import as_arrays, input_breaks, sample_times

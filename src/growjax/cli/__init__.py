@@ -250,7 +250,7 @@ def _population(args, paths) -> dict:
     if fit.status != "converged":
         raise RunFailed(f"the joint fit did not converge ({fit.status})", {"command": "posterior", **fit.summary()})
     _progress_note(args, f"posterior: joint fit done in {time.perf_counter() - started:.1f} s; NUTS on the population")
-    post = pop.sample(fit, name, chains=args.chains, warmup=args.warmup, samples=args.samples, seed=args.seed)
+    post = pop.sample_population(fit, name, chains=args.chains, warmup=args.warmup, samples=args.samples, seed=args.seed)
     if args.predict:
         new = ex.read(Path(args.predict), catheter=args.catheter)
         run = xs.Run(
@@ -733,7 +733,7 @@ def control_command(args) -> dict:
     target = gc.target_from_experiment(exp, args.t_end)
     out = _out(args)
     started = _progress_note(args, f"control: {args.method} design on the fast model, evaluated on {args.fidelity}")
-    summary = gc.design(
+    summary = gc.design_controller(
         target,
         args.drive,
         args.method,
@@ -867,7 +867,7 @@ def design_command(args) -> dict:
         result = gd.design(
             known,
             space,
-            criterion=args.criterion,
+            criterion={"A": gd.AOptimal, "D": gd.DOptimal}[args.criterion](),
             sensors=tuple(args.sensors.split(",")),
             random=args.random,
             starts=args.starts,

@@ -2,28 +2,32 @@
 
 What is here, in the order a design uses it:
 
-* :func:`linearize` — the state-space model (A, B, C, D) of pressure demand → length (forward drive) or
+* `linearize` — the state-space model (A, B, C, D) of pressure demand → length (forward drive) or
   step command → length (stepper) about an operating point, from exact JAX Jacobians of the fast
   configuration's vector field, as a python-control ``StateSpace`` (``sys.A`` … work with ``scipy.signal``).
-* :func:`optimize_profile` — the pressure-demand profile (piecewise linear on fixed knots) that makes the
-  robot follow a desired length, by least squares with forward-mode Jacobians through :func:`growjax.simulation.simulate`
-  (all knots in one merged sensitivity solve), inside the demand box [0, p_max]. For the stepper drive
-  (integer commands) an open-loop step schedule is found on the model without gradients: :func:`optimize_steps`
-  searches the lead of a schedule read off the target, :func:`plan_steps` replays the steps the tuned
-  closed-loop step controller issues on the model.
-* :func:`run_closed_loop` — a sampled-data length controller around either configuration of the plant:
-  :class:`LengthPID` (forward drive, outer loop over the pressure PID, with the optimised profile as
-  feed-forward), :class:`StepController` (stepper: back-and-forth steps on the length error) and
-  :class:`MPC` (forward drive; nonlinear least squares on the fast model from the current state).
-* :func:`tune_pid` — gains by gradient descent on the closed-loop tracking cost, optionally averaged over
-  parameter draws (robust design: a posterior's, :func:`parameter_draws`, and the rig's within its
-  tolerances, :func:`rig_draws`).
-* :func:`design` — one design (drive × method) end to end, summarised for JSON (the ``growjax control`` command).
+* `optimize_profile` — the pressure-demand profile (piecewise linear on fixed knots) that makes the
+  robot follow a desired length, by least squares with forward-mode Jacobians through
+  `growjax.simulation.simulate` (all knots in one merged sensitivity solve), inside the demand box [0, the
+  pressure ceiling]. For the stepper drive (integer commands) an open-loop step schedule is found on the model
+  without gradients: `optimize_steps` searches the lead of a schedule read off the target, `plan_steps` replays
+  the steps the tuned closed-loop step controller issues on the model.
+* `run_closed_loop` — a sampled-data length controller around either configuration of the plant:
+  `LengthPID` (forward drive, outer loop over the pressure PID, with the optimised profile as
+  feed-forward), `StepController` (stepper: back-and-forth steps on the length error) and
+  `MPC` (forward drive; nonlinear least squares on the fast model from the current state).
+* `tune_pid` — gains by gradient descent on the closed-loop tracking cost, optionally averaged over
+  parameter draws (robust design: a posterior's, `parameter_draws`, and the rig's within its
+  tolerances, `growjax.calibration.tolerance.rig_draws`).
+* `design_controller` — one design (drive × method) end to end, summarised for JSON (the ``growjax control``
+  command).
 
-The plant of a closed loop (:class:`Plant`) is stepped tick by tick from its state through
-:func:`growjax.simulation.simulate.simulate_from`, with the solver and settings of its configuration, so a controller
+Every design respects the rig's limits (`growjax.model.limits`): the demand under the pressure ceiling, a run
+that crosses the membrane limit flagged, the stepper's tick rate under its step rate.
+
+The plant of a closed loop (`Plant`) is stepped tick by tick from its state through
+`growjax.simulation.simulate.simulate_from`, with the solver and settings of its configuration, so a controller
 designed on the fast model is evaluated on the model it was not designed on. All quantities SI: lengths m,
-pressures Pa, times s. Its figure: :func:`growjax.plotting.control_figure`.
+pressures Pa, times s. Its figure: `growjax.plotting.control_figure`.
 """
 
 from growjax.control.controllers import (
@@ -35,7 +39,6 @@ from growjax.control.controllers import (
     run_closed_loop,
     score,
 )
-from growjax.control.design import design
 from growjax.control.linearise import linearize, operating_point
 from growjax.control.plant import (
     Plant,
@@ -44,7 +47,6 @@ from growjax.control.plant import (
     with_microstepping,
 )
 from growjax.control.profile import (
-    KnotProfile,
     ProfileResult,
     optimize_profile,
     optimize_steps,
@@ -67,14 +69,14 @@ from growjax.control.tuning import (
     parameter_draws,
     pid_cost_fn,
     plan_steps,
-    rig_draws,
     tune_pid,
     tune_stepper,
 )
+from growjax.control.workflow import design_controller
 
 
 def __getattr__(name):
-    """The figure of a closed loop, from :mod:`growjax.plotting` (matplotlib is imported only where it is used)."""
+    """The figure of a closed loop, from `growjax.plotting` (matplotlib is imported only where it is used)."""
     if name == "control_figure":
         from growjax.plotting import control_figure
 
@@ -86,7 +88,6 @@ __all__ = [
     "DEFAULT_LOG_GAINS",
     "MPC",
     "ClosedLoopResult",
-    "KnotProfile",
     "LengthPID",
     "Plant",
     "ProfileResult",
@@ -94,7 +95,7 @@ __all__ = [
     "Target",
     "TuneResult",
     "catheter_signal",
-    "design",
+    "design_controller",
     "linearize",
     "operating_point",
     "optimize_profile",
@@ -105,7 +106,6 @@ __all__ = [
     "plan_steps",
     "plant_params",
     "ramp_with_pauses",
-    "rig_draws",
     "rmse",
     "run_closed_loop",
     "score",

@@ -1,6 +1,6 @@
-"""Sampled-data length controllers run around a :class:`growjax.control.plant.Plant` tick by tick:
-:class:`LengthPID` (forward drive, over the pressure PID, with a feed-forward profile), :class:`StepController`
-(stepper) and :class:`MPC` (forward drive, nonlinear, on the fast model). SI units."""
+"""Sampled-data length controllers run around a `growjax.control.plant.Plant` tick by tick:
+`LengthPID` (forward drive, over the pressure PID, with a feed-forward profile), `StepController`
+(stepper) and `MPC` (forward drive, nonlinear, on the fast model). SI units."""
 
 from __future__ import annotations
 
@@ -92,7 +92,7 @@ def pid_loop(plant: Plant, pid: LengthPID, target_ts, target_len, catheter, lim:
 def run_closed_loop(
     plant: Plant, controller: LengthPID | StepController | MPC, target: Target, t1: float, lim: Limits | None = None
 ) -> ClosedLoopResult:
-    """Run a length controller (:class:`LengthPID`, :class:`StepController` or :class:`MPC`) around ``plant``
+    """Run a length controller (`LengthPID`, `StepController` or `MPC`) around ``plant``
     from rest over [0, t1] s, and score it against ``target`` (RMSE on the samples at t ≥ 0.01 s)."""
     lim = lim or limits(plant.params)
     cath = catheter_signal(target)
@@ -174,12 +174,12 @@ class MPC(eqx.Module):
     """Nonlinear model-predictive length control of the forward drive on the fast configuration.
 
     Every ``dt`` s: from the current state estimate, choose the demand at the next ``horizon`` knots (first-order
-    hold, in [0, the pressure ceiling]) minimising Σ (L − L_ref)²/(1 mm)² + ``w_move``·Σ(Δu/10 kPa)² + pressure excess over
-    the ceiling, by ``iterations`` Gauss–Newton steps (Jacobian: one batched forward-difference solve of the
+    hold, in [0, the pressure ceiling]) minimising Σ (L − L_ref)²/(1 mm)² + ``w_move``·Σ(Δu/10 kPa)² + pressure
+    excess over the ceiling, by ``iterations`` Gauss–Newton steps (Jacobian: one batched forward-difference solve of the
     fast model), warm-started from the last plan; apply the first knot. On a plant of another configuration the
     state estimate is the fast model run alongside, with its length and pressure reset to the measured ones.
 
-    The steps are not :func:`growjax.calibration.least_squares.levenberg_marquardt`: a tick's plan is one compiled program
+    The steps are not `growjax.calibration.least_squares.levenberg_marquardt`: a tick's plan is one compiled program
     of a fixed number of full steps, its time per tick bounded. Measured on the control benchmark (10 s of the
     public length, reference plant), the engine's damped, rejectable steps within the same two iterations track
     at 0.76 mm RMSE against 0.45 mm for the full steps.
@@ -207,8 +207,8 @@ class MPC(eqx.Module):
         return predict
 
     def _planner(self, model: Plant, cath, ceiling: float):
-        """``plan_step(y, t s, u_now Pa, plan (horizon,) Pa, ref (horizon·samples,) m) → plan (horizon,) Pa``: one tick's
-        least squares, the demand in units of 10 kPa inside [0, ``ceiling``] Pa."""
+        """``plan_step(y, t s, u_now Pa, plan (horizon,) Pa, ref (horizon·samples,) m) → plan (horizon,) Pa``: one
+        tick's least squares, the demand in units of 10 kPa inside [0, ``ceiling``] Pa."""
         predict = self._predictor(model, cath)
         n, scale, eps = self.horizon, 1e4, 0.05  # eps: 500 Pa
 

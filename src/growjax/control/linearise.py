@@ -56,7 +56,7 @@ def linearize(
 
     Forward drive: input the pressure demand (Pa), output the robot length (m); operating point after
     ``settle`` s at demand ``pressure`` (growing above the yield pressure, holding below). Inverse drive:
-    input the step command (steps, continuous: a microstepping driver, :func:`with_microstepping`),
+    input the step command (steps, continuous: a microstepping driver, `with_microstepping`),
     output the length, held at ``steps``. States are the fast configuration's scaled states.
     A, B, C from exact Jacobians (``jax.jacfwd``) of the vector field; D = 0. The operating point
     (state, rates, whether it grows) is attached as ``sys.operating_point``.

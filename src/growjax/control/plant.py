@@ -1,5 +1,5 @@
 """A configuration of the model as a plant: stepped from its state tick by tick through
-:func:`growjax.simulation.simulate.simulate_from` (the configuration's own solver and settings), with the vector field and
+`growjax.simulation.simulate.simulate_from` (the configuration's own solver and settings), with the vector field and
 outputs of a state for linear models and state estimates. SI units."""
 
 from __future__ import annotations
@@ -23,16 +23,16 @@ TICK_STEPS = {"fast": 400, "reference": 20_000}
 
 def with_microstepping(params, on: bool = True):
     """``params`` with the stepper's driver swapped for the sine–cosine microstepping one (both configurations;
-    :func:`growjax.model.motor.winding_voltages`): the step command may then be any real number."""
+    `growjax.model.motor.winding_voltages`): the step command may then be any real number."""
     return eqx.tree_at(lambda p: p.motor, params, dataclasses.replace(params.motor, microstepping=on))
 
 
 class Plant(eqx.Module):
     """A configuration of the model as a plant: (params, config, the assembly's prepared constants).
 
-    ``config`` is the simulation's, made explicit (:meth:`growjax.Config.resolved`), with the pressure limit
-    flagged rather than stopping a tick and a tick's step budget (:data:`TICK_STEPS`) unless it sets one.
-    ``microstep`` swaps the stepper's full-step driver for the microstepping one (:func:`with_microstepping`).
+    ``config`` is the simulation's, made explicit (`growjax.Config.resolved`), with the pressure limit
+    flagged rather than stopping a tick and a tick's step budget (`TICK_STEPS`) unless it sets one.
+    ``microstep`` swaps the stepper's full-step driver for the microstepping one (`with_microstepping`).
     """
 
     params: object
@@ -114,5 +114,5 @@ def segment_inputs(catheter, ta, tb, ua, ub, steps):
 
 
 def catheter_signal(target):
-    """The catheter length of a :class:`growjax.control.targets.Target` as an input signal (m)."""
+    """The catheter length of a `growjax.control.targets.Target` as an input signal (m)."""
     return gj.Sampled(np.asarray(target.time, float), np.asarray(target.catheter, float))

@@ -1,4 +1,4 @@
-"""Open-loop design: the forward drive's pressure-demand profile by least squares through :func:`growjax.simulation.simulate`,
+"""Open-loop design: the forward drive's pressure-demand profile by least squares through `growjax.simulation.simulate`,
 and the stepper's step schedules (integer commands: searched, not differentiated). SI units."""
 
 from __future__ import annotations
@@ -19,15 +19,6 @@ from growjax.model.limits import Limits, limits
 from growjax.model.params import Parameters
 
 
-class KnotProfile(gj.Sampled):
-    """A piecewise-linear demand on fixed knots: every interior knot is declared a slope break, so the
-    solvers' breaks do not depend on the (optimised, traced) values."""
-
-    def kink_times(self, t0, t1, threshold: float = 0.0):
-        t = np.asarray(self.times, float)
-        return t[(t > t0) & (t < t1)]
-
-
 class ProfileResult(NamedTuple):
     """An optimised demand profile: knots (K,) s, demand (K,) Pa, the sum of squared residuals at the first guess
     and after each accepted step, the tracking RMSE (m) on the configuration optimised on, and the wall time (s)."""
@@ -45,7 +36,7 @@ MAX_STEP = 60e3
 
 
 def profile_inputs(target: Target, knots, values):
-    return gj.Inputs(catheter_length=catheter_signal(target), pressure_demand=KnotProfile(knots, values))
+    return gj.Inputs(catheter_length=catheter_signal(target), pressure_demand=gj.KnotProfile(knots, values))
 
 
 def optimize_profile(
@@ -61,13 +52,13 @@ def optimize_profile(
     lead: float = 0.0,
 ) -> ProfileResult:
     """The forward drive's pressure-demand profile (piecewise linear, knots every ``knot_dt`` s) that makes the
-    length follow ``target``, by :func:`growjax.calibration.least_squares.levenberg_marquardt` on the tracking residuals.
+    length follow ``target``, by `growjax.calibration.least_squares.levenberg_marquardt` on the tracking residuals.
 
     Residuals: length error on the target's grid (mm), ``smooth``·knot differences (per 10 kPa), and the sensed
     pressure's excess over ``lim.pressure_ceiling`` (per kPa); the knots are kept in [0, ``lim.pressure_ceiling``] (the
     engine's bounds). A trial point is scored by one solve and linearised once accepted: residuals and
-    Jacobian in one forward-mode pass through :func:`growjax.simulation.simulate` (all knots in one solve,
-    :func:`growjax.calibration.least_squares.linearise`); a step moves each knot by at most :data:`MAX_STEP`.
+    Jacobian in one forward-mode pass through `growjax.simulation.simulate` (all knots in one solve,
+    `growjax.calibration.least_squares.linearise`); a step moves each knot by at most `MAX_STEP`.
     ``iterations``: at most that many accepted steps (fewer where the engine converges first).
     ``cost_history``: Σ r² at the first guess and after each accepted step.
     """

@@ -13,7 +13,6 @@ import jax.numpy as jnp
 import numpy as np
 
 import growjax as gj
-from growjax.calibration import tolerance as tl
 from growjax.control.controllers import (
     LengthPID,
     StepController,
@@ -51,15 +50,6 @@ def parameter_draws(n: int, seed: int = 0, posterior: str | None = None, base=No
         idx = rng.choice(size, size=n, replace=n > size)
         return {k: v[idx] for k, v in flat.items()}
     return {k: float(gj.get(base, k)) * (1.0 + rel_sd * rng.standard_normal(n)) for k in (names or ("Y",))}
-
-
-def rig_draws(n: int, base, tolerances: dict, seed: int = 0) -> dict:
-    """Draws of the rig within its tolerances as {qualified name: (n,) array}: each toleranced parameter ψ·exp(u z),
-    z ~ N(0, 1) independent (seeded), u its relative standard uncertainty in ``tolerances`` {name: u}
-    (:mod:`growjax.calibration.tolerance`; aliases allowed, zeros dropped). {} for no tolerances."""
-    tol = tl.budget(base, tolerances, use_default=False)
-    rng = np.random.default_rng([seed, 1])  # a stream apart from the posterior's draws
-    return {k: float(gj.get(base, k)) * np.exp(u * rng.standard_normal(n)) for k, u in tol.items()}
 
 
 def _is_parameter(base, name: str) -> bool:
@@ -167,7 +157,7 @@ def tune_stepper(
 ):
     """The step controller's rate (Hz), lead (s) and pressure gate (Pa) by search on the fast model (its cost is
     piecewise constant in them, so a grid, not a gradient; leads 50 ms apart).
-    → (best :class:`StepController`, its RMSE m)."""
+    → (best `StepController`, its RMSE m)."""
     plant = Plant.make(params, gj.Config(drive="inverse", t1=t1), microstep=microsteps > 1)
     lim = limits(params)
     best = None
@@ -183,8 +173,8 @@ def tune_stepper(
 
 
 def plan_steps(params, target: Target, t1: float, microsteps: int = 1, controller: StepController | None = None):
-    """The open-loop step schedule planned on the fast model: the tuned closed-loop :class:`StepController`
-    (``controller``, default :func:`tune_stepper`'s) runs on the model, and the step counts it issues there are
+    """The open-loop step schedule planned on the fast model: the tuned closed-loop `StepController`
+    (``controller``, default `tune_stepper`'s) runs on the model, and the step counts it issues there are
     the schedule, replayed on the robot without measuring it. The feedback acts on the model's length, so the
     plan inherits the controller's back steps and pressure gate but not its correction of model error.
     → (controller, RMSE m on the model, tick times (s), step counts)."""

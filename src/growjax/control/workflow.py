@@ -25,7 +25,6 @@ from growjax.control.tuning import (
     parameter_draws,
     pid_cost_fn,
     plan_steps,
-    rig_draws,
     tune_pid,
     tune_stepper,
 )
@@ -33,7 +32,7 @@ from growjax.model import params as gp
 from growjax.model.limits import limits
 
 
-def design(
+def design_controller(
     target: Target,
     drive: str,
     method: str,
@@ -51,14 +50,14 @@ def design(
 ) -> dict:
     """One design (drive × method) for ``target`` over [0, t1] s, evaluated on ``evaluate_on``. → JSON-ready dict.
 
-    ``base``: the plant's parameters (default :func:`growjax.reference` of ``drive``), started at the target's
-    first length (:func:`plant_params`); the design and its evaluation both use them.
+    ``base``: the plant's parameters (default `growjax.reference` of ``drive``), started at the target's
+    first length (`plant_params`); the design and its evaluation both use them.
     ``robust``: an ArviZ posterior file; the feedback gains are then tuned on the cost averaged over
-    ``n_draws`` of its draws (:func:`parameter_draws`). ``tolerances`` {parameter: relative sd}
-    (:mod:`growjax.calibration.tolerance`; None or {}: the rig as ``base`` gives it): the feedback gains are tuned on
+    ``n_draws`` of its draws (`parameter_draws`). ``tolerances`` {parameter: relative sd}
+    (`growjax.calibration.tolerance`; None or {}: the rig as ``base`` gives it): the feedback gains are tuned on
     the cost averaged over ``n_draws`` draws of the rig, each toleranced parameter ψ·exp(u z), z ~ N(0, 1)
-    (:func:`rig_draws`), jointly with the posterior's draws where ``robust`` is given. Only the forward
-    drive's feedback design is tuned on draws; ValueError for tolerances with any other design.
+    (`growjax.calibration.tolerance.rig_draws`), jointly with the posterior's draws where ``robust`` is given.
+    Only the forward drive's feedback design is tuned on draws; ValueError for tolerances with any other design.
     """
     params = plant_params(drive, target, base=base)
     tol = tl.budget(params, tolerances or {}, use_default=False)
@@ -136,7 +135,7 @@ def design(
             pid = LengthPID(jnp.asarray(DEFAULT_LOG_GAINS), jnp.asarray(prof.knots), jnp.asarray(prof.demand))
             draws = parameter_draws(n_draws, seed, robust, params) if robust else {}
             posterior_names = {gp.resolve_name(params, k) for k in draws}
-            draws |= {k: v for k, v in rig_draws(n_draws, params, tol, seed).items() if k not in posterior_names}
+            draws |= {k: v for k, v in tl.rig_draws(n_draws, params, tol, seed).items() if k not in posterior_names}
             cost = pid_cost_fn(params, target, t1, pid, draws or None, lim)
             tuned = tune_pid(cost, pid.log_gains, iterations)
             summary["tuning_s"] = tuned.wall_s

@@ -1,13 +1,13 @@
-"""What a design must respect on every plausible rig: the sensed pressure below the membrane limit with the control
-module's margin, the robot's length inside its stroke and the syringes' travel inside theirs (and, when a limit is
-given, the pump platform's speed).
+"""What a design must respect on every plausible rig, the rig's `growjax.model.limits.Limits`: the sensed pressure
+below the ceiling a margin under the membrane limit, the robot's length inside its stroke and the syringes' travel
+inside theirs (and, when a limit is given, the pump platform's speed).
 
-"Every plausible rig" is a set of draws (:func:`draws`): the rig's toleranced parameters within their tolerances
-(:func:`growjax.control.rig_draws`) and θ from its current uncertainty, seeded. In the optimisation the limits are
-a penalty on the nominal run widened by the spread the draws would give, linearised (:func:`penalty`, free: the
-sensitivities are at hand); on a finished design they are checked by simulating every draw (:func:`check`). The
-forward drive's pump is an ideal torque source in the model, so its speed has no limit there: ``max_speed`` is
-off unless given.
+"Every plausible rig" is a set of draws (`draws`): the rig's toleranced parameters within their tolerances
+(`growjax.calibration.tolerance.rig_draws`) and θ from its current uncertainty, seeded. In the optimisation the
+limits are a penalty on the nominal run widened by the spread the draws would give, linearised (`penalty`, free:
+the sensitivities are at hand); on a finished design they are checked by simulating every draw (`check`). The
+forward drive's pump is an ideal torque source in the model, so its speed has no limit there:
+``max_pump_speed`` is off unless given.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from growjax.calibration import fit as gf
-from growjax.control.tuning import rig_draws
+from growjax.calibration.tolerance import rig_draws
 from growjax.design.knowledge import Knowledge
 from growjax.design.sensitivity import Sensitivities
 from growjax.model import params as gp
@@ -58,7 +58,7 @@ def penalty(s: Sensitivities, prior_covariance, lim: Limits, spread: float = SPR
 class Check(eqx.Module):
     """A check of inputs over draws, per input (C,): the worst over the draws of the sensed pressure (Pa), the
     length (m), the syringes' travel (m), the platform's speed (m/s), whether every run reached its end, and
-    whether all of it is inside the :class:`Limits`; ``length`` and ``pressure`` (C, D, n) the runs
+    whether all of it is inside the `Limits`; ``length`` and ``pressure`` (C, D, n) the runs
     themselves when kept."""
 
     peak_pressure: np.ndarray
@@ -88,8 +88,8 @@ def stack(inputs: list):
 
 def check(inputs, knowledge: Knowledge, config, ts, breaks, lim: Limits, drawn: dict, keep_runs: bool = False) -> Check:
     """Simulate every input × draw (the fast configuration, batched ``CHUNK`` runs at a time) and compare the worst
-    of each input with ``lim``. ``inputs``: C inputs of one structure stacked (:func:`stack`), sharing their
-    ``breaks``; ``drawn`` from :func:`draws`; ``ts`` (n,) s; ``keep_runs``: keep the runs' length and pressure."""
+    of each input with ``lim``. ``inputs``: C inputs of one structure stacked (`stack`), sharing their
+    ``breaks``; ``drawn`` from `draws`; ``ts`` (n,) s; ``keep_runs``: keep the runs' length and pressure."""
     c = jax.tree_util.tree_leaves(inputs)[0].shape[0]
     d = len(next(iter(drawn.values())))
     names = tuple(drawn)
@@ -103,7 +103,7 @@ def check(inputs, knowledge: Knowledge, config, ts, breaks, lim: Limits, drawn: 
     base = as_arrays(knowledge.base)
     for start in range(0, total, size):
         sl = np.arange(start, start + size) % total
-        batch = jax.tree_util.tree_map(lambda a: a[idx_c[sl]], inputs)
+        batch = jax.tree_util.tree_map(lambda a, rows=idx_c[sl]: a[rows], inputs)
         res = _runs(base, names, batch, jnp.asarray(values[idx_d[sl]]), config, jnp.asarray(ts), breaks)
         n_real = min(size, total - start)
         for k, v in zip(out, res):
@@ -114,7 +114,9 @@ def check(inputs, knowledge: Knowledge, config, ts, breaks, lim: Limits, drawn: 
     worst = lambda a: np.max(np.where(np.isfinite(a), a, np.inf), axis=(1, 2))
     peak_p, peak_l, peak_s, peak_v = worst(pressure), worst(length), worst(np.abs(syringe)), worst(speed)
     completed = np.all(ok, axis=1)
-    admissible = completed & (peak_p <= lim.pressure_ceiling) & (peak_l <= lim.length_ceiling) & (peak_s <= lim.syringe_stroke)
+    admissible = (
+        completed & (peak_p <= lim.pressure_ceiling) & (peak_l <= lim.length_ceiling) & (peak_s <= lim.syringe_stroke)
+    )
     if lim.max_pump_speed is not None:
         admissible &= peak_v <= lim.max_pump_speed
     return Check(

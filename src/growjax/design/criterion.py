@@ -2,36 +2,39 @@
 model, linearised, and the precision criteria on it.
 
 For the next experiment's data y = L(w) + δ + ε (length; and the pressure when it is recorded), linearised in
-w = (ln θ, b) at the estimate with J̃ = [J_θ, G_b] the length's sensitivities (:mod:`.sensitivity`), the
+w = (ln θ, b) at the estimate with J̃ = [J_θ, G_b] the length's sensitivities (`.sensitivity`), the
 posterior covariance of w is
 
     Σ_post = (Σ_prior⁻¹ + J̃ᵀ K⁻¹ J̃ + J_Pᵀ J_P / σ_P²)⁻¹,
 
-K the covariance of the discrepancy and the sensor noise on the sample times (:mod:`growjax.calibration.discrepancy`; K⁻¹J̃
+K the covariance of the discrepancy and the sensor noise on the sample times (`growjax.calibration.discrepancy`; K⁻¹J̃
 by the Kalman filter's whitening, exact for the Matérn-3/2 and Ornstein–Uhlenbeck processes) and the pressure
 rows with independent noise of sd σ_P. The rig's errors b are nuisance parameters (their tolerances the
 prior): the block of Σ_post on θ has them integrated out. The covariance does not depend on the data, only on
 the input: it is what a fit of the designed experiment will report, to the linearisation.
 
-A criterion maps that block to a number to minimise: :class:`Precision` (Bayesian A- or D-optimality). Any
-callable ``(Prediction) → scalar`` serves the optimiser (:mod:`.optimise`) the same way: a criterion of model
-discrimination takes the same place.
+A criterion (`Criterion`) maps that block, the covariance of the parameters of interest in ln θ (relative
+variances), to a number to minimise: `AOptimal` (the log of its trace) or `DOptimal` (its log determinant),
+Bayesian because the covariance has the prior in it. A new criterion is one subclass of `Criterion` with a
+``name`` and a ``__call__``; the design (`growjax.design.design`) takes any. The discrimination design
+(`growjax.design.discrimination`) minimises a criterion of another kind, −ln min(T_AB, T_BA), in the same search.
 """
 
 from __future__ import annotations
 
-from typing import NamedTuple
+import abc
+from typing import ClassVar, NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jaxtyping import Array, Float
 
 from growjax.calibration import discrepancy as dc
 from growjax.design.sensitivity import Sensitivities
 
 SENSORS = ("length", "pressure")
 PRESSURE_NOISE = 1e3  # Pa, sd of the pressure sensor's noise (independent samples)
-KINDS = ("A", "D")
 
 
 class Prediction(NamedTuple):
@@ -76,11 +79,11 @@ def posterior(
     pressure_noise: float = PRESSURE_NOISE,
     remainder=None,
 ) -> Prediction:
-    """The :class:`Prediction` of sensitivities ``s``: Σ = (Λ₀ + information)⁻¹ for the prior precisions Λ₀
-    ``precision_known`` and ``precision_alone`` (m, m) (:meth:`growjax.design.knowledge.Knowledge.prior_precision`).
+    """The `Prediction` of sensitivities ``s``: Σ = (Λ₀ + information)⁻¹ for the prior precisions Λ₀
+    ``precision_known`` and ``precision_alone`` (m, m) (`growjax.design.knowledge.Knowledge.prior_precision`).
 
     ``remainder`` (n, D) m: what the rig's linearised effect misses at D draws of the rig
-    (:func:`growjax.design.sensitivity.remainder`). A fit that linearises the rig (:func:`growjax.calibration.fit.fit`) takes
+    (`growjax.design.sensitivity.remainder`). A fit that linearises the rig (`growjax.calibration.fit.fit`) takes
     it for data: its estimate moves by Σ J̃ᵀK⁻¹ r for a remainder r, so the covariance gains
     Σ J̃ᵀK⁻¹ V VᵀK⁻¹J̃ Σ with V Vᵀ = the remainder's second moment over the draws (the sandwich of the estimator
     the fit is, with the remainder as an error it does not model)."""
@@ -102,26 +105,46 @@ def posterior(
     return Prediction(s, spread(known), spread(alone), known)
 
 
-class Precision(eqx.Module):
-    """Bayesian precision of the first ``size`` entries of w (the parameters of interest, in ln θ: relative
-    uncertainties): ``"A"`` the log of the trace of their posterior covariance (the sum of their relative
-    variances), ``"D"`` its log determinant. Smaller is better."""
+class Criterion(eqx.Module):
+    """A criterion of precision: the number a design minimises, from the covariance of the parameters of interest.
 
-    size: int = eqx.field(static=True)
-    kind: str = eqx.field(static=True, default="A")
+    Subclass it with a ``name`` (how summaries and figures label it: ``"A"`` for "A-optimal") and a ``__call__``.
+    Instances are compared and hashed by their fields (a criterion is a static part of a compiled problem).
+    """
 
-    def __check_init__(self):
-        if self.kind not in KINDS:
-            raise ValueError(f"the precision criterion must be one of {KINDS}, got {self.kind!r}")
+    name: ClassVar[str]
 
-    def of_covariance(self, cov):
-        block = cov[: self.size, : self.size]
-        if self.kind == "A":
-            return jnp.log(jnp.trace(block))
-        return jnp.linalg.slogdet(block)[1]
+    @abc.abstractmethod
+    def __call__(self, covariance: Float[Array, "p p"]) -> Float[Array, ""]:
+        """The criterion of a covariance.
 
-    def __call__(self, prediction: Prediction):
-        return self.of_covariance(prediction.covariance)
+        Args:
+            covariance: (p, p) the posterior covariance of ln θ of the p parameters of interest (relative: a
+                diagonal entry is a relative variance). Traceable: the criterion is differentiated through it.
+
+        Returns:
+            A scalar, smaller for a more precise estimate; NaN or inf where it is undefined.
+        """
+
+
+class AOptimal(Criterion):
+    """Bayesian A-optimality: the log of the trace of the covariance, the log of the sum of the parameters'
+    relative variances."""
+
+    name = "A"
+
+    def __call__(self, covariance: Float[Array, "p p"]) -> Float[Array, ""]:
+        return jnp.log(jnp.trace(covariance))
+
+
+class DOptimal(Criterion):
+    """Bayesian D-optimality: the log determinant of the covariance, the log of the squared volume of the
+    parameters' joint uncertainty."""
+
+    name = "D"
+
+    def __call__(self, covariance: Float[Array, "p p"]) -> Float[Array, ""]:
+        return jnp.linalg.slogdet(covariance)[1]
 
 
 def standard_deviations(cov, size: int):

@@ -10,18 +10,18 @@ Hunter–Reiner and Box–Hill)
 
 r = μ_A − μ_B (n,) m the two models' lengths on the sample times, J (n, p + 1) the sensitivities of μ_B to its
 free parameters (ln θ and B's parameter), Σ = K + G U Gᵀ: K the discrepancy and the sensor noise of the residual
-model (whitened by the Kalman filter, :func:`growjax.calibration.discrepancy.whiten`), G the rig's sensitivities and
+model (whitened by the Kalman filter, `growjax.calibration.discrepancy.whiten`), G the rig's sensitivities and
 U = diag(u²) its tolerances (marginalised, as the discovery's scores do). T_BA swaps the roles. The design
 maximises min(T_AB, T_BA): whichever effect is real, the data should name it.
 
 Why this criterion: it is cheap (two sensitivity solves per input, the two models sharing one compiled program),
 differentiable (forward mode through the solves, as the precision criterion), and under the linearisation it is
 exactly the non-centrality of the discovery's statistic: the difference of the two candidates' 2ΔlogL, which
-:func:`growjax.discover.discover` compares with its threshold to tell rivals apart. T is invariant to the
+`growjax.discover.discover` compares with its threshold to tell rivals apart. T is invariant to the
 coordinate each parameter is moved in (a column scaling of J); B's parameter moves linearly, by a tenth of its
 range's top per unit, as in the discovery. Its limits: the refit is linearised (a large effect, or one whose
 rival must move far to imitate it, is rejected more surely than T says), and the true effect's size is assumed
-(its moderate magnitude, :func:`growjax.data.synthetic.moderate_magnitude`, unless given).
+(its moderate magnitude, `growjax.data.synthetic.moderate_magnitude`, unless given).
 """
 
 from __future__ import annotations
@@ -31,17 +31,17 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+import growjax.design.constraints as dcon
+import growjax.design.sensitivity as sensitivity
 from growjax.calibration import discrepancy as dc
-from growjax.control.profile import KnotProfile
 from growjax.data import synthetic as syn
-from growjax.design import constraints as dcon
-from growjax.design import sensitivity
 from growjax.design.knowledge import Knowledge
 from growjax.design.space import DesignSpace, demand_at_knots
 from growjax.model import effects as fx
 from growjax.model import params as gp
-from growjax.model.limits import Limits, limits
-from growjax.model.signals import Inputs
+from growjax.model.limits import Limits
+from growjax.model.limits import limits as limits_of
+from growjax.model.signals import Inputs, KnotProfile
 from growjax.simulation.config import Config
 from growjax.simulation.simulate import as_arrays
 
@@ -75,9 +75,9 @@ def statistic(r, jac, rig, tolerance, times, hyper: dc.Hyper):
 
 
 class Discrimination(eqx.Module):
-    """The problem of designing an input that tells ``effects`` (A, B) apart; build it with :func:`make`. Its
-    ``parts`` and ``inputs`` are those of :class:`growjax.design.Problem`, so the random batch, the descent and
-    the check (:mod:`.optimise`, :mod:`.constraints`) take it as they take a precision problem."""
+    """The problem of designing an input that tells ``effects`` (A, B) apart; build it with `make`. Its
+    ``parts`` and ``inputs`` are those of `growjax.design.DesignProblem`, so the random batch, the descent and
+    the check (`.optimise`, `.constraints`) take it as they take a precision problem."""
 
     base: object  # Parameters at the estimate, both effects present (numbers as arrays)
     sizes: jax.Array  # (2, 2) SI: the two models' effect sizes, A's model (a, 0) then B's (0, b)
@@ -121,11 +121,11 @@ class Discrimination(eqx.Module):
         return s.length, s.pressure, s.jac_length, s.jac_pressure
 
     def solves(self, inputs, breaks=None):
-        """:meth:`solve` of A's model and B's, stacked (2, …) (traceable)."""
+        """`solve` of A's model and B's, stacked (2, …) (traceable)."""
         return jax.lax.map(lambda sz: self.solve(inputs, sz, breaks), self.sizes)
 
     def statistics(self, runs):
-        """(T_AB, T_BA) of the stacked runs of :meth:`solves`: data from A's model fitted by B's, and the
+        """(T_AB, T_BA) of the stacked runs of `solves`: data from A's model fitted by B's, and the
         reverse."""
         length, _, jac, _ = runs
         p = len(self.names)
@@ -145,7 +145,7 @@ class Discrimination(eqx.Module):
         return jnp.stack(out)
 
     def of_runs(self, runs):
-        """(criterion −ln min(T_AB, T_BA), penalty of the limits summed over both models) of :meth:`solves`'s
+        """(criterion −ln min(T_AB, T_BA), penalty of the limits summed over both models) of `solves`'s
         runs (traceable)."""
         t = self.statistics(runs)
         crit = -jnp.log(jnp.maximum(jnp.min(t), FLOOR))
@@ -156,7 +156,7 @@ class Discrimination(eqx.Module):
         return crit, pen
 
     def parts(self, inputs, breaks=None):
-        """(criterion, penalty) of ``inputs`` (traceable): what :func:`growjax.design.evaluate` returns."""
+        """(criterion, penalty) of ``inputs`` (traceable): what `growjax.design.evaluate` returns."""
         return self.of_runs(self.solves(inputs, breaks))
 
     def objective(self, x):
@@ -173,10 +173,10 @@ def make(
     limits: Limits | None = None,
     config: Config | None = None,
 ) -> Discrimination:
-    """The :class:`Discrimination` of ``effects`` (two catalogue names) on ``space``, θ = ``knowledge``'s
+    """The `Discrimination` of ``effects`` (two catalogue names) on ``space``, θ = ``knowledge``'s
     parameters at their estimate (refitted with the rival's effect), its rig and residual model; ``sizes`` (a, b)
     SI: each effect's size, as the truth and as the rival's starting point (default their moderate magnitudes);
-    ``config`` as :func:`growjax.design.make`."""
+    ``config`` as `growjax.design.make`."""
     effects = rivals(effects)
     sizes = tuple(syn.moderate_magnitude(e) for e in effects) if sizes is None else tuple(float(v) for v in sizes)
     if len(sizes) != 2:
@@ -202,7 +202,7 @@ def make(
         tolerance=jnp.asarray(u),
         prior_covariance=jnp.asarray(prior),
         breaks=space.breaks(),
-        limits=limits if limits is not None else limits(knowledge.base),
+        limits=limits if limits is not None else limits_of(knowledge.base),
         names=tuple(knowledge.names),
         effects=effects,
         fields=fields,

@@ -15,7 +15,7 @@ BASELINE_COLOUR = "0.45"
 def design_figure(result, path) -> Path:
     """Three panels over the run: demand (kPa; for the stepper, the commanded length, mm), sensed pressure (kPa)
     with the ceiling and the membrane limit, and length (mm) with the stroke's ceiling; ``result`` a
-    :class:`growjax.design.DesignResult`."""
+    `growjax.design.DesignResult`."""
     import matplotlib.pyplot as plt
 
     space, lim = result.space, result.limits

@@ -3,8 +3,8 @@ from several starts (the forward drive's demand) or a local search over the choi
 criterion is piecewise constant: no gradient to follow).
 
 The random batch is the baseline a design must beat and the source of the starts: n random designs
-(:meth:`growjax.design.space.DesignSpace.random`) are simulated over every draw of the rig and θ in batches
-(:func:`growjax.design.constraints.check`), the inadmissible ones dropped (more are drawn, a few rounds at most,
+(`growjax.design.space.DesignSpace.random`) are simulated over every draw of the rig and θ in batches
+(`growjax.design.constraints.check`), the inadmissible ones dropped (more are drawn, a few rounds at most,
 until n pass), and the rest scored by the criterion. The optimiser then descends from the best of them: its
 design is the best iterate it met, so it is never worse than its start.
 """
@@ -17,10 +17,10 @@ from collections.abc import Callable
 
 import numpy as np
 
+import growjax.design.constraints as dcon
+import growjax.design.discrimination as ddis
+import growjax.design.problem as dprob
 from growjax import progress as prog
-from growjax.design import constraints as dcon
-from growjax.design import discrimination as ddis
-from growjax.design import problem as dprob
 from growjax.design.knowledge import Knowledge
 from growjax.design.space import DesignSpace
 
@@ -83,17 +83,17 @@ GRADIENTS = ("differences", "jax")
 
 
 def multistart(
-    problem: dprob.Problem,
+    problem: dprob.DesignProblem,
     starts,
     iterations: int = ITERATIONS,
     learning_rate: float = LEARNING_RATE,
     gradient: str = "differences",
     progress: bool = False,
 ) -> list[Descent]:
-    """:func:`adam` on the problem's objective from each row of ``starts`` (S, K − 1), best first. ``gradient``:
-    ``"differences"``, the slope over a step of the demand (:func:`growjax.design.problem.smoothed_gradient`), or
+    """`adam` on the problem's objective from each row of ``starts`` (S, K − 1), best first. ``gradient``:
+    ``"differences"``, the slope over a step of the demand (`growjax.design.problem.smoothed_gradient`), or
     ``"jax"``, the exact derivative by forward mode through the model
-    (:func:`growjax.design.problem.value_and_gradient`)."""
+    (`growjax.design.problem.value_and_gradient`)."""
     if gradient not in GRADIENTS:
         raise ValueError(f"gradient must be one of {GRADIENTS}, got {gradient!r}")
     starts = np.atleast_2d(np.asarray(starts, float))
@@ -135,7 +135,7 @@ BATCH = 8  # neighbours scored together in the local search (one compiled evalua
 
 
 def local_search(
-    problem: dprob.Problem,
+    problem: dprob.DesignProblem,
     space,
     starts,
     moves: int = ITERATIONS,
@@ -144,8 +144,8 @@ def local_search(
     progress: bool = False,
 ) -> list[Descent]:
     """From each row of ``starts`` (S, N), at most ``moves`` moves of a first-improvement search over the stepper's
-    :func:`neighbours`: they are scored ``batch`` at a time in a seeded random order
-    (:func:`growjax.design.problem.values`), and the first batch holding one better than the incumbent moves the
+    `neighbours`: they are scored ``batch`` at a time in a seeded random order
+    (`growjax.design.problem.values`), and the first batch holding one better than the incumbent moves the
     search to the best of that batch. A move costs a batch or two while most neighbours improve, where a
     steepest step would score all ~3N; when no neighbour improves, the schedule is a local optimum and the search
     stops. Best first."""
@@ -193,7 +193,7 @@ class RandomBatch:
 
 
 def random_admissible(
-    problem: dprob.Problem,
+    problem: dprob.DesignProblem,
     space: DesignSpace,
     knowledge: Knowledge,
     n: int,
@@ -203,7 +203,7 @@ def random_admissible(
     progress: bool = False,
 ) -> RandomBatch:
     """n random admissible inputs, scored: each random design simulated over every draw (``drawn``, default
-    :func:`growjax.design.constraints.draws` of ``knowledge``, seeded) in batches, the inadmissible dropped, more
+    `growjax.design.constraints.draws` of ``knowledge``, seeded) in batches, the inadmissible dropped, more
     drawn (at most ``rounds`` rounds) until n pass; then the criterion of each (one compiled evaluation per
     input, one per CPU core at a time). Fewer than n where the rounds run out; ValueError where none is admissible."""
     clock = time.perf_counter()

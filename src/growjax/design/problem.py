@@ -6,13 +6,13 @@ The criterion is Bayesian: the posterior covariance depends on where θ and the 
 blockdiag(Σ_θ, U), seeded and held fixed) and averaged (for the A-criterion, the log of the expected sum of
 relative variances). An input whose information comes from a feature the nominal rig has and the others lack (a
 growth threshold crossed just so) is worth what it is worth on average. With one point the design is local, at
-the estimate. To that average is added what the fit's linearised rig misses (:func:`.sensitivity.remainder`, at
+the estimate. To that average is added what the fit's linearised rig misses (`.sensitivity.remainder`, at
 ``offsets``: one plain solve per draw of the rig): an input that drives the rig's nonlinearity hard can look
 informative to the linearisation and not deliver, and the fit of its data would then claim more than it knows.
 
-objective(x) = that criterion (the one the design's table reports, :func:`covariances`) + the limits' penalty
-(:func:`.constraints.penalty`) at the estimate. Its slope: exact by forward mode through the model
-(:func:`value_and_gradient`), or by differences over a step of the demand (:func:`smoothed_gradient`, what the
+objective(x) = that criterion (the one the design's table reports, `covariances`) + the limits' penalty
+(`.constraints.penalty`) at the estimate. Its slope: exact by forward mode through the model
+(`value_and_gradient`), or by differences over a step of the demand (`smoothed_gradient`, what the
 descent follows: see there why). Arrays are leaves, so one compiled program serves every design of one problem's
 shapes.
 """
@@ -27,27 +27,27 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+import growjax.design.constraints as dcon
+import growjax.design.criterion as dcrit
+import growjax.design.sensitivity as sensitivity
 from growjax.calibration import discrepancy as dc
-from growjax.control.profile import KnotProfile
-from growjax.control.tuning import rig_draws
-from growjax.design import constraints as dcon
-from growjax.design import criterion as dcrit
-from growjax.design import sensitivity
+from growjax.calibration.tolerance import rig_draws
 from growjax.design.knowledge import Knowledge
 from growjax.design.space import DesignSpace, demand_at_knots, stepper_inputs
 from growjax.model import params as gp
-from growjax.model.limits import Limits, limits
-from growjax.model.signals import Inputs
+from growjax.model.limits import Limits
+from growjax.model.limits import limits as limits_of
+from growjax.model.signals import Inputs, KnotProfile
 from growjax.simulation.config import Config
 from growjax.simulation.simulate import as_arrays
 
 POINTS = 4  # points of (θ, rig) the criterion is averaged over
-DEMAND_STEP = 0.02  # share of p_max by which :func:`smoothed_gradient` moves each knot
+DEMAND_STEP = 0.02  # share of p_max by which `smoothed_gradient` moves each knot
 NONLINEAR_DRAWS = 16  # draws of the rig on which what its linearisation misses is measured
 
 
-class Problem(eqx.Module):
-    """The design problem (see the module docstring). Build it with :func:`make`."""
+class DesignProblem(eqx.Module):
+    """The design problem (see the module docstring). Build it with `make`."""
 
     base: object  # Parameters at the estimate on the nominal rig, numbers as arrays
     knots: jax.Array  # (K,) s: the demand's knots (forward drive) or the step controller's edges (stepper)
@@ -66,7 +66,7 @@ class Problem(eqx.Module):
     rig: tuple = eqx.field(static=True)
     sensors: tuple = eqx.field(static=True)
     pressure_noise: float = eqx.field(static=True)
-    criterion: dcrit.Precision = eqx.field(static=True)
+    criterion: dcrit.Criterion = eqx.field(static=True)
     config: object = eqx.field(static=True)
     spread: float = eqx.field(static=True, default=dcon.SPREAD)
     drive: str = eqx.field(static=True, default="forward")
@@ -92,7 +92,7 @@ class Problem(eqx.Module):
         )
 
     def predict(self, inputs, breaks=None, z=None, sensors=None, nonlinear: bool = False) -> dcrit.Prediction:
-        """The :class:`growjax.design.criterion.Prediction` of ``inputs`` (their ``breaks``, default the design
+        """The `growjax.design.criterion.Prediction` of ``inputs`` (their ``breaks``, default the design
         space's) at the point ``z`` of w (default 0), with ``sensors`` (default the problem's); ``nonlinear``: with
         what the rig's linearisation misses at the problem's ``offsets``."""
         breaks = self.breaks if breaks is None else breaks
@@ -115,17 +115,22 @@ class Problem(eqx.Module):
 
     def covariance(self, inputs, breaks=None):
         """The covariance (m, m) of the estimate of w with what is known that the table reports
-        (:func:`covariances`' ``"known"``): averaged over the points, plus what the rig's linearisation misses at
+        (`covariances`' ``"known"``): averaged over the points, plus what the rig's linearisation misses at
         the estimate (at the problem's ``offsets``); and the sensitivities at the estimate (traceable)."""
         first = self.predict(inputs, breaks, self.points[0], nonlinear=True)
         rest = jax.lax.map(lambda z: self.predict(inputs, breaks, z).covariance_linear, self.points[1:])
         mean = (first.covariance_linear + rest.sum(axis=0)) / self.points.shape[0]
         return mean + (first.covariance - first.covariance_linear), first.sensitivities
 
+    def criterion_of(self, covariance):
+        """The criterion of a covariance (m, m) of w: of its block on the parameters of interest (p, p)."""
+        p = len(self.names)
+        return self.criterion(covariance[:p, :p])
+
     def parts(self, inputs, breaks=None):
-        """(criterion of :meth:`covariance`, penalty at the estimate) of ``inputs`` (traceable)."""
+        """(criterion of `covariance`, penalty at the estimate) of ``inputs`` (traceable)."""
         cov, s = self.covariance(inputs, breaks)
-        return self.criterion.of_covariance(cov), dcon.penalty(s, self.prior_covariance, self.limits, self.spread)
+        return self.criterion_of(cov), dcon.penalty(s, self.prior_covariance, self.limits, self.spread)
 
     def objective(self, x):
         """criterion + penalty of design x (K,); +inf where the model failed."""
@@ -137,7 +142,7 @@ class Problem(eqx.Module):
 def make(
     knowledge: Knowledge,
     space: DesignSpace,
-    criterion: str = "A",
+    criterion: dcrit.Criterion | None = None,
     sensors=("length",),
     pressure_noise: float = dcrit.PRESSURE_NOISE,
     limits: Limits | None = None,
@@ -145,14 +150,35 @@ def make(
     seed: int = 0,
     config: Config | None = None,
     nonlinear_draws: int = NONLINEAR_DRAWS,
-) -> Problem:
-    """The :class:`Problem` of designing ``space``'s input given ``knowledge``; ``criterion`` ``"A"`` or ``"D"`` on
-    the parameters of interest; ``points``: the points of (θ, rig) the criterion is averaged over (1: the local
-    design at the estimate; more: the estimate and draws from the prior, seeded); ``config``: the fast
-    configuration's settings over the run (default :meth:`growjax.design.space.DesignSpace.config`);
-    ``nonlinear_draws``: draws of the rig (seeded) on which what its linearisation misses is measured, in the
-    objective and the reports alike (0: none, the linearised criterion)."""
+) -> DesignProblem:
+    """The problem of designing ``space``'s input given ``knowledge``.
+
+    Args:
+        knowledge: what is known (the parameters of interest, their covariance, the rig's tolerances).
+        space: the design space (the forward drive's demand or the stepper's schedule).
+        criterion: what the design minimises, a `growjax.design.Criterion` of the covariance of the parameters
+            of interest (None: `growjax.design.AOptimal`).
+        sensors: ``("length",)`` or ``("length", "pressure")``.
+        pressure_noise: Pa, sd of the pressure sensor's noise.
+        limits: the rig's limits (None: `growjax.model.limits.limits` of ``knowledge.base``).
+        points: the points of (θ, rig) the criterion is averaged over (1: the local design at the estimate;
+            more: the estimate and draws from the prior, seeded).
+        seed: the seed of the points and the rig's draws.
+        config: the fast configuration's settings over the run (None: `growjax.design.space.DesignSpace.config`).
+        nonlinear_draws: draws of the rig (seeded) on which what its linearisation misses is measured, in the
+            objective and the reports alike (0: none, the linearised criterion).
+
+    Returns:
+        The `DesignProblem`.
+
+    Raises:
+        TypeError: a criterion that is not a `growjax.design.Criterion` (a name such as ``"A"``, say).
+        ValueError: bad sensors, a configuration of the other drive, or fewer than one point.
+    """
     sensors = dcrit.check_sensors(sensors)
+    criterion = dcrit.AOptimal() if criterion is None else criterion
+    if not isinstance(criterion, dcrit.Criterion):
+        raise TypeError(f"criterion must be a growjax.design.Criterion such as AOptimal(), got {criterion!r}")
     if config is not None and config.drive != space.drive:
         raise ValueError(f"the configuration's drive is {config.drive!r}, the design space's {space.drive!r}")
     if points < 1:
@@ -162,13 +188,13 @@ def make(
     zs = np.concatenate(
         [np.zeros((1, prior.shape[0])), rng.multivariate_normal(np.zeros(prior.shape[0]), prior, size=points - 1)]
     )
-    lim = limits if limits is not None else limits(knowledge.base)
+    lim = limits if limits is not None else limits_of(knowledge.base)
     drawn = rig_draws(nonlinear_draws, knowledge.base, knowledge.tolerances, seed + 1) if nonlinear_draws else {}
     offsets = np.zeros((0, len(knowledge.rig)))
     if drawn:
         offsets = np.stack([np.log(drawn[n] / float(gp.get(knowledge.base, n))) for n in knowledge.rig], axis=1)
     stepper = space.drive == "inverse"
-    return Problem(
+    return DesignProblem(
         base=as_arrays(knowledge.base),
         knots=jnp.asarray(space.edges if stepper else space.knots),
         p_max=jnp.asarray(0.0 if stepper else float(space.p_max)),
@@ -186,14 +212,14 @@ def make(
         rig=knowledge.rig,
         sensors=sensors,
         pressure_noise=float(pressure_noise),
-        criterion=dcrit.Precision(len(knowledge.names), criterion),
+        criterion=criterion,
         config=(config or space.config()).replace(t1=float(space.duration), adjoint="forward").resolved(),
         drive=space.drive,
     )
 
 
 @eqx.filter_jit
-def value_and_gradient(problem: Problem, x):
+def value_and_gradient(problem: DesignProblem, x):
     """(objective, its exact gradient (K − 1,)) of design x by forward mode through the model: the sensitivities
     (and the plain solves of what the rig's linearisation misses) differentiated again through the solver's loop
     along every design variable."""
@@ -206,18 +232,18 @@ def value_and_gradient(problem: Problem, x):
     return jnp.where(jnp.isfinite(value), value, jnp.inf), tangent
 
 
-def information(problem: Problem, inputs, breaks):
+def information(problem: DesignProblem, inputs, breaks):
     """At every point (P of them): the information of the length rows (P, m, m) and of the pressure rows (P, m, m);
     at the estimate, the whitened cross term J̃ᵀK⁻¹V (m, D) of what the rig's linearisation misses
-    (:func:`growjax.design.criterion.posterior`), the run's length (n,) m and pressure (n,) Pa. One compiled
-    program per inputs' structure, the one :func:`evaluate` runs."""
+    (`growjax.design.criterion.posterior`), the run's length (n,) m and pressure (n,) Pa. One compiled
+    program per inputs' structure, the one `evaluate` runs."""
     return _information(problem, inputs, breaks)[:5]
 
 
 @eqx.filter_jit
-def _information(problem: Problem, inputs, breaks):
-    """:func:`information`'s outputs and the limits' penalty at the estimate (:func:`growjax.design.constraints.penalty`).
-    The first point is the estimate (:func:`make`), so its sensitivities serve the penalty and the cross term too."""
+def _information(problem: DesignProblem, inputs, breaks):
+    """`information`'s outputs and the limits' penalty at the estimate (`growjax.design.constraints.penalty`).
+    The first point is the estimate (`make`), so its sensitivities serve the penalty and the cross term too."""
 
     def info(s):
         w = dc.whiten(s.jac_length, problem.times, problem.hyper)
@@ -246,8 +272,8 @@ def _information(problem: Problem, inputs, breaks):
     )
 
 
-def covariances(problem: Problem, info_length, info_pressure, cross, sensors) -> dict:
-    """Covariances (m, m) of the estimate of w under ``sensors``, from :func:`information`'s output:
+def covariances(problem: DesignProblem, info_length, info_pressure, cross, sensors) -> dict:
+    """Covariances (m, m) of the estimate of w under ``sensors``, from `information`'s output:
     ``"known"`` (with what is known) and ``"alone"`` (the next experiment alone), each averaged over the points
     plus what the rig's linearisation misses (at the estimate); ``"known_local"``, ``"alone_local"``: at the
     estimate on the nominal rig, linearised (the classical local prediction); NaN where the precision is singular."""
@@ -267,17 +293,17 @@ def covariances(problem: Problem, info_length, info_pressure, cross, sensors) ->
 
 
 def evaluate(problem, x):
-    """(criterion, penalty) of design x (K − 1,): the objective's two parts (:meth:`Problem.parts`). For a
-    :class:`Problem`, through :func:`information`'s compiled program, the one the design's table reports from
+    """(criterion, penalty) of design x (K − 1,): the objective's two parts (`DesignProblem.parts`). For a
+    `DesignProblem`, through `information`'s compiled program, the one the design's table reports from
     (the same numbers to rounding); NaN where the model failed or the information is singular (a design that
     informs nothing where the prior is flat: flagged like a failed run, not allowed to sink its batch)."""
-    if not isinstance(problem, Problem):
+    if not isinstance(problem, DesignProblem):
         return _parts(problem, x)
     info_l, info_p, cross, _, _, pen = (np.asarray(a) for a in _information(problem, problem.inputs(x), problem.breaks))
     if not all(np.all(np.isfinite(a)) for a in (info_l, info_p, cross)):
         return np.float64(np.nan), pen
     cov = covariances(problem, info_l, info_p, cross, problem.sensors)["known"]
-    return np.asarray(problem.criterion.of_covariance(cov)), pen
+    return np.asarray(problem.criterion_of(cov)), pen
 
 
 @eqx.filter_jit
@@ -285,7 +311,7 @@ def _parts(problem, x):
     return problem.parts(problem.inputs(x))
 
 
-def evaluate_many(problem: Problem, xs, workers: int | None = None) -> np.ndarray:
+def evaluate_many(problem: DesignProblem, xs, workers: int | None = None) -> np.ndarray:
     """(criterion, penalty) (S, 2) of designs ``xs`` (S, K − 1), one compiled evaluation each, ``workers`` at a time
     (threads: a compiled evaluation releases the GIL; default one per CPU core)."""
     xs = np.atleast_2d(np.asarray(xs, float))
@@ -300,20 +326,20 @@ def evaluate_many(problem: Problem, xs, workers: int | None = None) -> np.ndarra
         return np.array(list(pool.map(one, xs)))
 
 
-def values(problem: Problem, xs, workers: int | None = None) -> np.ndarray:
-    """The objective (S,) of designs ``xs`` (S, K − 1) (:func:`evaluate_many`); +inf where the model failed."""
+def values(problem: DesignProblem, xs, workers: int | None = None) -> np.ndarray:
+    """The objective (S,) of designs ``xs`` (S, K − 1) (`evaluate_many`); +inf where the model failed."""
     v = evaluate_many(problem, xs, workers).sum(axis=1)
     return np.where(np.isfinite(v), v, np.inf)
 
 
-def smoothed_gradient(problem: Problem, x, step: float = DEMAND_STEP, workers: int | None = None):
+def smoothed_gradient(problem: DesignProblem, x, step: float = DEMAND_STEP, workers: int | None = None):
     """(objective, its gradient (K − 1,)) of design x by forward differences of the demand at each knot by
     ``step`` × p_max (backward where that would pass p_max), the K perturbed designs evaluated together
-    (:func:`values`).
+    (`values`).
 
     The criterion is a function of the sensitivities, and those carry the model's regularised switches (the
     growth threshold's friction, the valves, the end stops: C¹ over bands far narrower than any change of a
-    design worth making), so the exact derivative (:func:`value_and_gradient`) at a design near a switch
+    design worth making), so the exact derivative (`value_and_gradient`) at a design near a switch
     reports the switch, not the slope of the criterion over a step of the demand. A difference over a step of a
     few kPa is the slope that matters to the descent."""
     x = np.asarray(x, float)

@@ -1,5 +1,5 @@
-"""The design spaces: the forward drive's pressure demand (:class:`DesignSpace`) and the stepper's step schedule
-(:class:`StepperSpace`).
+"""The design spaces: the forward drive's pressure demand (`DesignSpace`) and the stepper's step schedule
+(`StepperSpace`).
 
 The forward drive's demand is a piecewise-linear profile on fixed knots over the run.
 
@@ -7,16 +7,17 @@ A design is a vector x (K − 1,) of unconstrained numbers, one per knot after t
 p_max·σ(x_k) (σ the logistic function), so every x is a demand inside (0, p_max) and the map is smooth for the
 optimiser. The run starts at rest: the demand is 0 at t = 0 (the first knot), as in the shipped experiments (a
 demand already high when the run starts sends the fast configuration through a start-up transient the
-reference does not have). Between knots the demand is linear (:class:`growjax.control.KnotProfile`: every interior knot is a
-declared slope break, so the solver's breaks do not depend on the values). The catheter is an input the rig
-gives, not a design variable: its length is the one of the experiment already run (held after its end).
+reference does not have). Between knots the demand is linear (`growjax.model.signals.KnotProfile`: every
+interior knot is a declared slope break, so the solver's breaks do not depend on the values). The catheter is
+an input the rig gives, not a design variable: its length is the one of the experiment already run (held after
+its end).
 
 The stepper's input is discrete. Its position controller samples the desired length every 1/f s and issues at
-most one step per period, half a period later (:func:`growjax.model.motor.step_schedule`), so every schedule it can
+most one step per period, half a period later (`growjax.model.motor.step_schedule`), so every schedule it can
 issue is a choice of −1, 0 or +1 step at each of the same edge times. A design is that vector of choices; the
 schedule's count is its running sum, never below 0 (the robot starts at rest). All schedules share their edges,
 hence the solver's breaks and one compiled program; the criterion is piecewise constant in them, so the search
-is over the choices themselves (:func:`growjax.design.optimise.local_search`), not along a gradient.
+is over the choices themselves (`growjax.design.optimise.local_search`), not along a gradient.
 SI units: s, Pa, m.
 """
 
@@ -30,10 +31,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from growjax.control.profile import KnotProfile
 from growjax.data import experiment as ex
 from growjax.model.motor import step_schedule
-from growjax.model.signals import Constant, Inputs, Sampled, StepSchedule, published_pulse
+from growjax.model.signals import Constant, Inputs, KnotProfile, Sampled, StepSchedule, published_pulse
 from growjax.simulation.config import Config
 from growjax.simulation.simulate import input_breaks
 
@@ -201,11 +201,11 @@ def stepper_inputs(catheter, edges, x) -> Inputs:
 @dataclasses.dataclass(frozen=True)
 class StepperSpace:
     """The stepper (inverse) drive's schedule over ``duration`` s: at each of the position controller's edges
-    (:attr:`edges`, every 1/``rate`` s) −1, 0 or +1 step, each step ``metres_per_step`` m of commanded robot length
-    (:func:`growjax.data.experiment.demand_steps`); the catheter length ``catheter`` (a signal, m); the baseline
+    (`edges`, every 1/``rate`` s) −1, 0 or +1 step, each step ``metres_per_step`` m of commanded robot length
+    (`growjax.data.experiment.demand_steps`); the catheter length ``catheter`` (a signal, m); the baseline
     ``recorded`` (a desired length, m, as a signal: the length the experiment already run recorded, which is what the
     shipped stepper model is driven by); the sensors sampled every ``sample_interval`` s. Build it with
-    :func:`stepper_space`."""
+    `stepper_space`."""
 
     duration: float
     metres_per_step: float
@@ -352,7 +352,7 @@ class StepperSpace:
 
 
 def stepper_space(base, duration: float, experiment: ex.Experiment | None = None) -> StepperSpace:
-    """The :class:`StepperSpace` of the stepper drive's parameters ``base`` over ``duration`` s, with the catheter
+    """The `StepperSpace` of the stepper drive's parameters ``base`` over ``duration`` s, with the catheter
     and the baseline (its recorded length as the desired length) of an experiment already run, if given."""
     recorded = None
     if experiment is not None and "robot_length_m" in experiment:

@@ -12,13 +12,14 @@ from concurrent.futures import ThreadPoolExecutor
 import jax
 import numpy as np
 
+import growjax.design.constraints as dcon
+import growjax.design.criterion as dcrit
+import growjax.design.discrimination as ddis
+import growjax.design.optimise as dopt
+import growjax.design.problem as dprob
 from growjax import progress as prog
 from growjax.calibration import fit as gf
-from growjax.design import constraints as dcon
-from growjax.design import criterion as dcrit
-from growjax.design import discrimination as ddis
-from growjax.design import optimise as dopt
-from growjax.design import problem as dprob
+from growjax.calibration.likelihood_ratio import boundary_threshold
 from growjax.design.knowledge import Knowledge
 from growjax.design.space import DesignSpace, StepperSpace
 from growjax.model import effects as fx
@@ -42,7 +43,7 @@ class DesignResult:
     random input", "design") and sensor set, each parameter's predicted sd
     of ln θ with what is known (``sd_log``: averaged over the points, with what the fit's linearised rig misses),
     from the next experiment alone (``sd_log_alone``), the classical local prediction at the estimate
-    (``sd_log_local``) and its 90 % interval (SI); ``checks``: {input: :class:`growjax.design.constraints.Check`
+    (``sd_log_local``) and its 90 % interval (SI); ``checks``: {input: `growjax.design.constraints.Check`
     over the draws}; ``random``: the random batch; ``descents``: the optimiser's starts, best first."""
 
     names: tuple
@@ -56,12 +57,12 @@ class DesignResult:
     random: dopt.RandomBatch
     descents: list
     limits: Limits
-    criterion: str
+    criterion: str  # the criterion's name: "A", "D" (`Criterion.name`) or "discrimination"
     sensors: tuple
     knowledge: dict
     wall_s: dict
     scaled: float = 1.0  # the share of the optimiser's demand kept to pass the check (1: as optimised)
-    discrimination: dict | None = None  # the rivals, their sizes and the threshold (a design by :func:`discriminate`)
+    discrimination: dict | None = None  # the rivals, their sizes and the threshold (a design by `discriminate`)
 
     def summary(self) -> dict:
         random = self.random
@@ -105,7 +106,7 @@ def published_inputs(space: DesignSpace | StepperSpace) -> Inputs:
 def design(
     knowledge: Knowledge,
     space: DesignSpace | StepperSpace,
-    criterion: str = "A",
+    criterion: dcrit.Criterion | None = None,
     sensors=("length",),
     random: int = 64,
     starts: int = 1,
@@ -122,16 +123,18 @@ def design(
 ) -> DesignResult:
     """Design the next experiment's input for the precision of ``knowledge``'s parameters.
 
-    ``random`` random admissible inputs are drawn and scored (:func:`growjax.design.optimise.random_admissible`);
+    ``criterion``: what the design minimises, a `growjax.design.Criterion` of the predicted covariance of the
+    parameters of interest (None: `growjax.design.AOptimal`; any subclass serves).
+    ``random`` random admissible inputs are drawn and scored (`growjax.design.optimise.random_admissible`);
     the optimiser descends from the ``starts`` best of them (``iterations`` Adam steps each; for a
-    :class:`growjax.design.StepperSpace`, ``iterations`` moves of :func:`growjax.design.optimise.local_search`);
+    `growjax.design.StepperSpace`, ``iterations`` moves of `growjax.design.optimise.local_search`);
     the best result that passes the check over ``n_draws`` draws of the rig and θ (scaled down a little where it
     does not) is the design.
     ``points``: the points of (θ, rig) the criterion is averaged over (1: the local design at the estimate; the
     criterion's cost grows with each point);
     ``nonlinear_draws``: draws of the rig on which what its linearisation misses is measured (0: none);
     ``gradient``: the descent's slope, ``"differences"`` over a step of the demand or ``"jax"``, exact
-    (:func:`growjax.design.optimise.multistart`). The
+    (`growjax.design.optimise.multistart`). The
     table reports the design, the best random input and the space's baseline under ``sensors`` and, where
     the pressure is recorded, under the length alone. DesignError where nothing admissible is found.
     """
@@ -181,7 +184,7 @@ def design(
         batch,
         descents,
         lim,
-        criterion,
+        problem.criterion.name,
         sensors,
         knowledge.summary(),
         wall,
@@ -206,16 +209,14 @@ def discriminate(
     progress: bool = False,
 ) -> DesignResult:
     """Design the next experiment's input to tell two rival catalogue ``effects`` (A, B) apart: the input that
-    maximises min(T_AB, T_BA) (:mod:`growjax.design.discrimination`), with ``knowledge``'s parameters refitted
+    maximises min(T_AB, T_BA) (`growjax.design.discrimination`), with ``knowledge``'s parameters refitted
     beside the rival's effect; ``sizes`` (a, b) SI: the effects' assumed sizes (default their moderate
-    magnitudes). The search, the limits and the check are those of :func:`design` (the objective −ln min T).
+    magnitudes). The search, the limits and the check are those of `design` (the objective −ln min T).
 
     The table (``rows``): per input ("published pulse train", "best random input", "design") T_AB, T_BA, min T and
     whether min T exceeds the discovery's single-experiment threshold (``false_positive_rate`` over the
-    catalogue, :func:`growjax.discover.boundary_threshold`): expected to separate. ValueError on a bad pair of
-    effects; DesignError where nothing admissible is found."""
-    from growjax.discover import boundary_threshold
-
+    catalogue, `growjax.calibration.likelihood_ratio.boundary_threshold`): expected to separate. ValueError on a
+    bad pair of effects; DesignError where nothing admissible is found."""
     if space.drive != "forward":
         raise ValueError(
             "the discrimination design is built for the forward drive's demand, not the stepper's schedule"
@@ -351,7 +352,7 @@ def _by_reported(problem, space, descents, batch, starts: int) -> np.ndarray:
 
 
 def _covariances(problem, inputs, breaks, sets) -> list[dict]:
-    """The predicted covariances (:func:`growjax.design.problem.covariances`) of ``inputs``, one per sensor set."""
+    """The predicted covariances (`growjax.design.problem.covariances`) of ``inputs``, one per sensor set."""
     info_l, info_p, cross = dprob.information(problem, inputs, breaks)[:3]
     return [dprob.covariances(problem, info_l, info_p, cross, sensors) for sensors in sets]
 
@@ -417,6 +418,6 @@ def _row(problem, knowledge: Knowledge, label: str, inputs, breaks, sets) -> lis
                 "interval_90": [float(lo), float(hi)],
                 "width_90": float(hi - lo),
             }
-        crit = float(problem.criterion.of_covariance(jax.numpy.asarray(cov)))
+        crit = float(problem.criterion_of(jax.numpy.asarray(cov)))
         rows.append({"input": label, "sensors": list(sensors), "criterion": crit, "parameters": params})
     return rows

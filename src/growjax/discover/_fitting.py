@@ -131,7 +131,7 @@ def _map_jobs(run, jobs, workers: int, progress: bool, desc: str, first_alone: b
     if workers > 1 and len(rest) > 1:
         with concurrent.futures.ThreadPoolExecutor(max_workers=workers) as pool:
             futures = [pool.submit(run, job) for job in rest]
-            for future in concurrent.futures.as_completed(futures):
+            for _ in concurrent.futures.as_completed(futures):
                 bar.update(1)
             results += [f.result() for f in futures]
     else:

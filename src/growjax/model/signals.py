@@ -105,6 +105,17 @@ class Sampled(eqx.Module):
         return times[(times > t0) & (times < t1)]
 
 
+class KnotProfile(Sampled):
+    """A piecewise-linear profile through (``times`` (K,) s, ``values`` (K,)) whose every interior knot is a declared
+    slope break, so the solvers' breaks depend on the knots alone, never on the values (which may be traced:
+    optimised, or differentiated). Extrapolated linearly as `Sampled`."""
+
+    def kink_times(self, t0, t1, threshold: float = 0.0):
+        """The interior knots in (t0, t1), s (``threshold`` is not used: every knot is a break)."""
+        t = np.asarray(self.times, float)
+        return t[(t > t0) & (t < t1)]
+
+
 class StepSchedule(eqx.Module):
     """Integer step count of a stepper driver: ``counts[j]`` from ``times[j]`` on, 0 before the first edge."""
 
@@ -136,7 +147,7 @@ class Inputs(eqx.Module):
     Attributes:
         catheter_length: L_c(t), m (catheter in contact with the robot).
         pressure_demand: P_ref(t), Pa (forward drive).
-        steps: driver step count k(t) (inverse drive; from :func:`growjax.model.motor.step_schedule`).
+        steps: driver step count k(t) (inverse drive; from `growjax.model.motor.step_schedule`).
         desired_length: desired robot length, m (inverse drive; kept for plotting and metrics).
     """
 
