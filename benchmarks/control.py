@@ -132,7 +132,8 @@ def other_methods(res, record, target, T, ev, p, cfg_ev, lim):
 
 def stepper_methods(res, target, T, ev):
     """The open-loop step schedule, the closed-loop full-step controller and the 1/16-microstep controller,
-    designed on the fast configuration and evaluated on ``ev``: `growjax.control.design_controller`, as the CLI runs them."""
+    designed on the fast configuration and evaluated on ``ev``: `growjax.control.design_controller`, as the CLI runs
+    them."""
     for name, method, microsteps in (
         ("inverse open-loop steps", "open-loop", 1),
         ("inverse feedback (step controller)", "feedback", 1),

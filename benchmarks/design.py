@@ -1,13 +1,13 @@
 """The designed experiment against the published pulse train: the criterion's landscape, and replications that
 compare each input's realised precision with the design's prediction.
 
-Run: ``python benchmarks/design.py [--random 1000] [--replications 20] [--workers 16] [--out benchmarks/results/design.json]``.
-The design is written to ``--out`` as soon as it is made and each replication to its partial file as it finishes:
-``--design-from OUT --resume`` completes a run that stopped.
+Run: ``python benchmarks/design.py [--random 1000] [--replications 20] [--workers 16]
+[--out benchmarks/results/design.json]``. The design is written to ``--out`` as soon as it is made and each
+replication to its partial file as it finishes: ``--design-from OUT --resume`` completes a run that stopped.
 
-What is known: the default fit (``growjax.calibration.fit.fit``, the default likelihood) of the shipped synthetic experiment
-(or ``--data``) for ``--for`` (default Y), under ``--growth-law`` (``lockhart``: Lockhart's law for the fit, the
-design and the replications' data; with ``--for Y phi_L n_L`` the law's rate and exponent, which the shipped
+What is known: the default fit (``growjax.calibration.fit.fit``, the default likelihood) of the shipped synthetic
+experiment (or ``--data``) for ``--for`` (default Y), under ``--growth-law`` (``lockhart``: Lockhart's law for the fit,
+the design and the replications' data; with ``--for Y phi_L n_L`` the law's rate and exponent, which the shipped
 experiment leaves undetermined, enter with their box's uniform prior). Then:
 
 (a) Landscape: ``growjax.design.design`` with ``--random`` random admissible inputs scored by the criterion; the
@@ -18,8 +18,8 @@ experiment leaves undetermined, enter with their box's uniform prior). Then:
     with fresh white length noise (the fitted noise sd; and 1 kPa pressure noise where ``--sensors`` records it;
     with ``--discrepancy-in-data``, also a fresh draw of the Matérn-3/2 discrepancy the first fit found, the
     residual model the prediction assumes);
-    each fitted alone by ``growjax.calibration.fit.fit`` (default likelihood, the rig's errors inferred as parameters of the
-    model, as ``growjax fit`` does; ``--no-rig-tangents``: their secants, linearised once at nominal, or with
+    each fitted alone by ``growjax.calibration.fit.fit`` (default likelihood, the rig's errors inferred as parameters of
+    the model, as ``growjax fit`` does; ``--no-rig-tangents``: their secants, linearised once at nominal, or with
     ``--relinearise`` taken again where the data put the rig). Reported per input: the
     realised sd of ln θ̂ over the replications against the predicted sd of the experiment alone, the fits'
     mean reported sd and the coverage of their 90 % intervals, and the design's realised sd against the

@@ -9,8 +9,8 @@ residuals as they are (its own ``jax.linearize`` of the model), e.g. ``--cases f
 Problems, each from one start:
 
 * ``fit_Y``, ``fit_Y_kp``: the fit's first stage (least squares, before the discrepancy) on the shipped synthetic
-  experiment, forward drive, 0–10 s, length only: ``growjax.calibration.fit.make_problem``'s residuals (units of 1 mm) in
-  z = ln(θ/θ_ref) for Y, and for Y with the pressure loop's proportional gain ``pid.proportional``; the start
+  experiment, forward drive, 0–10 s, length only: ``growjax.calibration.fit.make_problem``'s residuals (units of 1 mm)
+  in z = ln(θ/θ_ref) for Y, and for Y with the pressure loop's proportional gain ``pid.proportional``; the start
   30 % above the reference values. The engine runs as the fit runs it (``growjax.calibration.fit._linearised``, the
   physical bounds, ``LM_TOLERANCE``).
 * ``profile``: the control profile's problem as ``growjax.control.optimize_profile`` poses it (its residual

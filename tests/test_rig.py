@@ -237,7 +237,9 @@ def test_a_rig_misfit_that_runs_y_to_zero_with_the_rig_nominal_is_brought_back_b
     }
     offsets = {n: float(rng.normal(0.0, u)) for n, u in tolerances.items()}
     rig = gj.replace(base, Y=truth_y, **{n: gj.get(base, n) * np.exp(b) for n, b in offsets.items()})
-    space = gd.stepper_space(base, 10.0, ex.read(REPO / "src" / "growjax" / "data" / "datasets" / "synthetic_forward.csv"))
+    space = gd.stepper_space(
+        base, 10.0, ex.read(REPO / "src" / "growjax" / "data" / "datasets" / "synthetic_forward.csv")
+    )
     t = space.times
     rng.normal(0.0, noise, t.size), rng.integers(2**31)  # the designed run's draws, made first in the benchmark
     maker = gj.Config(fidelity="reference", drive="inverse", t1=10.0)

@@ -1,5 +1,6 @@
 """The shared likelihood: Matérn-3/2 discrepancy, sensor noise and rig tolerances (growjax.calibration.discrepancy,
-growjax.calibration.tolerance) and what fit, posterior and discovery make of data the fitted model does not reproduce."""
+growjax.calibration.tolerance) and what fit, posterior and discovery make of data the fitted model does not
+reproduce."""
 
 import sys
 from pathlib import Path

@@ -8,6 +8,20 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
+__all__ = [
+    "arviz_plots",
+    "control_figure",
+    "discovery_figure",
+    "population_figure",
+    "posterior_figures",
+    "predictive_figure",
+    "rank_figure",
+    "set_figure",
+    "sobol_figure",
+    "sweep_figure",
+    "trajectory_figure",
+]
+
 
 def _save(fig, path):
     """Write ``fig`` to ``path`` (folders created), close it, return the path."""

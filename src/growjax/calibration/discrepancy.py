@@ -11,8 +11,8 @@ the fixed rig parameters held at their nominal values: bⱼ ~ N(0, uⱼ²) is pa
 (its tolerance uⱼ) and gⱼ(t) = ∂L/∂ln ψⱼ the length's sensitivity to it.
 
 A Matérn-3/2 process is the output of a two-state linear SDE and the noise of a one-state one, so this
-covariance is that of a linear Gaussian state-space model: a Kalman filter (:func:`kalman_filter`, a ``lax.scan``) gives the exact likelihood
-in O(n) for any (also irregular) sampling, the whitened residuals for Gauss–Newton, forecasts and
+covariance is that of a linear Gaussian state-space model: a Kalman filter (:func:`kalman_filter`, a ``lax.scan``) gives
+the exact likelihood in O(n) for any (also irregular) sampling, the whitened residuals for Gauss–Newton, forecasts and
 draws. The tolerance terms are static states of the same filter (for the total log-likelihood, a q × q
 correction after the three-state filter instead).
 
@@ -31,6 +31,32 @@ import jax.numpy as jnp
 import numpy as np
 import numpyro.distributions as _dist
 from jaxtyping import ArrayLike, Float
+
+__all__ = [
+    "AMPLITUDE_SCALE",
+    "KINDS",
+    "NOISE_SCALE",
+    "NOISE_TIME_BOUNDS",
+    "NOISE_TIME_LOG_SD",
+    "NOISE_TIME_MEDIAN",
+    "TIME_SCALE_LOG_SD",
+    "TIME_SCALE_MEDIAN",
+    "Hyper",
+    "MeasuredLength",
+    "distribution",
+    "draw",
+    "drift_kernel",
+    "estimate",
+    "forecast",
+    "kalman_filter",
+    "kernel",
+    "log_likelihood",
+    "log_likelihood_runs",
+    "log_prior",
+    "noise_kernel",
+    "smooth",
+    "whiten",
+]
 
 KINDS = ("matern32", "none")
 

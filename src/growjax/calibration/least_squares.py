@@ -23,6 +23,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+__all__ = ["levenberg_marquardt", "linearise", "memoised"]
+
 
 def linearise(residuals, z):
     """(r (m,), J (m, p)) of ``residuals`` at z (p,) in one forward-mode pass: ``jax.jvp`` along the p unit
@@ -33,9 +35,9 @@ def linearise(residuals, z):
 
 
 def memoised(model, size: int = 4):
-    """``model(z, *args)`` (args the same at every call) keeping its last ``size`` results by the value of z (p,): a fit asks for the same point again
-    (a solver starts where the last one accepted, the hyperparameters are estimated there) and the model is
-    deterministic, so the repeat costs nothing."""
+    """``model(z, *args)`` (args the same at every call) keeping its last ``size`` results by the value of z (p,): a fit
+    asks for the same point again (a solver starts where the last one accepted, the hyperparameters are estimated there)
+    and the model is deterministic, so the repeat costs nothing."""
     kept = OrderedDict()
 
     def call(z, *args):

@@ -19,6 +19,17 @@ import numpy as np
 
 from growjax.model import params as gp
 
+__all__ = [
+    "DEFAULT_BUDGET",
+    "budget",
+    "default_budget",
+    "length_sensitivity",
+    "parse",
+    "rig_at",
+    "rig_draws",
+    "sensitivity",
+]
+
 # Relative standard uncertainties (1 sd of ln ψ) of the reference rig, with the reason for each.
 # Parameters whose tolerance moves the length by far less than the noise (hose length and wall compliance,
 # the saline's viscosity) are left out of the default: each tolerance costs one simulation per fit.

@@ -250,7 +250,9 @@ def _population(args, paths) -> dict:
     if fit.status != "converged":
         raise RunFailed(f"the joint fit did not converge ({fit.status})", {"command": "posterior", **fit.summary()})
     _progress_note(args, f"posterior: joint fit done in {time.perf_counter() - started:.1f} s; NUTS on the population")
-    post = pop.sample_population(fit, name, chains=args.chains, warmup=args.warmup, samples=args.samples, seed=args.seed)
+    post = pop.sample_population(
+        fit, name, chains=args.chains, warmup=args.warmup, samples=args.samples, seed=args.seed
+    )
     if args.predict:
         new = ex.read(Path(args.predict), catheter=args.catheter)
         run = xs.Run(
@@ -807,7 +809,8 @@ def design_command(args) -> dict:
         if p_max > lim.pressure_ceiling + 1e-9:
             raise ValueError(
                 f"--p-max {p_max / 1e3:.1f} kPa is above the sensed-pressure ceiling "
-                f"{lim.pressure_ceiling / 1e3:.1f} kPa (the membrane limit {lim.membrane_limit / 1e3:.1f} kPa × the margin)"
+                f"{lim.pressure_ceiling / 1e3:.1f} kPa (the membrane limit "
+                f"{lim.membrane_limit / 1e3:.1f} kPa × the margin)"
             )
         space = gd.DesignSpace(
             args.duration,

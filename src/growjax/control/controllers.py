@@ -19,6 +19,8 @@ from growjax.control.targets import Target, rmse, step_length
 from growjax.model.limits import Limits, limits
 from growjax.simulation import fast as fm
 
+__all__ = ["MPC", "ClosedLoopResult", "LengthPID", "StepController", "pid_loop", "run_closed_loop", "score"]
+
 
 class LengthPID(eqx.Module):
     """Sampled PI-D on length over the pressure loop (forward drive), with feed-forward and anti-windup.

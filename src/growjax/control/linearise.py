@@ -12,6 +12,8 @@ from growjax.control.plant import Plant
 from growjax.model.params import Parameters
 from growjax.simulation import fast as fm
 
+__all__ = ["linearize", "operating_point"]
+
 
 def operating_point(
     params: Parameters,

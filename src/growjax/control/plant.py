@@ -17,6 +17,8 @@ from growjax.simulation import fast as fm
 from growjax.simulation import reference as rm
 from growjax.simulation.simulate import simulate_from
 
+__all__ = ["TICK_STEPS", "Plant", "catheter_signal", "segment_inputs", "with_microstepping"]
+
 # Step budget of one tick, per fidelity (a tick spans at most a few hundred steps).
 TICK_STEPS = {"fast": 400, "reference": 20_000}
 

@@ -18,6 +18,17 @@ from growjax.control.targets import Target, rmse, step_length
 from growjax.model.limits import Limits, limits
 from growjax.model.params import Parameters
 
+__all__ = [
+    "MAX_STEP",
+    "ProfileResult",
+    "optimize_profile",
+    "optimize_steps",
+    "profile_inputs",
+    "simulate_profile",
+    "simulate_steps",
+    "step_commands",
+]
+
 
 class ProfileResult(NamedTuple):
     """An optimised demand profile: knots (K,) s, demand (K,) Pa, the sum of squared residuals at the first guess

@@ -11,6 +11,16 @@ from jaxtyping import Float
 
 import growjax as gj
 
+__all__ = [
+    "Target",
+    "plant_params",
+    "ramp_with_pauses",
+    "rmse",
+    "step_length",
+    "step_sequence",
+    "target_from_experiment",
+]
+
 
 class Target(NamedTuple):
     """A desired length: ``time`` (T,) s, ``length`` (T,) m, ``catheter`` (T,) m (catheter in contact; 0 if unknown)."""

@@ -23,6 +23,16 @@ from growjax.control.plant import Plant, catheter_signal
 from growjax.control.targets import Target
 from growjax.model.limits import Limits, limits
 
+__all__ = [
+    "DEFAULT_LOG_GAINS",
+    "TuneResult",
+    "parameter_draws",
+    "pid_cost_fn",
+    "plan_steps",
+    "tune_pid",
+    "tune_stepper",
+]
+
 DEFAULT_LOG_GAINS = (7.0, 7.0, 4.5)  # Kp 1e7 Pa/m (10 kPa per mm), Ki 1e7 Pa/(m s), Kd 3e4 Pa s/m
 
 

@@ -31,6 +31,8 @@ from growjax.control.tuning import (
 from growjax.model import params as gp
 from growjax.model.limits import limits
 
+__all__ = ["design_controller"]
+
 
 def design_controller(
     target: Target,

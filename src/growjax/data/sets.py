@@ -40,6 +40,8 @@ from growjax.data import experiment as ex
 from growjax.data.experiment import Experiment, ExperimentError
 from growjax.model import params as gp
 
+__all__ = ["SCOPES", "SENSORS", "ExperimentSet", "Run", "Scope", "read"]
+
 SCOPES = ("shared", "robot", "rig", "experiment")
 SENSORS = ("length", "pressure")
 _KEYS = {"file", "name", "drive", "robot", "rig", "window", "sensors", "parameters"}

@@ -26,6 +26,8 @@ from growjax.model.limits import Limits
 from growjax.simulation.simulate import as_arrays, simulate
 from growjax.simulation.trajectory import OK
 
+__all__ = ["CHUNK", "DRAWS", "SPREAD", "Check", "check", "draws", "penalty", "stack"]
+
 SPREAD = 2.5  # sds of the linearised spread over the draws the penalty keeps clear of each limit
 DRAWS = 32  # rig and θ draws a design is checked on
 CHUNK = 128  # runs per compiled batch of the check

@@ -33,6 +33,19 @@ from jaxtyping import Array, Float
 from growjax.calibration import discrepancy as dc
 from growjax.design.sensitivity import Sensitivities
 
+__all__ = [
+    "PRESSURE_NOISE",
+    "SENSORS",
+    "AOptimal",
+    "Criterion",
+    "DOptimal",
+    "Prediction",
+    "check_sensors",
+    "information",
+    "posterior",
+    "standard_deviations",
+]
+
 SENSORS = ("length", "pressure")
 PRESSURE_NOISE = 1e3  # Pa, sd of the pressure sensor's noise (independent samples)
 

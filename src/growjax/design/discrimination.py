@@ -45,6 +45,8 @@ from growjax.model.signals import Inputs, KnotProfile
 from growjax.simulation.config import Config
 from growjax.simulation.simulate import as_arrays
 
+__all__ = ["FLOOR", "Discrimination", "make", "rivals", "statistic", "statistics", "value_and_gradient"]
+
 FLOOR = 1e-12  # T below which the objective −ln T is held (rivals indistinguishable there)
 
 

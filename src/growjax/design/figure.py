@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
+__all__ = ["BASELINE_COLOUR", "STYLE", "design_figure"]
+
 STYLE = {"design": "C3", "best random input": "C0"}
 BASELINE_COLOUR = "0.45"
 

@@ -24,6 +24,21 @@ from growjax import progress as prog
 from growjax.design.knowledge import Knowledge
 from growjax.design.space import DesignSpace
 
+__all__ = [
+    "BATCH",
+    "GRADIENTS",
+    "ITERATIONS",
+    "LEARNING_RATE",
+    "ROUNDS",
+    "Descent",
+    "RandomBatch",
+    "adam",
+    "local_search",
+    "multistart",
+    "neighbours",
+    "random_admissible",
+]
+
 ITERATIONS = 15  # Adam steps per start
 LEARNING_RATE = 0.2  # in the logits of the demand: ~5 % of p_max per step at most, early on
 ROUNDS = 4  # rounds of random draws for n admissible inputs

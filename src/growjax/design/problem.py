@@ -41,6 +41,21 @@ from growjax.model.signals import Inputs, KnotProfile
 from growjax.simulation.config import Config
 from growjax.simulation.simulate import as_arrays
 
+__all__ = [
+    "DEMAND_STEP",
+    "NONLINEAR_DRAWS",
+    "POINTS",
+    "DesignProblem",
+    "covariances",
+    "evaluate",
+    "evaluate_many",
+    "information",
+    "make",
+    "smoothed_gradient",
+    "value_and_gradient",
+    "values",
+]
+
 POINTS = 4  # points of (θ, rig) the criterion is averaged over
 DEMAND_STEP = 0.02  # share of p_max by which `smoothed_gradient` moves each knot
 NONLINEAR_DRAWS = 16  # draws of the rig on which what its linearisation misses is measured

@@ -18,6 +18,8 @@ from growjax.model import params as gp
 from growjax.simulation.simulate import forward_sensitivities, simulate
 from growjax.simulation.trajectory import OK
 
+__all__ = ["Sensitivities", "moved", "remainder", "solve", "solve_along"]
+
 
 class Sensitivities(NamedTuple):
     """On the sample times (n,): ``length`` m and ``pressure`` Pa; ``jac_length`` (n, m) m and ``jac_pressure``

@@ -37,6 +37,19 @@ from growjax.model.signals import Constant, Inputs, KnotProfile, Sampled, StepSc
 from growjax.simulation.config import Config
 from growjax.simulation.simulate import input_breaks
 
+__all__ = [
+    "KNOT_SPACING",
+    "SAMPLE_INTERVAL",
+    "DesignSpace",
+    "StepperSpace",
+    "catheter_of",
+    "demand_at_knots",
+    "held",
+    "sample_times",
+    "stepper_inputs",
+    "stepper_space",
+]
+
 KNOT_SPACING = 0.5  # s between the demand's knots
 SAMPLE_INTERVAL = 0.01  # s between the sensors' samples (100 Hz, as the shipped experiments)
 _EDGE = 1e-6  # share of p_max kept from the open interval's ends when a demand is mapped back to x

@@ -27,6 +27,8 @@ from growjax.model.limits import Limits
 from growjax.model.signals import Inputs
 from growjax.simulation.simulate import input_breaks
 
+__all__ = ["SHRINK", "DesignError", "DesignResult", "design", "discriminate", "published_inputs"]
+
 SHRINK = (0.97, 0.93, 0.88, 0.8, 0.7)  # demand scalings tried on a design that fails its check
 
 

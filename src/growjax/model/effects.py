@@ -35,6 +35,35 @@ import jax.numpy as jnp
 from growjax.model.robot import LOCKHART_PRESSURE_SCALE, lockhart_pressure
 from growjax.model.smooth import smooth_ramp
 
+__all__ = [
+    "CATALOGUE",
+    "FRICTION_VELOCITY",
+    "RAMP_VELOCITY",
+    "ActiveChannelForce",
+    "ActuationLag",
+    "CatheterFriction",
+    "Effect",
+    "FluidLeak",
+    "GrowthRateLimit",
+    "Instant",
+    "LumenFriction",
+    "RetractionFolding",
+    "Rod",
+    "TrappedAir",
+    "applied_drive",
+    "apply_all",
+    "chamber_outflow",
+    "friction_sign",
+    "initial_states",
+    "length_offset",
+    "rates",
+    "register",
+    "rod_force",
+    "split_states",
+    "state_scales",
+    "state_size",
+]
+
 FRICTION_VELOCITY = 1e-4  # m/s: velocity over which a friction force turns from one sign to the other
 RAMP_VELOCITY = 1e-6  # m/s: C¹ band of the ramps max(v, 0) of the velocity
 

@@ -9,6 +9,17 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+__all__ = [
+    "P_ATM",
+    "Fluid",
+    "StorageLaw",
+    "bulk_modulus",
+    "pressure_at_stored_fraction",
+    "storage_law",
+    "stored_volume_fraction",
+    "water",
+]
+
 P_ATM = 101325.0  # Pa, Simscape reference atmosphere
 
 

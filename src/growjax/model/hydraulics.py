@@ -3,7 +3,8 @@
 Sign convention (Simscape): pressures are gauge, Pa; a flow q (m³/s) is positive
 from port A to port B. Each component is a small pytree of parameters plus pure
 functions of pressures and flows; no component has a state except the pipeline
-chambers, whose derivatives are computed here and integrated by the assemblies (:mod:`growjax.simulation.reference`, :mod:`growjax.simulation.fast`).
+chambers, whose derivatives are computed here and integrated by the assemblies (:mod:`growjax.simulation.reference`,
+:mod:`growjax.simulation.fast`).
 """
 
 from __future__ import annotations
@@ -17,6 +18,29 @@ import jax.numpy as jnp
 
 from growjax.model.fluid import P_ATM, Fluid, bulk_modulus
 from growjax.model.smooth import smooth_ramp, smooth_step
+
+__all__ = [
+    "CheckValve",
+    "DirectionalValve",
+    "Nozzle",
+    "Orifice",
+    "Pipeline",
+    "ValveNetwork",
+    "chamber_pressure_rate",
+    "check_valve_flow",
+    "circular_pipeline",
+    "critical_pressure",
+    "line_pressure_drop",
+    "nozzle_pressure_drop",
+    "orifice_conductance",
+    "orifice_flow",
+    "orifice_pressure_drop",
+    "pipeline_half_pressure_drop",
+    "strained_volume",
+    "valve_network",
+    "valve_network_flow",
+    "wall_strain_rate",
+]
 
 
 def critical_pressure(p_avg, b_lam):
@@ -108,7 +132,8 @@ def chamber_pressure_rate(pipe: Pipeline, fluid: Fluid, p, wall_strain, net_infl
 
 
 def strained_volume(pipe: Pipeline, wall_strain, count=1):
-    """Chamber volume of ``count`` pipes like ``pipe`` at diameter increase δ = ``wall_strain`` (m): n·π(d + δ)²L/4, m³."""
+    """Chamber volume of ``count`` pipes like ``pipe`` at diameter increase δ = ``wall_strain`` (m): n·π(d + δ)²L/4,
+    m³."""
     return count * jnp.pi * (pipe.hydraulic_diameter + wall_strain) ** 2 / 4.0 * pipe.length
 
 

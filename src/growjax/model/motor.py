@@ -16,6 +16,18 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+__all__ = [
+    "PID",
+    "StepperMotor",
+    "ideal_torque_drive_force",
+    "motor_derivatives",
+    "motor_equilibrium_offset",
+    "paper_pid",
+    "pid_output",
+    "step_schedule",
+    "winding_voltages",
+]
+
 
 class PID(eqx.Module):
     """Continuous parallel PID with filtered derivative: C(s) = P + I/s + D N s/(s + N).

@@ -27,6 +27,22 @@ from growjax.model.motor import PID, StepperMotor
 from growjax.model.pump import SyringePump
 from growjax.model.robot import GrowingRobot
 
+__all__ = [
+    "ALIASES",
+    "DRIVES",
+    "Parameters",
+    "admissible_rows",
+    "as_dict",
+    "get",
+    "parameter_names",
+    "physical_ranges",
+    "reference",
+    "replace",
+    "resolve_name",
+    "validate",
+    "with_effects",
+]
+
 DRIVES = ("forward", "inverse")  # pressure demand with an ideal torque source; desired length with the stepper
 
 

@@ -14,6 +14,16 @@ import jax.numpy as jnp
 
 from growjax.model.smooth import smooth_ramp
 
+__all__ = [
+    "SyringePump",
+    "cylinder_stop_force",
+    "platform_force",
+    "platform_velocity",
+    "syringe_load_force",
+    "syringe_stop_force",
+    "syringe_volume_delivered",
+]
+
 
 class SyringePump(eqx.Module):
     """Syringe pump.
@@ -88,7 +98,8 @@ def syringe_volume_delivered(pump: SyringePump, x_platform):
 
 
 def _ramp_balance(damping, stop, drive, width):
-    """u ≥ 0 with damping·u + stop·smooth_ramp(u, width) = drive ≥ 0 (exact: quadratic inside the band, linear beyond)."""
+    """u ≥ 0 with damping·u + stop·smooth_ramp(u, width) = drive ≥ 0 (exact: quadratic inside the band, linear
+    beyond)."""
     quadratic = 2.0 * drive / (damping + jnp.sqrt(damping * damping + 2.0 * stop * drive / width))
     linear = (drive + 0.5 * stop * width) / (damping + stop)
     return jnp.where(drive <= (damping + 0.5 * stop) * width, quadratic, linear)

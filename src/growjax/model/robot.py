@@ -32,6 +32,26 @@ from growjax.model import hydraulics as hy
 from growjax.model.pump import cylinder_stop_force
 from growjax.model.smooth import smooth_abs_power, smooth_ramp
 
+__all__ = [
+    "BRACKET_LOGIT",
+    "GROWTH_LAWS",
+    "INFLOW_BRACKET_TOL",
+    "INFLOW_MAX_ITERATIONS",
+    "INFLOW_NEWTON_TOL",
+    "LOCKHART_PRESSURE_SCALE",
+    "GrowingRobot",
+    "RodBalance",
+    "catheter_friction_gain",
+    "growth_pressure",
+    "hard_stop_force",
+    "inflow",
+    "lockhart_pressure",
+    "pressure_limit",
+    "rod_balance",
+    "rod_pressure",
+    "velocity_pressure",
+]
+
 GROWTH_LAWS = ("reference", "lockhart")
 LOCKHART_PRESSURE_SCALE = 1e3  # Pa: p_ref of the Lockhart law
 INFLOW_MAX_ITERATIONS = 40  # cap on the rod balance's Newton steps (a few usually suffice)

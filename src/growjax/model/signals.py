@@ -15,6 +15,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Float
 
+__all__ = ["Constant", "Inputs", "KnotProfile", "PulseTrain", "Sampled", "StepSchedule", "published_pulse"]
+
 
 class Constant(eqx.Module):
     """A constant signal."""

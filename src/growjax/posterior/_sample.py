@@ -94,11 +94,11 @@ def sample(
     on stderr where it is a terminal; elsewhere (a log) the bars' progress as a plain line every ~10 % of each
     chain's draws. The draws do not depend on where stderr goes.
 
-    ``discrepancy`` and ``tolerances``: the likelihood, as in :func:`growjax.calibration.fit.fit` (:func:`growth_model`): the
-    discrepancy's amplitude and time scale are sampled with the parameters; the rig's tolerances enter through
-    the length's sensitivities (linearised), marginalised exactly. The rig is linearised where the fit puts it:
-    ``rig_centre`` {tolerance: ln(ψ/ψ₀)}, or None to take it from :func:`growjax.calibration.fit.fit` on the same data and
-    likelihood (its ``rig_offset``), so that the fit and the posterior
+    ``discrepancy`` and ``tolerances``: the likelihood, as in :func:`growjax.calibration.fit.fit`
+    (:func:`growth_model`): the discrepancy's amplitude and time scale are sampled with the parameters; the rig's
+    tolerances enter through the length's sensitivities (linearised), marginalised exactly. The rig is linearised where
+    the fit puts it: ``rig_centre`` {tolerance: ln(ψ/ψ₀)}, or None to take it from :func:`growjax.calibration.fit.fit`
+    on the same data and likelihood (its ``rig_offset``), so that the fit and the posterior
     linearise the rig alike. The model runs with the rig there, and the rig's errors keep their prior about
     nominal.
 
@@ -414,8 +414,8 @@ def observation_draws(
     correlation time and the tolerances, if any. The
     pointwise terms are then the one-step-ahead log-densities log p(yᵢ | earlier y) (0 at samples not scored).
     Returns (log-likelihood, this experiment replicated, a new experiment): a replication keeps this experiment's
-    discrepancy and rig error as the data determine them (:func:`growjax.calibration.discrepancy.smooth`, each sample drawn
-    from its marginal) with fresh sensor noise; a new experiment draws a fresh discrepancy and rig error (the
+    discrepancy and rig error as the data determine them (:func:`growjax.calibration.discrepancy.smooth`, each sample
+    drawn from its marginal) with fresh sensor noise; a new experiment draws a fresh discrepancy and rig error (the
     band for running the rig again). Nothing is simulated again: NumPyro's ``Predictive`` and ArviZ's
     log-likelihood would each run the model once more per draw. Seeded by ``seed``.
     """

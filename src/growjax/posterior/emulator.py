@@ -29,6 +29,8 @@ from growjax.model import params as gp
 from growjax.simulation.simulate import sample_times, simulate
 from growjax.simulation.trajectory import OK
 
+__all__ = ["Axis", "Emulator", "build", "model_lengths", "predicted_length", "validate"]
+
 
 @dataclasses.dataclass(frozen=True)
 class Axis:

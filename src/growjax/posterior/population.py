@@ -47,6 +47,18 @@ from growjax.posterior import nuts_chain
 from growjax.simulation.config import Config
 from growjax.simulation.simulate import input_breaks, simulate
 
+__all__ = [
+    "SPREAD_SCALE",
+    "PopulationResult",
+    "linearised_likelihood",
+    "model",
+    "new_robot",
+    "predict_new_robot",
+    "robots_given",
+    "sample_population",
+    "save",
+]
+
 SPREAD_SCALE = 0.3  # s₀: half-normal scale of the population's sd of ln θ (robots within ~±60 % a priori)
 
 

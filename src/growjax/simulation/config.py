@@ -9,6 +9,8 @@ import numpy as np
 
 from growjax.model.params import DRIVES
 
+__all__ = ["FIDELITIES", "TANGENTS", "Config"]
+
 FIDELITIES = ("fast", "reference")
 TANGENTS = ("auto", "forward", "differences")
 

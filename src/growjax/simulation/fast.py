@@ -43,6 +43,24 @@ from growjax.model.robot import INFLOW_MAX_ITERATIONS, RodBalance, inflow
 from growjax.simulation import _assembly as assembly
 from growjax.simulation.config import Config
 
+__all__ = [
+    "FORWARD_SCALES",
+    "FORWARD_STATES",
+    "INVERSE_SCALES",
+    "INVERSE_STATES",
+    "SHARED_BATCH_MIN",
+    "Prepared",
+    "initial_state",
+    "layout",
+    "line_pressure",
+    "line_resistance",
+    "lines_volume",
+    "prepare",
+    "pressure_of",
+    "rod_solve",
+    "stored_volume",
+]
+
 FORWARD_STATES = ("stored_volume", "x_platform", "robot_displacement", "wall_strain", "z_integral", "z_filter")
 FORWARD_SCALES = (1e-6, 1e-2, 1e-4, 1e-6, 1e6, 1e7)  # error control weights the length 100x more than the pressure loop
 INVERSE_STATES = (

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
+__all__ = ["length_rmse", "rmse_at_samples"]
+
 
 def length_rmse(traj, times, measured, t_start=None, t_end=None):
     """Root-mean-square length error (m) of ``traj`` against ``measured`` (m) sampled at ``times`` (s).

@@ -29,6 +29,24 @@ from growjax.simulation import _assembly as assembly
 from growjax.simulation.config import Config
 from growjax.simulation.trajectory import finish
 
+__all__ = [
+    "FORWARD_SCALES",
+    "FORWARD_STATES",
+    "INVERSE_SCALES",
+    "INVERSE_STATES",
+    "Network",
+    "Prepared",
+    "initial_state",
+    "layout",
+    "network",
+    "outputs",
+    "prepare",
+    "pressure_limit_event",
+    "save_at",
+    "solve",
+    "solver_status",
+]
+
 if TYPE_CHECKING:
     import diffrax
 
@@ -204,7 +222,8 @@ rates, vector_field = assembly.vector_fields(_forward_rates, _inverse_rates, lam
 
 
 def initial_state(params: Parameters, config: Config) -> jax.Array:
-    """Scaled initial state: syringes full on their stop, robot at its initial length, lines at their initial pressures."""
+    """Scaled initial state: syringes full on their stop, robot at its initial length, lines at their initial
+    pressures."""
     tube, tank = params.tube, params.tank
     wall0 = tube.diameter_compliance * tube.initial_pressure
     zero = jnp.zeros_like(jnp.asarray(tube.initial_pressure, float))

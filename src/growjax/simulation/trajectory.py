@@ -9,6 +9,8 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
+__all__ = ["OK", "PRESSURE_LIMIT", "SOLVER_FAILED", "STATUS_NAMES", "Trajectory", "finish", "status_name"]
+
 # Status codes of a trajectory.
 OK, PRESSURE_LIMIT, SOLVER_FAILED = 0, 1, 2
 STATUS_NAMES = {OK: "ok", PRESSURE_LIMIT: "pressure_limit", SOLVER_FAILED: "solver_failed"}

@@ -1,8 +1,8 @@
 """XLA:CPU options: an opt-in one that compiles the solver's loop into one kernel ("small loops"), and the
 quick compile the sweep's program takes.
 
-**Small loops.** XLA:CPU runs a compiled program as a sequence of operations, each launched on its own (a few µs), except a
-``while`` loop whose operations it can all emit as one kernel and whose data fit under a size limit
+**Small loops.** XLA:CPU runs a compiled program as a sequence of operations, each launched on its own (a few µs),
+except a ``while`` loop whose operations it can all emit as one kernel and whose data fit under a size limit
 (``xla_cpu_small_while_loop_byte_threshold``, 1 kB by default): that loop runs as one compiled function.
 With the limit raised, the solver's loop (:mod:`growjax.simulation._rosenbrock`) qualifies when its linear solve is
 written in elementwise operations instead of a LAPACK call, which it is while this option is in
@@ -37,6 +37,24 @@ import os
 import re
 import subprocess
 import sys
+
+__all__ = [
+    "FULL_BACKEND",
+    "QUICK_COMPILE",
+    "QUICK_COMPILE_VERIFIED",
+    "SMALL_LOOP_BYTES",
+    "SMALL_LOOP_OPTION",
+    "applied",
+    "apply",
+    "apply_quick_compile",
+    "compile_quickly",
+    "compiling",
+    "quick_compile_applied",
+    "quick_compile_flags",
+    "quick_compile_in_force",
+    "quick_compile_known",
+    "with_small_loops",
+]
 
 SMALL_LOOP_OPTION = "xla_cpu_small_while_loop_byte_threshold"
 SMALL_LOOP_BYTES = 1_000_000_000

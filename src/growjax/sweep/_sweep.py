@@ -177,7 +177,8 @@ class SweepResult:
 
 
 def _valid_rows(names, values, base: gp.Parameters) -> np.ndarray:
-    """Rows whose parameter values are finite and inside their physical ranges (:func:`growjax.model.params.admissible_rows`)."""
+    """Rows whose parameter values are finite and inside their physical ranges
+    (:func:`growjax.model.params.admissible_rows`)."""
     return gp.admissible_rows(base, names, values)
 
 

@@ -7,6 +7,8 @@ import signal
 import sys
 import threading
 
+__all__ = ["SIGNALS", "Stopper"]
+
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 

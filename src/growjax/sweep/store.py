@@ -20,6 +20,22 @@ from pathlib import Path
 import jax
 import numpy as np
 
+__all__ = [
+    "ARRAYS",
+    "FORMAT",
+    "NOT_RUN",
+    "VERSION",
+    "StoreError",
+    "config_record",
+    "create",
+    "differences",
+    "done_chunks",
+    "fingerprint",
+    "open_store",
+    "read",
+    "write_chunk",
+]
+
 FORMAT = "growjax-sweep"
 VERSION = 1
 NOT_RUN = -1  # status of a row whose chunk has not been run

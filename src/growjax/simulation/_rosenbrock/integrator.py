@@ -136,10 +136,11 @@ def integrate(
         save_ts: sorted times (T,) s (with ``batched``, (B, T)) at which to return the solution
             (``Result.saved``), interpolated in the loop as each step is taken, so that no step record is
             kept (only the last step, for the event). A step then covers at most ``SAVE_WINDOW`` of them
-            (binding only where they lie closer than about dtmax / (SAVE_WINDOW − 1)); times beyond the end get its state.
-        small_loops: a single run writes W⁻¹ in elementwise operations (:func:`growjax.simulation._rosenbrock.linear.inverse`)
+            (binding only where they lie closer than about dtmax / (SAVE_WINDOW − 1)); times beyond the end get its
+            state.
+        small_loops: a single run writes W⁻¹ in elementwise operations (`growjax.simulation._rosenbrock.linear.inverse`)
             instead of a LAPACK call, so that XLA:CPU can compile its whole loop into one kernel
-            (:mod:`growjax.simulation.xla_flags`).
+            (`growjax.simulation.xla_flags`).
 
     The state block is (1 + p, n): row 0 the state, rows 1… the sensitivities. Every row shares
     W = I − hγJ, J the state's Jacobian (the block-diagonal W a W-method allows). The error norm
