@@ -51,6 +51,23 @@ def test_pressure_limit_is_373_kpa():
     assert float(gj.pressure_limit(thicker.robot)) == pytest.approx(2 * 373.333e3, rel=1e-5)
 
 
+def test_the_rigs_limits_are_margins_under_the_membrane_limit_and_the_strokes():
+    """One set of limits for every workflow: the ceiling 90 % of the membrane's 373.3 kPa, the length 95 % of each
+    drive's stroke, the syringes' 50 mm travel, the stepper's 100 steps/s; the platform's speed unchecked unless
+    given."""
+    forward = gj.limits(gj.reference("forward"))
+    assert forward.membrane_limit == pytest.approx(373.333e3, rel=1e-5)
+    assert forward.pressure_ceiling == pytest.approx(336e3, rel=1e-5)
+    assert forward.length_ceiling == pytest.approx(0.076, rel=1e-12) and forward.syringe_stroke == 0.05
+    assert forward.max_pump_speed is None and forward.max_step_rate == 100.0
+    stepper = gj.limits(gj.reference("inverse"), max_pump_speed=5e-3)
+    assert stepper.length_ceiling == pytest.approx(0.095, rel=1e-12) and stepper.max_pump_speed == 5e-3
+    assert stepper.summary()["pressure_ceiling_Pa"] == forward.pressure_ceiling  # the same membrane
+    for bad in ({"margin": 1.2}, {"stroke_margin": 0.0}, {"max_pump_speed": 0.0}, {"max_step_rate": -1.0}):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            gj.limits(gj.reference("forward"), **bad)
+
+
 def test_orifice_inverse_is_exact():
     k, p_cr = 1e-7, 150.0
     q = jnp.array([-3e-5, -1e-8, 0.0, 2e-9, 4e-6])
