@@ -216,8 +216,8 @@ def test_a_criterion_defined_outside_the_package_runs_through_the_design():
     from growjax.design import problem as dprob
 
     base = gj.replace(gj.reference("forward"), Y=9000.0)
-    names = (Y, "robot.extensibility")
-    known = gd.Knowledge(base, names, np.diag([0.03, 0.3]) ** 2, {"robot.catheter_friction": 0.2}, HYPER, "test")
+    names = (Y, "robot.catheter_friction")  # the data inform both, Y's relative variance the smaller by ~20×
+    known = gd.Knowledge(base, names, np.diag([0.03, 0.05]) ** 2, {"pid.proportional": 0.05}, HYPER, "test")
     space = gd.DesignSpace(1.0, 336e3, _catheter(), knot_spacing=0.5)
     res = gd.design(known, space, EOptimal(), random=2, iterations=1, n_draws=2, points=1, nonlinear_draws=0)
     assert res.summary()["criterion"] == "E"
@@ -229,7 +229,7 @@ def test_a_criterion_defined_outside_the_package_runs_through_the_design():
         cov = dprob.covariances(problem, info_l, info_p, cross, ("length",))["known"][:2, :2]
         largest = np.linalg.eigvalsh(cov)[-1]
         assert crit[label] == pytest.approx(np.log(largest), rel=1e-9, abs=1e-12)
-        assert np.log(np.trace(cov)) > crit[label] + 1e-3  # not the A-criterion: the smaller variance counts there
+        assert np.log(np.trace(cov)) > crit[label] + 0.01  # not the A-criterion (there Y's variance adds ~5 %)
         sd = [r["parameters"] for r in res.rows if r["input"] == label][0]
         np.testing.assert_allclose([sd[n]["sd_log"] for n in names], np.sqrt(np.diag(cov)), rtol=1e-9)
     assert crit["design"] <= crit["best random input"]  # the search minimised it
