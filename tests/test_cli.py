@@ -228,7 +228,7 @@ def test_control_gives_the_design_the_fixed_parameters_and_tolerances(tmp_path, 
         seen.update(kw)
         raise _Designed
 
-    monkeypatch.setattr(gc, "design", design)
+    monkeypatch.setattr(gc, "design_controller", design)
     with pytest.raises(_Designed):
         cli.main(["control", "--param", "ext=2e-6", "--tolerance", "Kp=0.1", "--out", str(tmp_path)])
     assert float(gj.get(seen["base"], "ext")) == 2e-6
