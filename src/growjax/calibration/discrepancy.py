@@ -32,32 +32,6 @@ import numpy as np
 import numpyro.distributions as _dist
 from jaxtyping import ArrayLike, Float
 
-__all__ = [
-    "AMPLITUDE_SCALE",
-    "KINDS",
-    "NOISE_SCALE",
-    "NOISE_TIME_BOUNDS",
-    "NOISE_TIME_LOG_SD",
-    "NOISE_TIME_MEDIAN",
-    "TIME_SCALE_LOG_SD",
-    "TIME_SCALE_MEDIAN",
-    "Hyper",
-    "MeasuredLength",
-    "distribution",
-    "draw",
-    "drift_kernel",
-    "estimate",
-    "forecast",
-    "kalman_filter",
-    "kernel",
-    "log_likelihood",
-    "log_likelihood_runs",
-    "log_prior",
-    "noise_kernel",
-    "smooth",
-    "whiten",
-]
-
 KINDS = ("matern32", "none")
 
 # Priors of the hyperparameters (fit: MAP; posterior: marginalised). See the docs' "Uncertainty" page.
