@@ -12,6 +12,7 @@ from conftest import REPO, ar1_noise, smooth_perturbation
 import growjax as gj
 from growjax import discover as gd
 from growjax.data import experiment as ex
+from growjax.model import params as gp
 
 
 def _smooth_bump(t, height):
@@ -232,7 +233,7 @@ def test_candidate_fits_stay_in_their_physical_ranges():
 
     times, _, inputs, cfg = _small_example("clean")
     top = gd.candidate_parameter("fluid_leak")[2][1]
-    truth = gj.params.with_effects(gj.reference(), fx.FluidLeak(conductance=3.0 * top))
+    truth = gp.with_effects(gj.reference(), fx.FluidLeak(conductance=3.0 * top))
     length = np.asarray(gj.simulate(truth, inputs, cfg, ts=times).length)
     problem = gd.make_candidates(times, length, inputs, SMALL_CANDIDATES, gj.reference(), ("Y",), cfg)
     lo, hi = problem.bounds()
@@ -240,7 +241,7 @@ def test_candidate_fits_stay_in_their_physical_ranges():
         assert float(problem.effect_values(jnp.full(3, hi[1 + k]), jnp.eye(3)[k])[k]) == pytest.approx(
             gd.candidate_parameter(name)[2][1], rel=1e-9
         )
-    y_lo, y_hi, _ = gj.params.physical_ranges(problem.base)[problem.base_names[0]]  # Y: (0, y_hi) Pa
+    y_lo, y_hi, _ = gp.physical_ranges(problem.base)[problem.base_names[0]]  # Y: (0, y_hi) Pa
     assert y_lo == 0 and lo[0] == -np.inf and hi[0] == pytest.approx(np.log(y_hi / float(problem.refs[0])))
     k = SMALL_CANDIDATES.index("fluid_leak")
     mask, select = np.eye(3)[k], np.zeros((4, 2))  # Y and the leak fitted: discover's first-round shape

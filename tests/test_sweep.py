@@ -16,6 +16,7 @@ import pytest
 import growjax as gj
 from growjax import sweep as sw
 from growjax.data import experiment as ex
+from growjax.sweep import _sweep as sweep_impl
 
 CFG = gj.Config(t1=2.0)
 REPO = Path(__file__).resolve().parents[1]
@@ -229,14 +230,14 @@ def test_stored_sweep_stopped_and_resumed_equals_an_uninterrupted_one(setup, tmp
 def test_a_signal_stops_a_stored_sweep_after_the_chunk_in_flight(setup, tmp_path, monkeypatch):
     """SIGTERM raised while the first chunk runs: that chunk is kept, the sweep stops before the next."""
     base, inputs, measured = setup
-    run_chunk = sw._run_chunk
+    run_chunk = sweep_impl._run_chunk
 
     def signalled(plan, c):
         if c == 0:
             os.kill(os.getpid(), signal.SIGTERM)
         return run_chunk(plan, c)
 
-    monkeypatch.setattr(sw, "_run_chunk", signalled)
+    monkeypatch.setattr(sweep_impl, "_run_chunk", signalled)
     with pytest.raises(sw.SweepInterrupted, match="1 of 3 chunks") as stop:
         sw.lhs_sweep(6, base, inputs, CFG, seed=7, measured=measured, chunk_size=2, store=tmp_path / "s")
     assert stop.value.signal == signal.SIGTERM

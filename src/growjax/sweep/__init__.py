@@ -19,6 +19,7 @@ from ._sweep import (
     resume,
     sobol_indices,
 )
+from .store import StoreError
 
 __all__ = [
     "Dimension",
@@ -38,4 +39,5 @@ __all__ = [
     "parse_dimension",
     "resume",
     "sobol_indices",
+    "StoreError",
 ]
