@@ -15,8 +15,9 @@ arviz-stats, arviz-plots).
 - ``observed_data``: ``length`` (time,), m, the measured length;
 - ``constant_data``: ``scored`` (time,) bool, the samples the likelihood scores.
 
-Every ``time`` coordinate is the sample time in s (in ``log_likelihood``, the scored samples' times); variables
-with a unit carry it in their ``units`` attribute.
+Every ``time`` coordinate is the sample time in s (in ``log_likelihood``, the scored samples' times). The lengths,
+the times and the noise's and discrepancy's sites carry their unit in a ``units`` attribute; the parameters are in
+SI units, as ``growjax params`` lists them.
 
 The NumPyro model samples in SI units. The record keeps the sites of a sub-millimetre or sub-second size in mm
 or ms (`RECORDED`), under names that say so, so that ``arviz_stats.summary``'s two decimals show their digits;
