@@ -2,7 +2,8 @@
 
 Run from the repository root::
 
-    python calibration/calibrate_public.py [--quick] [--out out/calibration] [--results calibration/results/calibration.json]
+    python calibration/calibrate_public.py [--quick] [--out out/calibration]
+        [--results calibration/results/calibration.json]
 
 Every step uses the default likelihood of ``growjax fit`` and ``growjax posterior``: the length as the model plus
 a Matérn-3/2 discrepancy plus sensor noise, the rig's default tolerance budget with the rig's errors inferred
@@ -194,7 +195,7 @@ def main():
         summary["posterior_sd_over_prior_sd"] = _identification(res.idata, priors)
         report["posterior"][law] = summary
         results[law] = res
-        posterior_figures(res.idata, [p.site for p in priors] + ["sigma"], out, prefix=f"{law}_")
+        posterior_figures(res.idata, [p.site for p in priors] + ["sigma_mm"], out, prefix=f"{law}_")
         print(
             f"[{time.perf_counter() - clock:.0f} s] posterior ({law}) done: wall {res.wall_s:.0f} s, "
             f"R-hat {summary['rhat_max']:.4f}, divergences {summary['divergences']}",

@@ -9,7 +9,6 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 __all__ = [
-    "arviz_plots",
     "control_figure",
     "discovery_figure",
     "population_figure",
@@ -205,31 +204,6 @@ def predictive_figure(times, observed, bands: dict, path, title: str = ""):
     return _save(fig, path)
 
 
-def arviz_plots():
-    """The ``arviz_plots`` module (ArviZ 1.x's plots), importable beside any matplotlib ≥ 3.8.
-
-    arviz-plots up to 1.1 registers its styles through ``matplotlib.style.core``, a module matplotlib 3.11 keeps
-    (deprecated) but no longer imports with ``matplotlib.style``: it is imported here first, so ``import
-    arviz_plots`` succeeds. Its matplotlib backend is imported too; matplotlib's deprecation notices raised while
-    importing them are silenced."""
-    import importlib
-    import warnings
-
-    import matplotlib
-    import matplotlib.style
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", matplotlib.MatplotlibDeprecationWarning)
-        warnings.simplefilter("ignore", PendingDeprecationWarning)
-        if not hasattr(matplotlib.style, "core"):
-            try:
-                importlib.import_module("matplotlib.style.core")
-            except ImportError:  # a matplotlib without the module: an arviz-plots that does not need it
-                pass
-        importlib.import_module("arviz_plots.backend.matplotlib")
-        return importlib.import_module("arviz_plots")
-
-
 def _figure(plots):
     """The matplotlib figure of an arviz-plots ``PlotCollection`` or ``PlotMatrix``."""
     return plots.viz["figure"].item()
@@ -262,13 +236,23 @@ def rank_figure(idata, sites, bins: int = 20):
 
 
 def posterior_figures(idata, sites, folder, prefix: str = ""):
-    """Figures of the posterior of ``sites`` in the DataTree ``idata``, PNG files in ``folder``: the rank-bar
-    trace (:func:`rank_figure`) and arviz-plots' pair plot with marginals (``plot_pair``) → (trace path, pair
-    path)."""
+    """Figures of a posterior as PNG files: the rank-bar trace (`rank_figure`) and arviz-plots' pair plot with
+    marginals (``plot_pair``, in ArviZ's ``arviz-variat`` style).
+
+    Args:
+        idata: a DataTree with a ``posterior`` group (`growjax.posterior.inference_data`).
+        sites: the scalar variables of ``posterior`` to show, by their names there (the noise is ``sigma_mm``).
+        folder: where the files go (created).
+        prefix: the files' names' prefix.
+
+    Returns:
+        (the trace figure's path, the pair plot's path): ``{prefix}trace.png`` and ``{prefix}pair.png``.
+    """
+    import arviz_plots as azp
+
     sites = list(sites)
     trace = _save(rank_figure(idata, sites), Path(folder) / f"{prefix}trace.png")
-    azp = arviz_plots()
-    with plt.style.context("arviz-variat"):  # ArviZ's style (colours as arviz-plots reads them)
+    with plt.style.context("arviz-variat"):  # ArviZ's style, registered by importing arviz_plots
         pair = azp.plot_pair(idata, var_names=sites, backend="matplotlib", figure_kwargs={"figsize": (8, 8)})
         pair = _save(_figure(pair), Path(folder) / f"{prefix}pair.png")
     return trace, pair

@@ -67,7 +67,7 @@ from ._priors import (
     lockhart_priors,
     paper_priors,
 )
-from ._record import inference_data
+from ._record import RECORDED, Recorded, inference_data, recorded_name, site_draws
 from ._sample import PosteriorResult, build_residuals, observation_draws, sample
 
 __all__ = [
@@ -76,9 +76,11 @@ __all__ = [
     "LAPLACE_MAX_STEPS",
     "LAPLACE_STALL",
     "PRIOR_CURVATURE_FLOOR",
+    "RECORDED",
     "DirectMean",
     "PosteriorResult",
     "Prior",
+    "Recorded",
     "Residuals",
     "RidgePrior",
     "SoftplusPrior",
@@ -104,9 +106,11 @@ __all__ = [
     "precondition",
     "predict",
     "predictive_band",
+    "recorded_name",
     "ridge_coordinates",
     "sample",
     "sbc",
+    "site_draws",
     "value_and_jacobian",
     "with_model_tangents",
 ]

@@ -18,6 +18,7 @@ from growjax.simulation import xla_flags
 
 from ._model import Residuals, emulated_mean, growth_model
 from ._priors import Prior
+from ._record import recorded_name, site_draws
 
 
 def predictive_band(draws, level: float = 0.9):
@@ -30,25 +31,27 @@ def diagnostics(idata, priors, observed, mcmc=None, residuals: Residuals | None 
     """Posterior means and 90 % intervals, R-hat, ESS, divergences, BFMI and predictive coverage: the share of
     the measured samples inside the pointwise 90 % band of this experiment replicated (``coverage_90``) and of a
     new experiment (``coverage_90_new_experiment``, a fresh discrepancy and rig error: wider). ``idata``: the run's
-    DataTree (:func:`inference_data`); R-hat, ESS and BFMI are arviz-stats'."""
+    DataTree (:func:`inference_data`); R-hat, ESS and BFMI are arviz-stats'. ``parameters`` is keyed by NumPyro's
+    site names, in SI units (σ in m, where the DataTree records ``sigma_mm``)."""
     import arviz_stats as azs
 
-    sites = [p.site for p in priors] + ["sigma"]
-    sites += [s for s in ("delta_amplitude", "delta_time_scale", "noise_time") if s in idata.posterior]
-    rhat = azs.rhat(idata, var_names=sites)
-    ess_bulk = azs.ess(idata, var_names=sites, method="bulk")
-    ess_tail = azs.ess(idata, var_names=sites, method="tail")
     post = idata.posterior
+    sites = [p.site for p in priors] + ["sigma"]
+    sites += [s for s in ("delta_amplitude", "delta_time_scale", "noise_time") if recorded_name(s) in post]
+    names = [recorded_name(s) for s in sites]
+    rhat = azs.rhat(idata, var_names=names)
+    ess_bulk = azs.ess(idata, var_names=names, method="bulk")
+    ess_tail = azs.ess(idata, var_names=names, method="tail")
     params = {}
-    for s in sites:
-        x = np.asarray(post[s]).ravel()
+    for s, name in zip(sites, names):
+        x = site_draws(post, s).ravel()
         params[s] = {
             "mean": float(x.mean()),
             "sd": float(x.std()),
             "interval_90": [float(np.quantile(x, 0.05)), float(np.quantile(x, 0.95))],
-            "rhat": float(rhat[s]),
-            "ess_bulk": float(ess_bulk[s]),
-            "ess_tail": float(ess_tail[s]),
+            "rhat": float(rhat[name]),
+            "ess_bulk": float(ess_bulk[name]),
+            "ess_tail": float(ess_tail[name]),
         }
     div = int(np.asarray(idata.sample_stats["diverging"]).sum()) if "diverging" in idata.sample_stats else 0
     observed = np.asarray(observed)
@@ -78,7 +81,7 @@ def predict(idata, priors, base, inputs, config, times, seed: int = 0, max_draws
     """Posterior predictive length draws (S, T) for new ``inputs`` (e.g. another pressure profile), noise included."""
     post = idata.posterior
     flat = {p.site: np.asarray(post[p.site]).ravel() for p in priors}
-    sigma = np.asarray(post["sigma"]).ravel()
+    sigma = site_draws(post, "sigma").ravel()
     take = np.random.default_rng(seed).choice(sigma.size, size=min(max_draws, sigma.size), replace=False)
     thetas = {p.name: jnp.asarray(flat[p.site][take]) for p in priors}
     mu = jax.jit(jax.vmap(lambda th: predicted_length(th, base, inputs, config, jnp.asarray(times))))(thetas)
@@ -97,7 +100,7 @@ def forecast(
     t_fit, y_fit = (np.asarray(a, float) for a in result.data)
     t_new = np.asarray(times, float)
     union = np.unique(np.concatenate([t_fit, t_new]))
-    sigma = np.asarray(post["sigma"]).ravel()
+    sigma = site_draws(post, "sigma").ravel()
     take = np.random.default_rng(seed).choice(sigma.size, size=min(max_draws, sigma.size), replace=False)
     thetas = {p.name: jnp.asarray(np.asarray(post[p.site]).ravel()[take]) for p in priors}
     res = result.residuals
@@ -127,7 +130,7 @@ def forecast(
         g, u = jnp.asarray(g_np), jnp.asarray(res.tolerance)
         offset = np.asarray(res.rig_mean(g_np))  # the rig term's prior mean where the rig is not nominal
         mu = mu + offset
-    flat = lambda site: jnp.asarray(np.asarray(post[site]).ravel()[take]) if site in post else None
+    flat = lambda site: jnp.asarray(site_draws(post, site).ravel()[take]) if recorded_name(site) in post else None
     amp, ell, tau = flat("delta_amplitude"), flat("delta_time_scale"), flat("noise_time")
     hyper = dc.Hyper(
         jnp.zeros(take.size) if amp is None else amp,
