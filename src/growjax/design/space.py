@@ -1,5 +1,5 @@
-"""The design spaces: the forward drive's pressure demand (:class:`DesignSpace`) and the stepper's step schedule
-(:class:`StepperSpace`).
+"""The design spaces: the forward drive's pressure demand (`DesignSpace`, made by `demand_space`) and the
+stepper's step schedule (`StepperSpace`, made by `stepper_space`).
 
 The forward drive's demand is a piecewise-linear profile on fixed knots over the run.
 
@@ -7,16 +7,16 @@ A design is a vector x (K − 1,) of unconstrained numbers, one per knot after t
 p_max·σ(x_k) (σ the logistic function), so every x is a demand inside (0, p_max) and the map is smooth for the
 optimiser. The run starts at rest: the demand is 0 at t = 0 (the first knot), as in the shipped experiments (a
 demand already high when the run starts sends the fast configuration through a start-up transient the
-reference does not have). Between knots the demand is linear (:class:`growjax.control.KnotProfile`: every interior knot is a
-declared slope break, so the solver's breaks do not depend on the values). The catheter is an input the rig
-gives, not a design variable: its length is the one of the experiment already run (held after its end).
+reference does not have). Between knots the demand is linear (`growjax.control.KnotProfile`: every interior
+knot is a declared slope break, so the solver's breaks do not depend on the values). The catheter is an input the
+rig gives, not a design variable: its length is the one of the experiment already run (held after its end).
 
 The stepper's input is discrete. Its position controller samples the desired length every 1/f s and issues at
-most one step per period, half a period later (:func:`growjax.model.motor.step_schedule`), so every schedule it can
+most one step per period, half a period later (`growjax.model.motor.step_schedule`), so every schedule it can
 issue is a choice of −1, 0 or +1 step at each of the same edge times. A design is that vector of choices; the
 schedule's count is its running sum, never below 0 (the robot starts at rest). All schedules share their edges,
 hence the solver's breaks and one compiled program; the criterion is piecewise constant in them, so the search
-is over the choices themselves (:func:`growjax.design.optimise.local_search`), not along a gradient.
+is over the choices themselves (`growjax.design.optimise.local_search`), not along a gradient.
 SI units: s, Pa, m.
 """
 
@@ -25,6 +25,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
@@ -36,6 +37,9 @@ from growjax.model.motor import step_schedule
 from growjax.model.signals import Constant, Inputs, Sampled, StepSchedule, published_pulse
 from growjax.simulation.config import Config
 from growjax.simulation.simulate import input_breaks
+
+if TYPE_CHECKING:
+    from growjax.design.constraints import Limits
 
 KNOT_SPACING = 0.5  # s between the demand's knots
 SAMPLE_INTERVAL = 0.01  # s between the sensors' samples (100 Hz, as the shipped experiments)
@@ -366,3 +370,45 @@ def stepper_space(base, duration: float, experiment: ex.Experiment | None = None
         recorded,
         t0=Config().t0,
     )
+
+
+def check_p_max(p_max: float, limits: Limits) -> None:
+    """Refuse a demand whose top ``p_max`` (Pa) is above the sensed-pressure ceiling of ``limits``.
+
+    Raises:
+        ValueError: naming both pressures, kPa.
+    """
+    if p_max > limits.pressure + 1e-9:
+        raise ValueError(
+            f"--p-max {p_max / 1e3:.1f} kPa is above the sensed-pressure ceiling "
+            f"{limits.pressure / 1e3:.1f} kPa (the membrane limit {limits.membrane / 1e3:.1f} kPa × the margin)"
+        )
+
+
+def demand_space(
+    duration: float,
+    limits: Limits,
+    experiment: ex.Experiment | None = None,
+    *,
+    p_max: float | None = None,
+    knot_spacing: float | None = None,
+) -> DesignSpace:
+    """The forward drive's `DesignSpace` over ``duration`` s, inside ``limits``.
+
+    Args:
+        duration: length of the run, s.
+        limits: the limits the design respects (`growjax.design.limits`).
+        experiment: an experiment already run: its catheter length, held after its end (none: 0).
+        p_max: top of the demand, Pa; None: the sensed-pressure ceiling of ``limits``.
+        knot_spacing: s between the demand's knots; None: `KNOT_SPACING`.
+
+    Returns:
+        The space.
+
+    Raises:
+        ValueError: ``p_max`` above the sensed-pressure ceiling (`check_p_max`), or a bad duration or knot spacing.
+    """
+    p_max = limits.pressure if p_max is None else p_max
+    check_p_max(p_max, limits)
+    spacing = KNOT_SPACING if knot_spacing is None else knot_spacing
+    return DesignSpace(duration, p_max, catheter_of(experiment, duration), spacing)
