@@ -169,10 +169,10 @@ def test_a_failure_of_the_computation_is_not_reported_as_bad_input(monkeypatch, 
     def singular(args):
         raise np.linalg.LinAlgError("Singular matrix")
 
-    monkeypatch.setitem(cli.COMMANDS, "simulate", singular)
+    monkeypatch.setattr(cli.simulate, "run", singular)
     with pytest.raises(np.linalg.LinAlgError, match="Singular matrix"):
         cli.main(["simulate", "--out", str(tmp_path / "out")])
-    monkeypatch.setitem(cli.COMMANDS, "simulate", lambda args: (_ for _ in ()).throw(ValueError("bad --x")))
+    monkeypatch.setattr(cli.simulate, "run", lambda args: (_ for _ in ()).throw(ValueError("bad --x")))
     assert cli.main(["simulate", "--out", str(tmp_path / "out")]) == 2
 
 
@@ -201,16 +201,17 @@ def test_bad_experiments_exit_2_with_one_line_naming_the_file(tmp_path, capsys):
 
 def test_a_window_longer_than_the_data_is_shrunk_to_them_with_a_note(tmp_path, capsys):
     from growjax import cli
+    from growjax.cli import loader, options
 
     short = _rows(tmp_path / "short.csv", "time_s,robot_length_m", [0.01, 0.1, 0.2])
     args = cli.build_parser().parse_args(["simulate", str(short), "--no-catheter"])
-    _, exp, _, _ = cli._setup(args, "forward")
-    assert args.t_end == pytest.approx(0.2) and cli.make_config(args).t1 == pytest.approx(0.2)
+    exp = loader.load(args).experiment
+    assert args.t_end == pytest.approx(0.2) and options.make_config(args).t1 == pytest.approx(0.2)
     assert "catheter_length_m" not in exp and exp.time.size == 3
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "note" in err and "0.01–0.2 s" in err and "0.001–10 s" in err, err
     args = cli.build_parser().parse_args(["simulate", str(short), "--no-catheter", "--t-end", "0.15"])
-    _, exp, _, _ = cli._setup(args, "forward")  # a window inside the data: kept, silently
+    exp = loader.load(args).experiment  # a window inside the data: kept, silently
     assert args.t_end == 0.15 and exp.time.size == 2 and capsys.readouterr().err == ""
 
 
