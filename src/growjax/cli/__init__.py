@@ -23,7 +23,7 @@ from growjax.cli.command import BAD_INPUT, OK, RUN_FAILED, RunFailed, Stopped
 COMMANDS = (simulate, sweep, fit, posterior, discover, control, design, params, effects)
 
 
-def command(name: str):
+def module_of(name: str):
     """The module of the command ``name``."""
     return next(c for c in COMMANDS if c.NAME == name)
 
@@ -73,12 +73,12 @@ def main(argv=None) -> int:
 
     matplotlib.use("Agg")  # the commands write figures to files
     args = build_parser().parse_args(argv)
-    cmd = command(args.command)
+    cmd = module_of(args.command)
     to_stdout = getattr(args, "json", None) == "-"
     human = sys.stderr if to_stdout else sys.stdout
     if not cmd.PROCESS.workflow:
         summary = cmd.run(args)
-        _write_json(summary, args.json)
+        _write_json(summary, getattr(args, "json", None))
         if not to_stdout:
             print("\n".join(cmd.summary_lines(summary)), file=human)
         return OK
@@ -104,14 +104,14 @@ def main(argv=None) -> int:
         return stop.status
     if summary.get("process_index", 0):  # a worker of a distributed sweep: process 0 reports
         return status
-    _write_json(summary, args.json)
+    _write_json(summary, getattr(args, "json", None))
     print("\n".join(cmd.summary_lines(summary)), file=human)
     if failure:
         print(f"growjax {args.command}: failed: {failure}", file=sys.stderr)
     return status
 
 
-__all__ = ["BAD_INPUT", "COMMANDS", "OK", "RUN_FAILED", "build_parser", "command", "main", "summary_lines"]
+__all__ = ["BAD_INPUT", "COMMANDS", "OK", "RUN_FAILED", "build_parser", "main", "module_of", "summary_lines"]
 
 
 if __name__ == "__main__":
