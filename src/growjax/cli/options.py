@@ -138,7 +138,7 @@ _SOURCE = (
         "(default: $GROWJAX_DATA_DIR)",
     ),
 )
-DRIVE = option(
+_DRIVE = option(
     "--drive",
     choices=DRIVES,
     default="forward",
@@ -176,7 +176,7 @@ def shared(
     ``--json``."""
     help_ = _DATA_HELP + ("; several, or a TOML manifest, are fitted jointly" if many else "")
     parser.add_argument("data", nargs="*" if many else "?", default=None, help=help_)
-    add(parser, (*_SOURCE, DRIVE, _PARAM))
+    add(parser, (*_SOURCE, _DRIVE, _PARAM))
     parser.add_argument(
         "--fidelity",
         choices=FIDELITIES,
@@ -279,7 +279,6 @@ def likelihood_of(args) -> dict:
 
 
 __all__ = [
-    "DRIVE",
     "DRIVES",
     "FIDELITIES",
     "Formatter",
