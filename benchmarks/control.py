@@ -25,8 +25,8 @@ import numpy as np
 
 import growjax as gj
 from growjax import control as gc
-from growjax.cli import default_data_path
 from growjax.data import experiment as ex
+from growjax.data.datasets import default_data_path
 
 HERE = Path(__file__).resolve().parent
 from _environment import environment  # the script's folder is on the path

@@ -71,7 +71,7 @@ def knowledge_of(args):
     import growjax as gj
     from growjax import design as gd
     from growjax.calibration import fit as gf
-    from growjax.cli import recorded_parameters
+    from growjax.cli.loader import recorded_parameters
     from growjax.data import experiment as ex
 
     path = Path(args.data)
@@ -502,7 +502,7 @@ def main():
 
     import growjax as gj
     from growjax import design as gd
-    from growjax.cli import recorded_parameters
+    from growjax.cli.loader import recorded_parameters
 
     clock = time.perf_counter()
     known, exp, base = knowledge_of(args)

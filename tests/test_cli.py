@@ -123,6 +123,44 @@ def test_simulate_command_reports_bad_input(tmp_path):
     assert done.returncode == 2 and "millimetres" in done.stderr
 
 
+def test_a_command_is_one_module_listed_in_the_registry(monkeypatch, tmp_path, capsys):
+    """A module with NAME, HELP, PROCESS, add_arguments, run and summary_lines, listed in COMMANDS, is a command:
+    its options parsed (a bad value exit 2), its summary written as JSON and shown in lines (exit 0), its failure
+    exit 1 with the reason and the summary still written."""
+    import types
+
+    from growjax import cli
+    from growjax.cli import command, options
+
+    echo = types.ModuleType("echo")
+    echo.NAME, echo.HELP, echo.PROCESS = "echo", "say a pressure back in kPa", command.Process()
+
+    def add_arguments(parser):
+        options.add(parser, (options.option("--value", type=options.positive, default=1e3, help="a pressure, Pa"),))
+        options.json_option(parser, "write the summary as JSON to FILE")
+
+    def run(args):
+        summary = {"command": "echo", "value_Pa": args.value}
+        if args.value > 2e5:
+            raise command.RunFailed("above 200 kPa", summary)
+        return summary
+
+    echo.add_arguments, echo.run = add_arguments, run
+    echo.summary_lines = lambda s: [f"echo: {s['value_Pa'] / 1e3:g} kPa"]
+    monkeypatch.setattr(cli, "COMMANDS", (*cli.COMMANDS, echo))
+
+    assert cli.main(["echo", "--value", "2e3", "--json", str(tmp_path / "e.json")]) == 0
+    assert capsys.readouterr().out.strip() == "echo: 2 kPa"
+    assert json.loads((tmp_path / "e.json").read_text()) == {"command": "echo", "value_Pa": 2000.0}
+    assert cli.main(["echo", "--value", "3e5", "--json", str(tmp_path / "f.json")]) == 1
+    assert capsys.readouterr().err.strip() == "growjax echo: failed: above 200 kPa"
+    assert json.loads((tmp_path / "f.json").read_text())["failure"] == "above 200 kPa"
+    with pytest.raises(SystemExit) as stop:
+        cli.main(["echo", "--value", "-1"])
+    assert stop.value.code == 2 and "--value: must be a positive number" in capsys.readouterr().err
+    assert "echo" in cli.build_parser().format_help()
+
+
 @pytest.mark.parametrize(
     "argv, named",
     [
@@ -169,10 +207,10 @@ def test_a_failure_of_the_computation_is_not_reported_as_bad_input(monkeypatch, 
     def singular(args):
         raise np.linalg.LinAlgError("Singular matrix")
 
-    monkeypatch.setitem(cli.COMMANDS, "simulate", singular)
+    monkeypatch.setattr(cli.simulate, "run", singular)
     with pytest.raises(np.linalg.LinAlgError, match="Singular matrix"):
         cli.main(["simulate", "--out", str(tmp_path / "out")])
-    monkeypatch.setitem(cli.COMMANDS, "simulate", lambda args: (_ for _ in ()).throw(ValueError("bad --x")))
+    monkeypatch.setattr(cli.simulate, "run", lambda args: (_ for _ in ()).throw(ValueError("bad --x")))
     assert cli.main(["simulate", "--out", str(tmp_path / "out")]) == 2
 
 
@@ -201,16 +239,17 @@ def test_bad_experiments_exit_2_with_one_line_naming_the_file(tmp_path, capsys):
 
 def test_a_window_longer_than_the_data_is_shrunk_to_them_with_a_note(tmp_path, capsys):
     from growjax import cli
+    from growjax.cli import loader, options
 
     short = _rows(tmp_path / "short.csv", "time_s,robot_length_m", [0.01, 0.1, 0.2])
     args = cli.build_parser().parse_args(["simulate", str(short), "--no-catheter"])
-    _, exp, _, _ = cli._setup(args, "forward")
-    assert args.t_end == pytest.approx(0.2) and cli.make_config(args).t1 == pytest.approx(0.2)
+    exp = loader.load(args).experiment
+    assert args.t_end == pytest.approx(0.2) and options.make_config(args).t1 == pytest.approx(0.2)
     assert "catheter_length_m" not in exp and exp.time.size == 3
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "note" in err and "0.01–0.2 s" in err and "0.001–10 s" in err, err
     args = cli.build_parser().parse_args(["simulate", str(short), "--no-catheter", "--t-end", "0.15"])
-    _, exp, _, _ = cli._setup(args, "forward")  # a window inside the data: kept, silently
+    exp = loader.load(args).experiment  # a window inside the data: kept, silently
     assert args.t_end == 0.15 and exp.time.size == 2 and capsys.readouterr().err == ""
 
 

@@ -7,6 +7,7 @@ import pytest
 from conftest import REPO
 
 from growjax import cli
+from growjax.cli import loader
 from growjax.data import datasets
 from growjax.data import experiment as ex
 
@@ -79,16 +80,16 @@ def test_the_command_line_fails_in_one_line_offline_and_on_a_bad_copy(offline, t
 
 
 def test_the_command_line_names_the_data_set_with_a_local_copy(offline, local_copy):
-    path = cli.data_path("mammobot", str(local_copy))
+    path = loader.data_path("mammobot", str(local_copy))
     assert path == offline / "experiment.csv" and ex.read(path).time.size == 2499
     with pytest.raises(ValueError, match="--data-dir applies to a named data set"):
-        cli.data_path(str(local_copy / "kings_ts.mat"), str(local_copy))
+        loader.data_path(str(local_copy / "kings_ts.mat"), str(local_copy))
     with pytest.raises(ValueError, match="--data-dir applies to a named data set: name it"):
-        cli.data_path(None, str(local_copy))
+        loader.data_path(None, str(local_copy))
 
 
 def test_a_folder_named_like_a_data_set_is_read_as_a_folder(tmp_path, monkeypatch, local_copy):
     folder = tmp_path / "mammobot"
     shutil.copytree(local_copy, folder)
     monkeypatch.chdir(tmp_path)
-    assert cli.data_path("mammobot") == folder.relative_to(tmp_path)
+    assert loader.data_path("mammobot") == folder.relative_to(tmp_path)

@@ -11,7 +11,7 @@ import pytest
 import growjax as gj
 from growjax import cli
 from growjax.calibration import joint
-from growjax.cli._summary import summary_lines
+from growjax.cli import summary_lines
 from growjax.data import sets as xs
 from growjax.data.experiment import ExperimentError
 

@@ -7,18 +7,12 @@ import shutil
 import signal
 from pathlib import Path
 
+from growjax.cli.command import Stopped
+
 STORE = "sweep.zarr"  # the store's folder inside --out
 # the options that define a sweep (recorded in its store; --resume takes them from there)
 DEFINING = ("data", "drive", "param", "fidelity", "rtol", "seed", "t_end", "n", "range", "chunk_size")
 STOPPED_BY_REQUEST = 3  # exit status of a sweep stopped by --max-chunks (a signal: 128 + its number)
-
-
-class Stopped(Exception):
-    """The sweep stopped before its end, its chunks kept; ``status``: the exit status."""
-
-    def __init__(self, message: str, status: int):
-        super().__init__(message)
-        self.status = status
 
 
 def store_path(folder) -> Path:
@@ -81,7 +75,7 @@ def prepare_new(folder) -> Path:
 
 
 def stopped(error, folder, distributed: bool) -> Stopped:
-    """The :class:`Stopped` of an interrupted sweep (``error``: :class:`growjax.sweep.SweepInterrupted`, or a
+    """The `Stopped` of an interrupted sweep (``error``: `growjax.sweep.SweepInterrupted`, or a
     ``KeyboardInterrupt`` that cut the chunk in flight)."""
     done = f"{error.done} of {error.total} chunks" if hasattr(error, "done") else "the chunks finished"
     again = " with the same process options" if distributed else ""

@@ -48,7 +48,7 @@ from growjax.design.problem import (
     values,
 )
 from growjax.design.sensitivity import Sensitivities, solve
-from growjax.design.space import DesignSpace, StepperSpace, catheter_of, stepper_space
+from growjax.design.space import DesignSpace, StepperSpace, catheter_of, check_p_max, demand_space, stepper_space
 from growjax.design.workflow import DesignError, DesignResult, design, discriminate, published_inputs
 
 __all__ = [
@@ -70,7 +70,9 @@ __all__ = [
     "adam",
     "catheter_of",
     "check",
+    "check_p_max",
     "covariances",
+    "demand_space",
     "design",
     "design_figure",
     "discriminate",

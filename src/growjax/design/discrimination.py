@@ -65,6 +65,33 @@ def rivals(effects) -> tuple[str, str]:
     return effects
 
 
+def checked_pair(effects, sizes=None, drive: str = "forward") -> tuple[tuple[str, str], tuple[float, float]]:
+    """The rivals and their sizes for a design of ``drive``'s input, checked.
+
+    Args:
+        effects: two distinct catalogue names (`rivals`).
+        sizes: each effect's size, SI, inside its physical range; None: their moderate magnitudes.
+        drive: the drive whose input is designed: the forward drive's demand alone.
+
+    Returns:
+        (effects, sizes).
+
+    Raises:
+        ValueError: naming what is wrong.
+    """
+    if drive != "forward":
+        raise ValueError("--discriminate designs the forward drive's demand: drop --next-drive inverse")
+    effects = rivals(effects)
+    if sizes is None:
+        return effects, tuple(syn.moderate_magnitude(e) for e in effects)
+    sizes = tuple(float(v) for v in sizes)
+    if len(sizes) != 2:
+        raise ValueError(f"--size takes one size per effect of --discriminate (two), got {len(sizes)}")
+    for effect, size in zip(effects, sizes):
+        syn.make_effect(effect, size)  # ValueError outside its physical range
+    return effects, sizes
+
+
 def statistic(r, jac, rig, tolerance, times, hyper: dc.Hyper):
     """T = rᵀΣ⁻¹r − rᵀΣ⁻¹J(JᵀΣ⁻¹J)⁻¹JᵀΣ⁻¹r ≥ 0 for Σ = K + G U Gᵀ: ``r`` (n,) m, ``jac`` J (n, k) m per unit,
     ``rig`` G (n, q) m per unit of the rig's relative errors, ``tolerance`` u (q,), ``times`` (n,) s, K of
@@ -179,11 +206,8 @@ def make(
     parameters at their estimate (refitted with the rival's effect), its rig and residual model; ``sizes`` (a, b)
     SI: each effect's size, as the truth and as the rival's starting point (default their moderate magnitudes);
     ``config`` as `growjax.design.make`."""
-    effects = rivals(effects)
-    sizes = tuple(syn.moderate_magnitude(e) for e in effects) if sizes is None else tuple(float(v) for v in sizes)
-    if len(sizes) != 2:
-        raise ValueError(f"sizes must give one size per effect, got {len(sizes)}")
-    made = [syn.make_effect(e, v) for e, v in zip(effects, sizes)]  # checks each size is inside its range
+    effects, sizes = checked_pair(effects, sizes)
+    made = [syn.make_effect(e, v) for e, v in zip(effects, sizes)]
     fields = tuple(f"{e}.{syn.magnitude_field(e)}" for e in effects)
     scales = [0.1 * fx.CATALOGUE[e].ranges[syn.magnitude_field(e)][1] for e in effects]
     base = gp.with_effects(knowledge.base, *(type(m)() for m in made))

@@ -1,5 +1,5 @@
-"""The design spaces: the forward drive's pressure demand (`DesignSpace`) and the stepper's step schedule
-(`StepperSpace`).
+"""The design spaces: the forward drive's pressure demand (`DesignSpace`, made by `demand_space`) and the
+stepper's step schedule (`StepperSpace`, made by `stepper_space`).
 
 The forward drive's demand is a piecewise-linear profile on fixed knots over the run.
 
@@ -32,6 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from growjax.data import experiment as ex
+from growjax.model.limits import Limits
 from growjax.model.motor import step_schedule
 from growjax.model.signals import Constant, Inputs, KnotProfile, Sampled, StepSchedule, published_pulse
 from growjax.simulation.config import Config
@@ -43,6 +44,7 @@ __all__ = [
     "DesignSpace",
     "StepperSpace",
     "catheter_of",
+    "demand_space",
     "demand_at_knots",
     "held",
     "sample_times",
@@ -379,3 +381,46 @@ def stepper_space(base, duration: float, experiment: ex.Experiment | None = None
         recorded,
         t0=Config().t0,
     )
+
+
+def check_p_max(p_max: float, limits: Limits) -> None:
+    """Refuse a demand whose top ``p_max`` (Pa) is above the sensed-pressure ceiling of ``limits``.
+
+    Raises:
+        ValueError: naming both pressures, kPa.
+    """
+    if p_max > limits.pressure_ceiling + 1e-9:
+        raise ValueError(
+            f"--p-max {p_max / 1e3:.1f} kPa is above the sensed-pressure ceiling "
+            f"{limits.pressure_ceiling / 1e3:.1f} kPa "
+            f"(the membrane limit {limits.membrane_limit / 1e3:.1f} kPa × the margin)"
+        )
+
+
+def demand_space(
+    duration: float,
+    limits: Limits,
+    experiment: ex.Experiment | None = None,
+    *,
+    p_max: float | None = None,
+    knot_spacing: float | None = None,
+) -> DesignSpace:
+    """The forward drive's `DesignSpace` over ``duration`` s, inside ``limits``.
+
+    Args:
+        duration: length of the run, s.
+        limits: the limits the design respects (`growjax.model.limits.limits`).
+        experiment: an experiment already run: its catheter length, held after its end (none: 0).
+        p_max: top of the demand, Pa; None: the sensed-pressure ceiling of ``limits``.
+        knot_spacing: s between the demand's knots; None: `KNOT_SPACING`.
+
+    Returns:
+        The space.
+
+    Raises:
+        ValueError: ``p_max`` above the sensed-pressure ceiling (`check_p_max`), or a bad duration or knot spacing.
+    """
+    p_max = limits.pressure_ceiling if p_max is None else p_max
+    check_p_max(p_max, limits)
+    spacing = KNOT_SPACING if knot_spacing is None else knot_spacing
+    return DesignSpace(duration, p_max, catheter_of(experiment, duration), spacing)

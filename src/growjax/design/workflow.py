@@ -21,7 +21,7 @@ from growjax import progress as prog
 from growjax.calibration import fit as gf
 from growjax.calibration.likelihood_ratio import boundary_threshold
 from growjax.design.knowledge import Knowledge
-from growjax.design.space import DesignSpace, StepperSpace
+from growjax.design.space import DesignSpace, StepperSpace, check_p_max
 from growjax.model import effects as fx
 from growjax.model.limits import Limits
 from growjax.model.signals import Inputs
@@ -146,11 +146,8 @@ def design(
         knowledge, space, criterion, sensors, pressure_noise, limits, points, seed, nonlinear_draws=nonlinear_draws
     )
     lim = problem.limits
-    if space.drive == "forward" and space.p_max > lim.pressure_ceiling + 1e-9:
-        raise ValueError(
-            f"p_max {space.p_max / 1e3:.1f} kPa is above the sensed-pressure ceiling "
-            f"{lim.pressure_ceiling / 1e3:.1f} kPa (the membrane limit {lim.membrane_limit / 1e3:.1f} kPa × the margin)"
-        )
+    if space.drive == "forward":
+        check_p_max(space.p_max, lim)
     sets = [sensors] if sensors == ("length",) else [("length",), sensors]
     rows, batch, descents, x, scaled, checks, wall = _search(
         problem,
@@ -219,18 +216,11 @@ def discriminate(
     whether min T exceeds the discovery's single-experiment threshold (``false_positive_rate`` over the
     catalogue, `growjax.calibration.likelihood_ratio.boundary_threshold`): expected to separate. ValueError on a
     bad pair of effects; DesignError where nothing admissible is found."""
-    if space.drive != "forward":
-        raise ValueError(
-            "the discrimination design is built for the forward drive's demand, not the stepper's schedule"
-        )
+    effects, sizes = ddis.checked_pair(effects, sizes, space.drive)
     clock = time.perf_counter()
     problem = ddis.make(knowledge, space, effects, sizes, limits)
     lim = problem.limits
-    if space.p_max > lim.pressure_ceiling + 1e-9:
-        raise ValueError(
-            f"p_max {space.p_max / 1e3:.1f} kPa is above the sensed-pressure ceiling "
-            f"{lim.pressure_ceiling / 1e3:.1f} kPa (the membrane limit {lim.membrane_limit / 1e3:.1f} kPa × the margin)"
-        )
+    check_p_max(space.p_max, lim)
     threshold = boundary_threshold(false_positive_rate / len(fx.CATALOGUE))
     base_t, batch, descents, x, scaled, checks, wall = _search(
         problem,

@@ -1,0 +1,144 @@
+"""What every command module shares: the protocol it follows, the process it asks for, how its run fails or
+stops, its output folder and its progress lines.
+
+A command is one module of ``growjax.cli`` (listed in ``growjax.cli.COMMANDS``) that defines:
+
+* ``NAME`` (str): the command's name on the command line;
+* ``HELP`` (str): its one line in ``growjax --help``;
+* ``PROCESS`` (`Process`): the process setup it needs before JAX starts its backend;
+* ``add_arguments(parser)``: its options, the shared groups of `growjax.cli.options` among them;
+* ``run(args) -> dict``: the work; returns the JSON summary (``"command": NAME`` in it); raises `RunFailed` (a run
+  failed: exit 1, the summary still written), ``ValueError`` or the data's errors (bad input: exit 2) or `Stopped`
+  (exit with its status);
+* ``summary_lines(summary) -> list[str]``: the few lines for people, in mm and kPa.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+OK, RUN_FAILED, BAD_INPUT = 0, 1, 2  # exit statuses: success, a run failed, a bad option or file
+
+
+class RunFailed(Exception):
+    """A run finished but failed (solver failure, failed sweep member, fit not converged, limit crossed).
+
+    Args:
+        reason: one line naming the failure.
+        summary: the command's JSON summary, written all the same.
+    """
+
+    def __init__(self, reason: str, summary: dict):
+        super().__init__(reason)
+        self.summary = summary
+
+
+class Stopped(Exception):
+    """The command stopped before its end, its work kept (a sweep's chunks).
+
+    Args:
+        message: one line: what was kept and how to complete it.
+        status: the exit status (128 + a signal's number, or a command's own).
+    """
+
+    def __init__(self, message: str, status: int):
+        super().__init__(message)
+        self.status = status
+
+
+@dataclasses.dataclass(frozen=True)
+class Process:
+    """The process setup a command needs, made before JAX starts its backend.
+
+    Attributes:
+        workflow: a workflow command: JAX's compile cache on, bad input reported as exit 2 and the summary for
+            people printed even with ``--json -`` (on stderr). False: a listing (``params``, ``effects``).
+        quick_compile: XLA's quicker emitters (`growjax.simulation.xla_flags.apply_quick_compile`) where
+            ``--fidelity fast``: a compile-bound command.
+        cpu_devices: every CPU core exposed as a JAX device (sweeps shard over them, a set's runs spread over them,
+            NUTS chains run one per device); ``GROWJAX_CPU_DEVICES`` overrides.
+        devices_at_least: the option (its ``dest``) whose value is the least number of devices wanted, or None.
+        whole_loop: a function of the parsed arguments: whether the solver's loop is compiled whole
+            (`growjax.simulation.xla_flags.apply`), or None.
+    """
+
+    workflow: bool = True
+    quick_compile: bool = False
+    cpu_devices: bool = False
+    devices_at_least: str | None = None
+    whole_loop: Callable | None = None
+
+    def apply(self, args) -> None:
+        """Set the process up for the parsed arguments ``args`` (nothing for a listing)."""
+        if not self.workflow:
+            return
+        enable_compile_cache()
+        from growjax.simulation import xla_flags
+
+        if self.quick_compile and args.fidelity == "fast":
+            xla_flags.apply_quick_compile()
+        if self.cpu_devices:
+            use_all_cpu_cores(getattr(args, self.devices_at_least) if self.devices_at_least else 1)
+        if self.whole_loop is not None and self.whole_loop(args):
+            xla_flags.apply()
+
+
+def enable_compile_cache() -> None:
+    """JAX's persistent compile cache in ``$GROWJAX_CACHE_DIR`` (default ``~/.cache/growjax/jax``)."""
+    import jax
+
+    cache = os.environ.get("GROWJAX_CACHE_DIR", str(Path.home() / ".cache" / "growjax" / "jax"))
+    jax.config.update("jax_compilation_cache_dir", cache)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+
+
+def use_all_cpu_cores(at_least: int = 1) -> None:
+    """Expose every CPU core, and at least ``at_least``, as a JAX device (``GROWJAX_CPU_DEVICES`` overrides; an
+    ``XLA_FLAGS`` that sets the host device count wins)."""
+    import jax
+
+    wanted = os.environ.get("GROWJAX_CPU_DEVICES")
+    n = int(wanted) if wanted else max(os.cpu_count() or 1, at_least)
+    if "xla_force_host_platform_device_count" in os.environ.get("XLA_FLAGS", ""):
+        return
+    try:
+        jax.config.update("jax_num_cpu_devices", n)
+    except (AttributeError, RuntimeError):
+        pass  # older JAX, or the backend is already initialised
+
+
+def out_dir(args) -> Path:
+    """The command's ``--out`` folder, made where missing."""
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    return out
+
+
+def note(args, text: str) -> float:
+    """One line of progress on stderr (none with ``--quiet``).
+
+    Returns:
+        The time, s (``time.perf_counter``).
+    """
+    from growjax import progress as prog
+
+    prog.note(text, not args.quiet)
+    return time.perf_counter()
+
+
+__all__ = [
+    "BAD_INPUT",
+    "OK",
+    "RUN_FAILED",
+    "Process",
+    "RunFailed",
+    "Stopped",
+    "enable_compile_cache",
+    "note",
+    "out_dir",
+    "use_all_cpu_cores",
+]

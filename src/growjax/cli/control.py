@@ -1,0 +1,126 @@
+"""``growjax control [DATA]``: a length controller designed on the fast model to track DATA's length (an open-loop
+profile or step schedule, tuned feedback, or MPC), evaluated on ``--fidelity``; writes control.png."""
+
+from __future__ import annotations
+
+import math
+import time
+
+from growjax.cli import loader, options
+from growjax.cli._summary import data_name, kpa, mm, origin_lines
+from growjax.cli.command import Process, RunFailed, note, out_dir
+from growjax.cli.options import count, option
+
+NAME = "control"
+HELP = "length control design: open-loop profile, feedback, MPC"
+PROCESS = Process()
+OPTIONS = (
+    option(
+        "--method",
+        choices=["open-loop", "feedback", "mpc"],
+        default="feedback",
+        help="open-loop demand profile (or step schedule), tuned feedback, or MPC (forward drive)",
+    ),
+    option(
+        "--robust", metavar="POSTERIOR.nc", default=None, help="tune on the cost averaged over draws of this posterior"
+    ),
+    option(
+        "--draws",
+        type=count(),
+        default=8,
+        help="draws to tune on: of the posterior (--robust), of the rig (--tolerance)",
+    ),
+    option("--iterations", type=count(), default=10, help="optimiser and tuning iterations"),
+    option("--microsteps", type=count(), default=1, help="stepper driver microsteps (1: the full-step driver)"),
+)
+
+
+def add_arguments(parser) -> None:
+    """The shared options (``--fidelity``: the evaluation's), the design's, ``--tolerance``, ``--quiet``."""
+    options.shared(
+        parser,
+        NAME,
+        fidelity_default="reference",
+        fidelity_help="configuration the design is evaluated on (designs use the fast one)",
+    )
+    options.add(parser, OPTIONS)
+    options.tolerance(
+        parser,
+        "(repeat; the feedback design is then tuned on the cost averaged over --draws draws of the "
+        "rig within the default budget of `growjax params` and these; none given: the rig as it is)",
+    )
+    options.quiet(parser)
+
+
+def run(args) -> dict:
+    """Design on the fast model, evaluate on ``--fidelity``, write the figure; the summary, RunFailed where the
+    evaluation crossed the membrane pressure limit or failed."""
+    if args.rtol is not None:
+        raise ValueError("growjax control does not take --rtol: designs use each configuration's default tolerance")
+    from growjax import control as gc
+
+    data = loader.load(args)
+    target = gc.target_from_experiment(data.experiment, args.t_end)
+    out = out_dir(args)
+    started = note(args, f"control: {args.method} design on the fast model, evaluated on {args.fidelity}")
+    summary = _design(args, target, data.base(), out)
+    note(args, f"control: done in {time.perf_counter() - started:.1f} s")
+    summary = {"command": NAME, "data": str(data.path), "fixed_parameters": data.origin, **summary}
+    if summary.get("pressure_limit_crossed"):
+        raise RunFailed(
+            f"the design crossed the membrane pressure limit ({summary['pressure_limit_Pa'] / 1e3:.1f} kPa; "
+            f"peak {summary['peak_pressure_Pa'] / 1e3:.1f} kPa)",
+            summary,
+        )
+    rmse = summary.get("tracking_rmse_m")
+    if rmse is None or not math.isfinite(rmse) or summary.get("status") not in ("ok", None):
+        raise RunFailed(f"the evaluation run failed ({summary.get('status')})", summary)
+    return summary
+
+
+# -- the workflow's call ----------------------------------------------------------------------------------------
+
+
+def _design(args, target, base, out) -> dict:
+    """The design to track ``target`` and its evaluation (`growjax.control.design`)."""
+    from growjax import control as gc
+
+    return gc.design_controller(
+        target,
+        args.drive,
+        args.method,
+        args.t_end,
+        robust=args.robust,
+        n_draws=args.draws,
+        iterations=args.iterations,
+        microsteps=args.microsteps,
+        evaluate_on=args.fidelity,
+        seed=args.seed,
+        figure=out / "control.png",
+        base=base,
+        tolerances=options.tolerances_of(args),
+    )
+
+
+def summary_lines(s: dict) -> list[str]:
+    """The tracking error, peak pressure, gains and figure."""
+    lines = [
+        f"control: {data_name(s)}, {s['drive']} drive, {s['method']}, evaluated on the {s['evaluated_on']} "
+        "configuration",
+        *origin_lines(s["fixed_parameters"]),
+        (
+            f"  tracking RMSE {mm(s.get('tracking_rmse_m'))}; peak pressure {kpa(s.get('peak_pressure_Pa'))} "
+            f"(limit {kpa(s.get('pressure_limit_Pa'))}, demand ceiling {kpa(s.get('max_demand_Pa'))})"
+        ),
+    ]
+    if s.get("gains"):
+        lines.append(
+            "  gains: "
+            + ", ".join(f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}" for k, v in s["gains"].items())
+        )
+    if s.get("figure"):
+        lines.append(f"  wrote {s['figure']}")
+    return lines
+
+
+__all__ = ["HELP", "NAME", "OPTIONS", "PROCESS", "add_arguments", "run", "summary_lines"]

@@ -1,0 +1,151 @@
+"""``growjax simulate [DATA]``: one run of the model on an experiment's inputs, against its measured length; writes
+trajectory.csv and trajectory.png."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from growjax.cli import loader, options
+from growjax.cli._summary import data_name, kpa, mm, origin_lines
+from growjax.cli.command import Process, RunFailed, out_dir
+
+NAME = "simulate"
+HELP = "simulate an experiment against its measured length"
+PROCESS = Process(quick_compile=True)
+
+
+def add_arguments(parser) -> None:
+    """The shared options alone."""
+    options.shared(parser, NAME)
+
+
+def run(args) -> dict:
+    """Simulate DATA's inputs on ``--fidelity``; the summary, RunFailed where the solver failed or the sensed
+    pressure crossed the membrane limit."""
+    import growjax as gj
+    from growjax.data import experiment as ex
+    from growjax.simulation.metrics import length_rmse
+
+    data = loader.load(args)
+    exp, params = data.experiment, data.base()
+    config = options.make_config(args, args.drive)
+    inputs = ex.to_inputs(exp, args.drive, params, config.t0, config.t1)
+    ts = exp.time[(exp.time >= config.t0) & (exp.time <= config.t1)]
+    ts = np.unique(np.concatenate([[config.t0], ts, [config.t1]]))
+    traj, first, wall = _simulate(params, inputs, config, ts)
+    out = out_dir(args)
+    series = _write_trajectory(traj, inputs, args.drive, out)
+    measured = (exp.time, exp["robot_length_m"]) if "robot_length_m" in exp else None
+    finite = np.isfinite(np.asarray(traj.length))
+    summary = {
+        "command": NAME,
+        "data": str(data.path),
+        "drive": args.drive,
+        "fidelity": config.fidelity,
+        "t_end_s": args.t_end,
+        "parameters": data.origin,
+        "status": gj.status_name(traj.status),
+        "limit_time_s": None if not np.isfinite(float(traj.limit_time)) else float(traj.limit_time),
+        "pressure_limit_Pa": float(gj.pressure_limit(params.robot)),
+        "final_length_m": float(np.asarray(traj.length)[finite][-1]) if np.any(finite) else None,
+        "peak_pressure_Pa": float(np.nanmax(traj.pressure)) if np.any(np.isfinite(traj.pressure)) else None,
+        "solver_steps": int(traj.n_steps),
+        "wall_s": wall,
+        "first_call_s": first,
+        "trajectory_csv": str(out / "trajectory.csv"),
+    }
+    if measured is not None and summary["status"] == "ok":
+        summary["rmse_length_m"] = float(length_rmse(traj, *measured, t_start=config.t0, t_end=config.t1))
+    summary["figure"] = str(_figure(traj, summary, series, measured, args.drive, data.path.name, out))
+    if summary["status"] == "pressure_limit":
+        raise RunFailed(
+            f"the sensed pressure crossed the membrane limit ({summary['pressure_limit_Pa'] / 1e3:.1f} kPa) "
+            f"at t = {summary['limit_time_s']:.3f} s; the run stopped there",
+            summary,
+        )
+    if summary["status"] != "ok":
+        raise RunFailed(f"the solver failed ({summary['status']}) after {summary['solver_steps']} steps", summary)
+    return summary
+
+
+# -- the workflow's call ----------------------------------------------------------------------------------------
+
+
+def _simulate(params, inputs, config, ts):
+    """(trajectory, first call's wall time s, the second's): the run twice, its compile timed apart."""
+    import jax
+
+    import growjax as gj
+
+    start = time.perf_counter()
+    traj = jax.block_until_ready(gj.simulate(params, inputs, config, ts=ts))
+    first = time.perf_counter() - start
+    start = time.perf_counter()
+    traj = jax.block_until_ready(gj.simulate(params, inputs, config, ts=ts))
+    return traj, first, time.perf_counter() - start
+
+
+# -- files --------------------------------------------------------------------------------------------------------
+
+
+def _write_trajectory(traj, inputs, drive: str, out) -> dict:
+    """trajectory.csv in ``out``: the series (SI) a run of ``drive`` gives, as an experiment file; the series."""
+    import jax
+
+    from growjax.data import experiment as ex
+
+    series = {
+        "robot_length_m": np.asarray(traj.length),
+        "pressure_Pa": np.asarray(traj.pressure),
+        "catheter_length_m": np.asarray(jax.vmap(inputs.catheter_length)(traj.time)),
+    }
+    if drive == "forward":
+        series["pressure_demand_Pa"] = np.asarray(traj.pressure_demand)
+    else:
+        series["desired_length_m"] = np.asarray(jax.vmap(inputs.desired_length)(traj.time))
+    series["robot_flow_m3_s"] = np.asarray(traj.robot_flow)
+    series["syringe_displacement_m"] = np.asarray(traj.syringe_displacement)
+    ex.write_csv(out / "trajectory.csv", traj.time, series)
+    return series
+
+
+def _figure(traj, summary: dict, series: dict, measured, drive: str, name: str, out):
+    """trajectory.png in ``out``: the run against the measured length (and the desired length of the stepper)."""
+    from growjax.plotting import trajectory_figure
+
+    title = f"{drive} drive on {name}"
+    if "rmse_length_m" in summary:
+        title += f": length RMSE {1e3 * summary['rmse_length_m']:.2f} mm"
+    return trajectory_figure(
+        traj,
+        out / "trajectory.png",
+        measured=measured,
+        desired=(np.asarray(traj.time), series["desired_length_m"]) if drive == "inverse" else None,
+        title=title,
+        pressure_limit=summary["pressure_limit_Pa"],
+    )
+
+
+def summary_lines(s: dict) -> list[str]:
+    """The run's status, final length, peak pressure, length RMSE, steps and files."""
+    lines = [
+        f"simulate: {data_name(s)}, {s['drive']} drive, {s['fidelity']} configuration, 0–{s['t_end_s']:g} s",
+        *origin_lines(s["parameters"]),
+        (
+            f"  status {s['status']}; final length {mm(s['final_length_m'])}; peak pressure "
+            f"{kpa(s['peak_pressure_Pa'])} (membrane limit {kpa(s['pressure_limit_Pa'])})"
+        ),
+    ]
+    if "rmse_length_m" in s:
+        lines.append(f"  length RMSE against the measured length: {mm(s['rmse_length_m'])}")
+    lines.append(
+        f"  {s['solver_steps']} solver steps, {1e3 * s['wall_s']:.0f} ms after compiling "
+        f"({s['first_call_s']:.1f} s first call)"
+    )
+    lines.append(f"  wrote {s['trajectory_csv']}, {s['figure']}")
+    return lines
+
+
+__all__ = ["HELP", "NAME", "PROCESS", "add_arguments", "run", "summary_lines"]
