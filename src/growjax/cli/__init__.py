@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from growjax.cli._parser import BAD_INPUT, build_parser, scored_window, tolerances_of
+from growjax.cli._parser import BAD_INPUT, build_parser, likelihood_of, scored_window, tolerances_of
 from growjax.cli._summary import summary_lines
 from growjax.data.datasets import default_data_path
 
@@ -88,8 +88,8 @@ def recorded_parameters(data: Path) -> dict:
 
 
 def data_path(data: str | None, data_dir: str | None = None) -> Path:
-    """The experiment a command reads: a path, a named public data set (``mammobot``: :func:`growjax.data.datasets.fetch`,
-    from ``data_dir`` where given), or the shipped synthetic experiment."""
+    """The experiment a command reads: a path, a named public data set (``mammobot``:
+    `growjax.data.datasets.fetch`, from ``data_dir`` where given), or the shipped synthetic experiment."""
     from growjax.data import datasets
 
     if data is not None and (Path(data).exists() or data not in datasets.NAMES):
@@ -124,8 +124,7 @@ def _setup(args, drive: str, growth_law: str = "reference"):
 def _fit_set(args, paths) -> dict:
     """``growjax fit A.csv B.csv …`` or ``growjax fit SET.toml``: the experiments fitted jointly."""
     import growjax as gj
-    from growjax.calibration import joint
-    from growjax.data import experiment as ex
+    from growjax import calibration
     from growjax.data import sets as xs
     from growjax.plotting import set_figure
 
@@ -135,33 +134,23 @@ def _fit_set(args, paths) -> dict:
     free = args.free or ["Y@robot"]
     scopes = [xs.Scope.parse(f, exps.runs[0].base()) for f in free]  # a bad scope is refused before any work
     started = _progress_note(args, f"fit: {', '.join(free)} over {len(exps)} experiments from {args.starts} starts")
-    result = joint.fit_set(
+    result = calibration.fit(
         exps,
-        free=scopes,
+        scopes,
+        likelihood=likelihood_of(args),
         config=config,
-        n_starts=args.starts,
+        starts=args.starts,
+        scout=16,
         seed=args.seed,
-        discrepancy=args.discrepancy,
-        tolerances=tolerances_of(args),
-        rig=args.rig,
-        rig_errors=args.rig_errors,
         rig_tangents=args.rig_tangents,
+        relinearise=args.relinearise,
     )
     _progress_note(args, f"fit: done in {time.perf_counter() - started:.1f} s")
     traces = []
-    for run, rec in zip(exps, result.runs):
-        values = {
-            lab.split("@")[0]: v
-            for lab, v in result.estimate.items()
-            if "@" not in lab or lab.split("@", 1)[1] in (run.robot, run.rig, run.name)
-        }
-        rig_values = {
-            k: gj.get(run.base(), k) * math.exp(b)
-            for k, b in result.rig_offset.get(run.rig if args.rig_errors == "shared" else run.name, {}).items()
-        }
-        base = gj.replace(run.base(), **rig_values, **values)
+    for run in exps:
+        base = result.parameters(run)
         cfg = config.replace(drive=run.drive)
-        traj = gj.simulate(base, ex.to_inputs(run.experiment, run.drive, base, cfg.t0, cfg.t1), cfg)
+        traj = gj.simulate(base, run.model_inputs(base, cfg.t0, cfg.t1), cfg)
         traces.append((run.name, traj, (run.times, run.length)))
     out = _out(args)
     fig = set_figure(traces, out / "fit.png")
@@ -222,7 +211,7 @@ def _read_set(args, paths, config):
 def _population(args, paths) -> dict:
     """``growjax posterior SET.toml --hierarchical NAME``: the joint fit of the set, then the population of its
     robots' NAME, and the predictive for a new robot of the same build."""
-    from growjax.calibration import joint
+    from growjax import calibration
     from growjax.data import experiment as ex
     from growjax.data import sets as xs
     from growjax.model.params import resolve_name
@@ -239,13 +228,8 @@ def _population(args, paths) -> dict:
             "name each experiment's robot in a manifest"
         )
     started = _progress_note(args, f"posterior: joint fit of {name}@robot over {len(exps)} experiments")
-    fit = joint.fit_set(
-        exps,
-        free=[f"{name}@robot"],
-        config=config,
-        seed=args.seed,
-        discrepancy=args.discrepancy,
-        tolerances=tolerances_of(args),
+    fit = calibration.fit(
+        exps, [f"{name}@robot"], likelihood=likelihood_of(args), config=config, starts=1, scout=16, seed=args.seed
     )
     if fit.status != "converged":
         raise RunFailed(f"the joint fit did not converge ({fit.status})", {"command": "posterior", **fit.summary()})
@@ -530,8 +514,8 @@ def sweep_command(args) -> dict:
 
 def fit_command(args) -> dict:
     import growjax as gj
-    from growjax.calibration import fit as gf
-    from growjax.data import experiment as ex
+    from growjax import calibration
+    from growjax.data import sets as xs
     from growjax.plotting import trajectory_figure
 
     paths = list(args.data or [])
@@ -543,35 +527,29 @@ def fit_command(args) -> dict:
     if "robot_length_m" not in exp:
         raise ValueError(f"{data} has no robot_length_m column to fit")
     config = make_config(args, args.drive, adjoint="forward")
-    inputs = ex.to_inputs(exp, args.drive, base, config.t0, config.t1)
-    pressure = exp["pressure_Pa"] if "pressure_Pa" in exp else None  # noqa: SIM401 (Experiment is not a dict)
+    exps = xs.ExperimentSet.single(
+        exp, name=data.stem or "experiment", drive=args.drive, defaults=base, window=scored_window(args, config)
+    )
     started = _progress_note(args, f"fit: {', '.join(args.free or ['Y'])} from {args.starts} starts")
-    result = gf.fit(
-        exp.time,
-        exp["robot_length_m"],
-        inputs,
-        free=args.free or ["Y"],
-        base=base,
+    result = calibration.fit(
+        exps,
+        args.free or ["Y"],
+        likelihood=likelihood_of(args),
         config=config,
-        pressure=pressure,
-        n_starts=args.starts,
+        starts=args.starts,
         seed=args.seed,
-        window=scored_window(args, config),
-        discrepancy=args.discrepancy,
-        tolerances=tolerances_of(args),
-        rig=args.rig,
         relinearise=args.relinearise,
         rig_tangents=args.rig_tangents,
     )
     _progress_note(args, f"fit: done in {time.perf_counter() - started:.1f} s")
     out = _out(args)
-    fitted = gj.replace(base, **result.rig_estimate, **result.estimate)
-    traj = gj.simulate(fitted, inputs, config)
+    fitted = result.parameters(exps.runs[0])
+    traj = gj.simulate(fitted, exps.runs[0].model_inputs(fitted, config.t0, config.t1), config)
     fig = trajectory_figure(
         traj,
         out / "fit.png",
         measured=(exp.time, exp["robot_length_m"]),
-        title=f"fit of {', '.join(result.names)}: RMSE {1e3 * result.rmse_length_m:.2f} mm",
+        title=f"fit of {', '.join(result.labels)}: RMSE {1e3 * result.rmse_length_m:.2f} mm",
     )
     summary = {
         "command": "fit",
@@ -593,7 +571,7 @@ def fit_command(args) -> dict:
 
 def posterior_command(args) -> dict:
     from growjax import posterior as gpost
-    from growjax.data import experiment as ex
+    from growjax.data import sets as xs
 
     paths = list(args.data or [])
     if args.hierarchical is not None:
@@ -608,24 +586,21 @@ def posterior_command(args) -> dict:
     if "robot_length_m" not in exp:
         raise ValueError(f"{data} has no robot_length_m column to calibrate against")
     config = make_config(args, args.drive, adjoint="forward")
-    inputs = ex.to_inputs(exp, args.drive, base, config.t0, config.t1)
     priors = gpost.paper_priors() if args.law == "reference" else gpost.lockhart_priors()
+    exps = xs.ExperimentSet.single(
+        exp, name=data.stem or "experiment", drive=args.drive, defaults=base, window=scored_window(args, config)
+    )
     res = gpost.sample(
-        exp.time,
-        exp["robot_length_m"],
-        inputs,
-        base,
-        config,
+        exps,
+        config=config,
         priors=priors,
+        likelihood=likelihood_of(args),
         chains=args.chains,
         warmup=args.warmup,
         samples=args.samples,
         seed=args.seed,
         progress=not args.quiet,
         emulate=args.emulate,
-        window=scored_window(args, config),
-        discrepancy=args.discrepancy,
-        tolerances=tolerances_of(args),
     )
     out = _out(args)
     res.idata.to_netcdf(str(out / "posterior.nc"))
@@ -671,8 +646,7 @@ def discover_command(args) -> dict:
         candidates=args.candidates or None,
         progress=not args.quiet,
         workers=args.workers,
-        discrepancy=args.discrepancy,
-        tolerances=tolerances_of(args),
+        likelihood=likelihood_of(args),
     )
     out = _out(args)
     figure = discovery_figure(res, out / "discover.png", title=f"{data.name}: {res.effect}")
@@ -707,8 +681,7 @@ def _discover_set(args, paths) -> dict:
         config=config,
         candidates=args.candidates or None,
         seed=args.seed,
-        discrepancy=args.discrepancy,
-        tolerances=tolerances_of(args),
+        likelihood=likelihood_of(args),
     )
     _progress_note(args, f"discover: done in {time.perf_counter() - started:.1f} s")
     return {
@@ -764,9 +737,9 @@ def control_command(args) -> dict:
 
 def design_command(args) -> dict:
     """What is known (a fit of DATA, or --fit-from), then the design; writes design.csv, design.png, summary.json."""
+    from growjax import calibration
     from growjax import design as gd
-    from growjax.calibration import fit as gf
-    from growjax.data import experiment as ex
+    from growjax.data import sets as xs
     from growjax.model import params as gp
 
     stepper = args.next_drive == "inverse"
@@ -814,31 +787,20 @@ def design_command(args) -> dict:
             gd.catheter_of(exp, args.duration),
             0.5 if args.knot_spacing is None else args.knot_spacing,
         )
-    tolerances = tolerances_of(args)
+    likelihood = likelihood_of(args)
     if args.fit_from:
-        known = gd.from_summary(args.fit_from, base, names, tolerances)
+        known = gd.from_summary(args.fit_from, base, names, likelihood=likelihood)
     else:
         if "robot_length_m" not in exp:
             raise ValueError(f"{data} has no robot_length_m column to fit: give what is known with --fit-from")
         config = make_config(args, args.drive, adjoint="forward")
-        inputs = ex.to_inputs(exp, args.drive, base, config.t0, config.t1)
-        pressure = exp["pressure_Pa"] if "pressure_Pa" in exp else None  # noqa: SIM401 (Experiment is not a dict)
-        started = _progress_note(args, f"design: what is known, a fit of {', '.join(names)} to {data.name}")
-        fitted = gf.fit(
-            exp.time,
-            exp["robot_length_m"],
-            inputs,
-            free=names,
-            base=base,
-            config=config,
-            pressure=pressure,
-            seed=args.seed,
-            window=scored_window(args, config),
-            discrepancy=args.discrepancy,
-            tolerances=tolerances,
+        exps = xs.ExperimentSet.single(
+            exp, name=data.stem or "experiment", drive=args.drive, defaults=base, window=scored_window(args, config)
         )
+        started = _progress_note(args, f"design: what is known, a fit of {', '.join(names)} to {data.name}")
+        fitted = calibration.fit(exps, names, likelihood=likelihood, config=config, seed=args.seed)
         _progress_note(args, f"design: fitted in {time.perf_counter() - started:.1f} s")
-        known = gd.from_fit(fitted, base, tolerances)
+        known = gd.from_fit(fitted, base, likelihood=likelihood)
     if base_next is not base:
         known = known.on(base_next)  # θ as fitted, on the next experiment's drive
     if args.discriminate is not None:
@@ -1019,7 +981,7 @@ def main(argv=None) -> int:
     if args.command in ("simulate", "fit") and args.fidelity == "fast":  # compile-bound: XLA's quicker emitters
         xla_flags.apply_quick_compile()
     if args.command in ("fit", "discover"):
-        _use_all_cpu_cores()  # a set's runs spread over the cores (growjax.calibration.joint)
+        _use_all_cpu_cores()  # a set's runs spread over the cores (growjax.calibration.batch)
     elif args.command == "sweep":
         _use_all_cpu_cores()
     elif args.command == "posterior":

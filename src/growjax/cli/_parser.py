@@ -221,6 +221,19 @@ def tolerances_of(args):
     return {**tl.default_budget(base), **dict(tl.parse(t) for t in args.tolerance)}
 
 
+def likelihood_of(args):
+    """The `growjax.calibration.Likelihood` of the likelihood's commands from ``--discrepancy``, ``--tolerance``
+    and, where the command has them, ``--rig`` and ``--rig-errors``."""
+    from growjax.calibration import Likelihood
+
+    return Likelihood(
+        discrepancy=args.discrepancy,
+        tolerances=tolerances_of(args),
+        rig=getattr(args, "rig", "inferred"),
+        rig_errors=getattr(args, "rig_errors", "shared"),
+    )
+
+
 def scored_window(args, config):
     """(t0, t1) s of the data scored: ``--t-start`` (default the configuration's start) to ``--t-end``."""
     t0 = config.t0 if args.t_start is None else args.t_start

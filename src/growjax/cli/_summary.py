@@ -112,7 +112,7 @@ def _fit_set(s: dict) -> list[str]:
 
 
 def _fit(s: dict, name: str) -> list[str]:
-    if "runs" in s:
+    if "experiments" in s:
         return _fit_set(s)
     lines = [
         f"fit: {name}, {s['drive']} drive, {s.get('t_start_s', 0.0):g}–{s['t_end_s']:g} s scored: {s['status']}",
@@ -135,7 +135,8 @@ def _fit(s: dict, name: str) -> list[str]:
     elif d:
         lines.append(f"  independent noise {_mm(d['noise_m'])}")
     if s.get("rig") == "inferred" and s.get("rig_offset"):
-        shown = ", ".join(f"{k} {100 * v:+.1f} %" for k, v in s["rig_offset"].items())
+        offsets = next(iter(s["rig_offset"].values()))  # the one run's rig
+        shown = ", ".join(f"{k} {100 * v:+.1f} %" for k, v in offsets.items())
         lines.append(f"  rig inferred from the data (its tolerances as priors): {shown}")
     elif s.get("rig") == "fixed":
         lines.append("  rig fixed at its nominal values, its tolerances propagated (--rig fixed)")

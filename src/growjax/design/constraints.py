@@ -19,7 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from growjax.calibration import fit as gf
+from growjax.calibration import physical_bounds
 from growjax.control.targets import PRESSURE_MARGIN
 from growjax.control.tuning import rig_draws
 from growjax.design.knowledge import Knowledge
@@ -82,7 +82,7 @@ def draws(knowledge: Knowledge, n: int = DRAWS, seed: int = 0) -> dict:
     rng = np.random.default_rng([seed, 2])
     theta = knowledge.estimate
     z = rng.multivariate_normal(np.zeros(theta.size), knowledge.covariance, size=n)
-    lo, hi = gf.physical_bounds(knowledge.base, knowledge.names, theta)
+    lo, hi = physical_bounds(knowledge.base, knowledge.names, theta)
     z = np.clip(z, lo, hi)
     out.update({name: theta[i] * np.exp(z[:, i]) for i, name in enumerate(knowledge.names)})
     return out
@@ -147,7 +147,7 @@ def check(inputs, knowledge: Knowledge, config, ts, breaks, lim: Limits, drawn: 
     base = as_arrays(knowledge.base)
     for start in range(0, total, size):
         sl = np.arange(start, start + size) % total
-        batch = jax.tree_util.tree_map(lambda a: a[idx_c[sl]], inputs)
+        batch = jax.tree_util.tree_map(lambda a, sl=sl: a[idx_c[sl]], inputs)
         res = _runs(base, names, batch, jnp.asarray(values[idx_d[sl]]), config, jnp.asarray(ts), breaks)
         n_real = min(size, total - start)
         for k, v in zip(out, res):

@@ -13,7 +13,7 @@ import jax
 import numpy as np
 
 from growjax import _progress
-from growjax.calibration import fit as gf
+from growjax.calibration import Z90
 from growjax.design import constraints as dcon
 from growjax.design import criterion as dcrit
 from growjax.design import discrimination as ddis
@@ -407,7 +407,7 @@ def _row(problem, knowledge: Knowledge, label: str, inputs, breaks, sets) -> lis
         cov = covs["known"]
         params = {}
         for i, n in enumerate(knowledge.names):
-            lo, hi = theta[i] * np.exp(-gf.Z90 * sd[i]), theta[i] * np.exp(gf.Z90 * sd[i])
+            lo, hi = theta[i] * np.exp(-Z90 * sd[i]), theta[i] * np.exp(Z90 * sd[i])
             params[n] = {
                 "estimate": float(theta[i]),
                 "sd_log": float(sd[i]),

@@ -14,13 +14,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import numpyro
-from jaxtyping import ArrayLike, Float
+from jaxtyping import Float
 
 from growjax import _progress
+from growjax.calibration import Likelihood
 from growjax.calibration import discrepancy as dc
 from growjax.calibration import tolerance as tl
 from growjax.data import experiment
-from growjax.model import params as gp
+from growjax.data.sets import ExperimentSet
 from growjax.posterior import emulator as em
 from growjax.simulation.config import Config
 
@@ -47,7 +48,7 @@ class PosteriorResult:
     summary: dict
     wall_s: float
     residuals: Residuals | None = None  # the likelihood's discrepancy, samples and tolerances (None: independent)
-    data: tuple = ()  # (times (n,) s, length (n,) m) the posterior was fitted on
+    data: tuple[Float[np.ndarray, " n"], Float[np.ndarray, " n"]] = ()  # (times s, length m) it was fitted on
 
 
 def _window(times, length, config, window):
@@ -57,79 +58,95 @@ def _window(times, length, config, window):
 
 
 def sample(
-    times: Float[ArrayLike, " m"],
-    length: Float[ArrayLike, " m"],
-    inputs,
-    base: gp.Parameters | None = None,
+    experiments: ExperimentSet,
+    *,
     config: Config | None = None,
     priors: Sequence[Prior] | None = None,
+    likelihood: Likelihood = Likelihood(),
     chains: int = 4,
     warmup: int = 500,
     samples: int = 500,
     seed: int = 0,
     dense_mass: bool = True,
     target_accept: float = 0.9,
-    window=None,
     progress: bool = True,
     emulate: bool | em.Emulator = False,
     max_tree_depth: int = 10,
     chain_method: str | None = None,
-    discrepancy: str = "matern32",
-    tolerances: dict | None = None,
     rig_centre: dict | None = None,
 ) -> PosteriorResult:
-    """NUTS over the priors and σ given a measured length (m) at ``times`` (s).
+    """NUTS over the priors and σ given one experiment's measured length.
 
-    ``emulate``: True samples through an :class:`~growjax.posterior.emulator.Emulator` of the model built over
-    the prior box (its validated RMS error joins the noise); an ``Emulator`` is used as given; False
-    (default) runs the model in every gradient (forward mode). ``max_tree_depth``: NUTS's cap on the
-    tree (at most 2^depth − 1 leapfrog steps per draw). ``chain_method``: NumPyro's; None runs the chains
-    ``"vectorized"`` through an emulator, and through the model ``"parallel"`` (one chain per JAX device,
-    each on its own thread: expose CPU cores as devices before JAX starts, as ``growjax posterior`` does)
-    when there are as many devices as chains, else ``"sequential"``: the vmapped forward-mode solve
-    (members stepped together) costs what the chains cost one after another, and the chains' trees, built
-    in lockstep, would wait for the deepest (`benchmarks/nuts_direct.py` measures both).
+    Args:
+        experiments: the set of one experiment (`growjax.data.sets.ExperimentSet.single`): its length (m) at its
+            times (s) inside its window, its parameters and inputs (a set's population is
+            `growjax.posterior.population`'s).
+        config: the simulation's settings (its drive is the run's).
+        priors: the sampled parameters' priors (default `paper_priors`).
+        likelihood: the likelihood's options, as the fit takes them (`growjax.calibration.Likelihood`): the
+            discrepancy's amplitude and time scale are sampled with the parameters; the rig's tolerances enter
+            through the length's sensitivities (linearised), marginalised exactly (``rig`` must be
+            ``"inferred"``); the configuration's own error (``model_error``, default the configuration's) enters
+            as the slow drift the fit carries, marginalised too.
+        emulate: True samples through an `growjax.posterior.emulator.Emulator` of the model built over the prior
+            box (its validated RMS error joins the noise); an ``Emulator`` is used as given; False (default) runs
+            the model in every gradient (forward mode).
+        max_tree_depth: NUTS's cap on the tree (at most 2^depth − 1 leapfrog steps per draw).
+        chain_method: NumPyro's; None runs the chains ``"vectorized"`` through an emulator, and through the model
+            ``"parallel"`` (one chain per JAX device, each on its own thread: expose CPU cores as devices before
+            JAX starts, as ``growjax posterior`` does) when there are as many devices as chains, else
+            ``"sequential"``: the vmapped forward-mode solve (members stepped together) costs what the chains
+            cost one after another, and the chains' trees, built in lockstep, would wait for the deepest
+            (`benchmarks/nuts_direct.py` measures both).
+        progress: a line per phase (emulator, likelihood, start point, NUTS's start and end) and NumPyro's bars on
+            stderr where it is a terminal; elsewhere (a log) the bars' progress as a plain line every ~10 % of
+            each chain's draws. The draws do not depend on where stderr goes.
+        rig_centre: {tolerance: ln(ψ/ψ₀)} where the rig is linearised, or None to take it from
+            `growjax.calibration.fit` on the same data and likelihood (its ``rig_offset``), so that the fit and
+            the posterior linearise the rig alike. The model runs with the rig there, and the rig's errors keep
+            their prior about nominal.
+        chains, warmup, samples, seed, dense_mass, target_accept: NUTS's.
 
-    ``progress``: a line per phase (emulator, likelihood, start point, NUTS's start and end) and NumPyro's bars
-    on stderr where it is a terminal; elsewhere (a log) the bars' progress as a plain line every ~10 % of each
-    chain's draws. The draws do not depend on where stderr goes.
+    Returns:
+        A DataTree (`inference_data`: the sampled sites in the posterior, the replicated and the model's length in
+        the posterior predictive, the pointwise log-likelihood for LOO, the measured length as observed data,
+        NUTS's sample stats) and a summary: per-parameter mean and 90 % interval, ``rhat_max``, ``ess_bulk_min``,
+        ``ess_tail_min``, ``divergences``, ``bfmi_min``, ``coverage_90`` (share of measured points inside the
+        90 % predictive band), ``emulator`` (its error and build time), ``chain_method``, ``coordinates`` (each
+        prior's: ``"numpyro"``, ``"softplus"`` or ``"ridge"``, `bound_start`), ``laplace_s`` (the start and mass
+        matrix through the model, `laplace_unconstrained`, compilation included), ``configuration_error_m`` (the
+        drift's sd) and ``wall_s`` (everything).
 
-    ``discrepancy`` and ``tolerances``: the likelihood, as in :func:`growjax.calibration.fit.fit` (:func:`growth_model`): the
-    discrepancy's amplitude and time scale are sampled with the parameters; the rig's tolerances enter through
-    the length's sensitivities (linearised), marginalised exactly. The rig is linearised where the fit puts it:
-    ``rig_centre`` {tolerance: ln(ψ/ψ₀)}, or None to take it from :func:`growjax.calibration.fit.fit` on the same data and
-    likelihood (its ``rig_offset``), so that the fit and the posterior
-    linearise the rig alike. The model runs with the rig there, and the rig's errors keep their prior about
-    nominal.
-
-    Returns a DataTree (:func:`inference_data`: the sampled sites in the posterior, the replicated and the
-    model's length in the posterior predictive, the pointwise log-likelihood for LOO, the measured length as
-    observed data, NUTS's sample stats) and a summary: per-parameter
-    mean and 90 % interval, ``rhat_max``, ``ess_bulk_min``, ``ess_tail_min``,
-    ``divergences``, ``bfmi_min``, ``coverage_90`` (share of measured points inside the 90 %
-    predictive band), ``emulator`` (its error and build time), ``chain_method``, ``coordinates`` (each prior's:
-    ``"numpyro"``, ``"softplus"`` or ``"ridge"``, :func:`bound_start`), ``laplace_s`` (the start and
-    mass matrix through the model, :func:`laplace_unconstrained`, compilation included) and ``wall_s`` (everything).
+    Raises:
+        ValueError: a set of more than one experiment, a fixed rig, or a ``rig_centre`` naming an untoleranced
+            parameter.
     """
-    base = base if base is not None else gp.reference()
-    config = (config if config is not None else Config()).replace(adjoint="forward")
+    if len(experiments) != 1:
+        raise ValueError(
+            f"a posterior takes one experiment, got {len(experiments)}: several robots' experiments are the "
+            "population's (growjax.posterior.population)"
+        )
+    if likelihood.rig != "inferred":
+        raise ValueError("the posterior marginalises the rig's errors under their tolerances: give rig='inferred'")
+    run = experiments.runs[0]
+    config = (config if config is not None else Config()).replace(adjoint="forward", drive=run.drive)
+    base = run.base()
+    inputs = run.model_inputs(base, config.t0, config.t1)
     priors = tuple(priors) if priors is not None else paper_priors()
-    t, y = _window(times, length, config, window)
+    discrepancy, window = likelihood.discrepancy, run.window
+    t, y = _window(run.times, run.length, config, window)
     start = time.perf_counter()
     if emulate is True:
         _progress.note("posterior: building the emulator", progress)
-    if discrepancy not in dc.KINDS:
-        raise ValueError(f"discrepancy must be one of {dc.KINDS}, got {discrepancy!r}")
-    tol = tl.budget(
-        base, tolerances, [p.name for p in priors], use_default=tolerances is None and discrepancy != "none"
-    )
-    centre, linearisations = _rig_centre(
-        rig_centre, tol, times, length, inputs, priors, base, config, window, discrepancy, tolerances, seed, progress
-    )
+    tol = likelihood.budget(base, [p.name for p in priors])
+    centre, linearisations = _rig_centre(rig_centre, tol, experiments, priors, config, likelihood, seed, progress)
     base = tl.rig_at(base, tol, centre)
     mean, model_error, emu_info = _mean_length(emulate, priors, base, inputs, config, t, seed, start)
     _progress.note(f"posterior: the likelihood ({discrepancy} discrepancy)", progress)
-    residuals, extra_init = _likelihood_terms(discrepancy, tol, t, y, mean, priors, base, inputs, config, seed, centre)
+    drift = likelihood.model_error_for(config)
+    residuals, extra_init = _likelihood_terms(
+        discrepancy, tol, t, y, mean, priors, (base, inputs, config), seed, centre, drift
+    )
 
     def make_model(mean_length, priors=priors):
         return functools.partial(
@@ -187,6 +204,7 @@ def sample(
             "discrepancy": discrepancy,
             "rig_centre": dict(zip(tol, map(float, centre))) if centre is not None else {},
             "linearisations": linearisations,
+            "configuration_error_m": drift,
             **_likelihood_record(residuals, y),
         }
     )
@@ -212,31 +230,21 @@ def _mean_length(emulate, priors, base, inputs, config, t, seed: int, start: flo
     return emulated_mean(emu), float(emu.error_rms), emu_info
 
 
-def _likelihood_terms(discrepancy: str, tol: dict, t, y, mean, priors, base, inputs, config, seed: int, centre=None):
-    """(:class:`Residuals` or None for independent noise, start values of σ and the discrepancy's sites)."""
-    if discrepancy == "none" and not tol:
+def _likelihood_terms(
+    discrepancy: str, tol: dict, t, y, mean, priors, model, seed: int, centre=None, model_error: float = 0.0
+):
+    """(:class:`Residuals` or None for independent noise, start values of σ and the discrepancy's sites);
+    ``model`` = (base, inputs, config)."""
+    if discrepancy == "none" and not tol and model_error == 0:
         return None, {}
-    residuals, hyper = build_residuals(discrepancy, t, y, mean, priors, base, inputs, config, tol, seed, centre)
+    residuals, hyper = build_residuals(discrepancy, t, y, mean, priors, *model, tol, seed, centre, model_error)
     return residuals, {**residuals.hyper_sites(hyper), "sigma": float(hyper.noise)}
 
 
-def _rig_centre(
-    given,
-    tol: dict,
-    times,
-    length,
-    inputs,
-    priors,
-    base,
-    config,
-    window,
-    discrepancy: str,
-    tolerances,
-    seed: int,
-    progress: bool,
-):
+def _rig_centre(given, tol: dict, experiments, priors, config, likelihood, seed: int, progress: bool):
     """(the rig's errors (q,) ln(ψ/ψ₀) where the posterior linearises it, or None at nominal; the fit's number of
-    linearisations, 0 when given or without tolerances): ``given`` {tolerance: value}, or the fit's."""
+    linearisations, 0 when given or without tolerances): ``given`` {tolerance: value}, or the fit's of the
+    experiment's length (its pressure is not scored)."""
     if not tol:
         return None, 0
     if given is not None:
@@ -245,23 +253,13 @@ def _rig_centre(
             raise ValueError(f"rig_centre names {unknown}, which carry no tolerance here (tolerances: {sorted(tol)})")
         centre = np.array([float(given.get(name, 0.0)) for name in tol])
         return (centre if np.any(centre != 0) else None), 0
-    from growjax.calibration import fit as gf
+    from growjax.calibration import fit
 
     _progress.note("posterior: the fit, for where the data put the rig", progress)
-    fitted = gf.fit(
-        times,
-        length,
-        inputs,
-        free=[p.name for p in priors],
-        base=base,
-        config=config,
-        window=window,
-        seed=seed,
-        discrepancy=discrepancy,
-        tolerances=tolerances,
-        relinearise=True,
-    )
-    centre = np.array([fitted.rig_offset.get(name, 0.0) for name in tol])
+    length_only = ExperimentSet(tuple(dataclasses.replace(r, sensors=("length",)) for r in experiments))
+    fitted = fit(length_only, [p.name for p in priors], likelihood=likelihood, config=config, seed=seed)
+    offsets = next(iter(fitted.rig_offset.values()), {})
+    centre = np.array([offsets.get(name, 0.0) for name in tol])
     if not np.all(np.isfinite(centre)) or not np.any(centre):  # the rig stayed at nominal
         return None, fitted.linearisations
     return centre, fitted.linearisations
@@ -364,13 +362,24 @@ def _likelihood_record(residuals: Residuals | None, y) -> dict:
 
 
 def build_residuals(
-    discrepancy: str, times, length, mean_length, priors, base, inputs, config, tol: dict, seed: int = 0, centre=None
+    discrepancy: str,
+    times,
+    length,
+    mean_length,
+    priors,
+    base,
+    inputs,
+    config,
+    tol: dict,
+    seed: int = 0,
+    centre=None,
+    model_error: float = 0.0,
 ) -> tuple[Residuals, dc.Hyper]:
     """The :class:`Residuals` of a posterior and its hyperparameters' start: the samples scored
-    (:func:`growjax.data.experiment.informative_samples` with a discrepancy), the rig's sensitivities at the scout's
+    (`growjax.data.experiment.informative_samples` with a discrepancy), the rig's sensitivities at the scout's
     best θ (``base`` holds the rig where it is linearised; ``centre`` (q,) its errors ln(ψ/ψ₀) there, None at
-    nominal: the slope there, as the fit takes it, rather than the secant from nominal), and the hyperparameters'
-    mode given the residuals there."""
+    nominal: the slope there, as the fit takes it, rather than the secant from nominal), the configuration's own
+    error ``model_error`` (m), and the hyperparameters' mode given the residuals there."""
     theta, _, _, _ = _scout(priors, mean_length, length, seed)
     observed = experiment.informative_samples(length) if discrepancy != "none" else np.ones(len(length), bool)
     g = u = None
@@ -385,13 +394,15 @@ def build_residuals(
         u,
         tuple(tol),
         None if centre is None else np.asarray(centre, float),
+        float(model_error),
     )
     r = (
         np.asarray(length)
         - np.asarray(jax.jit(mean_length)({k: jnp.asarray(v) for k, v in theta.items()}))
         - residuals.rig_mean()
     )
-    hyper = dc.estimate(r, times, discrepancy, g, u, observed)
+    g_all, u_all = residuals.columns()
+    hyper = dc.estimate(r, times, discrepancy, g_all, u_all, observed)
     return residuals, hyper
 
 
@@ -414,8 +425,8 @@ def observation_draws(
     correlation time and the tolerances, if any. The
     pointwise terms are then the one-step-ahead log-densities log p(yᵢ | earlier y) (0 at samples not scored).
     Returns (log-likelihood, this experiment replicated, a new experiment): a replication keeps this experiment's
-    discrepancy and rig error as the data determine them (:func:`growjax.calibration.discrepancy.smooth`, each sample drawn
-    from its marginal) with fresh sensor noise; a new experiment draws a fresh discrepancy and rig error (the
+    discrepancy and rig error as the data determine them (`growjax.calibration.discrepancy.smooth`, each sample
+    drawn from its marginal) with fresh sensor noise; a new experiment draws a fresh discrepancy and rig error (the
     band for running the rig again). Nothing is simulated again: NumPyro's ``Predictive`` and ArviZ's
     log-likelihood would each run the model once more per draw. Seeded by ``seed``.
     """
