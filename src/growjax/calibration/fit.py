@@ -66,8 +66,7 @@ def fit(
         scout: points of the Latin-hypercube scout over each free parameter's
             `growjax.calibration.starts.default_range` (every copy at the same value), ranked by the length RMSE
             over all runs; 0: one start, at the runs' own values.
-        seed: the scout's seed.
-        max_steps: Levenberg–Marquardt's accepted steps per fit.
+        seed, max_steps: the scout's seed; Levenberg–Marquardt's accepted steps per fit.
         rig_tangents: with the rig inferred, its errors are parameters of every run's model beside θ, their
             sensitivities the solver's exact tangents: least squares of z with the rig nominal, then of (z, b)
             with b's prior rows (a misfit is then the model's to remove, not the discrepancy's to absorb), then
@@ -78,8 +77,7 @@ def fit(
 
     Returns:
         The `growjax.calibration.FitResult`: each coordinate's estimate, 90 % interval, standard error and budget
-        (noise, discrepancy, the configuration's own error, the pressure noise, each tolerance, the
-        hyperparameters' spread), the runs, the rig's fitted errors, and ``parameters(run)``.
+        by source, the runs, the rig's fitted errors, and ``parameters(run)``.
 
     Raises:
         ValueError: a bad option, scope, window or parameter, naming it.
@@ -109,12 +107,20 @@ def fit(
         box = sampling_box(bases[0], layout.names, layout.refs, layout.scales)
         solution = solve_tangents(batch, layout, scores, tol, z, bounds, likelihood.discrepancy, max_steps, box)
     else:
-        steps = RELINEARISE_STEPS if relinearise else 1
-        options = (likelihood.rig, likelihood.discrepancy, max_steps, steps)
+        options = (likelihood.rig, likelihood.discrepancy, max_steps, RELINEARISE_STEPS if relinearise else 1)
         solution = solve_secants(batch, problems, layout, scores, tol, z, bounds, options)
     result = _result(solution, layout, likelihood, likelihood.model_error_for(config), tol, bounds)
     _describe(result, solution, layout, runs, bases)
-    result.starts = [
+    result.starts = _start_records(layout, values, order, (zs, costs, oks))
+    result.wall_s = time.perf_counter() - clock
+    return result
+
+
+def _start_records(layout: Layout, values, order, solved) -> list:
+    """[{"start", "estimate", "cost", "converged"}] of the least squares from each start: ``values`` (K, P) SI the
+    points scouted, ``order`` the starts among them, ``solved`` = (z, cost, converged) per start."""
+    zs, costs, oks = solved
+    return [
         {
             "start": dict(zip(layout.labels, map(float, values[i]))),
             "estimate": dict(zip(layout.labels, map(float, layout.values(zs[k])))),
@@ -123,8 +129,6 @@ def fit(
         }
         for k, i in enumerate(order)
     ]
-    result.wall_s = time.perf_counter() - clock
-    return result
 
 
 def _problems(runs, bases, modelled, config: Config, likelihood: Likelihood) -> list:
