@@ -14,10 +14,12 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 import xarray as xr
+from conftest import one_experiment
 
 import growjax as gj
 from growjax import plotting as gplot
 from growjax import posterior as gpost
+from growjax.calibration import Likelihood
 from growjax.posterior import emulator as em
 
 azp = gplot.arviz_plots()
@@ -63,9 +65,7 @@ def small_posterior():
     prior = gpost.paper_priors()[0]
     length = 2e-2 * TIMES + np.random.default_rng(0).normal(0.0, 2e-4, TIMES.size)
     return gpost.sample(
-        TIMES,
-        length,
-        None,
+        one_experiment(TIMES, length),
         config=gj.Config(t1=0.8),
         priors=[prior],
         chains=2,
@@ -74,8 +74,7 @@ def small_posterior():
         seed=0,
         progress=False,
         emulate=_linear_emulator(prior),
-        discrepancy="none",
-        tolerances={},
+        likelihood=Likelihood(discrepancy="none", tolerances={}, model_error=0.0),
     )
 
 

@@ -60,6 +60,8 @@ class Batch:
         """[(r (m_e,), J (m_e, p))] per run at the set's coordinates z (P,) (the last few points kept: the fit asks
         for a point again where one solver's end is the next one's start). With the rig's errors in the model
         (`rig_in_model`), z may be w = (z, b) (P + Q,) and J is (m_e, p + q)."""
+        if self.rig_in_model and np.size(z) == len(layout.labels):  # the rig nominal: one point with w = (z, 0)
+            z = np.concatenate([np.asarray(z, float), np.zeros(len(layout.rig_labels))])
         if stacked is None:
             return self._at(z, layout)
         return self._run(linearise_runs, z, layout, stacked)
@@ -120,7 +122,7 @@ class Batch:
         """
         cols = [[] for _ in range(self.size)]
         lo_hi = (-0.5, 0.5) if central else (0.0, 1.0)
-        r0 = None if central else self.residuals(z, layout)
+        r0 = None if central else self.linearised(z, layout)  # the runs at z: the fit has them already
         for name, u in tol.items():
             ends = []
             for f in lo_hi:
