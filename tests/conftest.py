@@ -42,12 +42,8 @@ DATASETS = REPO / "src" / "growjax" / "data" / "datasets"
 def one_experiment(times, length, inputs=None, *, base=None, drive="forward", pressure=None, window=None):
     """The set of one experiment made of arrays: its length (m) (and pressure, Pa) at ``times`` (s), run with
     ``inputs`` (None: made from the columns) on the parameters ``base`` (None: the drive's reference)."""
-    series = {"robot_length_m": np.asarray(length, float)}
-    if pressure is not None:
-        series["pressure_Pa"] = np.asarray(pressure, float)
-    return xs.ExperimentSet.single(
-        ex.Experiment(np.asarray(times, float), series), drive=drive, defaults=base, inputs=inputs, window=window
-    )
+    experiment = ex.from_arrays(times, length, pressure)
+    return xs.ExperimentSet.single(experiment, drive=drive, defaults=base, inputs=inputs, window=window)
 
 
 # The test run spreads whole files over its workers (``--dist loadfile``), except the files that fit the published

@@ -269,10 +269,12 @@ def compare_loo(results: dict) -> dict:
 
 
 def laplace(fit_result, sigma: float | None = None) -> dict:
-    """Laplace (Gauss–Newton) approximation at a fit: per-parameter mean, sd and 90 % interval (log-normal in θ)."""
+    """Laplace (Gauss–Newton) approximation at a fit (`growjax.calibration.FitResult`): per coordinate its mean, sd
+    and 90 % interval (log-normal in θ, or normal for a parameter fitted in a linear coordinate)."""
     out = {}
-    for i, n in enumerate(fit_result.names):
-        sd_z = float(np.sqrt(max(fit_result.covariance_log[i, i], 0.0)))
-        est = fit_result.estimate[n]
-        out[n] = {"mean": est, "sd": est * sd_z, "interval_90": fit_result.interval_90[n]}
+    for i, c in enumerate(fit_result.coordinates):
+        sd_z = float(np.sqrt(max(fit_result.covariance[i, i], 0.0)))
+        est = fit_result.estimate[c.label]
+        slope = est if c.scale is None else c.scale
+        out[c.label] = {"mean": est, "sd": slope * sd_z, "interval_90": fit_result.interval_90[c.label]}
     return out
