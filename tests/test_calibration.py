@@ -77,6 +77,54 @@ def test_a_direction_the_data_do_not_inform_is_undetermined_even_alone():
     assert abs(rotated[0]["direction"]["robot.extensibility"]) == pytest.approx(1.0)
 
 
+def _less_air(amplitude: float, seed: int, truth: float):
+    """A 2 s run of the fast model under a pulse train of ``amplitude`` Pa with the trapped-air effect's extra air
+    fraction at ``truth`` (less air than nominal for a negative one): its length (0.2 mm noise) and pressure
+    (500 Pa noise), a `growjax.data.sets.Run` with the inputs it ran."""
+    from growjax.data import sets as xs
+
+    cfg = gj.Config(t1=2.0)
+    inputs = gj.Inputs(catheter_length=gj.Constant(0.004), pressure_demand=gj.PulseTrain(amplitude=amplitude))
+    made = gj.with_effects(gj.reference(), gj.effects.TrappedAir(extra_fraction=truth))
+    times = np.arange(0.01, 2.0 + 1e-9, 0.01)
+    traj = gj.simulate(made, inputs, cfg, ts=times)
+    rng = np.random.default_rng(seed)
+    exp = ex.from_arrays(
+        times,
+        np.asarray(traj.length) + rng.normal(0.0, NOISE, times.size),
+        np.asarray(traj.pressure) + rng.normal(0.0, 500.0, times.size),
+    )
+    return xs.Run(f"pulse {amplitude / 1e3:.0f} kPa", exp, sensors=("length", "pressure"), inputs=inputs)
+
+
+def test_a_signed_parameter_is_fitted_below_its_nominal_value_alone_and_in_a_set():
+    """The trapped-air effect's extra air fraction may be negative (less air than the base model's): it is fitted in
+    a linear coordinate, not in ln θ, and on data made with less air than nominal its estimate is negative with a
+    90 % interval (symmetric about it) that covers the truth, from one experiment and, narrower, from two."""
+    from growjax.data import sets as xs
+
+    truth, name = -0.003, "trapped_air.extra_fraction"
+    runs = (_less_air(150e3, 1, truth), _less_air(100e3, 2, truth))
+    options = dict(
+        likelihood=cal.Likelihood(discrepancy="none", tolerances={}),
+        config=gj.Config(t1=2.0),
+        effects=(gj.effects.TrappedAir(),),  # at its nominal value, no extra air: the start
+        scout=0,
+    )
+    base = gj.with_effects(gj.reference(), gj.effects.TrappedAir())
+    assert cal.default_range(base, name) == (-0.005, 0.05)  # a scout draws over its range, linearly
+    np.testing.assert_allclose(cal.sampling_box(base, [name], [0.0]), [[-0.1], [1.0]])
+    widths = []
+    for exps in (xs.ExperimentSet(runs[:1]), xs.ExperimentSet(runs)):
+        res = cal.fit(exps, [name], **options)
+        lo, hi = res.interval_90[name]
+        assert res.coordinate(name).scale == 0.05 and res.summary()["parameters"][name]["coordinate"] == "linear"
+        assert res.status == "converged" and res.estimate[name] < 0.0
+        assert lo < truth < hi and hi - res.estimate[name] == pytest.approx(res.estimate[name] - lo)
+        widths.append(hi - lo)
+    assert widths[1] < widths[0]
+
+
 @pytest.mark.slow
 def test_fit_names_ext_and_n_as_undetermined():
     cfg, inputs, times, length = _synthetic(2.0, seed=12)

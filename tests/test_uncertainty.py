@@ -175,6 +175,8 @@ def test_no_blanket_inflation_on_white_noise(reference):
     data = lengths["published_Y12000"] + np.random.default_rng(11).normal(0.0, 2e-4, t.size)
     new = _fit(reference, data, tolerances={})
     old = _fit(reference, data, discrepancy="none", sigma_length=2e-4)
+    # without a discrepancy the fit still carries the configuration's own error (as the posterior does)
+    assert old.model_error_m == cal.FAST_MODEL_ERROR and old.budget[Y]["fast_model_error"] > 0.0
     assert new.discrepancy["amplitude_m"] < 5e-5
     assert new.standard_error[Y] < 1.5 * old.standard_error[Y]
     assert new.interval_90[Y][0] <= truth <= new.interval_90[Y][1]

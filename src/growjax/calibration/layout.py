@@ -35,12 +35,6 @@ class Coordinate:
     key: str
     scale: float | None = None
 
-    def applies_to(self, run) -> bool:
-        """Whether this copy is the one ``run`` (a `growjax.data.sets.Run`) uses."""
-        if self.scope == "shared":
-            return True
-        return self.key == {"robot": run.robot, "rig": run.rig, "experiment": run.name}[self.scope]
-
 
 @dataclasses.dataclass(frozen=True)
 class Layout:
