@@ -74,7 +74,11 @@ TARGETS = {"sweep_wall_s": 1.0, "ratio_min": 50.0, "agreement_m": 1e-4}
 def experiment_path() -> Path:
     """The public experiment's CSV if it is beside the checkout, else the shipped synthetic one."""
     folder = ex.shared_experiment_dir()
-    return folder / "experiment.csv" if folder else REPO / "src" / "growjax" / "data" / "datasets" / "synthetic_forward.csv"
+    return (
+        folder / "experiment.csv"
+        if folder
+        else REPO / "src" / "growjax" / "data" / "datasets" / "synthetic_forward.csv"
+    )
 
 
 def measured_series(exp, config: gj.Config):
@@ -551,7 +555,7 @@ def time_cli(n: int, data: Path) -> dict:
         env = dict(os.environ, GROWJAX_CACHE_DIR=str(Path(tmp) / "cache"), GROWJAX_CPU_DEVICES=str(CPU_DEVICES))
         for k in range(2):
             out, js = Path(tmp) / f"out{k}", Path(tmp) / f"s{k}.json"
-            args = [*cmd, "sweep", str(data), "--n", str(n), "--out", str(out), "--json", str(js)]
+            args = [*cmd, "sweep", str(data), "--sets", str(n), "--out", str(out), "--json", str(js)]
             start = time.perf_counter()
             proc = subprocess.run(args, capture_output=True, text=True, env=env, cwd=tmp, check=False)
             wall = time.perf_counter() - start
