@@ -13,7 +13,7 @@ import argparse
 import tomllib
 from pathlib import Path
 
-from growjax.cli import options
+from growjax.cli.parser import Listed, subparsers
 
 NOT_KEYS = ("help", "help-all", "config")  # long options that a file cannot set
 
@@ -73,7 +73,7 @@ def tokens(key: str, value, action: argparse.Action) -> list[str]:
             return [positive if on else negative]
         return [flag] if value else []
     values = value if isinstance(value, list) else [value]
-    if isinstance(value, list) and not isinstance(action, options.Listed):
+    if isinstance(value, list) and not isinstance(action, Listed):
         raise ValueError(f"{key} takes one value, got a list")
     if any(isinstance(v, (bool, dict, list)) for v in values):
         raise ValueError(f"{key} takes {'values' if isinstance(value, list) else 'a value'}, got {value!r}")
@@ -83,7 +83,7 @@ def tokens(key: str, value, action: argparse.Action) -> list[str]:
 def apply(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
     """Set ``args``' options from its ``--config`` file where the command line did not give them (``parser``:
     growjax's); the parser's one-line error (exit 2) naming the file for a bad file, key or value."""
-    parsers = options.subparsers(parser)
+    parsers = subparsers(parser)
     command = parsers[args.command]
     command.source = Path(args.config)
     try:
