@@ -26,7 +26,7 @@ DATA = REPO / "src" / "growjax" / "data" / "datasets"
 # case: (command line after `growjax`, headline figures as dotted paths into the summary)
 CASES = {
     "simulate": (["simulate"], ["final_length_m", "peak_pressure_Pa", "rmse_length_m", "solver_steps"]),
-    "sweep": (["sweep", "--n", "50"], ["best.rmse_length_m", "best.Y", "n_failed"]),
+    "sweep": (["sweep", "--sets", "50"], ["best.rmse_length_m", "best.Y", "n_failed"]),
     "fit": (
         ["fit"],
         ["parameters.robot.yield_pressure.estimate", "parameters.robot.yield_pressure.interval_90", "rmse_length_m"],
@@ -67,7 +67,7 @@ CASES = {
     ),
     "discover": (["discover", str(DATA / "discovery" / "retraction_folding.csv")], ["effect", "verdict"]),
     "discover_set": (
-        ["discover", str(DATA / "discovery_set" / "set.toml"), "--candidates", "retraction_folding", "trapped_air"],
+        ["discover", str(DATA / "discovery_set" / "set.toml"), "--candidates", "retraction_folding,trapped_air"],
         ["effect", "verdict"],
     ),
     "control": (["control"], ["tracking_rmse_m", "peak_pressure_Pa"]),
@@ -76,13 +76,13 @@ CASES = {
             "design",
             "--duration",
             "3",
-            "--random",
+            "--scout",
             "8",
-            "--iterations",
+            "--descent-steps",
             "2",
-            "--draws",
+            "--check-draws",
             "4",
-            "--points",
+            "--criterion-points",
             "1",
             "--nonlinear-draws",
             "0",

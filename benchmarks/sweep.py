@@ -555,7 +555,7 @@ def time_cli(n: int, data: Path) -> dict:
         env = dict(os.environ, GROWJAX_CACHE_DIR=str(Path(tmp) / "cache"), GROWJAX_CPU_DEVICES=str(CPU_DEVICES))
         for k in range(2):
             out, js = Path(tmp) / f"out{k}", Path(tmp) / f"s{k}.json"
-            args = [*cmd, "sweep", str(data), "--n", str(n), "--out", str(out), "--json", str(js)]
+            args = [*cmd, "sweep", str(data), "--sets", str(n), "--out", str(out), "--json", str(js)]
             start = time.perf_counter()
             proc = subprocess.run(args, capture_output=True, text=True, env=env, cwd=tmp, check=False)
             wall = time.perf_counter() - start

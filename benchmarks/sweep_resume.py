@@ -48,7 +48,7 @@ def command(args, out: Path, *extra: str) -> list[str]:
         "growjax.cli",
         "sweep",
         *data,
-        "--n",
+        "--sets",
         str(args.n),
         "--chunk-size",
         str(chunk_size(args)),

@@ -100,13 +100,15 @@ def test_every_command_shares_the_options_and_shows_defaults():
     for name in ("simulate", "sweep", "fit", "posterior", "discover", "control", "design"):
         sub = commands[name]
         options = {o for a in sub._actions for o in a.option_strings}
-        assert {"--drive", "--param", "--fidelity", "--rtol", "--seed", "--out", "--json"} <= options, name
+        assert {"--drive", "--param", "--t-end", "--out", "--json", "--quiet", "--config"} <= options, name
+        assert ("--seed" in options) == (name != "simulate"), name  # every command that draws
+        assert ("--fidelity" in options) == (name not in ("control", "design")), name
         assert sub.parse_args([]).out.replace("\\", "/") == f"out/{name}"
         helptext = sub.format_help()
         assert all(a.help for a in sub._actions), name
         assert "(default: out/" in " ".join(helptext.split()), name
     assert "--range" in {o for a in commands["sweep"]._actions for o in a.option_strings}
-    for name in ("sweep", "fit", "posterior", "discover", "control", "design"):  # progress on stderr, or none
+    for name in ("simulate", "sweep", "fit", "posterior", "discover", "control", "design"):  # progress, or none
         assert commands[name].parse_args(["--quiet"]).quiet and not commands[name].parse_args([]).quiet
 
 
@@ -137,7 +139,7 @@ def test_a_command_is_one_module_listed_in_the_registry(monkeypatch, tmp_path, c
 
     def add_arguments(parser):
         options.add(parser, (options.option("--value", type=options.positive, default=1e3, help="a pressure, Pa"),))
-        options.json_option(parser, "write the summary as JSON to FILE")
+        options.json_option(parser)
 
     def run(args):
         summary = {"command": "echo", "value_Pa": args.value}
@@ -167,15 +169,17 @@ def test_a_command_is_one_module_listed_in_the_registry(monkeypatch, tmp_path, c
         (["posterior", "--chains", "0"], "--chains: must be at least 1, got 0"),
         (["posterior", "--samples", "-5"], "--samples: must be at least 1, got -5"),
         (["posterior", "--warmup", "-1"], "--warmup: must be at least 0, got -1"),
-        (["sweep", "--n", "0"], "--n: must be at least 1"),
-        (["sweep", "--sobol-n", "100"], "--sobol-n: must be a power of 2"),
+        (["sweep", "--sets", "0"], "--sets: must be at least 1"),
+        (["sweep", "--sobol-points", "100"], "--sobol-points: must be a power of 2"),
         (["sweep", "--chunk-size", "0"], "--chunk-size: must be at least 1"),
         (["fit", "--starts", "0"], "--starts: must be at least 1"),
         (["discover", "--workers", "-2"], "--workers: must be at least 1"),
-        (["control", "--draws", "0"], "--draws: must be at least 1"),
+        (["control", "--tuning-draws", "0"], "--tuning-draws: must be at least 1"),
         (["control", "--iterations", "two"], "--iterations: 'two' is not an integer"),
         (["control", "--microsteps", "0"], "--microsteps: must be at least 1"),
-        (["simulate", "--seed", "-1"], "--seed: must be at least 0"),
+        (["fit", "--seed", "-1"], "--seed: must be at least 0"),
+        (["design", "--scout", "0"], "--scout: must be at least 1"),
+        (["design", "--check-draws", "1"], "--check-draws: must be at least 2"),
         (["simulate", "--t-end", "0"], "--t-end: must be a positive number"),
         (["fit", "--rtol=-1e-6"], "--rtol: must be a positive number"),
     ],
@@ -257,7 +261,7 @@ class _Designed(Exception):
     """Raised by a stand-in for the design once it has seen its arguments."""
 
 
-def test_control_gives_the_design_the_fixed_parameters_and_tolerances(tmp_path, monkeypatch):
+def test_control_gives_the_design_the_fixed_parameters_and_tolerances(tmp_path, monkeypatch, capsys):
     from growjax import cli
     from growjax import control as gc
 
@@ -269,13 +273,26 @@ def test_control_gives_the_design_the_fixed_parameters_and_tolerances(tmp_path, 
 
     monkeypatch.setattr(gc, "design_controller", design)
     with pytest.raises(_Designed):
-        cli.main(["control", "--param", "ext=2e-6", "--tolerance", "Kp=0.1", "--out", str(tmp_path)])
+        cli.main(["control", "--param", "ext=2e-6", "--robust-rig", "--tolerance", "Kp=0.1", "--out", str(tmp_path)])
     assert float(gj.get(seen["base"], "ext")) == 2e-6
     assert float(gj.get(seen["base"], "Y")) == 9000.0  # recorded beside the shipped data
     assert seen["tolerances"]["Kp"] == 0.1 and seen["tolerances"]["tank.length"] == 0.05  # on the default budget
     with pytest.raises(_Designed):
         cli.main(["control", "--out", str(tmp_path)])
     assert seen["tolerances"] is None and float(gj.get(seen["base"], "ext")) == float(gj.get(gj.reference(), "ext"))
+    assert (seen["evaluate_on"], seen["n_draws"]) == ("reference", 8)
+    with pytest.raises(_Designed):  # the default budget, tuned on 3 draws, evaluated on the fast configuration
+        cli.main(["control", "--robust-rig", "--tuning-draws", "3", "--evaluate-on", "fast", "--out", str(tmp_path)])
+    from growjax.calibration import tolerance as tl
+
+    assert seen["tolerances"] == tl.default_budget(gj.reference()) and seen["tolerances"]["tank.length"] == 0.05
+    assert (seen["evaluate_on"], seen["n_draws"]) == ("fast", 3)
+    for argv, named in (
+        (["--tolerance", "Kp=0.1"], "add --robust-rig"),
+        (["--robust-rig", "--tolerance", "none"], "no rig tolerance to draw"),
+    ):
+        assert cli.main(["control", *argv, "--out", str(tmp_path)]) == 2
+        assert named in capsys.readouterr().err
 
 
 def test_design_takes_the_growth_law_of_what_is_known(tmp_path, monkeypatch):
@@ -310,9 +327,7 @@ def test_design_takes_the_growth_law_of_what_is_known(tmp_path, monkeypatch):
                 "--law",
                 "lockhart",
                 "--for",
-                "Y",
-                "phi_L",
-                "n_L",
+                "Y,phi_L,n_L",
                 "--fit-from",
                 str(saved),
                 "--out",

@@ -144,7 +144,7 @@ def test_sweep_command_writes_table_figures_and_summary(tmp_path, capsys):
         "growjax.cli",
         "sweep",
         str(REPO / "src" / "growjax" / "data" / "datasets" / "synthetic_forward.csv"),
-        "--n",
+        "--sets",
         "16",
         "--t-end",
         "2",
@@ -296,7 +296,7 @@ def test_sweep_resume_errors_are_one_line_with_exit_2_and_change_nothing(tmp_pat
 
     data = str(REPO / "src" / "growjax" / "data" / "datasets" / "synthetic_forward.csv")
     folder = tmp_path / "run"
-    argv = ["sweep", data, "--n", "4", "--t-end", "2", "--seed", "5", "--chunk-size", "2", "--quiet"]
+    argv = ["sweep", data, "--sets", "4", "--t-end", "2", "--seed", "5", "--chunk-size", "2", "--quiet"]
     assert cli.main([*argv, "--out", str(folder), "--max-chunks", "1"]) == 3
     assert f"growjax sweep --resume {folder}" in capsys.readouterr().err
     before = _snapshot(folder)
@@ -345,7 +345,7 @@ def test_sweep_command_as_two_processes_gives_the_single_process_result(tmp_path
         "-m",
         "growjax.cli",
         "sweep",
-        "--n",
+        "--sets",
         "8",
         "--chunk-size",
         "4",

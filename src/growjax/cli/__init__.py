@@ -1,11 +1,11 @@
 """Command line: ``growjax COMMAND [DATA] [options]`` (``growjax --help``, ``growjax COMMAND --help``).
 
-Every workflow command takes the same shared options (``--drive``, ``--param``, ``--fidelity``, ``--rtol``,
-``--seed``, ``--t-end``, ``--out``, ``--json``), prints a short summary in mm and kPa, and exits with status 0 when
-its runs succeeded, 1 when a run failed (the reason on stderr) and 2 for a bad option or file. A sweep
-stopped before its end (its chunks kept for ``growjax sweep --resume DIR``) exits with 128 + the signal's
-number (130 for SIGINT, 143 for SIGTERM), or 3 where ``--max-chunks`` stopped it. Progress goes to stderr:
-bars on a terminal, a line every ~10 % elsewhere, none with ``--quiet``.
+Every workflow command takes the same shared options (``--drive``, ``--param``, ``--t-end``, ``--out``, ``--json``,
+``--config``; ``--fidelity`` and ``--seed`` where they apply; `growjax.cli.options`), prints a short summary in mm
+and kPa, and exits with status 0 when its runs succeeded, 1 when a run failed (the reason on stderr) and 2 for a
+bad option or file. A sweep stopped before its end (its chunks kept for ``growjax sweep --resume DIR``) exits with
+128 + the signal's number (130 for SIGINT, 143 for SIGTERM), or 3 where ``--max-chunks`` stopped it. Progress goes
+to stderr: bars on a terminal, a line every ~10 % elsewhere, none with ``--quiet``.
 
 Each command is one module of this folder (`growjax.cli.command` says what it defines); `COMMANDS` lists them.
 """
@@ -40,7 +40,9 @@ def build_parser() -> options.Parser:
     parser.add_argument("--version", action="version", version=f"growjax {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=options.Parser)
     for c in COMMANDS:
-        c.add_arguments(sub.add_parser(c.NAME, formatter_class=options.Formatter, help=c.HELP))
+        command = sub.add_parser(c.NAME, formatter_class=options.Formatter, help=c.HELP, description=c.HELP)
+        c.add_arguments(command)
+        options.common(command, c.NAME)
     return parser
 
 

@@ -11,7 +11,7 @@ from growjax.cli.command import Stopped
 
 STORE = "sweep.zarr"  # the store's folder inside --out
 # the options that define a sweep (recorded in its store; --resume takes them from there)
-DEFINING = ("data", "drive", "param", "fidelity", "rtol", "seed", "t_end", "n", "range", "chunk_size")
+DEFINING = ("data", "drive", "param", "fidelity", "rtol", "seed", "t_end", "sets", "range", "chunk_size")
 STOPPED_BY_REQUEST = 3  # exit status of a sweep stopped by --max-chunks (a signal: 128 + its number)
 
 

@@ -1,5 +1,5 @@
 """``growjax control [DATA]``: a length controller designed on the fast model to track DATA's length (an open-loop
-profile or step schedule, tuned feedback, or MPC), evaluated on ``--fidelity``; writes control.png."""
+profile or step schedule, tuned feedback, or MPC), evaluated on ``--evaluate-on``; writes control.png."""
 
 from __future__ import annotations
 
@@ -22,47 +22,55 @@ OPTIONS = (
         help="open-loop demand profile (or step schedule), tuned feedback, or MPC (forward drive)",
     ),
     option(
-        "--robust", metavar="POSTERIOR.nc", default=None, help="tune on the cost averaged over draws of this posterior"
+        "--evaluate-on",
+        choices=options.FIDELITIES,
+        default="reference",
+        help="the configuration the design is evaluated on (designs use the fast one)",
     ),
     option(
-        "--draws",
+        "--robust",
+        metavar="POSTERIOR.nc",
+        default=None,
+        help="tune the feedback on the cost averaged over draws of this posterior (default: none)",
+    ),
+    option(
+        "--robust-rig",
+        action="store_true",
+        help="tune the feedback on the cost averaged over draws of the rig within its tolerance budget "
+        "(--tolerance adjusts the budget)",
+    ),
+    option(
+        "--tuning-draws",
         type=count(),
         default=8,
-        help="draws to tune on: of the posterior (--robust), of the rig (--tolerance)",
+        metavar="N",
+        help="draws the feedback is tuned on: of the posterior (--robust), of the rig (--robust-rig)",
     ),
-    option("--iterations", type=count(), default=10, help="optimiser and tuning iterations"),
-    option("--microsteps", type=count(), default=1, help="stepper driver microsteps (1: the full-step driver)"),
+    option("--iterations", type=count(), default=10, metavar="N", help="optimiser steps and tuning rounds"),
+    option(
+        "--microsteps", type=count(), default=1, metavar="N", help="stepper driver microsteps (1: the full-step driver)"
+    ),
 )
 
 
 def add_arguments(parser) -> None:
-    """The shared options (``--fidelity``: the evaluation's), the design's, ``--tolerance``, ``--quiet``."""
-    options.shared(
-        parser,
-        NAME,
-        fidelity_default="reference",
-        fidelity_help="configuration the design is evaluated on (designs use the fast one)",
-    )
-    options.add(parser, OPTIONS)
-    options.tolerance(
-        parser,
-        "(repeat; the feedback design is then tuned on the cost averaged over --draws draws of the "
-        "rig within the default budget of `growjax params` and these; none given: the rig as it is)",
-    )
+    """The shared options (no ``--fidelity``, ``--rtol``: designs run the fast configuration at its tolerance,
+    ``--evaluate-on`` names the evaluation's), the design's, ``--tolerance``, ``--quiet``."""
+    options.shared(parser, NAME, fidelity=False, rtol=False)
+    options.add(parser, (*OPTIONS, options.TOLERANCE))
     options.quiet(parser)
 
 
 def run(args) -> dict:
-    """Design on the fast model, evaluate on ``--fidelity``, write the figure; the summary, RunFailed where the
+    """Design on the fast model, evaluate on ``--evaluate-on``, write the figure; the summary, RunFailed where the
     evaluation crossed the membrane pressure limit or failed."""
-    if args.rtol is not None:
-        raise ValueError("growjax control does not take --rtol: designs use each configuration's default tolerance")
     from growjax import control as gc
 
+    rig_budget(args)  # a bad --tolerance is refused before any work
     data = loader.load(args)
     target = gc.target_from_experiment(data.experiment, args.t_end)
     out = out_dir(args)
-    started = note(args, f"control: {args.method} design on the fast model, evaluated on {args.fidelity}")
+    started = note(args, f"control: {args.method} design on the fast model, evaluated on {args.evaluate_on}")
     summary = _design(args, target, data.base(), out)
     note(args, f"control: done in {time.perf_counter() - started:.1f} s")
     summary = {"command": NAME, "data": str(data.path), "fixed_parameters": data.origin, **summary}
@@ -78,6 +86,25 @@ def run(args) -> dict:
     return summary
 
 
+def rig_budget(args) -> dict | None:
+    """The rig's tolerances the feedback is tuned over: with ``--robust-rig`` the budget (``--tolerance`` on the
+    default one); None without it (the rig as it is). ValueError where ``--tolerance`` is given without
+    ``--robust-rig``, or the budget is empty."""
+    if not args.robust_rig:
+        if args.tolerance:
+            raise ValueError("--tolerance adjusts the rig's budget that --robust-rig tunes over: add --robust-rig")
+        return None
+    from growjax.calibration import tolerance as tl
+    from growjax.model import params as gp
+
+    budget = options.tolerances_of(args)
+    if budget is None:
+        budget = tl.default_budget(gp.reference(args.drive))
+    if not budget:
+        raise ValueError("--robust-rig with --tolerance none: no rig tolerance to draw the rig from")
+    return budget
+
+
 # -- the workflow's call ----------------------------------------------------------------------------------------
 
 
@@ -91,14 +118,14 @@ def _design(args, target, base, out) -> dict:
         args.method,
         args.t_end,
         robust=args.robust,
-        n_draws=args.draws,
+        n_draws=args.tuning_draws,
         iterations=args.iterations,
         microsteps=args.microsteps,
-        evaluate_on=args.fidelity,
+        evaluate_on=args.evaluate_on,
         seed=args.seed,
         figure=out / "control.png",
         base=base,
-        tolerances=options.tolerances_of(args),
+        tolerances=rig_budget(args),
     )
 
 
@@ -123,4 +150,4 @@ def summary_lines(s: dict) -> list[str]:
     return lines
 
 
-__all__ = ["HELP", "NAME", "OPTIONS", "PROCESS", "add_arguments", "run", "summary_lines"]
+__all__ = ["HELP", "NAME", "OPTIONS", "PROCESS", "add_arguments", "rig_budget", "run", "summary_lines"]

@@ -1,6 +1,6 @@
 """``growjax design [DATA]``: what is known (a fit of DATA, or ``--fit-from``), then the next experiment's input
 that most shrinks the intervals (the forward drive's demand, or the stepper's schedule), or that best tells two
-rival effects apart (``--discriminate A B``); writes design.csv, design.png and summary.json."""
+rival effects apart (``--discriminate A,B``); writes design.csv, design.png and summary.json."""
 
 from __future__ import annotations
 
@@ -10,50 +10,48 @@ import time
 from growjax.cli import loader, options
 from growjax.cli._summary import data_name, kpa, mm, origin_lines, value
 from growjax.cli.command import Process, note, out_dir
-from growjax.cli.options import DRIVES, count, option, positive
+from growjax.cli.options import DRIVES, LAW, PRESSURE_NOISE, count, listed, option, positive, rare
 
 NAME = "design"
 HELP = (
     "design the next experiment: the forward drive's demand (or the stepper's schedule) that most shrinks the intervals"
 )
 PROCESS = Process()
+SENSORS = ("length", "pressure")  # what an experiment designed for may record, in the design's order
 OPTIONS = (
-    option(
+    listed(
         "--for",
         dest="design_for",
-        action="extend",
-        nargs="+",
         default=[],
-        metavar="NAME",
-        help="parameters whose precision the design is for (repeat or list; none: Y)",
+        metavar="NAME[,...]",
+        help="parameters whose precision the design is for (default: Y)",
     ),
-    option(
+    listed(
         "--discriminate",
-        nargs="+",
         default=None,
-        metavar="EFFECT",
-        help="two rival catalogue effects A B: design to tell them apart (max min T, the expected "
-        "2ΔlogL by which the data reject the wrong one) instead of for precision",
+        metavar="EFFECT,EFFECT",
+        help="two rival catalogue effects: design to tell them apart (max min T, the expected 2ΔlogL by which the "
+        "data reject the wrong one) instead of for precision (default: off)",
     ),
-    option(
+    listed(
         "--size",
-        nargs="+",
-        type=float,
+        item=options.number,
         default=None,
-        metavar="SI",
-        help="with --discriminate: the two effects' assumed sizes (default their moderate magnitudes)",
+        metavar="SI,SI",
+        help="with --discriminate: the two effects' assumed sizes, SI (default: their moderate magnitudes)",
     ),
     option(
         "--fit-from",
         metavar="FIT.json",
         default=None,
-        help="what is known: the JSON summary of `growjax fit --json` (default: fit DATA first)",
+        help="what is known: the JSON summary of `growjax fit --json` (default: a fit of DATA)",
     ),
-    option(
+    listed(
         "--sensors",
-        choices=["length", "length,pressure"],
-        default="length",
-        help="what the next experiment records (length,pressure: the table also shows the length alone)",
+        item=options.one_of(*SENSORS),
+        default=["length"],
+        metavar="length[,pressure]",
+        help="what the next experiment records (with the pressure: the table also shows the length alone)",
     ),
     option(
         "--criterion",
@@ -70,69 +68,77 @@ OPTIONS = (
     ),
     option("--duration", type=positive, default=10.0, metavar="S", help="length of the designed run, s"),
     option(
-        "--knot-spacing",
-        type=positive,
-        default=None,
-        metavar="S",
-        help="s between the demand's knots (forward drive; default 0.5)",
-    ),
-    option(
         "--p-max",
         type=positive,
         default=None,
         metavar="PA",
         help="top of the demand, Pa (default: the sensed-pressure ceiling, the membrane limit × 0.9)",
     ),
-    option("--random", type=count(), default=64, help="random admissible inputs drawn and scored"),
-    option("--starts", type=count(), default=1, help="descents, from the best random inputs"),
     option(
-        "--iterations",
+        "--knot-spacing",
+        type=positive,
+        default=None,
+        metavar="S",
+        rare=True,
+        help="s between the demand's knots (forward drive) (default: 0.5)",
+    ),
+    option("--scout", type=count(), default=64, metavar="N", rare=True, help=options.SCOUT_HELP),
+    option("--starts", type=count(), default=1, metavar="K", rare=True, help=options.STARTS),
+    option(
+        "--descent-steps",
         type=count(),
         default=15,
-        help="gradient steps per descent (the stepper: moves of its local search)",
+        metavar="N",
+        rare=True,
+        help="steps of each local search: Adam's on the demand, moves on the stepper's schedule",
     ),
-    option("--draws", type=count(2), default=32, help="draws of the rig and θ every design is checked on"),
     option(
-        "--points",
+        "--check-draws",
+        type=count(2),
+        default=32,
+        metavar="N",
+        rare=True,
+        help="draws of the rig and θ every design is checked on",
+    ),
+    option(
+        "--criterion-points",
         type=count(),
         default=4,
+        metavar="N",
+        rare=True,
         help="points of θ and the rig the criterion is averaged over (1: the local design at the estimate)",
     ),
     option(
         "--nonlinear-draws",
         type=count(0),
         default=16,
+        metavar="N",
+        rare=True,
         help="draws of the rig on which what the fit's linearised rig misses is measured (0: none)",
     ),
-    option(
-        "--pressure-noise",
-        type=positive,
-        default=1e3,
-        metavar="PA",
-        help="sd of the pressure sensor's noise, Pa (with --sensors length,pressure)",
-    ),
+    rare(PRESSURE_NOISE),
     option(
         "--max-pump-speed",
         type=positive,
         default=None,
         metavar="M_S",
-        help="limit of the pump platform's speed, m/s (the model's ideal torque source has none)",
+        rare=True,
+        help="limit of the pump platform's speed, m/s (the model's ideal torque source has none) (default: none)",
     ),
-    option(
-        "--law",
-        choices=["reference", "lockhart"],
-        default="reference",
-        help="growth law of what is known and of the design (lockhart: e.g. --for Y phi_L n_L)",
-    ),
+    rare(LAW),
 )
+# the shared options design's --help leaves to --help-all (it shows at most 15)
+HIDDEN = ("--no-catheter", "--seed", "--t-end", "--json", "--quiet", "--t-start", "--discrepancy", "--rig")
 
 
 def add_arguments(parser) -> None:
-    """The shared options, the design's, ``--quiet``, the likelihood's (of the fit of DATA)."""
-    options.shared(parser, NAME)
+    """The shared options (no ``--fidelity``, ``--rtol``: design runs the fast configuration), the design's,
+    ``--quiet``, the likelihood's (of the fit of DATA); those of `HIDDEN` rare here."""
+    options.shared(parser, NAME, fidelity=False, rtol=False)
     options.add(parser, OPTIONS)
     options.quiet(parser)
-    options.likelihood(parser)
+    options.likelihood(parser, NAME, rig=("inferred",), rig_errors=None)
+    options.hide(parser, *HIDDEN)
 
 
 def run(args) -> dict:
@@ -175,9 +181,12 @@ def run(args) -> dict:
 
 def _check(args) -> None:
     """Refuse, before any work, options that do not go together (the rivals and their sizes as the workflow
-    checks them, `growjax.design.discrimination.checked_pair`)."""
+    checks them, `growjax.design.discrimination.checked_pair`); the sensors in their order."""
     from growjax.design import discrimination as ddis
 
+    if "length" not in args.sensors:
+        raise ValueError(f"--sensors {','.join(args.sensors)}: the length is always recorded (length[,pressure])")
+    args.sensors = [s for s in SENSORS if s in args.sensors]
     if args.discriminate is not None:
         ddis.checked_pair(args.discriminate, args.size, args.next_drive)
     if args.next_drive == "inverse" and (args.knot_spacing is not None or args.p_max is not None):
@@ -185,12 +194,10 @@ def _check(args) -> None:
             "--knot-spacing and --p-max shape the forward drive's demand; the stepper's schedule has "
             "neither (its steps are the controller's, at most one per period)"
         )
-    if args.fidelity != "fast":
-        raise ValueError("growjax design runs the fast configuration (its sensitivities are differentiated again)")
     if args.discriminate is not None:
         if args.design_for:
             raise ValueError("--for designs for precision, --discriminate to tell two effects apart: give one of them")
-        if args.sensors != "length":
+        if args.sensors != ["length"]:
             raise ValueError("--discriminate scores the length alone: drop --sensors")
     elif args.size is not None:
         raise ValueError("--size gives the effects' sizes of --discriminate")
@@ -237,10 +244,10 @@ def _design(args, known, space, lim, names):
             space,
             args.discriminate,
             args.size,
-            random=args.random,
+            random=args.scout,
             starts=args.starts,
-            iterations=args.iterations,
-            n_draws=args.draws,
+            iterations=args.descent_steps,
+            n_draws=args.check_draws,
             seed=args.seed,
             limits=lim,
             progress=not args.quiet,
@@ -250,19 +257,19 @@ def _design(args, known, space, lim, names):
         started = note(
             args,
             f"design: {args.criterion}-optimal {what} for {', '.join(names)}, "
-            f"{args.duration:g} s, sensors {args.sensors}",
+            f"{args.duration:g} s, sensors {','.join(args.sensors)}",
         )
         result = gd.design(
             known,
             space,
             criterion={"A": gd.AOptimal, "D": gd.DOptimal}[args.criterion](),
-            sensors=tuple(args.sensors.split(",")),
-            random=args.random,
+            sensors=tuple(args.sensors),
+            random=args.scout,
             starts=args.starts,
-            iterations=args.iterations,
-            n_draws=args.draws,
+            iterations=args.descent_steps,
+            n_draws=args.check_draws,
             seed=args.seed,
-            points=args.points,
+            points=args.criterion_points,
             pressure_noise=args.pressure_noise,
             limits=lim,
             nonlinear_draws=args.nonlinear_draws,

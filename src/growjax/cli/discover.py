@@ -9,21 +9,27 @@ from pathlib import Path
 from growjax.cli import loader, options
 from growjax.cli._summary import data_name, origin_lines
 from growjax.cli.command import Process, note, out_dir
-from growjax.cli.options import count, effect_name, option
+from growjax.cli.options import count, effect_name, listed, option
 
 NAME = "discover"
 HELP = "which catalogue effect the data need beyond the model (`growjax effects`)"
 PROCESS = Process(cpu_devices=True)  # a set's runs spread over the cores
 OPTIONS = (
-    option(
+    listed(
         "--candidates",
-        nargs="+",
-        metavar="EFFECT",
-        type=effect_name,
+        item=effect_name,
+        metavar="EFFECT[,...]",
         default=None,
-        help="catalogue effects to test (None: all of `growjax effects`)",
+        help="catalogue effects to test (default: every effect of `growjax effects`)",
     ),
-    option("--workers", type=count(), default=None, help="fits run at a time (None: one per CPU core)"),
+    option(
+        "--workers",
+        type=count(),
+        default=None,
+        metavar="N",
+        rare=True,
+        help="fits run at a time (default: one per CPU core)",
+    ),
 )
 
 
@@ -32,7 +38,7 @@ def add_arguments(parser) -> None:
     options.shared(parser, NAME, many=True)
     options.add(parser, OPTIONS)
     options.quiet(parser)
-    options.likelihood(parser)
+    options.likelihood(parser, NAME, rig=("inferred",), rig_errors=("shared",))
 
 
 def run(args) -> dict:

@@ -13,7 +13,7 @@ PROCESS = Process(workflow=False)
 
 def add_arguments(parser) -> None:
     """``--json``."""
-    options.json_option(parser, "write the catalogue as JSON to FILE ('-': stdout)")
+    options.json_option(parser)
 
 
 def run(args) -> dict:

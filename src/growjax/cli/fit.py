@@ -9,53 +9,48 @@ import time
 from growjax.cli import loader, options
 from growjax.cli._summary import data_name, mm, origin_lines, value
 from growjax.cli.command import Process, RunFailed, note, out_dir
-from growjax.cli.options import count, option
+from growjax.cli.options import count, listed, option
 
+SCOUT_ONE, SCOUT_SET = 64, 16  # the scout's points: one experiment, a set (each run of a set simulated per point)
 NAME = "fit"
 HELP = "least-squares fit to the measured length (and pressure)"
 PROCESS = Process(quick_compile=True, cpu_devices=True)  # a set's runs spread over the cores
 OPTIONS = (
-    option(
+    listed(
         "--free",
-        action="append",
         default=[],
-        metavar="NAME[@SCOPE]",
-        help="parameter to fit (repeat; none: Y). With several experiments, @robot, @rig or "
-        "@experiment fits one per robot, rig or experiment, none one for all (none given: Y@robot)",
+        metavar="NAME[@SCOPE][,...]",
+        help="parameters to fit; with several experiments NAME@robot, NAME@rig or NAME@experiment fits one per "
+        "robot, rig or experiment, NAME alone one for all (default: Y; Y@robot with several experiments)",
     ),
-    option("--starts", type=count(), default=3, help="starts, from the best sets of a Latin hypercube"),
+    option("--starts", type=count(), default=3, metavar="K", help=options.STARTS),
+    option(
+        "--scout",
+        type=count(),
+        default=None,
+        metavar="N",
+        rare=True,
+        help=f"{options.SCOUT_HELP} (default: {SCOUT_ONE}; {SCOUT_SET} for several experiments)",
+    ),
 )
 RIG_OPTIONS = (
-    option(
-        "--rig",
-        choices=["inferred", "fixed"],
-        default="inferred",
-        help="inferred: the toleranced rig parameters fitted beside the free ones, their tolerances "
-        "as priors (the posterior's treatment); fixed: held nominal, each tolerance propagated "
-        "as if the data said nothing of the rig (conservative)",
-    ),
-    option(
-        "--rig-errors",
-        choices=["shared", "experiment"],
-        default="shared",
-        help="with several experiments: one set of rig errors per rig, shared by its experiments, or "
-        "one per experiment (treats them as independent: over-confident on one rig)",
-    ),
     option(
         "--rig-tangents",
         action=argparse.BooleanOptionalAction,
         default=True,
-        help="the rig inferred: the rig's errors are parameters of the model, their sensitivities its "
-        "exact tangents, fitted with their priors before the discrepancy (default; reaches a rig "
-        "far off nominal); --no-rig-tangents: the rig's secants from nominal, taken apart",
+        rare=True,
+        help="the rig inferred: the rig's errors are parameters of the model, their sensitivities its exact "
+        "tangents, fitted with their priors before the discrepancy (reaches a rig far off nominal); "
+        "--no-rig-tangents: the rig's secants from nominal, taken apart (default: --rig-tangents)",
     ),
     option(
         "--relinearise",
         action=argparse.BooleanOptionalAction,
         default=True,
-        help="with --no-rig-tangents: take the secants again where the data put the rig, until it "
-        "settles (default); --no-relinearise: once, at nominal (faster; over-confident where the "
-        "rig is off by a tolerance or more)",
+        rare=True,
+        help="with --no-rig-tangents: take the secants again where the data put the rig, until it settles; "
+        "--no-relinearise: once, at nominal (faster; over-confident where the rig is off by a tolerance or more) "
+        "(default: --relinearise)",
     ),
 )
 
@@ -65,7 +60,7 @@ def add_arguments(parser) -> None:
     options.shared(parser, NAME, many=True)
     options.add(parser, OPTIONS)
     options.quiet(parser)
-    options.likelihood(parser)
+    options.likelihood(parser, NAME)
     options.add(parser, RIG_OPTIONS)
 
 
@@ -90,7 +85,7 @@ def run(args) -> dict:
         window=options.scored_window(args, config),
     )
     started = note(args, f"fit: {', '.join(args.free or ['Y'])} from {args.starts} starts")
-    result = _fit(args, exps, args.free or ["Y"], config)
+    result = _fit(args, exps, args.free or ["Y"], config, scout=args.scout or SCOUT_ONE)
     note(args, f"fit: done in {time.perf_counter() - started:.1f} s")
     out = out_dir(args)
     run = exps.runs[0]
@@ -130,7 +125,7 @@ def _run_set(args, data) -> dict:
     free = args.free or ["Y@robot"]
     scopes = [xs.Scope.parse(f, exps.runs[0].base()) for f in free]  # a bad scope is refused before any work
     started = note(args, f"fit: {', '.join(free)} over {len(exps)} experiments from {args.starts} starts")
-    result = _fit(args, exps, scopes, config, scout=16)
+    result = _fit(args, exps, scopes, config, scout=args.scout or SCOUT_SET)
     note(args, f"fit: done in {time.perf_counter() - started:.1f} s")
     fig = set_figure(_set_traces(args, exps, result, config), out_dir(args) / "fit.png")
     summary = {
@@ -176,7 +171,7 @@ def _set_traces(args, exps, result, config) -> list:
 # -- the workflow's call ----------------------------------------------------------------------------------------
 
 
-def _fit(args, exps, free, config, scout: int = 64):
+def _fit(args, exps, free, config, scout: int):
     """The fit of the set (`growjax.calibration.fit`) under the flags' likelihood."""
     from growjax import calibration
 

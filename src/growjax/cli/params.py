@@ -9,18 +9,17 @@ import numpy as np
 
 from growjax.cli import options
 from growjax.cli.command import Process
-from growjax.cli.options import DRIVES, option
 
 NAME = "params"
 HELP = "list the parameters: names, symbols, defaults, units, physical ranges"
 PROCESS = Process(workflow=False)
-OPTIONS = (option("--drive", choices=DRIVES, default="forward", help="which drive's published parameter set"),)
+OPTIONS = (options.DRIVE,)
 
 
 def add_arguments(parser) -> None:
-    """``--drive`` and ``--json``."""
+    """``--drive`` (whose published set) and ``--json``."""
     options.add(parser, OPTIONS)
-    options.json_option(parser, "write the table as JSON to FILE ('-': stdout)")
+    options.json_option(parser)
 
 
 def run(args) -> dict:

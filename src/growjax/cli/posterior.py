@@ -29,9 +29,9 @@ OPTIONS = (
         "--hierarchical",
         default=None,
         metavar="NAME",
-        help="a TOML manifest of several robots (or several files): each robot's NAME drawn from a "
+        help="with a TOML manifest of several robots (or several files): each robot's NAME drawn from a "
         "log-normal population whose median and spread are sampled, the data entering through "
-        "the set's joint fit; with the predictive for a new robot (default: off)",
+        "the set's joint fit; with the predictive for a new robot (default: one experiment's posterior)",
     ),
     option(
         "--predict",
@@ -40,21 +40,16 @@ OPTIONS = (
         help="with --hierarchical: the input (demand, catheter) of the new robot's experiment "
         "(default: the set's first experiment's)",
     ),
-    option(
-        "--law",
-        choices=["reference", "lockhart"],
-        default="reference",
-        help="growth law: the published velocity term, or Lockhart's",
-    ),
+    options.LAW,
     option(
         "--emulate",
         action="store_true",
         help="sample through a validated emulator of the model (fast; worth it where the data leave "
         "directions flat, as ext and n of the published law)",
     ),
-    option("--chains", type=count(), default=4, help="NUTS chains"),
-    option("--warmup", type=count(0), default=500, help="warm-up draws per chain"),
-    option("--samples", type=count(), default=500, help="kept draws per chain"),
+    option("--chains", type=count(), default=4, metavar="N", help="NUTS chains"),
+    option("--warmup", type=count(0), default=500, metavar="N", help="warm-up draws per chain"),
+    option("--samples", type=count(), default=500, metavar="N", help="kept draws per chain"),
 )
 
 
@@ -63,7 +58,7 @@ def add_arguments(parser) -> None:
     options.shared(parser, NAME, many=True)
     options.add(parser, OPTIONS)
     options.quiet(parser)
-    options.likelihood(parser)
+    options.likelihood(parser, NAME, rig=("inferred",), rig_errors=("shared",))
 
 
 def run(args) -> dict:

@@ -9,7 +9,7 @@ import numpy as np
 
 from growjax.cli import loader, options
 from growjax.cli._summary import data_name, kpa, mm, origin_lines
-from growjax.cli.command import Process, RunFailed, out_dir
+from growjax.cli.command import Process, RunFailed, note, out_dir
 
 NAME = "simulate"
 HELP = "simulate an experiment against its measured length"
@@ -17,8 +17,9 @@ PROCESS = Process(quick_compile=True)
 
 
 def add_arguments(parser) -> None:
-    """The shared options alone."""
-    options.shared(parser, NAME)
+    """The shared options (no ``--seed``: nothing is drawn) and ``--quiet``."""
+    options.shared(parser, NAME, seed=False)
+    options.quiet(parser)
 
 
 def run(args) -> dict:
@@ -34,6 +35,7 @@ def run(args) -> dict:
     inputs = ex.to_inputs(exp, args.drive, params, config.t0, config.t1)
     ts = exp.time[(exp.time >= config.t0) & (exp.time <= config.t1)]
     ts = np.unique(np.concatenate([[config.t0], ts, [config.t1]]))
+    note(args, f"simulate: {config.fidelity} configuration, {config.t0:g}–{config.t1:g} s, compiled then run")
     traj, first, wall = _simulate(params, inputs, config, ts)
     out = out_dir(args)
     series = _write_trajectory(traj, inputs, args.drive, out)

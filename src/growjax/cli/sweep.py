@@ -9,49 +9,81 @@ from growjax.cli import _sweep as cs
 from growjax.cli import loader, options
 from growjax.cli._summary import data_name, mm, origin_lines, value
 from growjax.cli.command import Process, RunFailed, out_dir
-from growjax.cli.options import count, option, power_of_two
+from growjax.cli.options import count, listed, option, power_of_two
 
 NAME = "sweep"
 HELP = "Latin-hypercube sweep scored against the measured length"
 PROCESS = Process(cpu_devices=True)
 OPTIONS = (
-    option("--n", type=count(), default=500, help="number of parameter sets"),
-    option(
+    option("--sets", type=count(), default=500, metavar="N", help="parameter sets of the Latin hypercube"),
+    listed(
         "--range",
-        action="append",
         default=[],
-        metavar="NAME=LOW:HIGH[:log]",
-        help="swept parameter and its range, SI units (repeat); none: the paper's n, Y, ext box",
+        metavar="NAME=LOW:HIGH[:log][,...]",
+        help="swept parameters and their ranges, SI units (default: the paper's n, Y, ext box)",
     ),
     option("--sobol", action="store_true", help="also compute Sobol indices of RMSE and final length"),
-    option("--sobol-n", type=power_of_two, default=256, help="Saltelli base points (a power of 2; runs = N·(d+2))"),
-    option("--chunk-size", type=count(), default=None, help="sets per compiled call (None: sized to memory)"),
+    option(
+        "--sobol-points",
+        type=power_of_two,
+        default=256,
+        metavar="N",
+        rare=True,
+        help="Saltelli base points of the Sobol indices (a power of 2; runs = N·(d+2))",
+    ),
+    option(
+        "--chunk-size",
+        type=count(),
+        default=None,
+        metavar="N",
+        rare=True,
+        help="sets per compiled call (default: sized to memory)",
+    ),
     option(
         "--resume",
         metavar="DIR",
         default=None,
-        help="complete the interrupted sweep kept in DIR (its --out); its options are the recorded ones",
+        help="complete the interrupted sweep kept in DIR (its --out); its options are the recorded ones "
+        "(default: a new sweep)",
     ),
     option(
         "--max-chunks",
-        type=int,
+        type=count(),
         default=None,
         metavar="K",
-        help="stop after K chunks, as an interrupt would (exit 3; complete with --resume)",
+        rare=True,
+        help="stop after K chunks, as an interrupt would (exit 3; complete with --resume) (default: no limit)",
     ),
     option(
         "--distributed",
         action="store_true",
+        rare=True,
         help="one process of several (jax.distributed, the cluster detected: SLURM, ...); process 0 writes the results",
     ),
     option(
         "--coordinator",
         metavar="HOST:PORT",
         default=None,
-        help="jax.distributed without a detected cluster: process 0's address (with --num-processes, --process-id)",
+        rare=True,
+        help="jax.distributed without a detected cluster: process 0's address (with --num-processes, --process-id) "
+        "(default: none)",
     ),
-    option("--num-processes", type=int, default=None, metavar="N", help="processes in all (--coordinator)"),
-    option("--process-id", type=int, default=None, metavar="I", help="this process, 0..N-1 (--coordinator)"),
+    option(
+        "--num-processes",
+        type=count(),
+        default=None,
+        metavar="N",
+        rare=True,
+        help="processes in all (--coordinator) (default: none)",
+    ),
+    option(
+        "--process-id",
+        type=count(0),
+        default=None,
+        metavar="I",
+        rare=True,
+        help="this process, 0..N-1 (--coordinator) (default: none)",
+    ),
 )
 
 
@@ -90,7 +122,7 @@ def run(args) -> dict:
     if summary["n_failed"]:
         reasons = ", ".join(f"{n} {why}" for why, n in summary["failed_reasons"].items())
         raise RunFailed(
-            f"{summary['n_failed']} of {args.n} sweep members failed ({reasons}); see {out / 'sweep.csv'}", summary
+            f"{summary['n_failed']} of {args.sets} sweep members failed ({reasons}); see {out / 'sweep.csv'}", summary
         )
     return summary
 
@@ -103,7 +135,7 @@ def _summary(args, data, config, dims, result, measured: bool, out) -> dict:
 
     result.write_csv(out / "sweep.csv")
     best = result.best()
-    title = f"{args.n}-set Latin hypercube on {data.path.name}"
+    title = f"{args.sets}-set Latin hypercube on {data.path.name}"
     if best is not None and measured:
         title += f": best RMSE {1e3 * best['rmse_length_m']:.2f} mm"
     fig = sweep_figure(result, out / "sweep.png", title=title)
@@ -117,7 +149,7 @@ def _summary(args, data, config, dims, result, measured: bool, out) -> dict:
         "drive": args.drive,
         "fidelity": config.fidelity,
         "t_end_s": args.t_end,
-        "n": args.n,
+        "n": args.sets,
         "seed": args.seed,
         "parameters": data.origin,
         "ranges": [{"name": d.name, "low": d.low, "high": d.high, "log": d.log} for d in dims],
@@ -157,7 +189,7 @@ def _sweep(args, base, inputs, config, dims, measured):
             )
         store = cs.prepare_new(args.out) if leader else cs.store_path(args.out)
         return sw.lhs_sweep(
-            args.n,
+            args.sets,
             base,
             inputs,
             config,
@@ -184,7 +216,7 @@ def _sobol(args, base, inputs, config, dims, measured, out) -> dict:
         base,
         inputs,
         config,
-        n_base=args.sobol_n,
+        n_base=args.sobol_points,
         seed=args.seed,
         measured=measured,
         chunk_size=args.chunk_size,

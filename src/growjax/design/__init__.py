@@ -25,7 +25,7 @@ What is here, in the order a design uses it:
 * `random_admissible`, `multistart`, `local_search` — the random baseline, the descent, and
   the stepper's search over its schedule's choices (`.optimise`).
 * `design` — all of it end to end (`.workflow`; the ``growjax design`` command), `discriminate`
-  its sibling for two rival effects (``growjax design --discriminate A B``), and `design_figure`.
+  its sibling for two rival effects (``growjax design --discriminate A,B``), and `design_figure`.
 
 SI units throughout: s, Pa, m; uncertainties of ln θ (relative).
 """
