@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import time
+from pathlib import Path
 
 from growjax.cli import loader, options
 from growjax.cli._summary import data_name, kpa, mm, origin_lines
@@ -57,6 +58,8 @@ def run(args) -> dict:
     evaluation crossed the membrane pressure limit or failed."""
     if args.rtol is not None:
         raise ValueError("growjax control does not take --rtol: designs use each configuration's default tolerance")
+    if args.robust is not None and not Path(args.robust).is_file():
+        raise ValueError(f"--robust {args.robust}: no such file (a posterior's InferenceData, .nc)")
     from growjax import control as gc
 
     data = loader.load(args)
@@ -66,7 +69,8 @@ def run(args) -> dict:
     summary = _design(args, target, data.base(), out)
     note(args, f"control: done in {time.perf_counter() - started:.1f} s")
     summary = {"command": NAME, "data": str(data.path), "fixed_parameters": data.origin, **summary}
-    if summary.get("pressure_limit_crossed"):
+    peak = summary.get("peak_pressure_Pa")
+    if summary.get("pressure_limit_crossed") and peak is not None and peak > summary["pressure_limit_Pa"]:
         raise RunFailed(
             f"the design crossed the membrane pressure limit ({summary['pressure_limit_Pa'] / 1e3:.1f} kPa; "
             f"peak {summary['peak_pressure_Pa'] / 1e3:.1f} kPa)",

@@ -215,6 +215,7 @@ def _known(args, data, base, names):
     config = options.make_config(args, args.drive, adjoint="forward")
     inputs = ex.to_inputs(exp, args.drive, base, config.t0, config.t1)
     pressure = exp["pressure_Pa"] if "pressure_Pa" in exp else None  # noqa: SIM401 (Experiment is not a dict)
+    window = options.scored_window(args, config)
     started = note(args, f"design: what is known, a fit of {', '.join(names)} to {data.path.name}")
     fitted = gf.fit(
         exp.time,
@@ -225,7 +226,7 @@ def _known(args, data, base, names):
         config=config,
         pressure=pressure,
         seed=args.seed,
-        window=options.scored_window(args, config),
+        window=window,
         discrepancy=likelihood["discrepancy"],
         tolerances=likelihood["tolerances"],
     )

@@ -77,6 +77,7 @@ def run(args) -> dict:
     data = loader.load(args)
     exp, base = data.experiment, data.base()
     dims = tuple(sw.parse_dimension(p, base) for p in args.range) if args.range else sw.paper_box()
+    _check_ranges(dims, base)
     config = options.make_config(args, args.drive)
     inputs = ex.to_inputs(exp, args.drive, base, config.t0, config.t1)
     measured = (exp.time, exp["robot_length_m"]) if "robot_length_m" in exp else None
@@ -93,6 +94,19 @@ def run(args) -> dict:
             f"{summary['n_failed']} of {args.n} sweep members failed ({reasons}); see {out / 'sweep.csv'}", summary
         )
     return summary
+
+
+def _check_ranges(dims, base) -> None:
+    """ValueError where a swept range leaves its parameter's physical range (`growjax params`)."""
+    from growjax.model import params as gp
+
+    ranges = gp.physical_ranges(base)
+    for d in dims:
+        lo, hi, unit = ranges.get(d.name, (None, None, ""))
+        if lo is not None and (d.low < lo or d.high > hi):
+            raise ValueError(
+                f"--range {d.name}={d.low:g}:{d.high:g} leaves its physical range {lo:g}–{hi:g} {unit}".rstrip()
+            )
 
 
 def _summary(args, data, config, dims, result, measured: bool, out) -> dict:
