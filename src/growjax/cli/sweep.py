@@ -228,7 +228,10 @@ def summary_lines(s: dict) -> list[str]:
     ]
     if s.get("best"):
         best = ", ".join(f"{k} = {value(k, v)}" for k, v in s["best"]["parameters"].items())
-        lines.append(f"  best: {best}; length RMSE {mm(s['best']['rmse_length_m'])}")
+        among = f" of the {s['n'] - s['n_failed']} that ran to their end" if s["n_failed"] else ""
+        lines.append(f"  best{among}: {best}; length RMSE {mm(s['best']['rmse_length_m'])}")
+    elif s["n_failed"] == s["n"]:
+        lines.append("  no set ran to its end: no best")
     for output, table in s.get("sobol", {}).get("indices", {}).items():
         if "S1" in table:
             shown = ", ".join(

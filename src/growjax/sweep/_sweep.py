@@ -90,7 +90,7 @@ def paper_box() -> tuple[Dimension, ...]:
 
 
 def parse_dimension(text: str, params: gp.Parameters) -> Dimension:
-    """``NAME=LOW:HIGH[:log]`` → :class:`Dimension` (NAME as accepted by :func:`growjax.replace`); ValueError naming
+    """``NAME=LOW:HIGH[:log]`` → `Dimension` (NAME as accepted by `growjax.replace`); ValueError naming
     ``--range``, the text and the problem."""
     if "=" not in text:
         raise ValueError(f"--range expects NAME=LOW:HIGH[:log], got {text!r}")
