@@ -195,7 +195,7 @@ def test_counts_and_spans_are_checked_by_the_parser(argv, named, capsys):
 
 def _rows(path, header, times):
     cols = header.split(",")
-    values = {"time_s": None, "robot_length_m": 0.010, "catheter_length_m": 0.004}
+    values = {"time_s": None, "robot_length_m": 0.010, "catheter_length_m": 0.004, "pressure_demand_Pa": 150e3}
     path.write_text(
         header
         + "\n"
@@ -245,7 +245,7 @@ def test_a_window_longer_than_the_data_is_shrunk_to_them_with_a_note(tmp_path, c
     from growjax import cli
     from growjax.cli import loader, options
 
-    short = _rows(tmp_path / "short.csv", "time_s,robot_length_m", [0.01, 0.1, 0.2])
+    short = _rows(tmp_path / "short.csv", "time_s,robot_length_m,pressure_demand_Pa", [0.01, 0.1, 0.2])
     args = cli.build_parser().parse_args(["simulate", str(short), "--no-catheter"])
     exp = loader.load(args).experiment
     assert args.t_end == pytest.approx(0.2) and options.make_config(args).t1 == pytest.approx(0.2)

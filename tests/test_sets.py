@@ -64,7 +64,7 @@ def test_the_command_line_gives_bad_sets_and_scopes_exit_2_with_one_line(tmp_pat
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "experiment 'a.csv'" in err[0] and "holds no data" in err[0]
     good = _write(tmp_path, '[[experiment]]\nfile = "a.csv"\n[[experiment]]\nfile = "b.csv"\n', ("a.csv", "b.csv"))
-    for free, message in (("Q@robot", "unknown parameter 'Q'"), ("Y@membrane", "unknown scope 'membrane'")):
+    for free, message in (("Q@robot", "--free Q: unknown parameter"), ("Y@membrane", "unknown scope 'membrane'")):
         assert cli.main(["fit", str(good), "--free", free, "--out", str(tmp_path / "out")]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and message in err[0], err

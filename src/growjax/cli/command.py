@@ -1,5 +1,6 @@
 """What every command module shares: the protocol it follows, the process it asks for, how its run fails or
-stops, its output folder and its progress lines.
+stops, its outputs (checked before the run, listed where it is interrupted), its output folder and its progress
+lines.
 
 A command is one module of ``growjax.cli`` (listed in ``growjax.cli.COMMANDS``) that defines:
 
@@ -15,13 +16,16 @@ A command is one module of ``growjax.cli`` (listed in ``growjax.cli.COMMANDS``) 
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import os
+import signal
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 OK, RUN_FAILED, BAD_INPUT = 0, 1, 2  # exit statuses: success, a run failed, a bad option or file
+SHOWN_WRITTEN = 4  # files an interrupted command names (then how many more)
 
 
 class RunFailed(Exception):
@@ -48,6 +52,42 @@ class Stopped(Exception):
     def __init__(self, message: str, status: int):
         super().__init__(message)
         self.status = status
+
+
+class Interrupted(KeyboardInterrupt):
+    """A signal that stops a command as Ctrl-C does (SIGTERM), raised in the main thread.
+
+    Args:
+        signum: the signal's number.
+    """
+
+    def __init__(self, signum: int):
+        super().__init__(signal.Signals(signum).name)
+        self.signal = signum
+
+
+@contextlib.contextmanager
+def terminate_as_interrupt():
+    """Within the block, SIGTERM raises `Interrupted` in the main thread (the previous handler restored after it;
+    elsewhere than the main thread, nothing changes)."""
+
+    def handle(signum, frame):
+        raise Interrupted(signum)
+
+    try:
+        previous = signal.signal(signal.SIGTERM, handle)
+    except ValueError:  # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def interrupted_status(error: BaseException) -> int:
+    """The exit status of a command stopped by ``error`` (a ``KeyboardInterrupt``): 128 + the signal's number."""
+    return 128 + int(getattr(error, "signal", signal.SIGINT))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -111,6 +151,72 @@ def use_all_cpu_cores(at_least: int = 1) -> None:
         pass  # older JAX, or the backend is already initialised
 
 
+def check_outputs(args) -> None:
+    """Refuse, before any work, outputs that cannot be written: ``--out`` (a folder, made where missing) and
+    ``--json`` (a file; ``-`` is stdout).
+
+    Raises:
+        ValueError: one line naming the option, the path and the problem.
+    """
+    out = getattr(args, "out", None)
+    if out is not None and getattr(args, "resume", None) is None:
+        _check_writable("--out", Path(out), folder=True)
+    where = getattr(args, "json", None)
+    if where and where != "-":
+        _check_writable("--json", Path(where), folder=False)
+
+
+def _check_writable(option: str, path: Path, folder: bool) -> None:
+    """ValueError where ``path`` cannot be written as a folder (``folder``) or as a file."""
+    what = "a folder" if folder else "a file"
+    if path.exists():
+        if folder != path.is_dir():
+            raise ValueError(f"{option} {path}: names {what}, and {path} is {'a file' if folder else 'a folder'}")
+        if not os.access(path, os.W_OK | (os.X_OK if folder else 0)):
+            raise ValueError(f"{option} {path}: {'the folder' if folder else 'the file'} is not writable")
+        return
+    parent = path.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir():
+        raise ValueError(f"{option} {path}: {parent} is a file, not a folder")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise ValueError(f"{option} {path}: cannot write in {parent} (not writable)")
+
+
+def outputs_now(args) -> dict:
+    """{path: (modification time ns, size)} of what the command may write: the entries of ``--out`` and the
+    ``--json`` file, as they stand (compare with `written`)."""
+    paths = []
+    out = getattr(args, "out", None)
+    if out is not None and Path(out).is_dir():
+        paths += sorted(Path(out).iterdir())
+    where = getattr(args, "json", None)
+    if where and where != "-":
+        paths.append(Path(where))
+    stamps = {}
+    for p in paths:
+        with contextlib.suppress(OSError):
+            st = p.stat()
+            stamps[str(p)] = (st.st_mtime_ns, st.st_size)
+    return stamps
+
+
+def written(args, before: dict) -> list[str]:
+    """The outputs made or changed since ``before`` (`outputs_now` then)."""
+    return [p for p, stamp in outputs_now(args).items() if before.get(p) != stamp]
+
+
+def interrupted_line(args, before: dict, error: BaseException) -> str:
+    """The one line of a command stopped by ``error`` (Ctrl-C, SIGTERM): what it wrote since ``before``."""
+    how = "interrupted" if getattr(error, "signal", signal.SIGINT) == signal.SIGINT else f"stopped by {error}"
+    files = written(args, before)
+    if not files:
+        return f"{how} before writing anything"
+    more = f" and {len(files) - SHOWN_WRITTEN} more" if len(files) > SHOWN_WRITTEN else ""
+    return f"{how}; wrote {', '.join(files[:SHOWN_WRITTEN])}{more}"
+
+
 def out_dir(args) -> Path:
     """The command's ``--out`` folder, made where missing."""
     out = Path(args.out)
@@ -134,11 +240,18 @@ __all__ = [
     "BAD_INPUT",
     "OK",
     "RUN_FAILED",
+    "Interrupted",
     "Process",
     "RunFailed",
     "Stopped",
+    "check_outputs",
     "enable_compile_cache",
+    "interrupted_line",
+    "interrupted_status",
     "note",
     "out_dir",
+    "outputs_now",
+    "terminate_as_interrupt",
     "use_all_cpu_cores",
+    "written",
 ]

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import time
+from pathlib import Path
 
 from growjax.cli import loader, options
 from growjax.cli._summary import data_name, kpa, mm, origin_lines
@@ -64,6 +65,8 @@ def add_arguments(parser) -> None:
 def run(args) -> dict:
     """Design on the fast model, evaluate on ``--evaluate-on``, write the figure; the summary, RunFailed where the
     evaluation crossed the membrane pressure limit or failed."""
+    if args.robust is not None and not Path(args.robust).is_file():
+        raise ValueError(f"--robust {args.robust}: no such file (a posterior's InferenceData, .nc)")
     from growjax import control as gc
 
     rig_budget(args)  # a bad --tolerance is refused before any work
@@ -74,10 +77,11 @@ def run(args) -> dict:
     summary = _design(args, target, data.base(), out)
     note(args, f"control: done in {time.perf_counter() - started:.1f} s")
     summary = {"command": NAME, "data": str(data.path), "fixed_parameters": data.origin, **summary}
-    if summary.get("pressure_limit_crossed"):
+    peak, limit = summary.get("peak_pressure_Pa"), summary["pressure_limit_Pa"]
+    if summary.get("status") == "pressure_limit" or (peak is not None and peak > limit):
         raise RunFailed(
-            f"the design crossed the membrane pressure limit ({summary['pressure_limit_Pa'] / 1e3:.1f} kPa; "
-            f"peak {summary['peak_pressure_Pa'] / 1e3:.1f} kPa)",
+            f"the design reached the membrane pressure limit ({limit / 1e3:.1f} kPa; peak "
+            f"{max(peak or limit, limit) / 1e3:.1f} kPa)",
             summary,
         )
     rmse = summary.get("tracking_rmse_m")
@@ -129,16 +133,33 @@ def _design(args, target, base, out) -> dict:
     )
 
 
+def _evaluation_line(s: dict) -> str:
+    """The evaluation's tracking error and peak pressure; where it stopped at the membrane limit, the limit as its
+    peak; where it failed, the peak up to its failure; a tracking error only where the run reached its end."""
+    limit, peak = s.get("pressure_limit_Pa"), s.get("peak_pressure_Pa")
+    ceilings = f"limit {kpa(limit)}, demand ceiling {kpa(s.get('max_demand_Pa'))}"
+    rmse = s.get("tracking_rmse_m")
+    reached_end = rmse is not None and math.isfinite(rmse)
+    at_limit = s.get("status") == "pressure_limit" or (peak is not None and limit is not None and peak > limit)
+    if at_limit:
+        peak = max((p for p in (peak, limit) if p is not None), default=None)  # the sensed pressure at the stop
+        tracked = f"tracking RMSE {mm(rmse)}" if reached_end else "no tracking RMSE"
+        return f"  the evaluation run reached the membrane limit: {tracked}; peak pressure {kpa(peak)} ({ceilings})"
+    if s.get("status") in ("ok", None) and reached_end:
+        return f"  tracking RMSE {mm(rmse)}; peak pressure {kpa(peak)} ({ceilings})"
+    return (
+        f"  the evaluation run did not reach its end ({s.get('status')}): no tracking RMSE; peak pressure up to "
+        f"its failure {kpa(peak)} ({ceilings})"
+    )
+
+
 def summary_lines(s: dict) -> list[str]:
     """The tracking error, peak pressure, gains and figure."""
     lines = [
         f"control: {data_name(s)}, {s['drive']} drive, {s['method']}, evaluated on the {s['evaluated_on']} "
         "configuration",
         *origin_lines(s["fixed_parameters"]),
-        (
-            f"  tracking RMSE {mm(s.get('tracking_rmse_m'))}; peak pressure {kpa(s.get('peak_pressure_Pa'))} "
-            f"(limit {kpa(s.get('pressure_limit_Pa'))}, demand ceiling {kpa(s.get('max_demand_Pa'))})"
-        ),
+        _evaluation_line(s),
     ]
     if s.get("gains"):
         lines.append(

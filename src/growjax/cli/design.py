@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import time
+from pathlib import Path
 
 from growjax.cli import loader, options
 from growjax.cli._summary import data_name, kpa, mm, origin_lines, value
@@ -157,7 +158,7 @@ def run(args) -> dict:
         space = gd.stepper_space(base_next, args.duration, data.experiment)
     else:
         space = gd.demand_space(args.duration, lim, data.experiment, p_max=args.p_max, knot_spacing=args.knot_spacing)
-    known = _known(args, data, base, names)
+    known, known_status = _known(args, data, base, names)
     if base_next is not base:
         known = known.on(base_next)  # θ as fitted, on the next experiment's drive
     result = _design(args, known, space, lim, names)
@@ -170,6 +171,7 @@ def run(args) -> dict:
         "data_drive": args.drive,
         "fixed_parameters": data.origin,
         "growth_law": args.law,
+        "known_fit_status": known_status,
         **result.summary(),
         "design_csv": str(csv),
         "figure": str(figure),
@@ -207,15 +209,16 @@ def _check(args) -> None:
 
 
 def _known(args, data, base, names):
-    """What is known (`growjax.design.Knowledge`): ``--fit-from``'s saved fit, or a fit of ``names`` to DATA
-    (`growjax.calibration.fit`)."""
+    """(what is known (`growjax.design.Knowledge`), the status of the fit it comes from): ``--fit-from``'s saved
+    fit, or a fit of ``names`` to DATA (`growjax.calibration.fit`)."""
     from growjax import calibration
     from growjax import design as gd
     from growjax.data import sets as xs
 
     likelihood = options.likelihood_of(args)
     if args.fit_from:
-        return gd.from_summary(args.fit_from, base, names, likelihood=likelihood)
+        known = gd.from_summary(args.fit_from, base, names, likelihood=likelihood)
+        return known, _saved_status(args.fit_from)
     exp = data.experiment
     if "robot_length_m" not in exp:
         raise ValueError(f"{data.path} has no robot_length_m column to fit: give what is known with --fit-from")
@@ -230,7 +233,15 @@ def _known(args, data, base, names):
     started = note(args, f"design: what is known, a fit of {', '.join(names)} to {data.path.name}")
     fitted = calibration.fit(exps, names, likelihood=likelihood, config=config, seed=args.seed)
     note(args, f"design: fitted in {time.perf_counter() - started:.1f} s")
-    return gd.from_fit(fitted, base, likelihood=likelihood)
+    return gd.from_fit(fitted, base, likelihood=likelihood), fitted.status
+
+
+def _saved_status(path) -> str | None:
+    """The status a saved fit's JSON summary records (None where it records none)."""
+    try:
+        return json.loads(Path(path).read_text()).get("status")
+    except (OSError, ValueError, AttributeError):
+        return None
 
 
 def _design(args, known, space, lim, names):
@@ -292,6 +303,7 @@ def summary_lines(s: dict) -> list[str]:
             f"design: {data_name(s)}, to tell {a} from {b}, {s['duration_s']:g} s, demand in 0–{kpa(s['p_max_Pa'])} "
             f"on knots every {s['knot_spacing_s']:g} s",
             *origin_lines(s["fixed_parameters"]),
+            *_known_lines(s),
             *_discrimination_rows(s),
         ]
         return lines + _tail(s)
@@ -305,6 +317,7 @@ def summary_lines(s: dict) -> list[str]:
     lines = [
         f"design: {data_name(s)}, {s['criterion']}-optimal for {', '.join(names)}, {s['duration_s']:g} s, {space}",
         *origin_lines(s["fixed_parameters"]),
+        *_known_lines(s),
     ]
     head = f"  {'input':26s} {'sensors':16s}" + "".join(f" {n.split('.')[-1][:14]:>14s} sd  90 % width" for n in names)
     lines += [head + "   alone sd"]
@@ -316,6 +329,17 @@ def summary_lines(s: dict) -> list[str]:
         alone = ", ".join(f"{100 * row['parameters'][n]['sd_log_alone']:.2f} %" for n in names)
         lines.append(f"  {row['input']:26s} {'+'.join(row['sensors']):16s}{cells}   {alone}")
     return lines + _tail(s)
+
+
+def _known_lines(s: dict) -> list[str]:
+    """Where the fit of what is known did not converge: a line saying what the design rests on."""
+    status = s.get("known_fit_status")
+    if status in ("converged", None):
+        return []
+    return [
+        f"  what is known comes from a fit that did not converge ({status}): the design rests on where its search "
+        "stopped, not on estimates"
+    ]
 
 
 def _discrimination_rows(s: dict) -> list[str]:

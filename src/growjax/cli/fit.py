@@ -199,11 +199,10 @@ def summary_lines(s: dict) -> list[str]:
         f"fit: {data_name(s)}, {s['drive']} drive, {s.get('t_start_s', 0.0):g}–{s['t_end_s']:g} s scored: "
         f"{s['status']}",
         *origin_lines(s["fixed_parameters"]),
+        *_stopped_lines(s),
     ]
     for p, v in s["parameters"].items():
-        interval = v["interval_90"]
-        shown = "undetermined" if interval is None else f"90 % {value(p, interval[0])} – {value(p, interval[1])}"
-        lines.append(f"  {p} = {value(p, v['estimate'])} ({shown})")
+        lines.append(f"  {p} = {value(p, v['estimate'])} ({_interval(s, p, v['interval_90'])})")
         if v.get("budget_sd"):
             parts = sorted(v["budget_sd"].items(), key=lambda kv: -kv[1])
             lines.append("    sd from " + ", ".join(f"{k} {value(p, x)}" for k, x in parts if x > 0))
@@ -227,18 +226,34 @@ def summary_lines(s: dict) -> list[str]:
     return lines
 
 
+def _stopped_lines(s: dict) -> list[str]:
+    """Where the fit did not converge: a line saying the values are where the search stopped."""
+    if s["status"] == "converged":
+        return []
+    return ["  not converged: the values below are where the search stopped, not estimates; no interval holds"]
+
+
+def _interval(s: dict, name: str, interval) -> str:
+    """A parameter's 90 % interval as shown (none where the fit did not converge)."""
+    if s["status"] != "converged":
+        return "where the search stopped"
+    if interval is None:
+        return "undetermined"
+    return f"90 % {value(name, interval[0])} – {value(name, interval[1])}"
+
+
 def _set_lines(s: dict) -> list[str]:
     runs = s["runs"]
     robots = len({r["robot"] for r in runs})
     rigs = len({r["rig"] for r in runs})
     lines = [
         f"fit: {len(runs)} experiments ({robots} robot{'s' * (robots > 1)}, {rigs} rig{'s' * (rigs > 1)}), "
-        f"fitted jointly: {s['status']}"
+        f"fitted jointly: {s['status']}",
+        *_stopped_lines(s),
     ]
     for p, v in s["parameters"].items():
-        interval, name = v["interval_90"], p.split("@")[0]
-        shown = "undetermined" if interval is None else f"90 % {value(name, interval[0])} – {value(name, interval[1])}"
-        lines.append(f"  {p} = {value(name, v['estimate'])} ({shown})")
+        name = p.split("@")[0]
+        lines.append(f"  {p} = {value(name, v['estimate'])} ({_interval(s, name, v['interval_90'])})")
         if v.get("budget_sd"):
             parts = sorted(v["budget_sd"].items(), key=lambda kv: -kv[1])[:5]
             lines.append("    sd from " + ", ".join(f"{k} {value(p.split('@')[0], x)}" for k, x in parts if x > 0))

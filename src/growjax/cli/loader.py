@@ -4,7 +4,9 @@ DATA is nothing (the synthetic experiment shipped with growjax), an experiment C
 files, ``mammobot`` (a named public data set, `growjax.data.datasets.fetch`), several files (one robot on one rig)
 or a TOML manifest. Each experiment takes the parameter values recorded beside its file (``X.json`` beside
 ``X.csv``) with ``--param`` on top. One file is read into the simulated window [t0, ``--t-end``]: a window that
-runs past the data's end is shrunk to it (a one-line note), one that does not overlap them is refused.
+runs past the data's end is shrunk to it (a one-line note), one that does not overlap them is refused. A file's
+columns that are not used, and a forward drive's demand taken as the published pulse train for want of a
+``pressure_demand_Pa`` column, are each said in a one-line note on stderr.
 """
 
 from __future__ import annotations
@@ -31,8 +33,72 @@ def parse_param(text: str) -> tuple[str, float]:
 
 
 def fixed_parameters(args) -> dict:
-    """{name: value} of ``--param`` (SI units)."""
-    return dict(parse_param(p) for p in args.param)
+    """{name: value} of ``--param`` (SI units); ValueError naming an unknown parameter or a value outside its
+    physical range."""
+    from growjax.model import params as gp
+
+    base = gp.reference(getattr(args, "drive", "forward"))
+    fixed = {}
+    for text in args.param:
+        name, value = parse_param(text)
+        qualified = parameter_name(base, name, "--param")
+        try:
+            gp.validate(gp.replace(base, **{qualified: value}))
+        except ValueError as err:
+            raise ValueError(f"--param {text}: {err}") from None
+        fixed[name] = value
+    return fixed
+
+
+def parameter_name(base, name: str, option: str) -> str:
+    """The qualified name of the parameter ``name`` of ``option``; ValueError naming the option, the name and the
+    nearest known names."""
+    import difflib
+
+    from growjax.model import params as gp
+
+    try:
+        return gp.resolve_name(base, name)
+    except ValueError as err:
+        if "ambiguous" in str(err):
+            raise ValueError(f"{option} {name}: {err}") from None
+    names = gp.parameter_names(base)
+    known = [*gp.ALIASES, *names, *(q.split(".", 1)[1] for q in names)]
+    near = difflib.get_close_matches(name, known, n=3)
+    hint = f"; did you mean {' or '.join(repr(n) for n in near)}?" if near else ""
+    raise ValueError(f"{option} {name}: unknown parameter{hint} (names as in `growjax params`)") from None
+
+
+def check_options(args) -> None:
+    """Refuse, before any work, an empty scored window (``--t-start`` after ``--t-end``) and the parameter options
+    that name an unknown parameter, a scope or a value out of range: ``--param``, ``--tolerance``, ``--free``,
+    ``--for``, ``--hierarchical``."""
+    from growjax.calibration import tolerance as tl
+    from growjax.data import sets as xs
+    from growjax.model import params as gp
+
+    t_start, t_end = getattr(args, "t_start", None), getattr(args, "t_end", None)
+    if t_start is not None and t_end is not None and not t_start < t_end:
+        raise ValueError(f"--t-start {t_start:g} s must lie before --t-end {t_end:g} s")
+    base = gp.reference(getattr(args, "drive", "forward"))
+    if hasattr(args, "param"):
+        fixed_parameters(args)
+    tolerances = getattr(args, "tolerance", None) or []
+    if [t.strip().lower() for t in tolerances] != ["none"]:
+        for text in tolerances:
+            name, _ = tl.parse(text)
+            parameter_name(base, name, "--tolerance")
+    single = not is_set(getattr(args, "data", None) or [])
+    for text in getattr(args, "free", None) or []:
+        if single and "@" in text:
+            raise ValueError(f"--free {text}: a scope (@{'/@'.join(xs.SCOPES[1:])}) applies to several experiments")
+        parameter_name(base, text.partition("@")[0].strip(), "--free")
+        if not single:
+            xs.Scope.parse(text, base)
+    for name in getattr(args, "design_for", None) or []:
+        parameter_name(base, name, "--for")
+    if getattr(args, "hierarchical", None):
+        parameter_name(base, args.hierarchical, "--hierarchical")
 
 
 def recorded_parameters(data: Path) -> dict:
@@ -67,6 +133,29 @@ def data_path(data: str | None, data_dir: str | None = None) -> Path:
     return datasets.fetch(data, data_dir=data_dir)
 
 
+def notice(args, text: str) -> None:
+    """One line on stderr: ``growjax COMMAND: note: text``."""
+    print(f"growjax {args.command}: note: {text}", file=sys.stderr)
+
+
+def unused_columns_note(args, exp) -> None:
+    """A note naming the columns of ``exp``'s file that are not used (none where every column is)."""
+    if exp.unused:
+        names = ", ".join(repr(c) for c in exp.unused)
+        notice(args, f"{exp.source}: column{'s' * (len(exp.unused) > 1)} {names} not used (not growjax columns)")
+
+
+def published_demand_note(args, exp, drive: str, named: bool) -> None:
+    """A note where a user's file on the forward drive has no demand column: the published pulse train is
+    simulated (``named``: a shipped or named public data set, recorded under that pulse: no note)."""
+    if drive == "forward" and "pressure_demand_Pa" not in exp and not named:
+        notice(
+            args,
+            f"{exp.source} has no pressure_demand_Pa column: the demand is taken as the published 0/150 kPa "
+            "pulse train",
+        )
+
+
 def in_window(args, exp, data: Path):
     """The samples of ``exp`` in the simulated window [t0, ``--t-end``]. A window that runs past the data's end is
     shrunk to it (``args.t_end`` set, a one-line note on stderr); ExperimentError naming both spans where the
@@ -83,7 +172,7 @@ def in_window(args, exp, data: Path):
     if inside.time.size < 2:
         raise ExperimentError(f"{spans}: only one sample lies in the window")
     if last < t1 - 1e-9:
-        print(f"growjax {args.command}: note: {spans}: the window is shrunk to {t0:g}–{last:g} s", file=sys.stderr)
+        notice(args, f"{spans}: the window is shrunk to {t0:g}–{last:g} s")
         args.t_end = last
     return inside
 
@@ -149,11 +238,14 @@ def load(args, growth_law: str = "reference", as_set: bool | None = None) -> Dat
 
 
 def _load_one(args, given: str | None, growth_law: str) -> Data:
+    from growjax.data import datasets
     from growjax.data import experiment as ex
     from growjax.data import sets as xs
 
     data = data_path(given, args.data_dir)
     exp = in_window(args, ex.read(data, catheter=args.catheter), data)
+    unused_columns_note(args, exp)
+    published_demand_note(args, exp, args.drive, named=given is None or given in datasets.NAMES)
     recorded = recorded_parameters(data)
     fixed = fixed_parameters(args)
     run = xs.Run(data.stem or data.name, exp, drive=args.drive, parameters={**recorded, **fixed})
@@ -175,6 +267,8 @@ def _load_set(args, paths) -> Data:
     from growjax.data import sets as xs
 
     fixed = fixed_parameters(args)
+    if len(paths) > 1 and any(Path(p).suffix.lower() == ".toml" for p in paths):
+        raise ValueError("a manifest (.toml) describes the whole set: give it alone")
     if len(paths) == 1:
         exps = xs.ExperimentSet.from_manifest(paths[0], catheter=args.catheter)
     else:
@@ -189,17 +283,24 @@ def _load_set(args, paths) -> Data:
     if fixed:
         exps = xs.ExperimentSet(tuple(dataclasses.replace(r, parameters={**r.parameters, **fixed}) for r in exps))
     for run in exps:
+        unused_columns_note(args, run.experiment)
+        published_demand_note(args, run.experiment, run.drive, named=False)
         gj.validate(run.base())
     return Data(exps, tuple(str(p) for p in paths), {"fixed": fixed}, False)
 
 
 __all__ = [
     "Data",
+    "check_options",
     "data_path",
     "fixed_parameters",
     "in_window",
     "is_set",
     "load",
+    "notice",
+    "parameter_name",
     "parse_param",
+    "published_demand_note",
     "recorded_parameters",
+    "unused_columns_note",
 ]

@@ -21,6 +21,7 @@ def _whole_loop(args) -> bool:
     return not args.emulate and args.hierarchical is None
 
 
+MIXED_RHAT = 1.1  # chains whose R-hat exceeds this did not mix
 NAME = "posterior"
 HELP = "NUTS posterior of Y, ext, n (or Y, phi_L, n_L) and the noise; of a population of robots with --hierarchical"
 PROCESS = Process(cpu_devices=True, devices_at_least="chains", whole_loop=_whole_loop)  # chains one per device
@@ -64,6 +65,8 @@ def add_arguments(parser) -> None:
 def run(args) -> dict:
     """The posterior of one experiment, or the population of a set's robots (``--hierarchical``); the summary,
     RunFailed where the chains did not mix."""
+    if args.predict and args.hierarchical is None:
+        raise ValueError("--predict gives the new robot's input of --hierarchical: give --hierarchical NAME")
     if args.hierarchical is not None:
         return _population(args, loader.load(args, as_set=True))
     if loader.is_set(args.data or []):
@@ -89,10 +92,16 @@ def run(args) -> dict:
         **res.summary,
         "inference_data": str(out / "posterior.nc"),
     }
-    rhat = summary.get("rhat_max")
-    if args.chains > 1 and (rhat is None or not math.isfinite(rhat) or rhat > 1.1):
-        raise RunFailed(f"the chains did not mix (R-hat max {rhat}); run more --warmup and --samples", summary)
+    if not _mixed(args.chains, summary.get("rhat_max")):
+        raise RunFailed(
+            f"the chains did not mix (R-hat max {summary.get('rhat_max')}); run more --warmup and --samples", summary
+        )
     return summary
+
+
+def _mixed(chains: int, rhat) -> bool:
+    """Whether ``chains`` chains mixed: one chain, or R-hat known and at most `MIXED_RHAT`."""
+    return chains < 2 or (rhat is not None and math.isfinite(rhat) and rhat <= MIXED_RHAT)
 
 
 def _population(args, data) -> dict:
@@ -110,13 +119,14 @@ def _population(args, data) -> dict:
             f"--hierarchical needs experiments of two or more robots, got robot {exps.robots[0]!r}: "
             "name each experiment's robot in a manifest"
         )
+    run = _new_robot(args, exps)  # --predict's file read before any work
     started = note(args, f"posterior: joint fit of {name}@robot over {len(exps)} experiments")
     fit = _joint_fit(args, exps, name, config)
     if fit.status != "converged":
-        raise RunFailed(f"the joint fit did not converge ({fit.status})", {"command": NAME, **fit.summary()})
+        summary = {"command": NAME, "hierarchical": name, "data": list(data.sources), "joint_fit": fit.summary()}
+        raise RunFailed(f"the joint fit did not converge ({fit.status}); no population was sampled", summary)
     note(args, f"posterior: joint fit done in {time.perf_counter() - started:.1f} s; NUTS on the population")
     post = _population_sample(args, fit, name)
-    run = _new_robot(args, exps)
     band = _predict(args, post, run, config)
     out = out_dir(args)
     nc = pop.save(post, out / "population.nc")
@@ -146,7 +156,7 @@ def _population(args, data) -> dict:
         "figure": str(fig),
     }
     rhat = post.diagnostics["mu"]["r_hat"]
-    if args.chains > 1 and (rhat is None or not math.isfinite(rhat) or rhat > 1.1):
+    if not _mixed(args.chains, rhat):
         raise RunFailed(f"the chains did not mix (R-hat of mu {rhat}); run more --warmup and --samples", summary)
     return summary
 
@@ -160,6 +170,7 @@ def _new_robot(args, exps):
         return exps.runs[0]
     first = exps.runs[0]
     new = ex.read(Path(args.predict), catheter=args.catheter)
+    loader.unused_columns_note(args, new)
     return xs.Run("new robot", new, drive=first.drive, robot="new robot", rig=first.rig, parameters=first.parameters)
 
 
@@ -236,6 +247,11 @@ def summary_lines(s: dict) -> list[str]:
         f"({s['warmup']} + {s['samples']})",
         *origin_lines(s["fixed_parameters"]),
     ]
+    if not _mixed(s["chains"], s.get("rhat_max")):
+        lines.append(
+            f"  the chains did not mix (R-hat max {s.get('rhat_max')} > {MIXED_RHAT}): the intervals below are not "
+            "the posterior's"
+        )
     for p, v in s["parameters"].items():
         lo, hi = v["interval_90"]
         if p in ("sigma", "delta_amplitude"):
@@ -258,12 +274,23 @@ def summary_lines(s: dict) -> list[str]:
 
 
 def _population_lines(s: dict) -> list[str]:
+    if "population_median" not in s:  # stopped at the joint fit
+        fit = s["joint_fit"]
+        return [
+            f"posterior: {data_name(s)}, population of the robots' {s['hierarchical']}: the joint fit did not "
+            f"converge ({fit['status']}); no population was sampled"
+        ]
     p = s["parameter"]
     med, sd = s["population_median"], s["population_sd_log"]
     fit = s["joint_fit"]
     lines = [
         f"posterior: {data_name(s)}, population of {len(s['robots'])} robots' {p}, {s['chains']} chains × "
         f"({s['warmup']} + {s['samples']}); the data through the joint fit ({fit['status']}, rig {fit['rig']})",
+        *(
+            []
+            if _mixed(s["chains"], s["diagnostics"]["mu"]["r_hat"])
+            else [f"  the chains did not mix (R-hat of mu > {MIXED_RHAT}): the intervals below are not the posterior's"]
+        ),
         f"  population median = {value(p, med['median'])} (90 % {value(p, med['interval_90'][0])} – "
         f"{value(p, med['interval_90'][1])}); spread (sd of ln) = {sd['median']:.3f} "
         f"(90 % {sd['interval_90'][0]:.3f} – {sd['interval_90'][1]:.3f})",

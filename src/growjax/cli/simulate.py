@@ -40,7 +40,6 @@ def run(args) -> dict:
     out = out_dir(args)
     series = _write_trajectory(traj, inputs, args.drive, out)
     measured = (exp.time, exp["robot_length_m"]) if "robot_length_m" in exp else None
-    finite = np.isfinite(np.asarray(traj.length))
     summary = {
         "command": NAME,
         "data": str(data.path),
@@ -51,8 +50,7 @@ def run(args) -> dict:
         "status": gj.status_name(traj.status),
         "limit_time_s": None if not np.isfinite(float(traj.limit_time)) else float(traj.limit_time),
         "pressure_limit_Pa": float(gj.pressure_limit(params.robot)),
-        "final_length_m": float(np.asarray(traj.length)[finite][-1]) if np.any(finite) else None,
-        "peak_pressure_Pa": float(np.nanmax(traj.pressure)) if np.any(np.isfinite(traj.pressure)) else None,
+        **_last_sample(traj, float(gj.pressure_limit(params.robot))),
         "solver_steps": int(traj.n_steps),
         "wall_s": wall,
         "first_call_s": first,
@@ -72,11 +70,38 @@ def run(args) -> dict:
     return summary
 
 
+def _status_lines(s: dict) -> list[str]:
+    """The run's status with its length and peak pressure: at the end, or at the stop and nothing after it."""
+    limit = f"membrane limit {kpa(s['pressure_limit_Pa'])}"
+    if s["status"] == "ok":
+        return [
+            f"  status ok; final length {mm(s['final_length_m'])}; peak pressure {kpa(s['peak_pressure_Pa'])} ({limit})"
+        ]
+    stop = s.get("stop_time_s")
+    at = "" if stop is None else f" at t = {stop:.3f} s"
+    if s["status"] == "pressure_limit":
+        head = f"  status pressure_limit: the sensed pressure reached the {limit}{at}; the run stopped there"
+    else:
+        head = f"  status {s['status']}: the solver stopped{at}"
+    last = s.get("final_time_s")
+    if last is None:
+        return [head, "  no sample before the stop"]
+    at_stop = stop is not None and abs(last - stop) < 1e-9
+    where = "at the stop" if at_stop else f"at t = {last:.3f} s (the last sample before the stop)"
+    return [
+        head,
+        f"  {where}: length {mm(s['final_length_m'])}; peak pressure up to it {kpa(s['peak_pressure_Pa'])}; "
+        "nothing simulated after it",
+    ]
+
+
 # -- the workflow's call ----------------------------------------------------------------------------------------
 
 
 def _simulate(params, inputs, config, ts):
-    """(trajectory, first call's wall time s, the second's): the run twice, its compile timed apart."""
+    """(trajectory, first call's wall time s, the second's): the run twice, its compile timed apart. Where the
+    first stopped before ``ts``' end, the second saves at its stop too (the first save time after it moved there:
+    the same program, and the samples after a stop are NaN either way)."""
     import jax
 
     import growjax as gj
@@ -84,9 +109,35 @@ def _simulate(params, inputs, config, ts):
     start = time.perf_counter()
     traj = jax.block_until_ready(gj.simulate(params, inputs, config, ts=ts))
     first = time.perf_counter() - start
+    stop = float(traj.t_final)
+    after = np.flatnonzero(ts > stop + 1e-12)
+    if after.size and (after[0] == 0 or ts[after[0] - 1] < stop):
+        ts = ts.copy()
+        ts[after[0]] = stop
     start = time.perf_counter()
     traj = jax.block_until_ready(gj.simulate(params, inputs, config, ts=ts))
     return traj, first, time.perf_counter() - start
+
+
+def _last_sample(traj, limit: float) -> dict:
+    """The summary's last simulated sample: its time, length and the peak sensed pressure up to it (the samples
+    after a stop are NaN: nothing after a stop is reported), and where the run stopped before its end. A run
+    stopped at the membrane limit ``limit`` (Pa) stopped where the sensed pressure reached it: that is its peak."""
+    import growjax as gj
+
+    status = gj.status_name(traj.status)
+    length, pressure = np.asarray(traj.length), np.asarray(traj.pressure)
+    finite = np.flatnonzero(np.isfinite(length) & np.isfinite(pressure))
+    stop = float(traj.t_final) if status != "ok" else None
+    if not finite.size:
+        return {"final_time_s": None, "final_length_m": None, "peak_pressure_Pa": None, "stop_time_s": stop}
+    peak = float(np.max(pressure[finite]))
+    return {
+        "final_time_s": float(np.asarray(traj.time)[finite[-1]]),
+        "final_length_m": float(length[finite[-1]]),
+        "peak_pressure_Pa": max(peak, limit) if status == "pressure_limit" else peak,
+        "stop_time_s": stop,
+    }
 
 
 # -- files --------------------------------------------------------------------------------------------------------
@@ -131,14 +182,12 @@ def _figure(traj, summary: dict, series: dict, measured, drive: str, name: str, 
 
 
 def summary_lines(s: dict) -> list[str]:
-    """The run's status, final length, peak pressure, length RMSE, steps and files."""
+    """The run's status, final length (at its stop, where it stopped), peak pressure, length RMSE, steps and
+    files."""
     lines = [
         f"simulate: {data_name(s)}, {s['drive']} drive, {s['fidelity']} configuration, 0–{s['t_end_s']:g} s",
         *origin_lines(s["parameters"]),
-        (
-            f"  status {s['status']}; final length {mm(s['final_length_m'])}; peak pressure "
-            f"{kpa(s['peak_pressure_Pa'])} (membrane limit {kpa(s['pressure_limit_Pa'])})"
-        ),
+        *_status_lines(s),
     ]
     if "rmse_length_m" in s:
         lines.append(f"  length RMSE against the measured length: {mm(s['rmse_length_m'])}")

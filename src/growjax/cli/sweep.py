@@ -109,6 +109,7 @@ def run(args) -> dict:
     data = loader.load(args)
     exp, base = data.experiment, data.base()
     dims = tuple(sw.parse_dimension(p, base) for p in args.range) if args.range else sw.paper_box()
+    _check_ranges(dims, base)
     config = options.make_config(args, args.drive)
     inputs = ex.to_inputs(exp, args.drive, base, config.t0, config.t1)
     measured = (exp.time, exp["robot_length_m"]) if "robot_length_m" in exp else None
@@ -125,6 +126,19 @@ def run(args) -> dict:
             f"{summary['n_failed']} of {args.sets} sweep members failed ({reasons}); see {out / 'sweep.csv'}", summary
         )
     return summary
+
+
+def _check_ranges(dims, base) -> None:
+    """ValueError where a swept range leaves its parameter's physical range (`growjax params`)."""
+    from growjax.model import params as gp
+
+    ranges = gp.physical_ranges(base)
+    for d in dims:
+        lo, hi, unit = ranges.get(d.name, (None, None, ""))
+        if lo is not None and (d.low < lo or d.high > hi):
+            raise ValueError(
+                f"--range {d.name}={d.low:g}:{d.high:g} leaves its physical range {lo:g}–{hi:g} {unit}".rstrip()
+            )
 
 
 def _summary(args, data, config, dims, result, measured: bool, out) -> dict:
@@ -246,7 +260,10 @@ def summary_lines(s: dict) -> list[str]:
     ]
     if s.get("best"):
         best = ", ".join(f"{k} = {value(k, v)}" for k, v in s["best"]["parameters"].items())
-        lines.append(f"  best: {best}; length RMSE {mm(s['best']['rmse_length_m'])}")
+        among = f" of the {s['n'] - s['n_failed']} that ran to their end" if s["n_failed"] else ""
+        lines.append(f"  best{among}: {best}; length RMSE {mm(s['best']['rmse_length_m'])}")
+    elif s["n_failed"] == s["n"]:
+        lines.append("  no set ran to its end: no best")
     for output, table in s.get("sobol", {}).get("indices", {}).items():
         if "S1" in table:
             shown = ", ".join(

@@ -1,17 +1,21 @@
 """Experiments as data: reading, validating and writing time series, and turning them into model inputs.
 
-CSV format (UTF-8 text): a ``time_s`` column (strictly increasing), a ``catheter_length_m`` column (input;
-required unless the experiment had no catheter in contact: ``catheter=False``) and any of
+CSV format (UTF-8 text): a ``time_s`` column (strictly increasing, from 0 s on), a ``catheter_length_m`` column
+(input; required unless the experiment had no catheter in contact: ``catheter=False``) and any of
 ``robot_length_m`` (measured), ``pressure_Pa`` (measured), ``pressure_demand_Pa`` (input, forward
-drive), ``desired_length_m`` (input, inverse drive). The lab's MATLAB ``timeseries`` files are read
-with mat-io.
+drive), ``desired_length_m`` (input, inverse drive), ``syringe_displacement_m`` and ``robot_flow_m3_s``
+(measured). A column whose name nearly spells a known one (another case, a near spelling, the same words in
+another order or unit) is an error naming both; any other column is not used (`Experiment.unused` names it).
+The lab's MATLAB ``timeseries`` files are read with mat-io.
 """
 
 from __future__ import annotations
 
 import csv
 import dataclasses
+import difflib
 import math
+import re
 from pathlib import Path
 
 import jax.numpy as jnp
@@ -21,9 +25,21 @@ from growjax.model.motor import step_schedule
 from growjax.model.params import Parameters
 from growjax.model.signals import Constant, Inputs, Sampled, StepSchedule, published_pulse
 
-COLUMNS = ("robot_length_m", "pressure_Pa", "catheter_length_m", "pressure_demand_Pa", "desired_length_m")
+COLUMNS = (
+    "robot_length_m",
+    "pressure_Pa",
+    "catheter_length_m",
+    "pressure_demand_Pa",
+    "desired_length_m",
+    "syringe_displacement_m",
+    "robot_flow_m3_s",
+)
 LENGTH_COLUMNS = ("robot_length_m", "catheter_length_m", "desired_length_m")
+PRESSURE_COLUMNS = ("pressure_Pa", "pressure_demand_Pa")
 MAX_PLAUSIBLE_LENGTH_M = 2.0  # a robot or catheter longer than this is almost surely in millimetres
+MIN_PLAUSIBLE_PEAK_PRESSURE_PA = 1e3  # a pressure record peaking below this (the membrane yields at ~8 kPa): kPa
+NEAR_SPELLING = 0.85  # difflib's ratio from which a column name is a misspelling of a known one
+UNITS = ("m", "mm", "cm", "um", "pa", "kpa", "mpa", "hpa", "bar", "mbar", "psi", "s", "ms", "us", "m3", "l", "ml")
 MIN_SAMPLE_SPACING_S = 1e-9  # s: samples closer than this are one instant read twice
 
 
@@ -33,11 +49,13 @@ class ExperimentError(ValueError):
 
 @dataclasses.dataclass(frozen=True)
 class Experiment:
-    """Time series of one experiment, SI units. ``series`` maps a column name to an array of shape (T,)."""
+    """Time series of one experiment, SI units. ``series`` maps a column name to an array of shape (T,);
+    ``unused`` names the file's columns that are not known (`COLUMNS`) and were not read."""
 
     time: np.ndarray
     series: dict
     source: str = ""
+    unused: tuple[str, ...] = ()
 
     def __getitem__(self, name):
         return self.series[name]
@@ -48,7 +66,7 @@ class Experiment:
     def window(self, t_end: float) -> Experiment:
         """The samples with time ≤ ``t_end`` (s)."""
         keep = self.time <= t_end + 1e-12
-        return Experiment(self.time[keep], {k: v[keep] for k, v in self.series.items()}, self.source)
+        return Experiment(self.time[keep], {k: v[keep] for k, v in self.series.items()}, self.source, self.unused)
 
 
 def from_arrays(time, robot_length_m, pressure_Pa=None, **series) -> Experiment:
@@ -66,7 +84,8 @@ def from_arrays(time, robot_length_m, pressure_Pa=None, **series) -> Experiment:
 
 
 def validate_series(time, series: dict, source: str = "") -> None:
-    """Raise :class:`ExperimentError` for NaN, unsorted or duplicate times, millimetre or negative lengths."""
+    """Raise `ExperimentError` for NaN, unsorted, duplicate or negative times, millimetre or negative lengths and
+    pressures in kPa."""
     where = f" in {source}" if source else ""
     time = np.asarray(time, float)
     if time.ndim != 1 or time.size < 2:
@@ -83,6 +102,11 @@ def validate_series(time, series: dict, source: str = "") -> None:
             f"time_s{where} has duplicate times (two samples within "
             f"{MIN_SAMPLE_SPACING_S:g} s, first at t = {time[1:][dt < MIN_SAMPLE_SPACING_S][0]} s)"
         )
+    if time[0] < 0:
+        raise ExperimentError(
+            f"time_s{where} has negative times (the first: t = {time[0]:g} s, row 1): the model's time starts at 0 "
+            "(the inputs' origin); shift the record to start at 0 or later"
+        )
     for name, values in series.items():
         values = np.asarray(values, float)
         if values.shape != time.shape:
@@ -98,37 +122,94 @@ def validate_series(time, series: dict, source: str = "") -> None:
                     f"column {name}{where} reaches {np.max(values):g} m: lengths look like millimetres; "
                     "give them in metres (divide by 1000)"
                 )
+        peak = float(np.max(np.abs(values)))
+        if name in PRESSURE_COLUMNS and 0.0 < peak < MIN_PLAUSIBLE_PEAK_PRESSURE_PA:
+            raise ExperimentError(
+                f"column {name}{where} peaks at {peak:g} Pa: pressures look like kPa; give them in Pa (multiply "
+                "by 1000)"
+            )
+
+
+def _words(name: str) -> tuple[frozenset, frozenset]:
+    """(words, unit words) of a column name, lower case (``"Pressure_demand_kPa"``: ({pressure, demand}, {kpa}))."""
+    tokens = [t for t in re.split(r"[^0-9a-z]+", name.lower()) if t]
+    return frozenset(t for t in tokens if t not in UNITS), frozenset(t for t in tokens if t in UNITS)
+
+
+def near_column(name: str) -> str | None:
+    """The known column (``time_s`` or one of `COLUMNS`) that ``name`` nearly spells: the same name in another
+    case, the same words in another order or unit, or a near spelling (difflib's ratio ≥ `NEAR_SPELLING`); None
+    where it is known itself or near none."""
+    known = ("time_s", *COLUMNS)
+    if name in known:
+        return None
+    lower = {k.lower(): k for k in known}
+    if name.lower() in lower:
+        return lower[name.lower()]
+    words = _words(name)[0]
+    for k in known:
+        if words and words == _words(k)[0]:
+            return k
+    close = difflib.get_close_matches(name.lower(), list(lower), n=1, cutoff=NEAR_SPELLING)
+    return lower[close[0]] if close else None
+
+
+def _check_header(path: Path, header: list) -> list:
+    """The header's columns that are not used (neither known nor near one); ExperimentError naming a repeated
+    column, one in millimetres, or one that nearly spells a known column absent from the file."""
+    repeated = sorted({h for h in header if header.count(h) > 1})
+    if repeated:
+        raise ExperimentError(f"{path}: column {repeated[0]!r} appears more than once")
+    for h in header:
+        if h.endswith("_mm"):
+            raise ExperimentError(f"{path}: column {h} is in millimetres; convert it to metres as {h[:-3]}_m")
+    unused = []
+    for h in header:
+        if h == "time_s" or h in COLUMNS:
+            continue
+        near = near_column(h)
+        if near is not None and near not in header:
+            raise ExperimentError(
+                f"{path}: column {h!r} is not a known column; did you mean {near!r}? (read in {_unit_of(near)})"
+            )
+        unused.append(h)
+    return unused
+
+
+def _unit_of(column: str) -> str:
+    """The SI unit a known column is read in ("m", "Pa", "s", "m³/s")."""
+    return "m³/s" if column.endswith("_m3_s") else column.rsplit("_", 1)[-1]
 
 
 def read_csv(path, catheter: bool = True) -> Experiment:
-    """Read an experiment CSV (see module docstring); unknown columns are ignored, with units checked.
+    """Read an experiment CSV (see the module docstring), its units checked.
 
-    ``catheter``: True, the file must have a ``catheter_length_m`` column; False, the experiment had no
-    catheter in contact (its length is taken as zero) and the file must not have one.
+    Args:
+        path: the file.
+        catheter: True, the file must have a ``catheter_length_m`` column; False, the experiment had no catheter
+            in contact (its length is taken as zero) and the file must not have one.
+
+    Returns:
+        The `Experiment`; its ``unused`` names the columns not read.
+
+    Raises:
+        ExperimentError: one line naming the file and the problem.
     """
     path = Path(path)
     if not path.exists():
         raise ExperimentError(f"no experiment file at {path}")
-    try:
-        with path.open(newline="", encoding="utf-8-sig") as fh:
-            reader = csv.reader(fh)
-            try:
-                header = [h.strip() for h in next(reader)]
-            except StopIteration:
-                raise ExperimentError(f"{path} is empty") from None
-            rows = [r for r in reader if r and any(c.strip() for c in r)]
-    except (UnicodeDecodeError, csv.Error):
-        hint = ": give the folder holding kings_ts.mat and lin_c_ts.mat" if path.suffix.lower() == ".mat" else ""
-        raise ExperimentError(f"{path} is not a text CSV (it holds binary data){hint}") from None
+    header, rows = _read_rows(path)
     if "time_s" not in header:
-        hint = " (found 'time': give the column as time_s, in seconds)" if "time" in header else ""
+        near = [h for h in header if near_column(h) == "time_s"]
+        hint = f" (found {near[0]!r}: give the column as time_s, in seconds)" if near else ""
         raise ExperimentError(f"{path} has no time_s column{hint}; columns: {header}")
-    for h in header:
-        if h.endswith("_mm"):
-            raise ExperimentError(f"{path}: column {h} is in millimetres; convert it to metres as {h[:-3]}_m")
+    unused = _check_header(path, header)
     known = [h for h in header if h in COLUMNS]
     if not known:
         raise ExperimentError(f"{path} has none of the columns {COLUMNS}; columns: {header}")
+    for k, r in enumerate(rows):
+        if len(r) != len(header):
+            raise ExperimentError(f"{path}: data row {k + 1} has {len(r)} values for {len(header)} columns")
     try:
         data = np.array([[float(c) if c.strip() else math.nan for c in r] for r in rows], float)
     except ValueError as err:
@@ -139,7 +220,24 @@ def read_csv(path, catheter: bool = True) -> Experiment:
     series = {h: data[:, header.index(h)] for h in known}
     validate_series(time, series, str(path))
     _check_catheter("catheter_length_m" in series, catheter, str(path), "catheter_length_m column")
-    return Experiment(time, series, str(path))
+    return Experiment(time, series, str(path), tuple(unused))
+
+
+def _read_rows(path: Path) -> tuple[list, list]:
+    """(header, non-empty rows) of a CSV; ExperimentError for an empty, unreadable or binary file."""
+    try:
+        with path.open(newline="", encoding="utf-8-sig") as fh:
+            reader = csv.reader(fh)
+            try:
+                header = [h.strip() for h in next(reader)]
+            except StopIteration:
+                raise ExperimentError(f"{path} is empty") from None
+            return header, [r for r in reader if r and any(c.strip() for c in r)]
+    except (UnicodeDecodeError, csv.Error):
+        hint = ": give the folder holding kings_ts.mat and lin_c_ts.mat" if path.suffix.lower() == ".mat" else ""
+        raise ExperimentError(f"{path} is not a text CSV (it holds binary data){hint}") from None
+    except OSError as err:
+        raise ExperimentError(f"cannot read {path}: {err.strerror or err}") from None
 
 
 def _check_catheter(has: bool, catheter: bool, source: str, what: str) -> None:
@@ -299,11 +397,13 @@ def shared_experiment_dir() -> Path | None:
 
 
 __all__ = [
+    "COLUMNS",
     "Experiment",
     "ExperimentError",
     "demand_steps",
     "from_arrays",
     "informative_samples",
+    "near_column",
     "read",
     "read_csv",
     "read_mat_experiment",

@@ -58,18 +58,22 @@ StoreError = _store.StoreError  # a missing or corrupt store, or one of another 
 
 
 def parse_dimension(text: str, params: gp.Parameters) -> Dimension:
-    """``NAME=LOW:HIGH[:log]`` → :class:`Dimension` (NAME as accepted by :func:`growjax.replace`)."""
+    """``NAME=LOW:HIGH[:log]`` → `Dimension` (NAME as accepted by `growjax.replace`); ValueError naming
+    ``--range``, the text and the problem."""
     if "=" not in text:
-        raise ValueError(f"--param expects NAME=LOW:HIGH[:log], got {text!r}")
+        raise ValueError(f"--range expects NAME=LOW:HIGH[:log], got {text!r}")
     name, rng = text.split("=", 1)
     parts = rng.split(":")
     if len(parts) not in (2, 3) or (len(parts) == 3 and parts[2] not in ("log", "lin")):
-        raise ValueError(f"--param {name}: range must be LOW:HIGH or LOW:HIGH:log, got {rng!r}")
+        raise ValueError(f"--range {name}: range must be LOW:HIGH or LOW:HIGH:log, got {rng!r}")
     try:
         low, high = float(parts[0]), float(parts[1])
     except ValueError:
-        raise ValueError(f"--param {name}: bounds {rng!r} are not numbers") from None
-    return Dimension(gp.resolve_name(params, name.strip()), low, high, len(parts) == 3 and parts[2] == "log")
+        raise ValueError(f"--range {name}: bounds {rng!r} are not numbers") from None
+    try:
+        return Dimension(gp.resolve_name(params, name.strip()), low, high, len(parts) == 3 and parts[2] == "log")
+    except ValueError as err:
+        raise ValueError(f"--range {text}: {err}") from None
 
 
 @dataclasses.dataclass
