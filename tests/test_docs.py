@@ -142,9 +142,12 @@ def test_no_history_in_docs_readme_or_docstrings():
     texts = [(p.relative_to(REPO), p.read_text()) for p in _pages() if p.name != "benchmarks.md"]
     texts += [("README.md", (REPO / "README.md").read_text()), *_docstrings()]
     hits = [f"{where}: {m.group(0)!r}" for where, text in texts for m in HISTORY.finditer(text)]
-    hits += [
-        f"{where}: {m.group(0)!r}" for where, text in texts for m in VERSION.finditer(text) if m.group(1) != __version__
-    ]
+    for where, text in texts:
+        if str(where) == "docs/results.md":
+            continue  # its one environment line names the version its figures were made with
+        hits += [
+            f"{where}: {m.group(0)!r}" for m in VERSION.finditer(text) if (m.group(1) or m.group(2)) != __version__
+        ]
     assert not hits, "history wording (it belongs in CHANGELOG.md):\n" + "\n".join(hits)
 
 
