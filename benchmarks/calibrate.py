@@ -23,9 +23,10 @@ import jax.numpy as jnp
 import numpy as np
 
 import growjax as gj
+from growjax import calibration as cal
 from growjax import posterior as gpost
-from growjax.calibration import fit as gf
 from growjax.data import experiment as ex
+from growjax.data import sets as xs
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -48,13 +49,14 @@ def main():
     base = gj.reference()
     cfg = gj.Config(t1=args.t_end)
     inputs = ex.to_inputs(exp, "forward", base, cfg.t0, cfg.t1)
+    one = xs.ExperimentSet.single(exp, defaults=base, inputs=inputs, sensors=["length"])
     out = {"data": exp.source, "t_end_s": args.t_end, "device": str(jax.devices()[0])}
 
     start = time.perf_counter()
-    res = gf.fit(exp.time, exp["robot_length_m"], inputs, free=["Y"], base=base, config=cfg)
+    res = cal.fit(one, ["Y"], config=cfg)
     first = time.perf_counter() - start
     start = time.perf_counter()
-    res = gf.fit(exp.time, exp["robot_length_m"], inputs, free=["Y"], base=base, config=cfg)
+    res = cal.fit(one, ["Y"], config=cfg)
     out["fit"] = {
         "wall_s_first_call_with_compile": first,
         "wall_s_compiled": time.perf_counter() - start,
@@ -78,11 +80,8 @@ def main():
     out["gradient_s_forward_mode"] = (time.perf_counter() - start) / 3
 
     post = gpost.sample(
-        exp.time,
-        exp["robot_length_m"],
-        inputs,
-        base,
-        cfg,
+        one,
+        config=cfg,
         chains=args.chains,
         warmup=args.warmup,
         samples=args.samples,
@@ -101,11 +100,8 @@ def main():
     if args.direct_iterations > 0:
         k = args.direct_iterations
         direct = gpost.sample(
-            exp.time,
-            exp["robot_length_m"],
-            inputs,
-            base,
-            cfg,
+            one,
+            config=cfg,
             chains=args.chains,
             warmup=k,
             samples=k,

@@ -36,7 +36,11 @@ def main(argv=None) -> dict:
     ap.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "control_gradient.json"))
     args = ap.parse_args(argv)
     folder = ex.shared_experiment_dir()
-    data = folder / "experiment.csv" if folder else REPO / "src" / "growjax" / "data" / "datasets" / "synthetic_forward.csv"
+    data = (
+        folder / "experiment.csv"
+        if folder
+        else REPO / "src" / "growjax" / "data" / "datasets" / "synthetic_forward.csv"
+    )
     t_end = args.t_end
     target = gc.target_from_experiment(ex.read(data), t_end)
     params = gc.plant_params("forward", target)

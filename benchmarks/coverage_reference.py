@@ -2,11 +2,11 @@
 
 Run: ``python benchmarks/coverage_reference.py [--seeds 1] [--out benchmarks/results/coverage_reference.json]``.
 
-For each of the five shipped reference-made experiments (``growjax/data/datasets/reference_lengths.csv``: the published pulse
-train, 0–10 s, Y from 6 to 14 kPa) plus Gaussian noise of 0.2 mm (seeds 100 + k, as the default test run draws
-them, then further seeds), ``growjax.calibration.fit`` estimates Y on the fast configuration twice: with the noise alone in
-its covariance, and with the fast configuration's measured model error added (the default). Printed per case:
-the estimate's error in standard errors of each, and whether each 90 % interval covers the truth.
+For each of the five shipped reference-made experiments (``growjax/data/datasets/reference_lengths.csv``: the
+published pulse train, 0–10 s, Y from 6 to 14 kPa) plus Gaussian noise of 0.2 mm (seeds 100 + k, as the default test
+run draws them, then further seeds), ``growjax.calibration.fit`` estimates Y on the fast configuration twice: with the
+noise alone in its covariance, and with the fast configuration's measured model error added (the default). Printed per
+case: the estimate's error in standard errors of each, and whether each 90 % interval covers the truth.
 """
 
 from __future__ import annotations
@@ -21,7 +21,9 @@ import jax
 import numpy as np
 
 import growjax as gj
-from growjax.calibration import fit as gf
+from growjax import calibration as cal
+from growjax.data import experiment as ex
+from growjax.data import sets as xs
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "data"))
@@ -47,16 +49,13 @@ def main():
             data = lengths[name] + np.random.default_rng(100 + k + 5 * s).normal(0.0, NOISE, t.size)
             row = {"case": name, "seed": 100 + k + 5 * s, "truth_Pa": truth}
             for label, error in (("noise_only", 0.0), ("with_model_error", None)):
-                res = gf.fit(
-                    t,
-                    data,
-                    inputs,
-                    free=["Y"],
+                res = cal.fit(
+                    xs.ExperimentSet.single(ex.from_arrays(t, data), inputs=inputs),
+                    ["Y"],
+                    likelihood=cal.Likelihood(sigma_length=NOISE, model_error=error),
                     config=gj.Config(t1=10.0),
-                    n_starts=1,
-                    sweep_n=0,
-                    sigma_length=NOISE,
-                    model_error=error,
+                    starts=1,
+                    scout=0,
                 )
                 est, se = res.estimate["robot.yield_pressure"], res.standard_error["robot.yield_pressure"]
                 lo, hi = res.interval_90["robot.yield_pressure"]
@@ -77,7 +76,7 @@ def main():
             )
     out = {
         "noise_m": NOISE,
-        "model_error_m": gf.FAST_MODEL_ERROR,
+        "model_error_m": cal.FAST_MODEL_ERROR,
         "cases": rows,
         "covered": {label: sum(r[label]["covered"] for r in rows) for label in ("noise_only", "with_model_error")},
         "n": len(rows),

@@ -1,13 +1,13 @@
 """The designed experiment against the published pulse train: the criterion's landscape, and replications that
 compare each input's realised precision with the design's prediction.
 
-Run: ``python benchmarks/design.py [--random 1000] [--replications 20] [--workers 16]
-[--out benchmarks/results/design.json]``. The design is written to ``--out`` as soon as it is made and each
-replication to its partial file as it finishes: ``--design-from OUT --resume`` completes a run that stopped.
+Run: ``python benchmarks/design.py [--random 1000] [--replications 20] [--workers 16] [--out
+benchmarks/results/design.json]``. The design is written to ``--out`` as soon as it is made and each replication to
+its partial file as it finishes: ``--design-from OUT --resume`` completes a run that stopped.
 
-What is known: the default fit (``growjax.calibration.fit.fit``, the default likelihood) of the shipped synthetic
-experiment (or ``--data``) for ``--for`` (default Y), under ``--growth-law`` (``lockhart``: Lockhart's law for the fit,
-the design and the replications' data; with ``--for Y phi_L n_L`` the law's rate and exponent, which the shipped
+What is known: the default fit (``growjax.calibration.fit``, the default likelihood) of the shipped synthetic experiment
+(or ``--data``) for ``--for`` (default Y), under ``--growth-law`` (``lockhart``: Lockhart's law for the fit, the
+design and the replications' data; with ``--for Y phi_L n_L`` the law's rate and exponent, which the shipped
 experiment leaves undetermined, enter with their box's uniform prior). Then:
 
 (a) Landscape: ``growjax.design.design`` with ``--random`` random admissible inputs scored by the criterion; the
@@ -18,8 +18,8 @@ experiment leaves undetermined, enter with their box's uniform prior). Then:
     with fresh white length noise (the fitted noise sd; and 1 kPa pressure noise where ``--sensors`` records it;
     with ``--discrepancy-in-data``, also a fresh draw of the Matérn-3/2 discrepancy the first fit found, the
     residual model the prediction assumes);
-    each fitted alone by ``growjax.calibration.fit.fit`` (default likelihood, the rig's errors inferred as parameters of
-    the model, as ``growjax fit`` does; ``--no-rig-tangents``: their secants, linearised once at nominal, or with
+    each fitted alone by ``growjax.calibration.fit`` (default likelihood, the rig's errors inferred as parameters of the
+    model, as ``growjax fit`` does; ``--no-rig-tangents``: their secants, linearised once at nominal, or with
     ``--relinearise`` taken again where the data put the rig). Reported per input: the
     realised sd of ln θ̂ over the replications against the predicted sd of the experiment alone, the fits'
     mean reported sd and the coverage of their 90 % intervals, and the design's realised sd against the
@@ -69,27 +69,17 @@ sys.path.insert(0, str(REPO / "benchmarks"))
 def knowledge_of(args):
     """(Knowledge, experiment, base) from the default fit of ``args.data``."""
     import growjax as gj
+    from growjax import calibration as cal
     from growjax import design as gd
-    from growjax.calibration import fit as gf
     from growjax.cli.loader import recorded_parameters
     from growjax.data import experiment as ex
+    from growjax.data import sets as xs
 
     path = Path(args.data)
     exp = ex.read(path)
     base = gj.replace(gj.reference("forward", growth_law=args.growth_law), **recorded_parameters(path))
     config = gj.Config(t1=float(min(exp.time[-1], 10.0)), adjoint="forward")
-    inputs = ex.to_inputs(exp, "forward", base, config.t0, config.t1)
-    pressure = exp["pressure_Pa"] if "pressure_Pa" in exp else None
-    res = gf.fit(
-        exp.time,
-        exp["robot_length_m"],
-        inputs,
-        free=args.design_for,
-        base=base,
-        config=config,
-        pressure=pressure,
-        seed=args.seed,
-    )
+    res = cal.fit(xs.ExperimentSet.single(exp, defaults=base), args.design_for, config=config, seed=args.seed)
     return gd.from_fit(res, base), exp, base
 
 
@@ -99,8 +89,10 @@ def replicate(job: dict) -> dict:
     import jax.numpy as jnp
 
     import growjax as gj
+    from growjax import calibration as cal
     from growjax.calibration import discrepancy as dc
-    from growjax.calibration import fit as gf
+    from growjax.data import experiment as ex
+    from growjax.data import sets as xs
     from growjax.model.signals import KnotProfile
 
     clock = time.perf_counter()
@@ -142,17 +134,16 @@ def replicate(job: dict) -> dict:
         pressure = None
         if job["pressure"]:
             pressure = np.asarray(traj.pressure)[1:] + rng.normal(0.0, job["pressure_noise"], times.size)
-        res = gf.fit(
-            times,
-            length,
-            inputs,
-            free=job["names"],
-            base=base,
+        one = xs.ExperimentSet.single(
+            ex.from_arrays(times, length, pressure), drive=drive, defaults=base, inputs=inputs
+        )
+        res = cal.fit(
+            one,
+            job["names"],
+            likelihood=cal.Likelihood(sigma_pressure=job["pressure_noise"]),
             config=config,
-            pressure=pressure,
-            sigma_pressure=job["pressure_noise"],
-            n_starts=1,
-            sweep_n=16,
+            starts=1,
+            scout=16,
             relinearise=job.get("relinearise", False),
             rig_tangents=job.get("rig_tangents", True),
         )

@@ -7,12 +7,12 @@ Run: ``python benchmarks/discover.py [--seeds 10] [--clean 20] [--t-end 10] [--e
 every run is :func:`growjax.discover.discover` over the whole catalogue on the fast configuration.
 
 Reported: the share of runs that name the hidden effect (or, where it trades with a base parameter or
-another effect, report it confounded), the share that claim another catalogue effect, the false-positive rate on clean data (any effect claimed or confounded),
-the coverage of the magnitude by its 90 % interval where the effect is named, the median RMSE
-after / noise, and what a run's time is made of (fits, linearisations, wall time per linearisation).
-``--profile`` also times every linearisation and adds to each run ``profile``: per model (the candidates switched
-on, ``base`` for none) the count, the summed and the largest wall time, s (threads overlap, so sums exceed the
-run's wall time), and its largest effect parameter in discover's coordinates (η = top/10 · softplus(u)).
+another effect, report it confounded), the share that claim another catalogue effect, the false-positive rate on clean
+data (any effect claimed or confounded), the coverage of the magnitude by its 90 % interval where the effect is named,
+the median RMSE after / noise, and what a run's time is made of (fits, linearisations, wall time per linearisation).
+``--profile`` also times every linearisation and adds to each run ``profile``: per model (the candidates switched on,
+``base`` for none) the count, the summed and the largest wall time, s (threads overlap, so sums exceed the run's wall
+time), and its largest effect parameter in discover's coordinates (η = top/10 · softplus(u)).
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ import numpy as np
 
 import growjax as gj
 from growjax import discover as gd
+from growjax.calibration import Likelihood
 from growjax.calibration import tolerance as tl
 from growjax.data import experiment as ex
 from growjax.data import synthetic as sy
@@ -83,8 +84,7 @@ def one_run(effect, magnitude, seed, t_end, profile=False, discrepancy="matern32
             exp["robot_length_m"][keep],
             inputs,
             config=cfg,
-            discrepancy=discrepancy,
-            tolerances=tolerances,
+            likelihood=Likelihood(discrepancy=discrepancy, tolerances=tolerances),
         )
     finally:
         if timer is not None:

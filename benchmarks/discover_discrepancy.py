@@ -23,6 +23,7 @@ import numpy as np
 
 import growjax as gj
 from growjax import discover as gd
+from growjax.calibration import Likelihood
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "benchmarks"))
@@ -86,7 +87,7 @@ def main():
     for label, data in sets:
         row = {"data": label}
         for kind in ("matern32", "none") if args.compare else ("matern32",):
-            res = gd.discover(t[keep], data, inputs, config=config, discrepancy=kind)
+            res = gd.discover(t[keep], data, inputs, config=config, likelihood=Likelihood(discrepancy=kind))
             row[kind] = {
                 "effect": res.effect,
                 "effects": res.effects,

@@ -9,9 +9,9 @@ residuals as they are (its own ``jax.linearize`` of the model), e.g. ``--cases f
 Problems, each from one start:
 
 * ``fit_Y``, ``fit_Y_kp``: the fit's first stage (least squares, before the discrepancy) on the shipped synthetic
-  experiment, forward drive, 0–10 s, length only: ``growjax.calibration.fit.make_problem``'s residuals (units of 1 mm)
-  in z = ln(θ/θ_ref) for Y, and for Y with the pressure loop's proportional gain ``pid.proportional``; the start
-  30 % above the reference values. The engine runs as the fit runs it (``growjax.calibration.fit._linearised``, the
+  experiment, forward drive, 0–10 s, length only: ``growjax.calibration.make_problem``'s residuals (units of 1 mm) in
+  z = ln(θ/θ_ref) for Y, and for Y with the pressure loop's proportional gain ``pid.proportional``; the start
+  30 % above the reference values. The engine runs as the fit runs it (``growjax.calibration.problem.linearised``, the
   physical bounds, ``LM_TOLERANCE``).
 * ``profile``: the control profile's problem as ``growjax.control.optimize_profile`` poses it (its residual
   function is local to it, so it is built here from the module's pieces: ``profile_inputs``,
@@ -53,9 +53,10 @@ import numpy as np
 import optimistix as optx
 
 import growjax as gj
+from growjax import calibration as cal
 from growjax import control as gc
-from growjax.calibration import fit as gf
 from growjax.calibration.least_squares import levenberg_marquardt, linearise
+from growjax.calibration.problem import linearised as fit_linearised
 from growjax.control import profile as cp
 from growjax.data import datasets as _data
 from growjax.data import experiment as ex
@@ -115,16 +116,16 @@ def fit_case(label, names, max_steps):
     exp = ex.read(_data.default_data_path()).window(10.0 + 1e-9)
     base, config = gj.reference("forward"), gj.Config(t1=10.0)
     inputs = ex.to_inputs(exp, "forward", base, config.t0, config.t1)
-    problem = gf.make_problem(base, names, inputs, config.replace(adjoint="forward"), exp.time, exp["robot_length_m"])
+    problem = cal.make_problem(base, names, inputs, config.replace(adjoint="forward"), exp.time, exp["robot_length_m"])
     refs = np.asarray(problem.refs)
-    bounds = gf.physical_bounds(base, problem.names, refs)
+    bounds = cal.physical_bounds(base, problem.names, refs)
 
     def linearised(z):  # the fit's compiled linearisation
-        return gf._linearised(jnp.asarray(z), problem)
+        return fit_linearised(jnp.asarray(z), problem)
 
     def engine(x0):
         lin = Counter(linearised)
-        z, _, ok, _, _ = levenberg_marquardt(lin, x0, max_steps, gf.LM_TOLERANCE, bounds=bounds)
+        z, _, ok, _, _ = levenberg_marquardt(lin, x0, max_steps, cal.LM_TOLERANCE, bounds=bounds)
         return z, ok, lin.accepted, lin.calls
 
     def estimate(z):
@@ -199,7 +200,7 @@ def with_jacobian(residuals):
 
 
 def optimistix_solver(key):
-    tol = gf.LM_TOLERANCE
+    tol = cal.LM_TOLERANCE
     solver = optx.LevenbergMarquardt(tol, tol) if key.startswith("lm") else optx.Dogleg(tol, tol)
     return optx.BestSoFarLeastSquares(solver) if key.endswith("_best") else solver
 
@@ -309,7 +310,7 @@ def main():
     out = {
         "environment": environment(),
         "data": str(_data.default_data_path()),
-        "tolerance": gf.LM_TOLERANCE,
+        "tolerance": cal.LM_TOLERANCE,
         "max_steps": args.max_steps,
         "repeat": args.repeat,
         "same_cost_relative": SAME_COST,

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 import growjax as gj
-from growjax.calibration import joint
+from growjax import calibration as cal
 from growjax.data import experiment as ex
 from growjax.data import sets as xs
 from growjax.data.experiment import Experiment
@@ -60,7 +60,8 @@ def main():
     rows = {}
     for label, chosen in (("forward", (0,)), ("stepper", (1,)), ("joint", (0, 1))):
         clock = time.perf_counter()
-        res = joint.fit_set(xs.ExperimentSet(tuple(runs[i] for i in chosen)), config=gj.Config(t1=10.0))
+        chosen_runs = xs.ExperimentSet(tuple(runs[i] for i in chosen))
+        res = cal.fit(chosen_runs, ["Y@robot"], config=gj.Config(t1=10.0), starts=1, scout=16)
         rows[label] = {
             "estimate_Pa": res.estimate[Y],
             "interval_90_Pa": list(res.interval_90[Y]),

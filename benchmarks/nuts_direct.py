@@ -2,7 +2,8 @@
 
 Run: ``python benchmarks/nuts_direct.py [--chains 4 --warmup 500 --samples 500] [--target-accept 0.98]
 [--max-tree-depth 10] [--vectorised-gradient] [--gradients-only] [--small-loops] [--sequential]
-[--geometry [TARGET_ACCEPT ...] [--logit]] [--out benchmarks/results/nuts_direct.json]`` (``--small-loops``: the opt-in option of :mod:`growjax.simulation.xla_flags`).
+[--geometry [TARGET_ACCEPT ...] [--logit]] [--out benchmarks/results/nuts_direct.json]`` (``--small-loops``: the
+opt-in option of `growjax.simulation.xla_flags`).
 
 Reads ``../shared/data/mammobot/experiment.csv`` (the shipped synthetic forward experiment when it is
 absent). Chains run in parallel, one per CPU device (the script exposes ``--chains`` devices;
@@ -33,6 +34,7 @@ from numpyro.infer.util import initialize_model
 import growjax as gj
 from growjax import posterior as gpost
 from growjax.data import experiment as ex
+from growjax.data import sets as xs
 from growjax.simulation import xla_flags
 
 REPO = Path(__file__).resolve().parents[1]
@@ -118,11 +120,8 @@ def main():
     if args.gradients_only:
         return
     res = gpost.sample(
-        exp.time,
-        exp["robot_length_m"],
-        inputs,
-        base,
-        cfg,
+        xs.ExperimentSet.single(exp, defaults=base, inputs=inputs, sensors=["length"]),
+        config=cfg,
         priors=gpost.lockhart_priors(),
         chains=args.chains,
         warmup=args.warmup,

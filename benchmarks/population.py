@@ -92,7 +92,7 @@ def make_population(seed: int, robots: int, rtol: float):
 def one_population(task: tuple) -> dict:
     seed, robots, rtol, chains, warmup, samples = task
     import growjax as gj
-    from growjax.calibration import joint
+    from growjax import calibration as cal
     from growjax.data import sets as xs
     from growjax.posterior import population as pop
 
@@ -103,7 +103,7 @@ def one_population(task: tuple) -> dict:
     made = time.perf_counter() - clock
     runs = xs.ExperimentSet(tuple(xs.Run(e.source, e, robot=e.source) for e in exps[:-1]))
     t0 = time.perf_counter()
-    fit = joint.fit_set(runs, free=["Y@robot"], config=gj.Config(t1=10.0))
+    fit = cal.fit(runs, ["Y@robot"], config=gj.Config(t1=10.0), starts=1, scout=16)
     fit_s = time.perf_counter() - t0
     t0 = time.perf_counter()
     post = pop.sample_population(fit, "Y", chains=chains, warmup=warmup, samples=samples, seed=seed)

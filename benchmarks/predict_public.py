@@ -1,6 +1,7 @@
 """Prediction beyond the fitted window of the public experiment: posterior on 0–7 s, 90 % band on 7–10 s.
 
-Run: ``python benchmarks/predict_public.py [--chains 4 --warmup 500 --samples 500] [--out benchmarks/results/predict_public.json]``.
+Run: ``python benchmarks/predict_public.py [--chains 4 --warmup 500 --samples 500]``
+``[--out benchmarks/results/predict_public.json]``.
 
 Forward drive, reference growth law, the paper's priors, NUTS through the emulator (as ``growjax posterior
 --emulate``). The predictive band on 7–10 s comes from :func:`growjax.posterior.forecast`: each draw's model
@@ -20,6 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from growjax import posterior as gpost
+from growjax.calibration import Likelihood
+from growjax.data import sets as xs
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "benchmarks"))
@@ -43,20 +46,17 @@ def main():
     out, bands = {}, {}
     for label, kind in (("discrepancy", "matern32"), ("independent", "none")):
         clock = time.perf_counter()
+        one = xs.ExperimentSet.single(exp, defaults=base, inputs=inputs, window=(config.t0, args.split))
         res = gpost.sample(
-            exp.time,
-            exp["robot_length_m"],
-            inputs,
-            base,
-            config,
+            one,
+            config=config,
             priors=priors,
+            likelihood=Likelihood(discrepancy=kind),
             chains=args.chains,
             warmup=args.warmup,
             samples=args.samples,
-            window=(config.t0, args.split),
             progress=False,
             emulate=True,
-            discrepancy=kind,
         )
         nuts_s = time.perf_counter() - clock
         draws = gpost.forecast(res, priors, base, inputs, config, t_new)

@@ -600,7 +600,7 @@ def rows_design_lockhart(r: dict) -> list[tuple[str, str, str]]:
     """The design rows, and each growth-law parameter's 90 % interval over the replications as a share of its
     prior box (the sampling box the fit's undetermined parameters take)."""
     import growjax as gj
-    from growjax.calibration import fit as gf
+    from growjax.calibration import default_range
 
     out = rows_design(r)
     base = gj.reference(growth_law=r["arguments"].get("growth_law", "reference"))
@@ -611,7 +611,7 @@ def rows_design_lockhart(r: dict) -> list[tuple[str, str, str]]:
         for name in ("robot.lockhart_rate", "robot.lockhart_exponent"):
             if not fits or name not in fits[0]:
                 continue
-            lo, hi = gf.default_range(base, name)
+            lo, hi = default_range(base, name)
             shares = [
                 np.log(f[name]["interval_90"][1] / f[name]["interval_90"][0]) / np.log(hi / lo)
                 if f[name]["interval_90"]

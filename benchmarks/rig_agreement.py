@@ -1,7 +1,8 @@
 """Fit and posterior treat the rig alike: Y's 90 % interval from ``growjax fit`` (the rig inferred, the default;
 and ``--rig fixed``) beside the posterior's, with coverage, on reference-made data with the default budget on.
 
-Run: ``python benchmarks/rig_agreement.py [--per-group 10] [--posterior-every 1] [--out benchmarks/results/rig_agreement.json]``.
+Run: ``python benchmarks/rig_agreement.py [--per-group 10] [--posterior-every 1]``
+``[--out benchmarks/results/rig_agreement.json]``.
 
 Data: reference-configuration runs of the published pulse train (Y uniform on 6–12 kPa), 0.2 mm white noise at
 100 Hz, in two groups: ``nominal`` (the rig exactly nominal: the shipped reference traces) and ``drawn`` (each
@@ -25,9 +26,10 @@ from pathlib import Path
 import numpy as np
 
 import growjax as gj
+from growjax import calibration as cal
 from growjax import posterior as gpost
-from growjax.calibration import fit as gf
 from growjax.data import experiment as ex
+from growjax.data import sets as xs
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "benchmarks"))
@@ -51,17 +53,13 @@ def interval_row(lo, hi, truth, estimate, wall):
 
 
 def fit_row(t, data, inputs, base, truth, rig, pressure=None):
-    res = gf.fit(
-        t,
-        data,
-        inputs,
-        free=["Y"],
-        base=base,
+    res = cal.fit(
+        xs.ExperimentSet.single(ex.from_arrays(t, data, pressure), defaults=base, inputs=inputs),
+        ["Y"],
+        likelihood=cal.Likelihood(rig=rig),
         config=gj.Config(t1=10.0),
-        pressure=pressure,
-        n_starts=1,
-        sweep_n=16,
-        rig=rig,
+        starts=1,
+        scout=16,
     )
     return {
         **interval_row(*res.interval_90[Y], truth, res.estimate[Y], res.wall_s),
@@ -72,11 +70,8 @@ def fit_row(t, data, inputs, base, truth, rig, pressure=None):
 def posterior_row(t, data, inputs, base, truth, args):
     clock = time.perf_counter()
     res = gpost.sample(
-        t,
-        data,
-        inputs,
-        base,
-        gj.Config(t1=10.0),
+        xs.ExperimentSet.single(ex.from_arrays(t, data), defaults=base, inputs=inputs),
+        config=gj.Config(t1=10.0),
         priors=gpost.paper_priors(),
         chains=args.chains,
         warmup=args.warmup,

@@ -2,14 +2,14 @@
 
 Run: ``python benchmarks/set_speed.py [--experiments 8] [--repeat 3] [--out benchmarks/results/set_speed.json]``.
 
-A set of ``--experiments`` reference-made experiments of one robot on one drawn rig (``benchmarks/sets.py``'s
-sets), 10 s each: ``growjax.calibration.joint.fit_set`` of the whole set, of its first experiment alone, and
-``growjax.calibration.fit.fit`` of that experiment, each ``--repeat`` times, interleaved. Printed: the median warm wall
-times and the ratio of the set's to one experiment's (target ≤ 3), with the share spent in the batched
-simulations; with ``--each`` (default), ``growjax.calibration.fit.fit`` of every experiment of the set alone, warm, and the
-ratio of the set's fit to their mean (the eight experiments' single runs differ up to fourfold in cost, and the
-first is one of the cheapest); and one evaluation of the fit's model (residuals and tangents in Y and the rig's errors) for the
-whole set in its batched program against that of one experiment, and the set's program on one device.
+A set of ``--experiments`` reference-made experiments of one robot on one drawn rig (``benchmarks/sets.py``'s sets),
+10 s each: ``growjax.calibration.fit`` of the whole set, of its first experiment alone, and
+``growjax.calibration.fit`` of that experiment, each ``--repeat`` times, interleaved. Printed: the median warm wall
+times and the ratio of the set's to one experiment's (target ≤ 3), with the share spent in the batched simulations;
+with ``--each`` (default), ``growjax.calibration.fit`` of every experiment of the set alone, warm, and the ratio of
+the set's fit to their mean (the eight experiments' single runs differ up to fourfold in cost, and the first is one of
+the cheapest); and one evaluation of the fit's model (residuals and tangents in Y and the rig's errors) for the whole
+set in its batched program against that of one experiment, and the set's program on one device.
 
 Every CPU core is a JAX device (``jax_num_cpu_devices``; ``GROWJAX_CPU_DEVICES`` overrides), as in ``growjax fit``,
 so the set's runs spread over them.
@@ -35,8 +35,9 @@ from pathlib import Path
 import numpy as np
 
 import growjax as gj
-from growjax.calibration import fit as gf
-from growjax.calibration import joint
+from growjax import calibration as cal
+from growjax.calibration import batch as cb
+from growjax.data import experiment as ex
 from growjax.data import sets as xs
 
 REPO = Path(__file__).resolve().parents[1]
@@ -63,9 +64,9 @@ def main():
     config = gj.Config(t1=10.0)
     inputs = _inputs(exps[0])
     jobs = {
-        "set": lambda: joint.fit_set(runs, config=config),
-        "one_experiment_as_a_set": lambda: joint.fit_set(first, config=config),
-        "one_experiment_fit": lambda: gf.fit(TIME, exps[0]["robot_length_m"], inputs, config=config),
+        "set": lambda: cal.fit(runs, ["Y@robot"], config=config, starts=1, scout=16),
+        "one_experiment_as_a_set": lambda: cal.fit(first, ["Y@robot"], config=config, starts=1, scout=16),
+        "one_experiment_fit": lambda: cal.fit(_one(exps[0], inputs), ["Y"], config=config),
     }
     walls = {k: [] for k in jobs}
     simulate = []
@@ -98,8 +99,13 @@ def _inputs(exp):
     )
 
 
+def _one(exp, inputs):
+    """The set of one experiment: its length alone, run with ``inputs``."""
+    return xs.ExperimentSet.single(ex.from_arrays(TIME, exp["robot_length_m"]), inputs=inputs)
+
+
 def _each(exps, config, repeat: int) -> dict:
-    """Median warm wall time, s, of ``growjax.calibration.fit.fit`` of each experiment of the set alone (its first call
+    """Median warm wall time, s, of ``growjax.calibration.fit`` of each experiment of the set alone (its first call
     compiles and is not counted), and their mean: the cost of fitting the set one experiment at a time is
     ``len(exps)`` × that mean."""
     warm = []
@@ -108,7 +114,7 @@ def _each(exps, config, repeat: int) -> dict:
         walls = []
         for _ in range(repeat + 1):
             clock = time.perf_counter()
-            gf.fit(TIME, e["robot_length_m"], inputs, config=config)
+            cal.fit(_one(e, inputs), ["Y"], config=config)
             walls.append(time.perf_counter() - clock)
         warm.append(float(np.median(walls[1:])))
     return {"warm_s": warm, "mean_warm_s": float(np.mean(warm))}
@@ -121,23 +127,25 @@ def _evaluation(exps, config, repeat: int) -> dict:
     import jax.numpy as jnp
 
     from growjax.calibration import tolerance as tl
-    from growjax.data import experiment as ex
+    from growjax.calibration.problem import linearised
 
     base = gj.reference("forward")
     names = ("robot.yield_pressure", *tl.budget(base, None, ["robot.yield_pressure"], use_default=True))
     cfg = config.replace(adjoint="forward")
     problems = [
-        gf.make_problem(base, names, ex.to_inputs(e, "forward", base, cfg.t0, cfg.t1), cfg, e.time, e["robot_length_m"])
+        cal.make_problem(
+            base, names, ex.to_inputs(e, "forward", base, cfg.t0, cfg.t1), cfg, e.time, e["robot_length_m"]
+        )
         for e in exps
     ]
-    stacked = joint._stack(joint._pad_breaks(problems))
+    stacked = cb.stack(cb.pad_breaks(problems))
     z_set, z_one = jnp.zeros((len(exps), len(names))), jnp.zeros(len(names))
     times = {"set_s": [], "set_one_device_s": [], "one_s": []}
     for _ in range(repeat + 1):  # the first call compiles
         for key, call in (
-            ("set_s", lambda: joint._spread(joint._linearise_runs, z_set, stacked)),
-            ("set_one_device_s", lambda: joint._one_device(joint._linearise_runs, z_set, stacked)),
-            ("one_s", lambda: gf._linearised(z_one, problems[0])),
+            ("set_s", lambda: cb.spread(cb.linearise_runs, z_set, stacked)),
+            ("set_one_device_s", lambda: cb.on_one_device(cb.linearise_runs, z_set, stacked)),
+            ("one_s", lambda: linearised(z_one, problems[0])),
         ):
             clock = time.perf_counter()
             jax.block_until_ready(call())

@@ -31,9 +31,9 @@ import jax.numpy as jnp
 import numpy as np
 
 import growjax as gj
-from growjax.calibration import fit as gf
-from growjax.calibration import joint
+from growjax import calibration as cal
 from growjax.calibration import tolerance as tl
+from growjax.data import experiment as ex
 from growjax.data import sets as xs
 from growjax.data.experiment import Experiment
 
@@ -123,12 +123,15 @@ def one_set(task):
         "rig_offsets": offsets,
         "singles_relinearised": relinearise,
     }
-    for label, options in (("joint", {}), ("joint_independent_rig", {"rig_errors": "experiment"})):
+    for label, options in (
+        ("joint", {}),
+        ("joint_independent_rig", {"likelihood": cal.Likelihood(rig_errors="experiment")}),
+    ):
         if kept is not None:
             row[label] = kept[label]
             continue
         t0 = time.perf_counter()
-        res = joint.fit_set(runs, free=["Y@robot"], config=config, **options)
+        res = cal.fit(runs, ["Y@robot"], config=config, starts=1, scout=16, **options)
         lab = f"{Y}@robot"
         row[label] = {
             **row_of(*res.interval_90[lab], y, res.estimate[lab]),
@@ -142,14 +145,12 @@ def one_set(task):
             catheter_length=gj.Sampled(TIME, CATHETER),
             pressure_demand=gj.Sampled(TIME, run.experiment["pressure_demand_Pa"]),
         )
-        res = gf.fit(
-            TIME,
-            run.length,
-            inputs,
-            free=["Y"],
+        res = cal.fit(
+            xs.ExperimentSet.single(ex.from_arrays(TIME, run.length), inputs=inputs),
+            ["Y"],
             config=config,
-            n_starts=1,
-            sweep_n=16,
+            starts=1,
+            scout=16,
             **({"rig_tangents": False, "relinearise": True} if relinearise else {}),
         )
         singles.append(
@@ -166,7 +167,7 @@ def one_set(task):
 
 def _z(row: dict, truth: float) -> float:
     """(estimate − truth) / sd, the sd read off the 90 % interval's width (± 1.645 sd)."""
-    return (row["estimate_Pa"] - truth) / (row["width_Pa"] / (2 * gf.Z90))
+    return (row["estimate_Pa"] - truth) / (row["width_Pa"] / (2 * cal.Z90))
 
 
 def _kept(partial: Path, args) -> list[dict]:

@@ -74,7 +74,11 @@ TARGETS = {"sweep_wall_s": 1.0, "ratio_min": 50.0, "agreement_m": 1e-4}
 def experiment_path() -> Path:
     """The public experiment's CSV if it is beside the checkout, else the shipped synthetic one."""
     folder = ex.shared_experiment_dir()
-    return folder / "experiment.csv" if folder else REPO / "src" / "growjax" / "data" / "datasets" / "synthetic_forward.csv"
+    return (
+        folder / "experiment.csv"
+        if folder
+        else REPO / "src" / "growjax" / "data" / "datasets" / "synthetic_forward.csv"
+    )
 
 
 def measured_series(exp, config: gj.Config):

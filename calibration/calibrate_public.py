@@ -2,7 +2,7 @@
 
 Run from the repository root::
 
-    python calibration/calibrate_public.py [--quick] [--out out/calibration]
+    python calibration/calibrate_public.py [--quick] [--out out/calibration] \
         [--results calibration/results/calibration.json]
 
 Every step uses the default likelihood of ``growjax fit`` and ``growjax posterior``: the length as the model plus
@@ -35,9 +35,10 @@ from pathlib import Path
 import numpy as np
 
 import growjax as gj
+from growjax import calibration as cal
 from growjax import posterior as gpost
-from growjax.calibration import fit as gf
 from growjax.data import experiment as ex
+from growjax.data import sets as xs
 from growjax.plotting import posterior_figures, predictive_figure, trajectory_figure
 
 REPO = Path(__file__).resolve().parents[1]
@@ -83,7 +84,7 @@ def page_record(report: dict, y_fit, all_fit, contrast, results: dict, priors: d
     fit.update(
         budget_sd_Pa=y_fit.budget.get(Y, {}),
         rmse_length_m=y_fit.rmse_length_m,
-        rig_offset=y_fit.rig_offset,
+        rig_offset=next(iter(y_fit.rig_offset.values()), {}),  # the experiment's rig
         wall_s=y_fit.wall_s,
     )
     posterior = {}
@@ -151,11 +152,12 @@ def main():
     base = gj.reference()
     cfg = gj.Config(t1=t_end, adjoint="forward")
     inputs = ex.to_inputs(exp, "forward", base, cfg.t0, cfg.t1)
-    y_fit = gf.fit(exp.time, exp["robot_length_m"], inputs, free=["Y"], config=cfg)
+    one = xs.ExperimentSet.single(exp, defaults=base, inputs=inputs, sensors=["length"])
+    y_fit = cal.fit(one, ["Y"], config=cfg)
     report["fit_Y"] = y_fit.summary()
-    all_fit = gf.fit(exp.time, exp["robot_length_m"], inputs, free=["Y", "ext", "n"], config=cfg)
+    all_fit = cal.fit(one, ["Y", "ext", "n"], config=cfg)
     report["fit_Y_ext_n"] = all_fit.summary()
-    contrast = gf.fit(exp.time, exp["robot_length_m"], inputs, free=["Y"], config=cfg, discrepancy="none")
+    contrast = cal.fit(one, ["Y"], likelihood=cal.Likelihood(discrepancy="none"), config=cfg)
     report["fit_Y_independent_noise"] = contrast.summary()
     traj = gj.simulate(gj.replace(base, **y_fit.estimate), inputs, cfg)
     trajectory_figure(
@@ -177,11 +179,8 @@ def main():
     for law, (law_base, priors, accept) in laws.items():
         law_inputs = ex.to_inputs(exp, "forward", law_base, cfg.t0, cfg.t1)
         res = gpost.sample(
-            exp.time,
-            exp["robot_length_m"],
-            law_inputs,
-            law_base,
-            cfg,
+            xs.ExperimentSet.single(exp, defaults=law_base, inputs=law_inputs),
+            config=cfg,
             priors=priors,
             chains=chains,
             warmup=warmup,

@@ -5,9 +5,9 @@ from pathlib import Path
 
 from growjax.simulation import xla_flags
 
-# The run is mostly compiles: XLA's quicker emitters for all of it (growjax.simulation.xla_flags), set before JAX starts and
-# inherited by the xdist workers and CLI subprocesses; only for a jaxlib known to have them (XLA aborts a process
-# on an unknown flag). test_xla_flags runs XLA's default too.
+# The run is mostly compiles: XLA's quicker emitters for all of it (growjax.simulation.xla_flags), set before JAX
+# starts and inherited by the xdist workers and CLI subprocesses; only for a jaxlib known to have them (XLA aborts a
+# process on an unknown flag). test_xla_flags runs XLA's default too.
 xla_flags.apply_quick_compile()
 # and XLA's backend at optimisation level 0: the suite's compiles about 13 % quicker in all, its longest runs slower;
 # rounding moves as under the quick emitters (no assertion here rests on the last bits).
@@ -33,9 +33,18 @@ jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
 
 import growjax as gj
 from growjax.data import experiment as ex
+from growjax.data import sets as xs
 
 REPO = Path(__file__).resolve().parents[1]
 DATASETS = REPO / "src" / "growjax" / "data" / "datasets"
+
+
+def one_experiment(times, length, inputs=None, *, base=None, drive="forward", pressure=None, window=None):
+    """The set of one experiment made of arrays: its length (m) (and pressure, Pa) at ``times`` (s), run with
+    ``inputs`` (None: made from the columns) on the parameters ``base`` (None: the drive's reference)."""
+    experiment = ex.from_arrays(times, length, pressure)
+    return xs.ExperimentSet.single(experiment, drive=drive, defaults=base, inputs=inputs, window=window)
+
 
 # The test run spreads whole files over its workers (``--dist loadfile``), except the files that fit the published
 # pulse over 10 s (Y alone, and Y with the rig's errors): they go to one worker, one after another, so that the later

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 import growjax as gj
+from growjax import calibration as cal
 from growjax import control as gc
 from growjax import discover as gdisc
 from growjax import posterior as gpost
 from growjax.calibration import discrepancy as dc
-from growjax.calibration import fit as gfit
 from growjax.simulation.simulate import simulate_from
 
 ANNOTATED = [
@@ -26,14 +26,22 @@ ANNOTATED = [
     gc.optimize_profile,
     gc.run_closed_loop,
     gc.Plant.advance,
-    gfit.fit,
+    cal.fit,
     gpost.sample,
     gpost.forecast,
     gdisc.discover,
     dc.log_likelihood,
     dc.whiten,
 ]
-RECORDS = [gj.Trajectory, gc.Target, gc.ProfileResult, gc.ClosedLoopResult, gc.LengthPID]
+RECORDS = [
+    gj.Trajectory,
+    gc.Target,
+    gc.ProfileResult,
+    gc.ClosedLoopResult,
+    gc.LengthPID,
+    cal.FitResult,
+    gpost.PosteriorResult,
+]
 
 
 def _shaped(hint) -> bool:

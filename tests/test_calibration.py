@@ -4,12 +4,13 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import REPO
+from conftest import REPO, one_experiment
 
 import growjax as gj
+from growjax import calibration as cal
 from growjax import posterior as gpost
-from growjax.calibration import fit as gf
 from growjax.data import experiment as ex
+from growjax.model import params as gp
 
 TRUTH_Y = 9000.0
 NOISE = 2e-4  # m
@@ -47,8 +48,13 @@ def test_fit_intervals_cover_the_truth_on_data_made_by_the_reference(grid, least
         name = GRID[k]
         truth = cases[name]["parameters"]["Y"]
         data = lengths[name] + np.random.default_rng(100 + k).normal(0.0, NOISE, time.size)
-        res = gf.fit(
-            time, data, inputs, free=["Y"], config=gj.Config(t1=10.0), n_starts=1, sweep_n=0, sigma_length=NOISE
+        res = cal.fit(
+            one_experiment(time, data, inputs),
+            ["Y"],
+            likelihood=cal.Likelihood(sigma_length=NOISE),
+            config=gj.Config(t1=10.0),
+            starts=1,
+            scout=0,
         )
         lo, hi = res.interval_90["robot.yield_pressure"]
         covered += lo < truth < hi
@@ -63,23 +69,71 @@ def test_a_direction_the_data_do_not_inform_is_undetermined_even_alone():
     """Relative to the best-informed direction, and in absolute terms: a single free parameter whose information on
     ln θ is ~0 (Y run to ~0 Pa, where it no longer acts) gets no interval, rather than the pseudo-inverse's zero."""
     names = ("robot.yield_pressure", "robot.extensibility")
-    assert gf.undetermined_directions(np.array([[3e-13]]), names[:1])[1].tolist() == [True]
-    assert gf.undetermined_directions(np.array([[2e3]]), names[:1])[1].tolist() == [False]  # ±2.2 % of Y
-    assert gf.undetermined_directions(np.array([[2 * gf.INFORMATION_FLOOR]]), names[:1])[1].tolist() == [False]
-    rotated, blind = gf.undetermined_directions(np.array([[4e4, 0.0], [0.0, 1e-8]]), names)
+    assert cal.undetermined_directions(np.array([[3e-13]]), names[:1])[1].tolist() == [True]
+    assert cal.undetermined_directions(np.array([[2e3]]), names[:1])[1].tolist() == [False]  # ±2.2 % of Y
+    assert cal.undetermined_directions(np.array([[2 * cal.INFORMATION_FLOOR]]), names[:1])[1].tolist() == [False]
+    rotated, blind = cal.undetermined_directions(np.array([[4e4, 0.0], [0.0, 1e-8]]), names)
     assert blind.tolist() == [False, True] and len(rotated) == 1
     assert abs(rotated[0]["direction"]["robot.extensibility"]) == pytest.approx(1.0)
+
+
+def _less_air(amplitude: float, seed: int, truth: float):
+    """A 2 s run of the fast model under a pulse train of ``amplitude`` Pa with the trapped-air effect's extra air
+    fraction at ``truth`` (less air than nominal for a negative one): its length (0.2 mm noise) and pressure
+    (500 Pa noise), a `growjax.data.sets.Run` with the inputs it ran."""
+    from growjax.data import sets as xs
+
+    cfg = gj.Config(t1=2.0)
+    inputs = gj.Inputs(catheter_length=gj.Constant(0.004), pressure_demand=gj.PulseTrain(amplitude=amplitude))
+    made = gj.with_effects(gj.reference(), gj.effects.TrappedAir(extra_fraction=truth))
+    times = np.arange(0.01, 2.0 + 1e-9, 0.01)
+    traj = gj.simulate(made, inputs, cfg, ts=times)
+    rng = np.random.default_rng(seed)
+    exp = ex.from_arrays(
+        times,
+        np.asarray(traj.length) + rng.normal(0.0, NOISE, times.size),
+        np.asarray(traj.pressure) + rng.normal(0.0, 500.0, times.size),
+    )
+    return xs.Run(f"pulse {amplitude / 1e3:.0f} kPa", exp, sensors=("length", "pressure"), inputs=inputs)
+
+
+def test_a_signed_parameter_is_fitted_below_its_nominal_value_alone_and_in_a_set():
+    """The trapped-air effect's extra air fraction may be negative (less air than the base model's): it is fitted in
+    a linear coordinate, not in ln θ, and on data made with less air than nominal its estimate is negative with a
+    90 % interval (symmetric about it) that covers the truth, from one experiment and, narrower, from two."""
+    from growjax.data import sets as xs
+
+    truth, name = -0.003, "trapped_air.extra_fraction"
+    runs = (_less_air(150e3, 1, truth), _less_air(100e3, 2, truth))
+    options = dict(
+        likelihood=cal.Likelihood(discrepancy="none", tolerances={}),
+        config=gj.Config(t1=2.0),
+        effects=(gj.effects.TrappedAir(),),  # at its nominal value, no extra air: the start
+        scout=0,
+    )
+    base = gj.with_effects(gj.reference(), gj.effects.TrappedAir())
+    assert cal.default_range(base, name) == (-0.005, 0.05)  # a scout draws over its range, linearly
+    np.testing.assert_allclose(cal.sampling_box(base, [name], [0.0]), [[-0.1], [1.0]])
+    widths = []
+    for exps in (xs.ExperimentSet(runs[:1]), xs.ExperimentSet(runs)):
+        res = cal.fit(exps, [name], **options)
+        lo, hi = res.interval_90[name]
+        assert res.coordinate(name).scale == 0.05 and res.summary()["parameters"][name]["coordinate"] == "linear"
+        assert res.status == "converged" and res.estimate[name] < 0.0
+        assert lo < truth < hi and hi - res.estimate[name] == pytest.approx(res.estimate[name] - lo)
+        widths.append(hi - lo)
+    assert widths[1] < widths[0]
 
 
 @pytest.mark.slow
 def test_fit_names_ext_and_n_as_undetermined():
     cfg, inputs, times, length = _synthetic(2.0, seed=12)
-    res = gf.fit(times, length, inputs, free=["Y", "ext", "n"], config=cfg, n_starts=2, sweep_n=16)
+    res = cal.fit(one_experiment(times, length, inputs), ["Y", "ext", "n"], config=cfg, starts=2, scout=16)
     assert abs(res.estimate["robot.yield_pressure"] - TRUTH_Y) < 0.01 * TRUTH_Y
     assert len(res.undetermined) == 2
     assert res.interval_90["robot.extensibility"] is None and res.interval_90["robot.growth_exponent"] is None
     assert res.interval_90["robot.yield_pressure"] is not None
-    ranges = gf.gp.physical_ranges(gj.reference())
+    ranges = gp.physical_ranges(gj.reference())
     for name in ("robot.extensibility", "robot.growth_exponent"):  # undetermined, yet inside its physical range
         assert ranges[name][0] <= res.estimate[name] <= ranges[name][1]
 
@@ -112,7 +166,14 @@ def test_nuts_on_reference_made_data_is_converged_and_covers_the_reference_estim
     assert (y_reference - TRUTH_Y) / se_reference > 2.0  # the noise draw, not the model, moves Y off the truth
     priors = gpost.paper_priors()[:1]
     res = gpost.sample(
-        times, length, inputs, config=cfg, priors=priors, chains=2, warmup=80, samples=80, seed=3, progress=False
+        one_experiment(times, length, inputs),
+        config=cfg,
+        priors=priors,
+        chains=2,
+        warmup=80,
+        samples=80,
+        seed=3,
+        progress=False,
     )
     s = res.summary
     assert s["divergences"] == 0
@@ -152,14 +213,14 @@ def test_emulated_and_direct_posteriors_agree_on_the_test_problem():
     cfg, inputs, times, length = _synthetic(0.8, seed=13)
     priors = gpost.paper_priors()[:1]
     kw = {"config": cfg, "priors": priors, "chains": 2, "warmup": 150, "samples": 150, "seed": 3, "progress": False}
-    emulated = gpost.sample(times, length, inputs, **kw).summary["parameters"]["Y"]
-    direct = gpost.sample(times, length, inputs, emulate=False, **kw).summary["parameters"]["Y"]
+    emulated = gpost.sample(one_experiment(times, length, inputs), **kw).summary["parameters"]["Y"]
+    direct = gpost.sample(one_experiment(times, length, inputs), emulate=False, **kw).summary["parameters"]["Y"]
     assert emulated["mean"] == pytest.approx(direct["mean"], abs=0.3 * direct["sd"])
     assert emulated["sd"] == pytest.approx(direct["sd"], rel=0.2)
 
 
 def _numeric(residuals):
-    """``linearised`` for :func:`growjax.calibration.fit.levenberg_marquardt` from NumPy residuals (forward differences)."""
+    """``linearised`` for `growjax.calibration.levenberg_marquardt` from NumPy residuals (forward differences)."""
 
     def linearised(z):
         z = np.asarray(z, float)
@@ -173,11 +234,11 @@ def _numeric(residuals):
 
 def test_levenberg_marquardt_solves_rosenbrock_and_stops_on_a_parameter_running_off_its_range():
     rosenbrock = _numeric(lambda z: np.array([10.0 * (z[1] - z[0] ** 2), 1.0 - z[0]]))
-    z, cost, ok, _, _ = gf.levenberg_marquardt(rosenbrock, np.array([-1.2, 1.0]), max_steps=100)
+    z, cost, ok, _, _ = cal.levenberg_marquardt(rosenbrock, np.array([-1.2, 1.0]), max_steps=100)
     assert ok and np.allclose(z, [1.0, 1.0], atol=1e-5) and cost < 1e-10
     # η = softplus(u) best at 0 (u → −∞): stops, converged, with the other coordinate fitted.
     drift = _numeric(lambda z: np.array([np.logaddexp(0.0, z[0]), z[1] - 2.0, 0.1]))
-    z, _, ok, _, _ = gf.levenberg_marquardt(drift, np.array([1.0, 0.0]), max_steps=40)
+    z, _, ok, _, _ = cal.levenberg_marquardt(drift, np.array([1.0, 0.0]), max_steps=40)
     assert ok and z[0] < -3.0 and z[1] == pytest.approx(2.0, abs=1e-6)
 
 
@@ -185,9 +246,9 @@ def test_levenberg_marquardt_keeps_a_flat_direction_inside_its_bounds():
     # z1 is pulled weakly towards 10 but bounded above by 2; z0 is determined.
     pulled = _numeric(lambda z: np.array([z[0] - 1.0, 1e-3 * (z[1] - 10.0)]))
     bounds = (np.array([-np.inf, -5.0]), np.array([np.inf, 2.0]))
-    z, _, ok, _, _ = gf.levenberg_marquardt(pulled, np.array([0.0, 0.0]), max_steps=60, bounds=bounds)
+    z, _, ok, _, _ = cal.levenberg_marquardt(pulled, np.array([0.0, 0.0]), max_steps=60, bounds=bounds)
     assert ok and z[0] == pytest.approx(1.0, abs=1e-6) and z[1] == pytest.approx(2.0, abs=1e-12)
-    z, _, _, _, _ = gf.levenberg_marquardt(pulled, np.array([0.0, 0.0]), max_steps=60)
+    z, _, _, _, _ = cal.levenberg_marquardt(pulled, np.array([0.0, 0.0]), max_steps=60)
     assert z[1] > 2.5  # without bounds it runs past them
 
 
@@ -201,7 +262,7 @@ def test_levenberg_marquardt_holds_a_coordinate_on_its_bound_and_solves_for_the_
         return np.array([z[0] - 5.0, z[1] - z[0]]), np.array([[1.0, 0.0], [-1.0, 1.0]])
 
     bounds = (np.array([-np.inf, -np.inf]), np.array([2.0, np.inf]))
-    z, cost, ok, _, _ = gf.levenberg_marquardt(linearised, np.zeros(2), max_steps=60, bounds=bounds)
+    z, cost, ok, _, _ = cal.levenberg_marquardt(linearised, np.zeros(2), max_steps=60, bounds=bounds)
     assert ok and z == pytest.approx([2.0, 2.0], abs=1e-3) and cost == pytest.approx(4.5, rel=1e-6)
     assert len(calls) <= 5
 
@@ -231,8 +292,8 @@ def test_levenberg_marquardt_stops_at_the_costs_resolution_instead_of_wandering_
     plain_counts, resolved_counts = [], []
     for shift in range(16):
         plain, resolved = [], []
-        _, cost_plain, _, _, _ = gf.levenberg_marquardt(_noisy_line(plain, noise, shift), np.zeros(2), max_steps=60)
-        z, cost, ok, _, _ = gf.levenberg_marquardt(
+        _, cost_plain, _, _, _ = cal.levenberg_marquardt(_noisy_line(plain, noise, shift), np.zeros(2), max_steps=60)
+        z, cost, ok, _, _ = cal.levenberg_marquardt(
             _noisy_line(resolved, noise, shift), np.zeros(2), max_steps=60, relative_resolution=1e-3
         )
         assert ok and len(resolved) <= min(len(plain), 15)
@@ -243,8 +304,8 @@ def test_levenberg_marquardt_stops_at_the_costs_resolution_instead_of_wandering_
     assert sum(resolved_counts) <= 0.7 * sum(plain_counts), (plain_counts, resolved_counts)
     # without noise the resolution changes nothing: a clean fit ends as before
     clean, clean_resolved = [], []
-    out = gf.levenberg_marquardt(_noisy_line(clean, 0.0), np.zeros(2), max_steps=60)
-    out_resolved = gf.levenberg_marquardt(
+    out = cal.levenberg_marquardt(_noisy_line(clean, 0.0), np.zeros(2), max_steps=60)
+    out_resolved = cal.levenberg_marquardt(
         _noisy_line(clean_resolved, 0.0), np.zeros(2), max_steps=60, relative_resolution=1e-3
     )
     assert np.array_equal(out[0], out_resolved[0]) and len(clean) == len(clean_resolved)
@@ -260,7 +321,7 @@ def test_levenberg_marquardt_never_evaluates_a_rejected_point_twice():
         points.append(np.asarray(z, float).tobytes())
         return steep(z)
 
-    z, _, ok, _, _ = gf.levenberg_marquardt(linearised, np.array([-1.0]), max_steps=40, max_move=3.0)
+    z, _, ok, _, _ = cal.levenberg_marquardt(linearised, np.array([-1.0]), max_steps=40, max_move=3.0)
     assert ok and z[0] == pytest.approx(np.log(1.5) / 3.0, abs=1e-6)
     assert len(points) == len(set(points))
 
@@ -279,8 +340,8 @@ def test_levenberg_marquardt_linearises_only_the_points_it_accepts():
         scored.append(float(np.asarray(z)[0]))
         return f(np.asarray(z, float))
 
-    plain = gf.levenberg_marquardt(steep, np.array([-1.0]), max_steps=40, max_move=3.0)
-    z, cost, ok, _, _ = gf.levenberg_marquardt(
+    plain = cal.levenberg_marquardt(steep, np.array([-1.0]), max_steps=40, max_move=3.0)
+    z, cost, ok, _, _ = cal.levenberg_marquardt(
         linearised, np.array([-1.0]), max_steps=40, max_move=3.0, residuals=residuals
     )
     assert ok and z[0] == pytest.approx(plain[0][0], abs=1e-6) and cost == pytest.approx(plain[1], rel=1e-6)
@@ -288,7 +349,7 @@ def test_levenberg_marquardt_linearises_only_the_points_it_accepts():
     costs = [0.5 * float(f(np.array([x])) @ f(np.array([x]))) for x in linearised_at]
     assert np.all(np.diff(costs) <= 0.0)  # every point linearised after the start was accepted
     linearised_at.clear()
-    gf.levenberg_marquardt(linearised, np.array([-1.0]), max_steps=2, max_move=3.0, residuals=residuals)
+    cal.levenberg_marquardt(linearised, np.array([-1.0]), max_steps=2, max_move=3.0, residuals=residuals)
     assert len(linearised_at) == 3
 
 
@@ -296,7 +357,7 @@ def test_physical_bounds_are_the_ranges_in_log_coordinates():
     base = gj.reference()
     names = ("robot.yield_pressure", "robot.growth_exponent", "robot.extensibility")
     refs = np.array([8000.0, 1.0, 5000.0])
-    lo, hi = gf.physical_bounds(base, names, refs)
+    lo, hi = cal.physical_bounds(base, names, refs)
     assert lo[0] == -np.inf and hi[0] == pytest.approx(np.log(1e6 / 8000.0))  # Y in [0, 1 MPa]
     assert (lo[1], hi[1]) == pytest.approx((np.log(0.05), np.log(5.0)))  # n in [0.05, 5]
     assert hi[2] == np.inf
@@ -311,14 +372,14 @@ def test_levenberg_marquardt_rejects_points_where_the_model_fails():
         with np.errstate(invalid="ignore"):
             return np.array([np.log(z[0]) - np.log(4.0)])
 
-    z, _, ok, _, jac = gf.levenberg_marquardt(_numeric(residuals), np.array([20.0]), max_steps=60, max_move=100.0)
+    z, _, ok, _, jac = cal.levenberg_marquardt(_numeric(residuals), np.array([20.0]), max_steps=60, max_move=100.0)
     assert min(calls) < 0.0  # a failed point was tried...
     assert ok and z[0] == pytest.approx(4.0, rel=1e-6) and np.all(np.isfinite(jac))  # ...and not taken
 
 
 def test_levenberg_marquardt_reports_a_start_where_the_model_fails():
     failing = _numeric(lambda z: np.array([np.nan, z[0]]))
-    z, cost, ok, _, jac = gf.levenberg_marquardt(failing, np.array([1.0]))
+    z, cost, ok, _, jac = cal.levenberg_marquardt(failing, np.array([1.0]))
     assert not ok and cost == np.inf and z[0] == 1.0 and np.all(np.isfinite(jac))
 
 

@@ -370,8 +370,7 @@ def test_posterior_command_writes_inference_data_and_the_issue_keys(tmp_path):
 def test_fit_passes_the_rigs_treatment_to_the_fit(monkeypatch, tmp_path, capsys):
     """``growjax fit`` makes the rig's errors parameters of the model by default (``--rig-tangents``);
     ``--no-rig-tangents`` takes secants, relinearised where the data put the rig unless ``--no-relinearise``."""
-    from growjax import cli
-    from growjax.calibration import fit as gf
+    from growjax import calibration, cli
 
     seen = []
 
@@ -379,7 +378,7 @@ def test_fit_passes_the_rigs_treatment_to_the_fit(monkeypatch, tmp_path, capsys)
         seen.append((kwargs.get("relinearise"), kwargs.get("rig_tangents")))
         raise ValueError("stopped before fitting")
 
-    monkeypatch.setattr(gf, "fit", stop)
+    monkeypatch.setattr(calibration, "fit", stop)
     data = "src/growjax/data/datasets/synthetic_forward.csv"
     for extra in ([], ["--rig-tangents"], ["--no-rig-tangents"], ["--no-rig-tangents", "--no-relinearise"]):
         assert cli.main(["fit", data, "--out", str(tmp_path), "--quiet", *extra]) == 2

@@ -12,8 +12,8 @@ from conftest import objective_differences
 import growjax as gj
 from growjax import cli
 from growjax import design as gd
+from growjax.calibration import default_range
 from growjax.calibration import discrepancy as dc
-from growjax.calibration import fit as gf
 from growjax.calibration import tolerance as tl
 from growjax.data import experiment as ex
 
@@ -110,10 +110,10 @@ def test_knowledge_from_a_saved_fit(tmp_path):
     known = gd.from_summary(saved, base, ["Y", "ext"])
     assert known.estimate[0] == 8000.0 and known.rig == ("pid.proportional",)
     assert np.sqrt(known.covariance[0, 0]) == pytest.approx(0.02)
-    lo, hi = gf.default_range(base, "robot.extensibility")
+    lo, hi = default_range(base, "robot.extensibility")
     assert known.covariance[1, 1] == pytest.approx(np.log(hi / lo) ** 2 / 12)  # undetermined: its box,
     assert known.estimate[1] == pytest.approx(np.sqrt(lo * hi))  # centred there, not at the fit's arbitrary value
-    lo, hi = gf.default_range(base, "robot.growth_exponent")
+    lo, hi = default_range(base, "robot.growth_exponent")
     wide = gd.from_summary(saved, base, ["Y", "n"])  # an interval wider than the box says less than the box
     assert wide.estimate[1] == pytest.approx(np.sqrt(lo * hi)) and wide.covariance[1, 1] == pytest.approx(
         np.log(hi / lo) ** 2 / 12

@@ -10,6 +10,7 @@ import pytest
 from conftest import REPO, ar1_noise, smooth_perturbation
 
 import growjax as gj
+from growjax import calibration as cal
 from growjax import discover as gd
 from growjax.data import experiment as ex
 from growjax.model import params as gp
@@ -141,7 +142,8 @@ def test_a_base_shift_the_fast_models_own_error_explains_is_no_confounding():
     res = gd.discover(exp.time[keep], exp["robot_length_m"][keep], inputs, config=cfg)
     assert res.effect == "none" and not res.confounded_with, gd.summary_text(res)
     assert 2.0 < res.trade_allowance < 50.0
-    strict = gd.discover(exp.time[keep], exp["robot_length_m"][keep], inputs, config=cfg, model_error=0.0)
+    exact = cal.Likelihood(model_error=0.0)
+    strict = gd.discover(exp.time[keep], exp["robot_length_m"][keep], inputs, config=cfg, likelihood=exact)
     assert strict.effect == "confounded" and strict.trade_allowance == 0.0, gd.summary_text(strict)
     for name in strict.confounded_with:  # with -s: what the base-held fits gave the confounded candidates
         s = strict.evidence[0][name]

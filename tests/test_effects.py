@@ -313,7 +313,8 @@ def _length_and_tangent(values, tangent, inputs, breaks, classes=FEW_CLASSES):
     return jax.jvp(length, (values,), (tangent,))
 
 
-def _unit(k, scale=1.0, size=len(FEW)):
+def _unit(k, scale=1.0, size=None):
+    size = len(FEW) if size is None else size
     e = np.zeros(size)
     e[k] = scale
     return jnp.asarray(e)

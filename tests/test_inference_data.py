@@ -18,11 +18,13 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 import xarray as xr
+from conftest import one_experiment
 from packaging.requirements import Requirement
 
 import growjax as gj
 from growjax import plotting as gplot
 from growjax import posterior as gpost
+from growjax.calibration import Likelihood
 from growjax.posterior import emulator as em
 
 REPO = Path(__file__).resolve().parents[1]
@@ -40,15 +42,15 @@ TIMES = np.arange(0.01, 0.81, 0.01)  # s
 GROUPS = {"posterior", "posterior_predictive", "log_likelihood", "sample_stats", "observed_data", "constant_data"}
 
 
-def _linear_emulator(prior):
+def _linear_emulator(prior, times=TIMES):
     """An emulator whose table is a known length, L = 20 mm/s · (1 − (Y − 9 kPa)/20 kPa) · t, linear in Y (so its
     ghost nodes are exact): NUTS runs in seconds, no model solve or compile of the simulator."""
     spacing = (prior.high - prior.low) / (prior.nodes - 1)
     nodes = prior.low + spacing * np.arange(-1, prior.nodes + 1)  # with one ghost node per side
-    values = 2e-2 * (1.0 - (nodes[:, None] - 9000.0) / 20000.0) * TIMES[None, :]
+    values = 2e-2 * (1.0 - (nodes[:, None] - 9000.0) / 20000.0) * times[None, :]
     return em.Emulator(
         values=jnp.asarray(values),
-        times=jnp.asarray(TIMES),
+        times=jnp.asarray(times),
         lows=jnp.asarray([prior.low]),
         highs=jnp.asarray([prior.high]),
         error_rms=jnp.asarray(0.0),
@@ -68,9 +70,7 @@ def small_posterior():
     prior = gpost.paper_priors()[0]
     length = 2e-2 * TIMES + np.random.default_rng(0).normal(0.0, 2e-4, TIMES.size)
     return gpost.sample(
-        TIMES,
-        length,
-        None,
+        one_experiment(TIMES, length),
         config=gj.Config(t1=0.8),
         priors=[prior],
         chains=2,
@@ -79,8 +79,7 @@ def small_posterior():
         seed=0,
         progress=False,
         emulate=_linear_emulator(prior),
-        discrepancy="none",
-        tolerances={},
+        likelihood=Likelihood(discrepancy="none", tolerances={}, model_error=0.0),
     )
 
 
@@ -122,6 +121,35 @@ def test_the_noise_is_recorded_in_mm_and_the_summary_json_keeps_si(small_posteri
     json_sigma = small_posterior.summary["parameters"]["sigma"]  # m, as every length in growjax's JSON
     assert json_sigma["mean"] == pytest.approx(float(sigma.mean()), rel=1e-12)
     assert json_sigma["interval_90"][0] == pytest.approx(float(np.quantile(sigma, 0.05)), rel=1e-12)
+
+
+def test_the_posterior_carries_the_fits_model_error_allowance_without_a_discrepancy():
+    """``discrepancy="none"``: the posterior reads the configuration's error allowance from the likelihood's options
+    as the fit does (`growjax.calibration.FAST_MODEL_ERROR` for the fast configuration) and marginalises it as the
+    slow drift the fit carries. On a length linear in Y over 10 s the drift, not the noise, limits Y (the
+    posterior's sd of Y grows over the allowance-free one's by the factor the Gaussian marginal gives)."""
+    from growjax.calibration import FAST_MODEL_ERROR, MODEL_ERROR_TIME
+    from growjax.calibration import discrepancy as dc
+
+    prior = gpost.paper_priors()[0]
+    times = np.arange(0.04, 10.0, 0.04)
+    length = 2e-2 * times + np.random.default_rng(4).normal(0.0, 1e-4, times.size)
+    config = gj.Config(t1=10.0)
+    none = Likelihood(discrepancy="none", tolerances={})
+    kw = dict(config=config, priors=[prior], chains=2, warmup=150, samples=300, seed=0, progress=False)
+    emulate = _linear_emulator(prior, times)
+    carried = gpost.sample(one_experiment(times, length), likelihood=none, emulate=emulate, **kw)
+    bare = gpost.sample(one_experiment(times, length), likelihood=none.replace(model_error=0.0), emulate=emulate, **kw)
+    assert none.model_error_for(config) == FAST_MODEL_ERROR  # what the fit propagates (its fast_model_error)
+    assert carried.summary["configuration_error_m"] == carried.residuals.model_error == FAST_MODEL_ERROR
+    assert bare.residuals is None and bare.summary["configuration_error_m"] == 0.0
+    jac = -1e-6 * times  # dL/dY, m/Pa
+    drift = dc.drift_columns(times, FAST_MODEL_ERROR, MODEL_ERROR_TIME)
+    noise = 1e-4**2 * np.eye(times.size)
+    widened = np.sqrt((jac @ jac / 1e-4**2) / (jac @ np.linalg.solve(noise + drift @ drift.T, jac)))
+    assert widened > 1.5  # the drift, not the noise, limits Y
+    sd = lambda res: res.summary["parameters"]["Y"]["sd"]  # noqa: E731
+    assert sd(carried) / sd(bare) == pytest.approx(widened, rel=0.15)
 
 
 def test_arviz_summary_shows_the_noise_at_its_default_rounding(saved):

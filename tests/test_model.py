@@ -239,7 +239,7 @@ def test_fits_and_the_emulator_score_the_model_at_the_samples():
     """Samples at whole hundredths fall between the default save grid's points (every 10 ms from t0 = 1 ms):
     fit residuals and the emulator's prediction use the solution at the samples themselves (a sweep's RMSE:
     tests/test_sweep.py)."""
-    from growjax.calibration import fit as gf
+    from growjax.calibration import make_problem
     from growjax.posterior import emulator as em
 
     cfg = gj.Config(t1=1.0)
@@ -251,7 +251,7 @@ def test_fits_and_the_emulator_score_the_model_at_the_samples():
     interpolated = np.interp(times, np.asarray(grid.time), np.asarray(grid.length))
     assert np.max(np.abs(interpolated - exact)) > 1e-6  # the grid would be off by more than a micrometre
     data = exact + 1e-4
-    problem = gf.make_problem(base, ["Y"], inputs, cfg, times, data, sigma_length=1e-4)
+    problem = make_problem(base, ["Y"], inputs, cfg, times, data, sigma_length=1e-4)
     np.testing.assert_allclose(np.asarray(problem.residuals(jnp.zeros(1))), -1.0, atol=1e-4)  # 1e-8 m
     predicted = em.predicted_length(
         {"robot.yield_pressure": base.robot.yield_pressure}, base, inputs, cfg, jnp.asarray(times)

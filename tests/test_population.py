@@ -9,7 +9,7 @@ import pytest
 
 import growjax as gj
 from growjax import cli
-from growjax.calibration.joint import SetFitResult
+from growjax.calibration import Coordinate, FitResult
 from growjax.data import experiment as ex
 from growjax.data import sets as xs
 from growjax.posterior import population as pop
@@ -29,22 +29,15 @@ def _set_fit(z_hat, robots, runs=None):
     joint = np.block([[SIGMA**2 * np.eye(r) + (G * U**2) @ G * np.ones((r, r)), -gu], [-gu.T, np.diag(U**2)]])
     labels = tuple(f"{Y}@{k}" for k in robots)
     est = dict(zip(labels, np.exp(z_hat)))
-    return SetFitResult(
+    return FitResult(
         labels,
         est,
         {},
         {},
-        {},
         joint[:r, :r],
-        runs or [],
-        "inferred",
-        "shared",
-        {},
-        {},
-        0.0,
-        "converged",
-        0.0,
-        0.0,
+        coordinates=tuple(Coordinate(f"{Y}@{k}", Y, "robot", k) for k in robots),
+        runs=runs or [],
+        rig="inferred",
         rig_labels=(("rig", "pump.screw_viscous_friction"), ("rig", "robot.catheter_friction")),
         rig_vector=np.zeros(2),
         joint_covariance=joint,

@@ -9,10 +9,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import one_experiment
 
 import growjax as gj
+from growjax import calibration as cal
+from growjax.calibration import batch as cb
 from growjax.calibration import discrepancy as dc
-from growjax.calibration import fit as gf
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "data"))
@@ -29,8 +31,11 @@ def _likelihood(inferred: bool, n=120):
     used[::7] = False  # samples the likelihood does not score
     g = rng.normal(0.0, 1e-4, (n, 3))  # m per unit ln ψ
     u = np.array([0.2, 0.05, 0.1])
-    lik = gf.Likelihood(jnp.asarray(t), jnp.asarray(used), jnp.asarray(np.flatnonzero(used)), 1e-3, n)
-    raw = (jnp.asarray(rng.normal(0.0, 0.2, n)), jnp.asarray(rng.normal(0.0, 5.0, (n, 2))))  # σ_L, σ_L per unit z
+    lik = cal.RunScore.of(t, used, 1e-3)
+    raw = (
+        jnp.asarray(rng.normal(0.0, 0.2, n)),
+        jnp.asarray(rng.normal(0.0, 5.0, (n, 2))),
+    )  # σ_L, σ_L per unit z
     return lik.with_tolerances(g, dict(zip(("a", "b", "c"), u)), inferred=inferred), raw, t, used, g, u
 
 
@@ -60,31 +65,29 @@ def rig_off():
         cases,
     ) = mk.read_reference_lengths()
     data = lengths[RIG_OFF] + np.random.default_rng(5).normal(0.0, 2e-4, t.size)
-    fit = lambda rig, **kw: gf.fit(
-        t,
-        data,
-        mk.reference_inputs("published"),
-        free=["Y"],
+    fit = lambda rig, **kw: cal.fit(
+        one_experiment(t, data, mk.reference_inputs("published")),
+        ["Y"],
+        likelihood=cal.Likelihood(rig=rig),
         config=gj.Config(t1=10.0),
-        n_starts=1,
-        sweep_n=0,
-        rig=rig,
+        starts=1,
+        scout=0,
         **kw,
     )
     points = {"tangents": [], "secants": []}  # (z, the rig's values) of every run of the model in a fit
-    linearised = gf._linearised
+    spread = cb.spread
 
     def counted(kind):
-        def run(z, problem):
-            rig = np.concatenate([np.ravel(np.asarray(x, float)) for x in jax.tree_util.tree_leaves(problem.base)])
-            points[kind].append(np.asarray(z, float).tobytes() + rig.tobytes())
-            return linearised(z, problem)
+        def run(program, z_local, problems, stacked=True):
+            rig = np.concatenate([np.ravel(np.asarray(x, float)) for x in jax.tree_util.tree_leaves(problems.base)])
+            points[kind].append(np.asarray(z_local, float).tobytes() + rig.tobytes())
+            return spread(program, z_local, problems, stacked)
 
         return run
 
     def counting(kind, **kw):
         with pytest.MonkeyPatch.context() as mp:
-            mp.setattr(gf, "_linearised", counted(kind))
+            mp.setattr(cb, "spread", counted(kind))
             return fit("inferred", **kw)
 
     # the rig's secants (``rig_tangents=False``, not the default) and the secants linearised once: the slow tests',
@@ -109,7 +112,7 @@ def test_the_data_inform_the_rig_on_reference_made_data(rig_off):
     width = lambda res: res.interval_90[Y][1] - res.interval_90[Y][0]
     assert width(inferred) < 0.5 * width(fixed)
     assert inferred.rig == "inferred" and fixed.rig == "fixed" and fixed.rig_offset == {}
-    assert inferred.rig_offset["pump.screw_viscous_friction"] < 0.0
+    assert inferred.rig_offset["rig"]["pump.screw_viscous_friction"] < 0.0
     assert inferred.status == "converged" and inferred.linearisations == 1  # exact slopes: nothing to take again
     budget = inferred.budget[Y]
     assert sum(v**2 for v in budget.values()) == pytest.approx(inferred.standard_error[Y] ** 2, rel=1e-6)
@@ -128,7 +131,7 @@ def test_the_rigs_secants_agree_with_its_tangents_where_both_reach(rig_off):
     assert abs(tangents.estimate[Y] - secants.estimate[Y]) < secants.standard_error[Y]
     width = lambda res: res.interval_90[Y][1] - res.interval_90[Y][0]
     assert width(tangents) == pytest.approx(width(secants), rel=0.15)
-    assert secants.rig_offset["pump.screw_viscous_friction"] < 0.0
+    assert secants.rig_offset["rig"]["pump.screw_viscous_friction"] < 0.0
 
 
 @pytest.mark.slow
@@ -151,7 +154,7 @@ def test_the_fit_runs_the_model_once_per_point(rig_off):
 
 def test_an_unknown_rig_treatment_is_refused():
     with pytest.raises(ValueError, match="rig must be one of"):
-        gf.fit(np.linspace(0, 1, 5), np.zeros(5), None, rig="known")
+        cal.Likelihood(rig="known")
 
 
 @pytest.mark.slow
@@ -160,18 +163,17 @@ def test_fit_and_posterior_agree_on_the_shipped_data(synthetic_experiment):
     width (both infer the rig), the fixed propagation is far wider, and the posterior's band of this experiment
     replicated holds 0.85–0.95 of the measured points while a new experiment's is wider."""
     from growjax import posterior as gpost
-    from growjax.data import experiment as ex
+    from growjax.data import sets as xs
 
     exp = synthetic_experiment
     base = gj.replace(gj.reference("forward"), Y=9000.0)
     config = gj.Config(t1=10.0)
-    inputs = ex.to_inputs(exp, "forward", base, config.t0, config.t1)
     width = lambda iv: iv[1] - iv[0]
-    fit = gf.fit(exp.time, exp["robot_length_m"], inputs, base=base, config=config, pressure=exp["pressure_Pa"])
-    fixed = gf.fit(
-        exp.time, exp["robot_length_m"], inputs, base=base, config=config, pressure=exp["pressure_Pa"], rig="fixed"
-    )
-    post = gpost.sample(exp.time, exp["robot_length_m"], inputs, base, config, emulate=True, progress=False)
+    one = xs.ExperimentSet.single(exp, defaults=base)
+    fit = cal.fit(one, config=config)
+    fixed = cal.fit(one, likelihood=cal.Likelihood(rig="fixed"), config=config)
+    length_only = xs.ExperimentSet.single(exp, defaults=base, sensors=["length"])
+    post = gpost.sample(length_only, config=config, emulate=True, progress=False)
     posterior_width = width(post.summary["parameters"]["Y"]["interval_90"])
     assert abs(width(fit.interval_90[Y]) / posterior_width - 1.0) < 0.25
     assert width(fixed.interval_90[Y]) > 2.0 * width(fit.interval_90[Y])
@@ -211,7 +213,7 @@ def test_a_rig_centre_naming_an_untoleranced_parameter_is_refused():
     from growjax import posterior as gpost
 
     with pytest.raises(ValueError, match="rig_centre names .*pump.hose_length"):
-        gpost.sample(np.linspace(0, 1, 5), np.zeros(5), None, rig_centre={"pump.hose_length": 0.1})
+        gpost.sample(one_experiment(np.linspace(0, 1, 5), np.zeros(5)), rig_centre={"pump.hose_length": 0.1})
 
 
 @pytest.mark.slow
@@ -247,15 +249,12 @@ def test_a_rig_misfit_that_runs_y_to_zero_with_the_rig_nominal_is_brought_back_b
     length = np.asarray(gj.simulate(rig, inputs, maker, ts=np.concatenate([[maker.t0], t])).length)[1:]
     length = length + rng.normal(0.0, noise, t.size)
     length = length + np.asarray(dc.draw(jax.random.PRNGKey(int(rng.integers(2**31))), t, hyper))
-    res = gf.fit(
-        t,
-        length,
-        inputs,
-        free=["Y"],
-        base=gj.replace(base, Y=truth_y),
+    res = cal.fit(
+        one_experiment(t, length, inputs, base=gj.replace(base, Y=truth_y), drive="inverse"),
+        ["Y"],
         config=gj.Config(drive="inverse", t1=10.0),
-        n_starts=1,
-        sweep_n=16,
+        starts=1,
+        scout=16,
     )
     assert res.starts[0]["estimate"][Y] < 2500.0, res.starts  # the rig held nominal: Y run out of its box
     assert res.interval_90[Y] is not None, res.estimate

@@ -9,9 +9,11 @@ import numpy as np
 import pytest
 
 import growjax as gj
+from growjax import calibration as cal
 from growjax import cli
-from growjax.calibration import joint
+from growjax.calibration import batch as cb
 from growjax.cli import summary_lines
+from growjax.data import experiment as ex
 from growjax.data import sets as xs
 from growjax.data.experiment import ExperimentError
 
@@ -83,29 +85,25 @@ def shipped_set():
     return exps, truth, gj.Config(t1=4.0)
 
 
-@pytest.mark.slow
-def test_a_set_of_one_is_the_single_fit(shipped_set):
-    """The joint machinery on one experiment is the fit: the same estimate, and the same interval up to the
-    hyperparameters' spread, which the joint fit leaves out."""
-    exps, _, config = shipped_set
+def test_a_set_of_one_is_the_experiment_given_as_arrays(shipped_set):
+    """One experiment of the set, fitted as the set's run and as arrays with their inputs and parameters (the way a
+    single experiment was given): one code path, the same estimate, interval and budget, the hyperparameters'
+    spread included."""
+    exps, _, _ = shipped_set
+    config = gj.Config(t1=2.0)
     run = exps.runs[1]
-    alone = joint.fit_set(xs.ExperimentSet((run,)), free=["Y"], config=config, sweep_n=0)
-    from growjax.calibration import fit as gf
-    from growjax.data import experiment as ex
-
-    single = gf.fit(
-        run.times,
-        run.length,
-        ex.to_inputs(run.experiment, "forward", run.base(), config.t0, config.t1),
-        free=["Y"],
-        config=config,
-        sweep_n=0,
-        relinearise=True,
+    likelihood = cal.Likelihood(tolerances={})
+    as_run = cal.fit(xs.ExperimentSet((run,)), ["Y"], likelihood=likelihood, config=config, scout=0)
+    inputs = ex.to_inputs(run.experiment, "forward", run.base(), config.t0, config.t1)
+    arrays = xs.ExperimentSet.single(
+        ex.Experiment(run.times, {"robot_length_m": run.length}), defaults=run.base(), inputs=inputs
     )
-    # both fit the rig's errors in the model's own tangents
-    assert abs(alone.estimate[Y] - single.estimate[Y]) < 0.25 * single.standard_error[Y]
-    assert alone.standard_error[Y] == pytest.approx(single.standard_error[Y], rel=0.15)
-    assert alone.standard_error[Y] <= single.standard_error[Y] * (1 + 1e-6)
+    as_arrays = cal.fit(arrays, ["Y"], likelihood=likelihood, config=config, scout=0)
+    assert as_run.estimate[Y] == pytest.approx(as_arrays.estimate[Y], rel=1e-9)
+    np.testing.assert_allclose(as_run.interval_90[Y], as_arrays.interval_90[Y], rtol=1e-9)
+    assert as_run.budget[Y]["hyperparameters"] > 0.0
+    assert as_run.budget[Y] == pytest.approx(as_arrays.budget[Y], rel=1e-9)
+    assert as_run.discrepancy["amplitude_m"] == pytest.approx(as_run.runs[0]["discrepancy"]["amplitude_m"])
 
 
 def test_the_shipped_set_fitted_jointly_covers(shipped_set):
@@ -115,7 +113,7 @@ def test_the_shipped_set_fitted_jointly_covers(shipped_set):
     screw friction (made 21 % high) as high."""
     exps, truth, config = shipped_set
     label = f"{Y}@membrane-1"
-    together = joint.fit_set(exps, config=config, sweep_n=0)
+    together = cal.fit(exps, ["Y@robot"], config=config, scout=0)
     lo, hi = together.interval_90[label]
     assert lo <= truth["truth"]["Y"] <= hi and together.status == "converged"
     assert together.programs == 1 and len(together.runs) == 3
@@ -124,15 +122,16 @@ def test_the_shipped_set_fitted_jointly_covers(shipped_set):
     assert read["robot.catheter_friction"] < -0.2 and read["pump.screw_viscous_friction"] > 0.1
     assert together.linearisations == 1 and together.rig_settled  # no secants to take again
     summary = together.summary()
-    lines = summary_lines({**summary, "command": "fit", "figure": "fit.png"})
+    lines = summary_lines({**summary, "command": "fit", "experiments": [], "figure": "fit.png"})
     assert summary["rig_settled"] and not any("had not settled" in line for line in lines)
     unsettled = summary_lines(
         {
             **summary,
             "command": "fit",
+            "experiments": [],
             "figure": "fit.png",
             "rig_settled": False,
-            "linearisations": joint.RELINEARISE_STEPS,
+            "linearisations": cal.RELINEARISE_STEPS,
             "rig_last_move": 0.12,
         }
     )
@@ -143,8 +142,6 @@ def test_runs_of_different_lengths_and_sensors_pad_to_one_program_and_keep_their
     """Three runs on one configuration, 80 and 50 samples, one with the pressure: padded to one tree of one shape
     (one compiled program), the padded samples repeat a run's last one, and each run's kept rows of the padded
     measurements are its own measurements, in order (its residuals, cut back, are the unpadded run's)."""
-    from growjax.calibration import fit as gf
-
     cfg, base = gj.Config(t1=1.0), gj.reference("forward")
     inputs = gj.Inputs(catheter_length=gj.Constant(0.02), pressure_demand=gj.PulseTrain(amplitude=150e3))
     rng = np.random.default_rng(0)
@@ -153,9 +150,9 @@ def test_runs_of_different_lengths_and_sensors_pad_to_one_program_and_keep_their
     for m, p in zip(sizes, sensed):
         t = np.arange(1, m + 1) * 0.01
         problems.append(
-            gf.make_problem(base, (Y,), inputs, cfg, t, rng.normal(size=m), rng.normal(size=m) if p else None)
+            cal.make_problem(base, (Y,), inputs, cfg, t, rng.normal(size=m), rng.normal(size=m) if p else None)
         )
-    padded, rows = joint._pad_samples(problems)
+    padded, rows = cb.pad_samples(problems)
     shapes = {
         (jax.tree_util.tree_structure(pr), tuple(np.shape(x) for x in jax.tree_util.tree_leaves(pr))) for pr in padded
     }
@@ -173,10 +170,10 @@ def test_the_shipped_sets_secants_settle_where_the_data_put_the_rig(shipped_set)
     (the slope there, not half a tolerance away) and agrees with the tangents' fit."""
     exps, truth, config = shipped_set
     label = f"{Y}@membrane-1"
-    secants = joint.fit_set(exps, config=config, sweep_n=0, rig_tangents=False)
-    tangents = joint.fit_set(exps, config=config, sweep_n=0)
-    assert 1 < secants.linearisations < joint.RELINEARISE_STEPS
-    assert secants.rig_settled and secants.rig_last_move <= joint.RELINEARISE_TOLERANCE
+    secants = cal.fit(exps, ["Y@robot"], config=config, scout=0, rig_tangents=False)
+    tangents = cal.fit(exps, ["Y@robot"], config=config, scout=0)
+    assert 1 < secants.linearisations < cal.RELINEARISE_STEPS
+    assert secants.rig_settled and secants.rig_last_move <= cal.RELINEARISE_TOLERANCE
     assert abs(secants.estimate[label] - tangents.estimate[label]) < tangents.standard_error[label]
 
 
@@ -186,8 +183,8 @@ def test_an_unshared_rig_claims_more_than_the_shipped_set_can_say(shipped_set):
     rig can say (over 30 drawn sets it under-covers: ``benchmarks/sets.py``)."""
     exps, _, config = shipped_set
     label = f"{Y}@membrane-1"
-    shared = np.diff(joint.fit_set(exps, config=config, sweep_n=0).interval_90[label])[0]
-    independent = joint.fit_set(exps, config=config, sweep_n=0, rig_errors="experiment")
+    shared = np.diff(cal.fit(exps, ["Y@robot"], config=config, scout=0).interval_90[label])[0]
+    independent = cal.fit(exps, ["Y@robot"], likelihood=cal.Likelihood(rig_errors="experiment"), config=config, scout=0)
     assert np.diff(independent.interval_90[label])[0] < shared
 
 
@@ -197,10 +194,9 @@ def test_the_shipped_set_fitted_jointly_beats_each_experiment_alone(shipped_set)
     ``benchmarks/sets.py``)."""
     exps, _, config = shipped_set
     label = f"{Y}@membrane-1"
-    together = np.diff(joint.fit_set(exps, config=config).interval_90[label])[0]
-    best_single = min(
-        np.diff(joint.fit_set(xs.ExperimentSet((r,)), config=config).interval_90[label])[0] for r in exps.runs
-    )
+    fit = lambda runs: cal.fit(xs.ExperimentSet(runs), ["Y@robot"], config=config, starts=1, scout=16)
+    together = np.diff(fit(exps.runs).interval_90[label])[0]
+    best_single = min(np.diff(fit((r,)).interval_90[label])[0] for r in exps.runs)
     assert together < best_single
 
 
@@ -210,8 +206,8 @@ jax.config.update("jax_num_cpu_devices", 2)
 jax.config.update("jax_enable_x64", True)
 import numpy as np
 import growjax as gj
-from growjax.calibration import fit as gf
-from growjax.calibration import joint
+from growjax import calibration as cal
+from growjax.calibration import batch as cb
 
 cfg = gj.Config(t1=1.0)
 base = gj.reference("forward")
@@ -220,15 +216,15 @@ for k, amplitude in enumerate((100e3, 125e3, 150e3, 175e3, 200e3)):
     inputs = gj.Inputs(catheter_length=gj.Sampled(np.array([0.0, 10.0]), np.full(2, 0.02)),
                        pressure_demand=gj.PulseTrain(amplitude=amplitude))
     times = np.arange(1, 101) * 0.01
-    problems.append(gf.make_problem(base, ("robot.yield_pressure",), inputs, cfg, times, np.full(100, 0.01)))
-stacked = joint._stack(joint._pad_breaks(problems))
+    problems.append(cal.make_problem(base, ("robot.yield_pressure",), inputs, cfg, times, np.full(100, 0.01)))
+stacked = cb.stack(cb.pad_breaks(problems))
 z = jax.numpy.asarray([[0.0], [0.1], [-0.1], [0.05], [-0.05]])
 calls = []
-shared = joint._spread_compiled
-joint._spread_compiled = lambda *a: calls.append(a[1].size) or shared(*a)  # the devices each call spreads over
-spread, _ = joint._spread(joint._residuals_runs, z, stacked)
+shared = cb.sharded
+cb.sharded = lambda *a: calls.append(a[1].size) or shared(*a)  # the devices each call spreads over
+spread, _ = cb.spread(cb.residuals_runs, z, stacked)
 assert calls == [2], calls
-alone, _ = joint._one_device(joint._residuals_runs, z, stacked)
+alone, _ = cb.on_one_device(cb.residuals_runs, z, stacked)
 print(len(jax.devices()), float(np.max(np.abs(np.asarray(spread) - np.asarray(alone)))),
       float(np.max(np.abs(np.asarray(alone)))))
 """

@@ -9,12 +9,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from conftest import ar1_noise, smooth_perturbation
+from conftest import ar1_noise, one_experiment, smooth_perturbation
 from scipy.stats import multivariate_normal
 
 import growjax as gj
+from growjax import calibration as cal
 from growjax.calibration import discrepancy as dc
-from growjax.calibration import fit as gf
 from growjax.calibration import tolerance as tl
 from growjax.data import experiment as ex
 
@@ -136,9 +136,10 @@ def reference():
     return t, lengths, cases, mk.reference_inputs("published")
 
 
-def _fit(reference, data, **options):
+def _fit(reference, data, window=None, **options):
     t, _, _, inputs = reference
-    return gf.fit(t, data, inputs, free=["Y"], config=gj.Config(t1=10.0), n_starts=1, sweep_n=0, **options)
+    one = one_experiment(t, data, inputs, window=window)
+    return cal.fit(one, ["Y"], likelihood=cal.Likelihood(**options), config=gj.Config(t1=10.0), starts=1, scout=0)
 
 
 def test_intervals_cover_y_under_a_discrepancy_the_model_does_not_have(reference):
@@ -174,6 +175,8 @@ def test_no_blanket_inflation_on_white_noise(reference):
     data = lengths["published_Y12000"] + np.random.default_rng(11).normal(0.0, 2e-4, t.size)
     new = _fit(reference, data, tolerances={})
     old = _fit(reference, data, discrepancy="none", sigma_length=2e-4)
+    # without a discrepancy the fit still carries the configuration's own error (as the posterior does)
+    assert old.model_error_m == cal.FAST_MODEL_ERROR and old.budget[Y]["fast_model_error"] > 0.0
     assert new.discrepancy["amplitude_m"] < 5e-5
     assert new.standard_error[Y] < 1.5 * old.standard_error[Y]
     assert new.interval_90[Y][0] <= truth <= new.interval_90[Y][1]
@@ -184,7 +187,7 @@ def test_a_window_keeps_only_its_samples_and_a_bad_one_is_refused(reference):
     """The problem a windowed fit solves holds the samples inside the window alone (the model still runs from t0);
     a reversed window and an unknown likelihood are refused before any simulation."""
     t, lengths, _cases, inputs = reference
-    problem = gf.make_problem(
+    problem = cal.make_problem(
         gj.reference(), ["Y"], inputs, gj.Config(t1=10.0), t, lengths["published_Y7920"], window=(5.0, 10.0)
     )
     inside = (t >= 5.0) & (t <= 10.0)
@@ -316,9 +319,10 @@ def test_discovery_misreads_a_rig_parameter_off_when_the_rig_is_taken_as_known(r
     from growjax import discover as gd
 
     t, data, inputs, config = _rig_off(reference)
-    known = gd.discover(t, data, inputs, config=config, tolerances={}, candidates=RIG_OFF_CANDIDATES)
+    rig_known = cal.Likelihood(tolerances={})
+    known = gd.discover(t, data, inputs, config=config, likelihood=rig_known, candidates=RIG_OFF_CANDIDATES)
     assert known.effect != "none", gd.summary_text(known)
-    alone = gd.discover(t, data, inputs, config=config, tolerances={}, candidates=("active_channel_force",))
+    alone = gd.discover(t, data, inputs, config=config, likelihood=rig_known, candidates=("active_channel_force",))
     assert alone.effect == "active_channel_force", gd.summary_text(alone)  # the default test's one candidate
 
 

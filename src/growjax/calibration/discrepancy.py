@@ -11,9 +11,9 @@ the fixed rig parameters held at their nominal values: bⱼ ~ N(0, uⱼ²) is pa
 (its tolerance uⱼ) and gⱼ(t) = ∂L/∂ln ψⱼ the length's sensitivity to it.
 
 A Matérn-3/2 process is the output of a two-state linear SDE and the noise of a one-state one, so this
-covariance is that of a linear Gaussian state-space model: a Kalman filter (:func:`kalman_filter`, a ``lax.scan``) gives
-the exact likelihood in O(n) for any (also irregular) sampling, the whitened residuals for Gauss–Newton, forecasts and
-draws. The tolerance terms are static states of the same filter (for the total log-likelihood, a q × q
+covariance is that of a linear Gaussian state-space model: a Kalman filter (`kalman_filter`, a ``lax.scan``)
+gives the exact likelihood in O(n) for any (also irregular) sampling, the whitened residuals for Gauss–Newton,
+forecasts and draws. The tolerance terms are static states of the same filter (for the total log-likelihood, a q × q
 correction after the three-state filter instead).
 
 Shapes: ``times`` (n,) s, sorted; residuals (n,) or (n, k) m (k columns share one filter: a residual and its
@@ -328,6 +328,25 @@ def drift_kernel(times, sd: float, time_scale: float) -> np.ndarray:
     exponential), the fitted configuration's own error against the reference."""
     t = np.asarray(times, float)
     return sd**2 * np.exp(-0.5 * ((t[:, None] - t[None, :]) / time_scale) ** 2)
+
+
+DRIFT_GRID = 64  # points of the grid a drift's columns are built on (over the span of the times)
+DRIFT_SHARE = 1e-6  # the share of a drift's variance its columns may leave out
+
+
+def drift_columns(times, sd: float, time_scale: float) -> np.ndarray:
+    """Columns G (n, k) m at ``times`` (n,) s whose weights w ~ N(0, I) make G·w the slow drift of
+    `drift_kernel` (G Gᵀ ≈ sd² exp(−½(Δt/``time_scale``)²)): the kernel's leading eigenvectors on a grid of
+    `DRIFT_GRID` points over the times' span, extended to the times (Nyström), as many as carry all but
+    `DRIFT_SHARE` of its variance. A smooth kernel over a span of a few of its time scales needs a handful, so
+    the drift enters a likelihood as a few more static states of its filter, like the rig's errors."""
+    t = np.asarray(times, float)
+    grid = np.linspace(t.min(), t.max(), DRIFT_GRID if t.max() > t.min() else 1)
+    kernel_of = lambda a, b: np.exp(-0.5 * ((a[:, None] - b[None, :]) / time_scale) ** 2)  # noqa: E731
+    lam, vec = np.linalg.eigh(kernel_of(grid, grid))
+    lam, vec = lam[::-1], vec[:, ::-1]
+    k = int(np.searchsorted(np.cumsum(lam) / np.sum(lam), 1.0 - DRIFT_SHARE) + 1)
+    return sd * kernel_of(t, grid) @ vec[:, :k] / np.sqrt(lam[:k])
 
 
 def noise_kernel(times, hyper: Hyper) -> np.ndarray:

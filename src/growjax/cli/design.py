@@ -201,36 +201,29 @@ def _check(args) -> None:
 
 def _known(args, data, base, names):
     """What is known (`growjax.design.Knowledge`): ``--fit-from``'s saved fit, or a fit of ``names`` to DATA
-    (`growjax.calibration.fit.fit`)."""
+    (`growjax.calibration.fit`)."""
+    from growjax import calibration
     from growjax import design as gd
-    from growjax.calibration import fit as gf
-    from growjax.data import experiment as ex
+    from growjax.data import sets as xs
 
     likelihood = options.likelihood_of(args)
     if args.fit_from:
-        return gd.from_summary(args.fit_from, base, names, likelihood["tolerances"])
+        return gd.from_summary(args.fit_from, base, names, likelihood=likelihood)
     exp = data.experiment
     if "robot_length_m" not in exp:
         raise ValueError(f"{data.path} has no robot_length_m column to fit: give what is known with --fit-from")
     config = options.make_config(args, args.drive, adjoint="forward")
-    inputs = ex.to_inputs(exp, args.drive, base, config.t0, config.t1)
-    pressure = exp["pressure_Pa"] if "pressure_Pa" in exp else None  # noqa: SIM401 (Experiment is not a dict)
-    started = note(args, f"design: what is known, a fit of {', '.join(names)} to {data.path.name}")
-    fitted = gf.fit(
-        exp.time,
-        exp["robot_length_m"],
-        inputs,
-        free=names,
-        base=base,
-        config=config,
-        pressure=pressure,
-        seed=args.seed,
+    exps = xs.ExperimentSet.single(
+        exp,
+        name=data.path.stem or "experiment",
+        drive=args.drive,
+        defaults=base,
         window=options.scored_window(args, config),
-        discrepancy=likelihood["discrepancy"],
-        tolerances=likelihood["tolerances"],
     )
+    started = note(args, f"design: what is known, a fit of {', '.join(names)} to {data.path.name}")
+    fitted = calibration.fit(exps, names, likelihood=likelihood, config=config, seed=args.seed)
     note(args, f"design: fitted in {time.perf_counter() - started:.1f} s")
-    return gd.from_fit(fitted, base, likelihood["tolerances"])
+    return gd.from_fit(fitted, base, likelihood=likelihood)
 
 
 def _design(args, known, space, lim, names):

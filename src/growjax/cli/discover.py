@@ -101,7 +101,6 @@ def _discover(args, exp, base, config):
     inputs = ex.to_inputs(exp, args.drive, base, config.t0, config.t1)
     t0, t1 = options.scored_window(args, config)
     keep = (exp.time >= t0) & (exp.time <= t1)
-    likelihood = options.likelihood_of(args)
     return gd.discover(
         exp.time[keep],
         exp["robot_length_m"][keep],
@@ -111,8 +110,7 @@ def _discover(args, exp, base, config):
         candidates=args.candidates or None,
         progress=not args.quiet,
         workers=args.workers,
-        discrepancy=likelihood["discrepancy"],
-        tolerances=likelihood["tolerances"],
+        likelihood=options.likelihood_of(args),
     )
 
 
@@ -120,14 +118,12 @@ def _discover_set(args, exps, config):
     """The discovery on a set, by its joint fits (`growjax.discover.discover_set`)."""
     from growjax import discover as gd
 
-    likelihood = options.likelihood_of(args)
     return gd.discover_set(
         exps,
         config=config,
         candidates=args.candidates or None,
         seed=args.seed,
-        discrepancy=likelihood["discrepancy"],
-        tolerances=likelihood["tolerances"],
+        likelihood=options.likelihood_of(args),
     )
 
 

@@ -4,7 +4,6 @@ their 90 % intervals; several experiments, or a TOML manifest, fitted jointly. W
 from __future__ import annotations
 
 import argparse
-import math
 import time
 
 from growjax.cli import loader, options
@@ -73,7 +72,7 @@ def add_arguments(parser) -> None:
 def run(args) -> dict:
     """Fit one experiment, or a set jointly; the summary, RunFailed where the fit did not converge."""
     import growjax as gj
-    from growjax.data import experiment as ex
+    from growjax.data import sets as xs
     from growjax.plotting import trajectory_figure
 
     data = loader.load(args)
@@ -83,18 +82,25 @@ def run(args) -> dict:
     if "robot_length_m" not in exp:
         raise ValueError(f"{data.path} has no robot_length_m column to fit")
     config = options.make_config(args, args.drive, adjoint="forward")
-    inputs = ex.to_inputs(exp, args.drive, base, config.t0, config.t1)
+    exps = xs.ExperimentSet.single(
+        exp,
+        name=data.path.stem or "experiment",
+        drive=args.drive,
+        defaults=base,
+        window=options.scored_window(args, config),
+    )
     started = note(args, f"fit: {', '.join(args.free or ['Y'])} from {args.starts} starts")
-    result = _fit(args, exp, inputs, base, config)
+    result = _fit(args, exps, args.free or ["Y"], config)
     note(args, f"fit: done in {time.perf_counter() - started:.1f} s")
     out = out_dir(args)
-    fitted = gj.replace(base, **result.rig_estimate, **result.estimate)
-    traj = gj.simulate(fitted, inputs, config)
+    run = exps.runs[0]
+    fitted = result.parameters(run)
+    traj = gj.simulate(fitted, run.model_inputs(fitted, config.t0, config.t1), config)
     fig = trajectory_figure(
         traj,
         out / "fit.png",
         measured=(exp.time, exp["robot_length_m"]),
-        title=f"fit of {', '.join(result.names)}: RMSE {1e3 * result.rmse_length_m:.2f} mm",
+        title=f"fit of {', '.join(result.labels)}: RMSE {1e3 * result.rmse_length_m:.2f} mm",
     )
     summary = {
         "command": NAME,
@@ -124,7 +130,7 @@ def _run_set(args, data) -> dict:
     free = args.free or ["Y@robot"]
     scopes = [xs.Scope.parse(f, exps.runs[0].base()) for f in free]  # a bad scope is refused before any work
     started = note(args, f"fit: {', '.join(free)} over {len(exps)} experiments from {args.starts} starts")
-    result = _fit_set(args, exps, scopes, config)
+    result = _fit(args, exps, scopes, config, scout=16)
     note(args, f"fit: done in {time.perf_counter() - started:.1f} s")
     fig = set_figure(_set_traces(args, exps, result, config), out_dir(args) / "fit.png")
     summary = {
@@ -157,69 +163,32 @@ def _run_set(args, data) -> dict:
 def _set_traces(args, exps, result, config) -> list:
     """(name, trajectory at the fitted values, (times, measured length)) of each run of the set."""
     import growjax as gj
-    from growjax.data import experiment as ex
 
     traces = []
-    for run, _ in zip(exps, result.runs):
-        values = {
-            lab.split("@")[0]: v
-            for lab, v in result.estimate.items()
-            if "@" not in lab or lab.split("@", 1)[1] in (run.robot, run.rig, run.name)
-        }
-        rig_values = {
-            k: gj.get(run.base(), k) * math.exp(b)
-            for k, b in result.rig_offset.get(run.rig if args.rig_errors == "shared" else run.name, {}).items()
-        }
-        base = gj.replace(run.base(), **rig_values, **values)
+    for run in exps:
+        base = result.parameters(run)
         cfg = config.replace(drive=run.drive)
-        traj = gj.simulate(base, ex.to_inputs(run.experiment, run.drive, base, cfg.t0, cfg.t1), cfg)
+        traj = gj.simulate(base, run.model_inputs(base, cfg.t0, cfg.t1), cfg)
         traces.append((run.name, traj, (run.times, run.length)))
     return traces
 
 
-# -- the workflow's calls ---------------------------------------------------------------------------------------
+# -- the workflow's call ----------------------------------------------------------------------------------------
 
 
-def _fit(args, exp, inputs, base, config):
-    """The fit of one experiment (`growjax.calibration.fit.fit`)."""
-    from growjax.calibration import fit as gf
+def _fit(args, exps, free, config, scout: int = 64):
+    """The fit of the set (`growjax.calibration.fit`) under the flags' likelihood."""
+    from growjax import calibration
 
-    window = options.scored_window(args, config)
-    likelihood = options.likelihood_of(args)
-    return gf.fit(
-        exp.time,
-        exp["robot_length_m"],
-        inputs,
-        free=args.free or ["Y"],
-        base=base,
-        config=config,
-        pressure=exp["pressure_Pa"] if "pressure_Pa" in exp else None,  # noqa: SIM401 (Experiment is not a dict)
-        n_starts=args.starts,
-        seed=args.seed,
-        window=window,
-        discrepancy=likelihood["discrepancy"],
-        tolerances=likelihood["tolerances"],
-        rig=likelihood["rig"],
-        relinearise=args.relinearise,
-        rig_tangents=args.rig_tangents,
-    )
-
-
-def _fit_set(args, exps, scopes, config):
-    """The joint fit of a set (`growjax.calibration.joint.fit_set`)."""
-    from growjax.calibration import joint
-
-    likelihood = options.likelihood_of(args)
-    return joint.fit_set(
+    return calibration.fit(
         exps,
-        free=scopes,
+        free,
+        likelihood=options.likelihood_of(args),
         config=config,
-        n_starts=args.starts,
+        starts=args.starts,
+        scout=scout,
         seed=args.seed,
-        discrepancy=likelihood["discrepancy"],
-        tolerances=likelihood["tolerances"],
-        rig=likelihood["rig"],
-        rig_errors=likelihood["rig_errors"],
+        relinearise=args.relinearise,
         rig_tangents=args.rig_tangents,
     )
 
@@ -229,7 +198,7 @@ def _fit_set(args, exps, scopes, config):
 
 def summary_lines(s: dict) -> list[str]:
     """The estimates with their intervals and sd budgets, the residual model, the rig, the RMSE and the figure."""
-    if "runs" in s:
+    if "experiments" in s:
         return _set_lines(s)
     lines = [
         f"fit: {data_name(s)}, {s['drive']} drive, {s.get('t_start_s', 0.0):g}–{s['t_end_s']:g} s scored: "
@@ -253,7 +222,8 @@ def summary_lines(s: dict) -> list[str]:
     elif d:
         lines.append(f"  independent noise {mm(d['noise_m'])}")
     if s.get("rig") == "inferred" and s.get("rig_offset"):
-        shown = ", ".join(f"{k} {100 * v:+.1f} %" for k, v in s["rig_offset"].items())
+        offsets = next(iter(s["rig_offset"].values()))  # the one run's rig
+        shown = ", ".join(f"{k} {100 * v:+.1f} %" for k, v in offsets.items())
         lines.append(f"  rig inferred from the data (its tolerances as priors): {shown}")
     elif s.get("rig") == "fixed":
         lines.append("  rig fixed at its nominal values, its tolerances propagated (--rig fixed)")

@@ -267,15 +267,17 @@ def scored_window(args, config) -> tuple[float, float]:
     return (t0, config.t1)
 
 
-def likelihood_of(args) -> dict:
-    """The likelihood the flags name: ``discrepancy`` (``--discrepancy``), ``tolerances`` (``--tolerance``, as
-    `tolerances_of`), ``rig`` and ``rig_errors`` (``--rig``, ``--rig-errors``; None for a command without them)."""
-    return {
-        "discrepancy": args.discrepancy,
-        "tolerances": tolerances_of(args),
-        "rig": getattr(args, "rig", None),
-        "rig_errors": getattr(args, "rig_errors", None),
-    }
+def likelihood_of(args):
+    """The `growjax.calibration.Likelihood` the flags name: ``--discrepancy``, ``--tolerance`` (as
+    `tolerances_of`) and, where the command has them, ``--rig`` and ``--rig-errors``."""
+    from growjax.calibration import Likelihood
+
+    return Likelihood(
+        discrepancy=args.discrepancy,
+        tolerances=tolerances_of(args),
+        rig=getattr(args, "rig", None) or "inferred",
+        rig_errors=getattr(args, "rig_errors", None) or "shared",
+    )
 
 
 __all__ = [

@@ -77,11 +77,10 @@ def run(args) -> dict:
             "(for one robot's experiments, `growjax fit` gives their joint intervals)"
         )
     data = loader.load(args, growth_law=args.law)
-    exp, base = data.experiment, data.base()
-    if "robot_length_m" not in exp:
+    if "robot_length_m" not in data.experiment:
         raise ValueError(f"{data.path} has no robot_length_m column to calibrate against")
     config = options.make_config(args, args.drive, adjoint="forward")
-    res = _sample(args, exp, base, config)
+    res = _sample(args, data, config)
     out = out_dir(args)
     res.idata.to_netcdf(str(out / "posterior.nc"))
     summary = {
@@ -172,46 +171,44 @@ def _new_robot(args, exps):
 # -- the workflow's calls ---------------------------------------------------------------------------------------
 
 
-def _sample(args, exp, base, config):
-    """The posterior of one experiment (`growjax.posterior.sample`)."""
+def _sample(args, data, config):
+    """The posterior of one experiment (`growjax.posterior.sample`) under the flags' likelihood."""
     from growjax import posterior as gpost
-    from growjax.data import experiment as ex
+    from growjax.data import sets as xs
 
-    inputs = ex.to_inputs(exp, args.drive, base, config.t0, config.t1)
-    priors = gpost.paper_priors() if args.law == "reference" else gpost.lockhart_priors()
-    window = options.scored_window(args, config)
-    likelihood = options.likelihood_of(args)
+    exps = xs.ExperimentSet.single(
+        data.experiment,
+        name=data.path.stem or "experiment",
+        drive=args.drive,
+        defaults=data.base(),
+        window=options.scored_window(args, config),
+    )
     return gpost.sample(
-        exp.time,
-        exp["robot_length_m"],
-        inputs,
-        base,
-        config,
-        priors=priors,
+        exps,
+        config=config,
+        priors=gpost.paper_priors() if args.law == "reference" else gpost.lockhart_priors(),
+        likelihood=options.likelihood_of(args),
         chains=args.chains,
         warmup=args.warmup,
         samples=args.samples,
         seed=args.seed,
         progress=not args.quiet,
         emulate=args.emulate,
-        window=window,
-        discrepancy=likelihood["discrepancy"],
-        tolerances=likelihood["tolerances"],
     )
 
 
 def _joint_fit(args, exps, name: str, config):
-    """The set's joint fit of ``name`` per robot (`growjax.calibration.joint.fit_set`)."""
-    from growjax.calibration import joint
+    """The set's joint fit of ``name`` per robot (`growjax.calibration.fit`)."""
+    from growjax import calibration
 
-    likelihood = options.likelihood_of(args)
-    return joint.fit_set(
+    return calibration.fit(
         exps,
-        free=[f"{name}@robot"],
+        [f"{name}@robot"],
+        likelihood=options.likelihood_of(args),
         config=config,
+        starts=1,
+        scout=16,
         seed=args.seed,
-        discrepancy=likelihood["discrepancy"],
-        tolerances=likelihood["tolerances"],
     )
 
 

@@ -51,6 +51,20 @@ class Experiment:
         return Experiment(self.time[keep], {k: v[keep] for k, v in self.series.items()}, self.source)
 
 
+def from_arrays(time, robot_length_m, pressure_Pa=None, **series) -> Experiment:
+    """An experiment made of arrays: the measured length (m) (and pressure, Pa) at ``time`` (T,) s, and any other
+    column of `COLUMNS` by name (SI).
+
+    Raises:
+        ExperimentError: a series that fails `validate_series`.
+    """
+    columns = {"robot_length_m": robot_length_m, "pressure_Pa": pressure_Pa, **series}
+    columns = {k: np.asarray(v, float) for k, v in columns.items() if v is not None}
+    time = np.asarray(time, float)
+    validate_series(time, columns)
+    return Experiment(time, columns)
+
+
 def validate_series(time, series: dict, source: str = "") -> None:
     """Raise :class:`ExperimentError` for NaN, unsorted or duplicate times, millimetre or negative lengths."""
     where = f" in {source}" if source else ""
@@ -288,6 +302,7 @@ __all__ = [
     "Experiment",
     "ExperimentError",
     "demand_steps",
+    "from_arrays",
     "informative_samples",
     "read",
     "read_csv",

@@ -50,8 +50,21 @@ _KEYS = {"file", "name", "drive", "robot", "rig", "window", "sensors", "paramete
 @dataclasses.dataclass(frozen=True)
 class Run:
     """One experiment of a set: its series (SI), drive, robot, rig, scored window (s) and sensors.
-    ``parameters`` {name: value, SI}: values fixed for this run on top of its drive's reference (the robot's
-    and the rig's declared values included)."""
+
+    Attributes:
+        name: the run's name, unique in its set.
+        experiment: its series (`growjax.data.experiment.Experiment`).
+        drive: ``"forward"`` or ``"inverse"``.
+        robot: the robot (membrane) it ran.
+        rig: the rig (pump, controller, hoses, tank) it ran on.
+        window: (t_start, t_end) s of the samples scored, or None (the configuration's span).
+        sensors: the series scored: ``"length"``, and ``"pressure"`` where recorded.
+        parameters: {name: value, SI} fixed for this run on top of ``defaults`` (the robot's and the rig's
+            declared values included).
+        defaults: the parameters ``parameters`` are set on; None: its drive's reference.
+        inputs: the model's inputs (`growjax.Inputs`); None: made from the experiment's columns
+            (`growjax.data.experiment.to_inputs`).
+    """
 
     name: str
     experiment: Experiment
@@ -61,11 +74,21 @@ class Run:
     window: tuple[float, float] | None = None
     sensors: tuple[str, ...] = ("length",)
     parameters: dict = dataclasses.field(default_factory=dict)
+    defaults: gp.Parameters | None = dataclasses.field(default=None, compare=False, repr=False)
+    inputs: object = dataclasses.field(default=None, compare=False, repr=False)
 
     def base(self, growth_law: str = "reference") -> gp.Parameters:
-        """The run's parameters: its drive's reference with :attr:`parameters` set."""
-        base = gp.reference(self.drive, growth_law=growth_law)
+        """The run's parameters: ``defaults`` (else its drive's reference with ``growth_law``) with
+        ``parameters`` set."""
+        base = self.defaults if self.defaults is not None else gp.reference(self.drive, growth_law=growth_law)
         return gp.replace(base, **self.parameters) if self.parameters else base
+
+    def model_inputs(self, base: gp.Parameters, t0: float, t1: float):
+        """The model's inputs for the parameters ``base`` over [t0, t1] s: ``inputs`` where given, else made from
+        the experiment's columns."""
+        if self.inputs is not None:
+            return self.inputs
+        return ex.to_inputs(self.experiment, self.drive, base, t0, t1)
 
     @property
     def times(self) -> np.ndarray:
@@ -112,6 +135,35 @@ class ExperimentSet:
     def group_of(self, scope: str) -> list[str]:
         """Per run, the key of its copy of a parameter of ``scope`` (a robot, a rig, its own name, or 'all')."""
         return [{"shared": "all", "robot": r.robot, "rig": r.rig, "experiment": r.name}[scope] for r in self.runs]
+
+    @classmethod
+    def single(
+        cls,
+        experiment: Experiment,
+        *,
+        name: str = "experiment",
+        drive: str = "forward",
+        robot: str = "robot",
+        rig: str = "rig",
+        window: tuple[float, float] | None = None,
+        sensors: Sequence[str] | None = None,
+        parameters: dict | None = None,
+        defaults: gp.Parameters | None = None,
+        inputs=None,
+    ) -> ExperimentSet:
+        """The set of one experiment (a fit, posterior or discovery of one run takes it).
+
+        Args:
+            experiment: its series; a measured ``robot_length_m`` is required.
+            name, drive, robot, rig, window, parameters, defaults, inputs: as `Run`'s.
+            sensors: the series scored; None: the length, and the pressure where the experiment records it.
+
+        Raises:
+            ExperimentError: a bad drive, sensor, window or parameter, naming it.
+        """
+        used = tuple(sensors) if sensors is not None else SENSORS if "pressure_Pa" in experiment else ("length",)
+        run = _run(name, experiment, drive, robot, rig, window, used, dict(parameters or {}), name, defaults)
+        return cls((dataclasses.replace(run, inputs=inputs),))
 
     @classmethod
     def from_files(
@@ -223,8 +275,9 @@ def _read(path: Path, catheter: bool) -> Experiment:
     return ex.read(path, catheter=catheter)
 
 
-def _run(name, exp: Experiment, drive, robot, rig, window, sensors, parameters, label) -> Run:
-    """A :class:`Run`, checked: drive, sensors, window inside the data, parameters known."""
+def _run(name, exp: Experiment, drive, robot, rig, window, sensors, parameters, label, defaults=None) -> Run:
+    """A `Run`, checked: drive, sensors, window inside the data, parameters known (in ``defaults``, else the
+    drive's reference)."""
     if drive not in gp.DRIVES:
         raise ExperimentError(f"{label}: drive must be one of {gp.DRIVES}, got {drive!r}")
     bad = [s for s in sensors if s not in SENSORS]
@@ -245,13 +298,13 @@ def _run(name, exp: Experiment, drive, robot, rig, window, sensors, parameters, 
                 f"{label}: its window {window[0]:g}–{window[1]:g} s holds no data (the data span "
                 f"{exp.time[0]:g}–{exp.time[-1]:g} s)"
             )
-    base = gp.reference(drive)
+    base = defaults if defaults is not None else gp.reference(drive)
     for key in parameters:
         try:
             gp.resolve_name(base, key)
         except (KeyError, ValueError):
             raise ExperimentError(f"{label}: unknown parameter {key!r} (see `growjax params`)") from None
-    return Run(name, exp, drive, robot, rig, window, tuple(sensors), dict(parameters))
+    return Run(name, exp, drive, robot, rig, window, tuple(sensors), dict(parameters), defaults)
 
 
 def _unique_names(runs: list[Run]) -> list[Run]:

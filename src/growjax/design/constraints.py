@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from growjax.calibration import fit as gf
+from growjax.calibration import physical_bounds
 from growjax.calibration.tolerance import rig_draws
 from growjax.design.knowledge import Knowledge
 from growjax.design.sensitivity import Sensitivities
@@ -40,7 +40,7 @@ def draws(knowledge: Knowledge, n: int = DRAWS, seed: int = 0) -> dict:
     rng = np.random.default_rng([seed, 2])
     theta = knowledge.estimate
     z = rng.multivariate_normal(np.zeros(theta.size), knowledge.covariance, size=n)
-    lo, hi = gf.physical_bounds(knowledge.base, knowledge.names, theta)
+    lo, hi = physical_bounds(knowledge.base, knowledge.names, theta)
     z = np.clip(z, lo, hi)
     out.update({name: theta[i] * np.exp(z[:, i]) for i, name in enumerate(knowledge.names)})
     return out

@@ -5,7 +5,7 @@ The design's prior on w = (ln θ, b) is blockdiag(Σ_θ, U): Σ_θ the fit's cov
 already say), U = diag(u²) the rig's tolerances (its relative errors b = ln ψ/ψ₀, :mod:`growjax.calibration.tolerance`).
 The rig enters the next experiment as a fresh nuisance with its tolerance prior: what the old data said of the
 rig is not carried over (conservative where the next experiment runs on the same rig). A parameter the fit left
-undetermined (no interval, or one wider than its sampling box, :func:`growjax.calibration.fit.default_range`) takes a uniform
+undetermined (no interval, or one wider than its sampling box, `growjax.calibration.default_range`) takes a uniform
 prior over that box instead: the box's variance of ln θ, centred on the box (the fit's estimate of such a
 parameter is arbitrary, and can lie far outside the box: draws about it would run the robot in a regime nothing
 supports).
@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
+from growjax.calibration import FitResult, Likelihood, default_range
 from growjax.calibration import discrepancy as dc
-from growjax.calibration import fit as gf
 from growjax.calibration import tolerance as tl
 from growjax.model import params as gp
 
@@ -96,7 +96,7 @@ class Knowledge:
 
 def box_variance(base: gp.Parameters, name: str) -> float:
     """Variance of ln θ under a uniform prior over the parameter's sampling box."""
-    lo, hi = gf.default_range(base, name)
+    lo, hi = default_range(base, name)
     return float(np.log(hi / lo) ** 2 / 12.0)
 
 
@@ -121,7 +121,7 @@ def _centred(base, names, estimate: dict, determined) -> dict:
     out = dict(estimate)
     for n, d in zip(names, determined):
         if not d:
-            lo, hi = gf.default_range(base, n)
+            lo, hi = default_range(base, n)
             out[n] = float(np.sqrt(lo * hi))
     return out
 
@@ -131,22 +131,43 @@ def _hyper(record: dict | None) -> dc.Hyper:
     return dc.Hyper.of(h["amplitude_m"], h["time_scale_s"], h["noise_m"], h["noise_time_s"])
 
 
-def from_fit(result: gf.FitResult, base: gp.Parameters, tolerances: dict | None = None) -> Knowledge:
-    """What a :class:`growjax.calibration.fit.FitResult` of ``base`` knows: θ at its estimate, its covariance of ln θ, its
-    residual model and tolerances (``tolerances`` overrides them; None: the fit's, else the default budget)."""
-    names = tuple(result.names)
-    raw = np.asarray(result.covariance_log, float)
+def _tolerances(fitted: dict, base: gp.Parameters, names, likelihood: Likelihood | None) -> dict:
+    """The rig's tolerances for the next experiment: the fit's where it carried some and ``likelihood`` names none,
+    else the default budget with ``likelihood``'s tolerances on top (the next experiment always has a rig)."""
+    given = None if likelihood is None or likelihood.tolerances is None else dict(likelihood.tolerances)
+    return dict(fitted) if given is None and fitted else tl.budget(base, given, names)
+
+
+def from_fit(result: FitResult, base: gp.Parameters, *, likelihood: Likelihood | None = None) -> Knowledge:
+    """What a `growjax.calibration.FitResult` of ``base`` knows: θ at its estimate, its covariance of ln θ, its
+    residual model (the runs' median hyperparameters) and its tolerances (``likelihood``'s tolerances override
+    them; None: the fit's, else the default budget).
+
+    Raises:
+        ValueError: a coordinate of the fit not in ln θ (a signed parameter), or copies of a parameter per robot,
+            rig or run: what is known is one value of each parameter, in ln θ.
+    """
+    names = tuple(result.labels)
+    odd = [c.label for c in result.coordinates if c.scale is not None or c.scope != "shared"]
+    if odd:
+        raise ValueError(f"what is known takes parameters fitted once each in ln θ; the fit has {', '.join(odd)}")
+    raw = np.asarray(result.covariance, float)
     determined = _determined(base, names, raw, [result.standard_error.get(n) is not None for n in names])
     cov = _covariance(base, names, raw, determined)
     est = _centred(base, names, {n: result.estimate[n] for n in names}, determined)
-    tol = dict(result.tolerances) if tolerances is None and result.tolerances else tl.budget(base, tolerances, names)
+    tol = _tolerances(result.tolerances, base, names, likelihood)
     return Knowledge(gp.replace(base, **{**result.estimate, **est}), names, cov, tol, _hyper(result.discrepancy), "fit")
 
 
-def from_summary(path, base: gp.Parameters, names, tolerances: dict | None = None) -> Knowledge:
+def from_summary(path, base: gp.Parameters, names, *, likelihood: Likelihood | None = None) -> Knowledge:
     """What a saved fit knows: the JSON summary ``growjax fit --json FILE`` writes. It holds each parameter's
-    estimate and standard error (not their correlations: the covariance is taken diagonal). ``names``: the
-    parameters of interest, each among the fit's; ValueError naming what is missing."""
+    estimate and standard error (not their correlations: the covariance is taken diagonal), the residual model
+    (``discrepancy``) and the tolerances it carried (``likelihood``'s tolerances override them; None: the saved
+    ones, else the default budget). ``names``: the parameters of interest, each among the fit's.
+
+    Raises:
+        ValueError: naming what is missing or unreadable.
+    """
     path = Path(path)
     try:
         record = json.loads(path.read_text())
@@ -165,6 +186,5 @@ def from_summary(path, base: gp.Parameters, names, tolerances: dict | None = Non
     determined = _determined(base, names, np.diag(var), [s is not None for s in se])
     cov = _covariance(base, names, np.diag(var), determined)
     est = _centred(base, names, est, determined)
-    saved = record.get("tolerances") or None
-    tol = dict(saved) if tolerances is None and saved else tl.budget(base, tolerances, names)
+    tol = _tolerances(record.get("tolerances") or {}, base, names, likelihood)
     return Knowledge(gp.replace(base, **est), names, cov, tol, _hyper(record.get("discrepancy")), str(path))

@@ -18,7 +18,7 @@ import growjax.design.discrimination as ddis
 import growjax.design.optimise as dopt
 import growjax.design.problem as dprob
 from growjax import progress as prog
-from growjax.calibration import fit as gf
+from growjax.calibration import Z90
 from growjax.calibration.likelihood_ratio import boundary_threshold
 from growjax.design.knowledge import Knowledge
 from growjax.design.space import DesignSpace, StepperSpace, check_p_max
@@ -401,7 +401,7 @@ def _row(problem, knowledge: Knowledge, label: str, inputs, breaks, sets) -> lis
         cov = covs["known"]
         params = {}
         for i, n in enumerate(knowledge.names):
-            lo, hi = theta[i] * np.exp(-gf.Z90 * sd[i]), theta[i] * np.exp(gf.Z90 * sd[i])
+            lo, hi = theta[i] * np.exp(-Z90 * sd[i]), theta[i] * np.exp(Z90 * sd[i])
             params[n] = {
                 "estimate": float(theta[i]),
                 "sd_log": float(sd[i]),

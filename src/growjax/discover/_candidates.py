@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy import stats
 
-from growjax.calibration.fit import LM_TOLERANCE, levenberg_marquardt, physical_bounds
+from growjax.calibration import LM_TOLERANCE, levenberg_marquardt, physical_bounds
 from growjax.model import effects as fx
 from growjax.model import params as gp
 from growjax.simulation.config import Config
@@ -112,7 +112,7 @@ class Candidates(eqx.Module):
 @eqx.filter_jit
 def _linearised(w, problem: Candidates, mask, select, z_fixed):
     """Residuals r (m,), Jacobian J (m, q) and the model's pressure (m,) Pa of one model at its fitted
-    coordinates w (q,), in one forward-mode pass (as :func:`growjax.calibration.fit.linearise`). The candidate is data
+    coordinates w (q,), in one forward-mode pass (as `growjax.calibration.linearise`). The candidate is data
     (``mask``, ``select``, ``z_fixed``), so one compiled program serves every fit with the same q: q = p + 1 for the
     base fit, the first round and the base-held fits, p + 2 for the second round (each tangent direction costs a
     share of a linearisation, so a fit carries only as many as it can move). The traces
@@ -126,7 +126,7 @@ def _linearised(w, problem: Candidates, mask, select, z_fixed):
 
 
 def _fit_model(problem: Candidates, w0, mask, select, z_fixed, max_steps: int, resolution: float = 0.0):
-    """Levenberg–Marquardt for one model (:func:`growjax.calibration.fit.levenberg_marquardt` around :func:`_linearised`),
+    """Levenberg–Marquardt for one model (`growjax.calibration.levenberg_marquardt` around :func:`_linearised`),
     each fitted coordinate kept in its physical range (:meth:`Candidates.bounds`), stopping at the cost's
     ``resolution`` (mm², absolute) or :data:`COST_NOISE` of itself: (z (p + K,),
     residuals (m,), Jacobian (m, q), converged, pressure (m,) Pa at the optimum, linearisations run)."""

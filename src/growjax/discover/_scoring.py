@@ -10,8 +10,8 @@ import jax.numpy as jnp
 import numpy as np
 from scipy import stats
 
+from growjax.calibration import RunScore
 from growjax.calibration import discrepancy as dc
-from growjax.calibration import fit as gf
 from growjax.data import experiment
 
 from ._candidates import Z90, CandidateFit, candidate_parameter
@@ -24,7 +24,7 @@ _log_likelihood = jax.jit(dc.log_likelihood)
 
 def shared_intervals(fit: CandidateFit, scorer: Scorer, model_error: float) -> dict:
     """{name: (low, high)} SI: the 90 % intervals of ``fit``'s parameters under the scorer's likelihood, treated as
-    :func:`growjax.calibration.fit.fit` treats them: the generalised least-squares covariance under the discrepancy and
+    `growjax.calibration.fit` treats them: the generalised least-squares covariance under the discrepancy and
     noise at their mode, the rig's tolerances inferred (marginalised under their priors), the fitted
     configuration's own error ``model_error`` (m) propagated, and the spread over the hyperparameters. A
     parameter fitted in ln θ gets θ·exp(±z σ), an effect's θ ± z σ within its range."""
@@ -33,7 +33,7 @@ def shared_intervals(fit: CandidateFit, scorer: Scorer, model_error: float) -> d
     hyper = scorer.profile(fit.residual_m)[1]
     n = len(scorer.times)
     used = np.ones(n, bool) if scorer.observed is None else np.asarray(scorer.observed, bool)
-    likelihood = gf.Likelihood(jnp.asarray(scorer.times), jnp.asarray(used), jnp.asarray(np.flatnonzero(used)), 1e-3, n)
+    likelihood = RunScore.of(scorer.times, used, 1e-3)
     q = 0
     if scorer.sensitivity is not None:
         q = len(scorer.tolerance)
@@ -87,14 +87,15 @@ def misfit_test(residual, sigma: float, z_limit: float = 4.0, ratio_limit: float
 
 
 class Scorer:
-    """Likelihood-ratio scores and the misfit test under the fit's likelihood (:mod:`growjax.calibration.discrepancy`).
+    """Likelihood-ratio scores and the misfit test under the fit's likelihood (`growjax.calibration.discrepancy`).
 
     ``discrepancy="matern32"``: a model's score is its log-likelihood with the residual model's
     hyperparameters at their mode for that model's residuals, and the rig's tolerances marginalised (after
-    :meth:`with_tolerances`: every model is then scored against what the fixed parameters' errors could do);
-    the misfit is structured where the discrepancy is significant against white noise (2ΔlogL above the 1 % point of χ²₂) and larger than the noise, and
-    material where its amplitude also exceeds ``material`` (m): only a material misfit that no candidate
-    removes is reported ``unexplained``; a smaller one is left to the discrepancy term. ``"none"``: independent noise of sd ``sigma`` (m) and :func:`misfit_test`.
+    `with_tolerances`: every model is then scored against what the fixed parameters' errors could do);
+    the misfit is structured where the discrepancy is significant against white noise (2ΔlogL above the 1 %
+    point of χ²₂) and larger than the noise, and material where its amplitude also exceeds ``material`` (m):
+    only a material misfit that no candidate removes is reported ``unexplained``; a smaller one is left to the
+    discrepancy term. ``"none"``: independent noise of sd ``sigma`` (m) and `misfit_test`.
     A record interpolated between keyframes is scored at its keyframes.
     """
 

@@ -10,7 +10,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from growjax.calibration import joint
+from growjax.calibration import FitResult, Likelihood, fit
 from growjax.calibration.likelihood_ratio import boundary_p_value, boundary_threshold
 from growjax.data.sets import SCOPES, ExperimentSet, Scope
 from growjax.model import effects as fx
@@ -58,10 +58,9 @@ def discover_set(
     effect_scope: str = "robot",
     false_positive_rate: float = 0.05,
     confounding_correlation: float = 0.99,
-    discrepancy: str = "matern32",
+    likelihood: Likelihood = Likelihood(),
     material_misfit: float = MATERIAL_MISFIT,
-    tolerances: dict | None = None,
-    sweep_n: int = 16,
+    scout: int = 16,
     seed: int = 0,
     max_steps: int = 100,
 ) -> SetDiscoveryResult:
@@ -70,19 +69,19 @@ def discover_set(
 
     The procedure, one round (at most one effect is added):
 
-    1. **Base fit.** `growjax.calibration.joint.fit_set` of ``base_free`` (default one yield pressure per robot),
-       the rig's errors shared per rig and inferred under their tolerances (``tolerances``: as there), each run
-       with its own discrepancy (``discrepancy``). Its score is the set's total log-likelihood
-       (:attr:`growjax.calibration.joint.SetFitResult.log_likelihood`): every run's under its discrepancy and noise at
-       their mode, the rig's errors marginalised.
+    1. **Base fit.** `growjax.calibration.fit` of ``base_free`` (default one yield pressure per robot) under
+       ``likelihood`` (`growjax.calibration.Likelihood`: the rig's errors shared per rig and inferred under their
+       tolerances by default, each run with its own discrepancy). Its score is the set's total log-likelihood
+       (`growjax.calibration.FitResult.log_likelihood`): every run's under its discrepancy and noise at their mode,
+       the rig's errors marginalised.
     2. **Each candidate** (default the whole catalogue) is one more joint fit, one batched program over the runs:
-       the base parameters and the effect's parameter freed together, fitted from the best of the joint fit's
-       Latin hypercube (``sweep_n`` points, ``seed``; the effect's box a factor two either side of
-       :data:`EFFECT_START` of its range's top). Effects are fitted in log coordinates (η > 0): an effect whose
-       range also allows negative values (trapped air) is tested on its positive side only.
+       the base parameters and the effect's parameter freed together, fitted from the best of the fit's
+       Latin-hypercube scout (``scout`` points, ``seed``; the effect's box a factor two either side of
+       `EFFECT_START` of its range's top, or, for an effect whose range also allows negative values (trapped air),
+       its physical range, fitted in a linear coordinate).
     3. **Score.** 2ΔlogL = 2 (logL_k − logL_base), floored at 0. The threshold: 2ΔlogL distributed as the mixture of
        χ² over the effect's copies on their boundary (½χ²₀ + ½χ²₁ for one robot, :func:`boundary_threshold`) at
-       ``false_positive_rate`` Bonferroni-divided over the candidates, as in :func:`growjax.discover.discover`.
+       ``false_positive_rate`` Bonferroni-divided over the candidates, as in `growjax.discover.discover`.
     4. **Confounding.** A candidate that clears the threshold while one of its copies correlates with a base
        parameter beyond ``confounding_correlation`` in the joint covariance is ``confounded`` with that parameter,
        unless its size is pinned (every copy's 90 % interval within a factor two of its estimate). Two candidates
@@ -96,9 +95,9 @@ def discover_set(
        remains; ``"unexplained"`` where structure remains (or is material with none added); ``"confounded"``;
        else ``"none"``.
 
-    The effect's size (each copy's estimate, SI) and its 90 % interval are the joint fit's (log-normal, from the
+    The effect's size (each copy's estimate, SI) and its 90 % interval are the joint fit's (from the
     joint covariance: discrepancy, noise and the rig's errors included). ``config``: the simulation's settings (its
-    ``t1`` ends every run's window). ValueError for an unknown candidate, scope or discrepancy.
+    ``t1`` ends every run's window). ValueError for an unknown candidate or scope.
     """
     started = time.perf_counter()
     candidates = tuple(candidates) if candidates else tuple(fx.CATALOGUE)
@@ -115,33 +114,29 @@ def discover_set(
     base_scopes = [s if isinstance(s, Scope) else Scope.parse(s, base_params, default="robot") for s in base_free]
     copies = len(dict.fromkeys(experiments.group_of(effect_scope)))
     threshold = boundary_threshold(false_positive_rate / len(candidates), copies)
-    options = dict(
-        config=config, discrepancy=discrepancy, tolerances=tolerances, sweep_n=sweep_n, seed=seed, max_steps=max_steps
-    )
-    base = joint.fit_set(experiments, free=base_scopes, **options)
+    options = dict(config=config, likelihood=likelihood, starts=1, scout=scout, seed=seed, max_steps=max_steps)
+    base = fit(experiments, base_scopes, **options)
     fits = {}
     for name in candidates:
         qname, _, (_, top) = candidate_parameter(name)
         effect = fx.CATALOGUE[name](**{qname.split(".")[1]: EFFECT_START * top})
-        fits[name] = joint.fit_set(
-            experiments, free=[*base_scopes, Scope(qname, effect_scope)], effects=(effect,), **options
-        )
-    scores = {name: _score(name, fit, base, threshold, confounding_correlation, copies) for name, fit in fits.items()}
+        fits[name] = fit(experiments, [*base_scopes, Scope(qname, effect_scope)], effects=(effect,), **options)
+    scores = {name: _score(name, f, base, threshold, confounding_correlation, copies) for name, f in fits.items()}
     confounded = confounded_with_base(scores)
     best = choose(scores, threshold, confounded)
     final = fits[best] if best is not None else base
     windows = _measured(experiments, config)
-    misfit_before = _misfit(base, windows, discrepancy, material_misfit)
-    misfit_after = _misfit(final, windows, discrepancy, material_misfit)
+    misfit_before = _misfit(base, windows, likelihood.discrepancy, material_misfit)
+    misfit_after = _misfit(final, windows, likelihood.discrepancy, material_misfit)
     added = [best] if best is not None else []
     units = {candidate_parameter(n)[0]: candidate_parameter(n)[1] for n in candidates}
     parameters = {
         lab: {
             "estimate": final.estimate[lab],
             "interval_90": final.interval_90[lab],
-            "unit": units.get(lab.split("@")[0], _unit(lab.split("@")[0])),
+            "unit": units.get(c.name, _unit(c.name)),
         }
-        for lab in final.labels
+        for lab, c in zip(final.labels, final.coordinates)
     }
     runs = [
         {
@@ -172,8 +167,8 @@ def discover_set(
 
 def _score(
     name: str,
-    fit: joint.SetFitResult,
-    base: joint.SetFitResult,
+    fit: FitResult,
+    base: FitResult,
     threshold: float,
     confounding_correlation: float,
     copies: int,
@@ -181,12 +176,12 @@ def _score(
     """A candidate's evidence from its joint fit ``fit`` against the base fit: the keys of
     :func:`growjax.discover.score_candidate` (its estimate and interval per copy)."""
     qname, unit, (lo, hi) = candidate_parameter(name)
-    mine = [k for k, lab in enumerate(fit.labels) if lab.split("@")[0] == qname]
+    mine = [k for k, c in enumerate(fit.coordinates) if c.name == qname]
     others = [k for k in range(len(fit.labels)) if k not in mine]
     lr = max(2.0 * (fit.log_likelihood - base.log_likelihood), 0.0)
     if not math.isfinite(lr):
         lr = 0.0
-    cov = fit.covariance_log
+    cov = fit.covariance
     sd = np.sqrt(np.clip(np.diag(cov), 1e-300, None))
     corr = {}
     for j in others:  # each base parameter: its largest correlation with a copy of the effect
@@ -225,7 +220,7 @@ def _measured(experiments: ExperimentSet, config: Config) -> list:
     return out
 
 
-def _misfit(fit: joint.SetFitResult, measured: list, discrepancy: str, material: float) -> dict:
+def _misfit(fit: FitResult, measured: list, discrepancy: str, material: float) -> dict:
     """The misfit test of each run's residuals of ``fit``, and the set's: structured (material) where any run is."""
     per_run = []
     for (t, r), length, run in zip(fit.residuals, measured, fit.runs):

@@ -11,9 +11,8 @@ import numpy as np
 from jaxtyping import ArrayLike, Float
 from scipy import stats
 
-from growjax.calibration import discrepancy as dc
+from growjax.calibration import MODEL_ERROR_TIME, Likelihood
 from growjax.calibration import tolerance as tl
-from growjax.calibration.fit import MODEL_ERROR_TIME, default_model_error
 from growjax.model import effects as fx
 from growjax.model import params as gp
 from growjax.simulation.config import Config
@@ -41,10 +40,8 @@ def discover(
     multistart: bool = True,
     progress: bool = False,
     workers: int | None = None,
-    model_error: float | None = None,
-    discrepancy: str = "matern32",
+    likelihood: Likelihood = Likelihood(),
     material_misfit: float = MATERIAL_MISFIT,
-    tolerances: dict | None = None,
 ) -> DiscoveryResult:
     """Find which catalogue effect the measured ``length`` (m) at ``times`` (s) needs beyond the base model.
 
@@ -53,16 +50,15 @@ def discover(
     parameter's shift counts as confounding; ``base_names``: base parameters refitted with every
     candidate; ``multistart``: fit each new candidate from every start in ``START_FRACTIONS`` (False:
     from the first only, a third of the fits); ``workers``: fits run at a time (default one per CPU core; each
-    fit is deterministic, so the result does not depend on it); ``model_error``: the fitted configuration's
-    length error against the reference, m (default :data:`growjax.calibration.fit.FAST_MODEL_ERROR` for the fast
-    configuration, 0 for the reference), allowed for in the confounding test. ``discrepancy``: the likelihood
-    of every test (:mod:`growjax.calibration.discrepancy`; ``"none"``: independent noise); ``material_misfit`` (m): a smooth
-    misfit below it is left to the discrepancy; ``tolerances`` {parameter: relative sd}: the rig's uncertainty,
-    marginalised in every score (:mod:`growjax.calibration.tolerance`; None: its default budget with the discrepancy).
-    See the module docstring for the procedure and its thresholds.
+    fit is deterministic, so the result does not depend on it); ``likelihood``: the likelihood of every test
+    (`growjax.calibration.Likelihood`): its discrepancy (``"none"``: independent noise), its tolerances {parameter:
+    relative sd} (the rig's uncertainty, marginalised in every score; None: the default budget with the
+    discrepancy) and its ``model_error`` (the fitted configuration's length error against the reference, m;
+    None: the configuration's), allowed for in the confounding test; the rig is inferred in every score.
+    ``material_misfit`` (m): a smooth misfit below it is left to the discrepancy. See the module docstring for
+    the procedure and its thresholds.
     """
-    if discrepancy not in dc.KINDS:
-        raise ValueError(f"discrepancy must be one of {dc.KINDS}, got {discrepancy!r}")
+    discrepancy = likelihood.discrepancy
     start = time.perf_counter()
     workers = workers if workers is not None else _cores()
     if workers < 1:
@@ -74,8 +70,8 @@ def discover(
     problem = make_candidates(times, length, inputs, candidates, base, base_names, config)
     fitter = Fitter(problem, length, multistart, workers, progress, max_steps)
     threshold = float(stats.chi2.isf(2.0 * false_positive_rate / len(candidates), df=1))  # ½χ²₀ + ½χ²₁, Bonferroni
-    model_error = default_model_error(config) if model_error is None else model_error
-    tol = tl.budget(base, tolerances, base_names, use_default=tolerances is None and discrepancy != "none")
+    model_error = likelihood.model_error_for(config)
+    tol = likelihood.budget(base, base_names)
     first = _first_round(fitter, candidates, times, length, discrepancy, material_misfit, (base, inputs, config, tol))
     held_lr, held_trades = _held_round(fitter, first, candidates, threshold)
     # 2ΔlogL the fitted configuration's own error (a slow drift, too small for the discrepancy to be estimated

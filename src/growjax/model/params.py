@@ -259,3 +259,46 @@ def validate(params: Parameters) -> None:
     r = params.robot
     if np.any(np.asarray(r.inner_radius) >= np.asarray(r.outer_radius)):
         raise ValueError("parameter robot.inner_radius must be smaller than robot.outer_radius")
+
+
+@dataclasses.dataclass(frozen=True)
+class Dimension:
+    """One parameter's box: qualified ``name`` (``block.field``), bounds in SI units, linear or log scale."""
+
+    name: str
+    low: float
+    high: float
+    log: bool = False
+
+    def __post_init__(self):
+        if not (math.isfinite(self.low) and math.isfinite(self.high)) or not self.high > self.low:
+            raise ValueError(f"{self.name}: need finite LOW < HIGH, got {self.low}:{self.high}")
+        if self.log and self.low <= 0:
+            raise ValueError(f"{self.name}: a log scale needs LOW > 0, got {self.low}")
+
+    def from_unit(self, u):
+        """Map u ∈ [0, 1] to the parameter value."""
+        u = np.asarray(u, float)
+        if self.log:
+            return np.exp(np.log(self.low) + u * (np.log(self.high) - np.log(self.low)))
+        return self.low + u * (self.high - self.low)
+
+
+def paper_box() -> tuple[Dimension, ...]:
+    """The published investigation: n 0.9–1.1, Y 5–15 kPa, ext 4000–10000."""
+    return (
+        Dimension("robot.growth_exponent", 0.9, 1.1),
+        Dimension("robot.yield_pressure", 5e3, 15e3),
+        Dimension("robot.extensibility", 4000.0, 10000.0),
+    )
+
+
+def latin_hypercube(dims, n: int, seed: int) -> np.ndarray:
+    """(n, d) Latin-hypercube design in parameter units over the boxes ``dims`` (d,) of :class:`Dimension`
+    (``scipy.stats.qmc.LatinHypercube``, seeded)."""
+    from scipy.stats import qmc
+
+    if n < 1:
+        raise ValueError(f"a Latin hypercube needs n ≥ 1 points, got {n}")
+    unit = qmc.LatinHypercube(d=len(dims), seed=np.random.default_rng(seed)).random(n)
+    return np.column_stack([d.from_unit(unit[:, i]) for i, d in enumerate(dims)])

@@ -68,7 +68,8 @@ from ._priors import (
     paper_priors,
 )
 from ._record import RECORDED, Recorded, inference_data, recorded_name, site_draws
-from ._sample import PosteriorResult, build_residuals, observation_draws, sample
+from ._residuals import build_residuals, observation_draws
+from ._sample import PosteriorResult, sample
 
 __all__ = [
     "BOUND_FRACTION",

@@ -115,7 +115,7 @@ def forecast(
         return mu[:, at_new] + sigma[take][:, None] * rng.standard_normal((take.size, at_new.size))
     observed = np.zeros(union.size, bool)
     observed[at_fit[res.observed]] = True
-    g = u = None
+    g_np = None
     if res.sensitivity is not None:
         mean_theta = {n: float(np.mean(v)) for n, v in thetas.items()}
         g_np = tl.length_sensitivity(
@@ -127,9 +127,10 @@ def forecast(
             dict(zip(res.tolerance_names, map(float, res.tolerance))),
             central=res.centre is not None,
         )
-        g, u = jnp.asarray(g_np), jnp.asarray(res.tolerance)
         offset = np.asarray(res.rig_mean(g_np))  # the rig term's prior mean where the rig is not nominal
         mu = mu + offset
+    g, u = res.columns(union, g_np)  # the rig's terms and the configuration's drift at every time
+    g, u = (None, None) if g is None else (jnp.asarray(g), jnp.asarray(u))
     flat = lambda site: jnp.asarray(site_draws(post, site).ravel()[take]) if recorded_name(site) in post else None
     amp, ell, tau = flat("delta_amplitude"), flat("delta_time_scale"), flat("noise_time")
     hyper = dc.Hyper(
@@ -193,7 +194,7 @@ def sbc(
     ``truth_model({qualified name: (replicates,) values}) → (replicates, m)`` clean lengths (m) at the emulator's
     times: data from another configuration (the reference), plus σ-noise, so the check also sees the
     emulated configuration's error against it; the likelihood then carries the emulator's RMS error and
-    ``model_error`` (m, e.g. :data:`growjax.calibration.fit.FAST_MODEL_ERROR`, the fast configuration's against the
+    ``model_error`` (m, e.g. `growjax.calibration.FAST_MODEL_ERROR`, the fast configuration's against the
     reference), both as independent noise.
 
     Returns ``ranks`` {site: (replicates,) ints in [0, samples]}, ``coverage`` {site: share},
@@ -271,10 +272,12 @@ def compare_loo(results: dict) -> dict:
 
 
 def laplace(fit_result, sigma: float | None = None) -> dict:
-    """Laplace (Gauss–Newton) approximation at a fit: per-parameter mean, sd and 90 % interval (log-normal in θ)."""
+    """Laplace (Gauss–Newton) approximation at a fit (`growjax.calibration.FitResult`): per coordinate its mean, sd
+    and 90 % interval (log-normal in θ, or normal for a parameter fitted in a linear coordinate)."""
     out = {}
-    for i, n in enumerate(fit_result.names):
-        sd_z = float(np.sqrt(max(fit_result.covariance_log[i, i], 0.0)))
-        est = fit_result.estimate[n]
-        out[n] = {"mean": est, "sd": est * sd_z, "interval_90": fit_result.interval_90[n]}
+    for i, c in enumerate(fit_result.coordinates):
+        sd_z = float(np.sqrt(max(fit_result.covariance[i, i], 0.0)))
+        est = fit_result.estimate[c.label]
+        slope = est if c.scale is None else c.scale
+        out[c.label] = {"mean": est, "sd": slope * sd_z, "interval_90": fit_result.interval_90[c.label]}
     return out

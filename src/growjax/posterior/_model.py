@@ -12,6 +12,7 @@ import numpy as np
 import numpyro
 import numpyro.distributions as dist
 
+from growjax.calibration import MODEL_ERROR_TIME
 from growjax.calibration import discrepancy as dc
 from growjax.model import params as gp
 from growjax.posterior import emulator as em
@@ -35,13 +36,15 @@ def growth_model(
 
         θ_j ~ prior_j,   σ ~ HalfNormal(noise_scale),
         a ~ HalfNormal(2 mm),   ℓ ~ LogNormal(ln 1 s, 1),   τ ~ LogNormal(ln 30 ms, 1.5)   (with a discrepancy)
-        L_obs = L_model(t; θ) + δ(t) + Σ_k g_k(t) b_k + ε,   δ ~ GP(0, Matérn-3/2(a, ℓ)),
-        b_k ~ N(0, u_k²),   ε ~ GP(0, (σ² + e²) exp(−|Δt|/τ))   (τ = 0, independent, without one)
+        L_obs = L_model(t; θ) + δ(t) + Σ_k g_k(t) b_k + d(t) + ε,   δ ~ GP(0, Matérn-3/2(a, ℓ)),
+        b_k ~ N(0, u_k²),   d ~ GP(0, e_c² exp(−½(Δt/5 s)²)),   ε ~ GP(0, (σ² + e²) exp(−|Δt|/τ))
+        (τ = 0, independent, without a discrepancy)
 
     ``mean_length(theta)`` is the model (or its emulator) at the measured times; ``e`` (m) is the
-    emulator's RMS error (0 for the model itself). ``residuals`` (:class:`Residuals`) sets the discrepancy,
-    the rig's tolerances and the samples scored; None: independent noise, every sample (δ and b absent).
-    δ and b are marginalised exactly (:mod:`growjax.calibration.discrepancy`). A failed solve has zero likelihood.
+    emulator's RMS error (0 for the model itself). ``residuals`` (`Residuals`) sets the discrepancy,
+    the rig's tolerances, the configuration's own error e_c (the drift d) and the samples scored; None:
+    independent noise, every sample (δ, b and d absent). δ, b and d are marginalised exactly
+    (`growjax.calibration.discrepancy`). A failed solve has zero likelihood.
     """
     theta = {}
     for p in priors:
@@ -74,11 +77,15 @@ def growth_model(
 @dataclasses.dataclass(frozen=True, eq=False)
 class Residuals:
     """What the likelihood of :func:`growth_model` holds besides the model: the discrepancy (``"matern32"`` or
-    ``"none"``), the sample times (n,) s, the samples scored (n,) bool, and the rig's tolerances: sensitivities
+    ``"none"``), the sample times (n,) s, the samples scored (n,) bool, the rig's tolerances: sensitivities
     (n, q) m per unit ln ψ, relative sds (q,), names, and ``centre`` (q,), the rig's errors ln(ψ/ψ₀) where the
-    model and the sensitivities are taken (None: nominal). The rig's errors b from there have the prior
-    N(−centre, u²) (their tolerance is about nominal), so the rig term's mean is −g·centre. The filter runs over
-    the scored samples alone (the likelihood of an interpolated record is that of its keyframes)."""
+    model and the sensitivities are taken (None: nominal), and ``model_error`` (m), the fitted configuration's own
+    error against the reference. The rig's errors b from there have the prior N(−centre, u²) (their tolerance is
+    about nominal), so the rig term's mean is −g·centre. The configuration's error is a slow drift of sd
+    ``model_error`` (squared exponential over `growjax.calibration.MODEL_ERROR_TIME`, as the fit carries it),
+    marginalised as a few more static terms of the filter (`growjax.calibration.discrepancy.drift_columns`). The
+    filter runs over the scored samples alone (the likelihood of an interpolated record is that of its
+    keyframes)."""
 
     discrepancy: str
     times: np.ndarray
@@ -87,6 +94,20 @@ class Residuals:
     tolerance: np.ndarray | None = None
     tolerance_names: tuple = ()
     centre: np.ndarray | None = None
+    model_error: float = 0.0
+
+    def columns(self, times=None, sensitivity=None) -> tuple:
+        """(g (n, q + k) m, u (q + k,)) or (None, None): the rig's sensitivities (``sensitivity`` at ``times``, default
+        this likelihood's) and the configuration's drift columns at ``times`` (default the samples' times), with the
+        prior sds of their weights (the tolerances; 1 for the drift's)."""
+        times = self.times if times is None else times
+        g = self.sensitivity if sensitivity is None else sensitivity
+        u = self.tolerance
+        if self.model_error > 0:
+            drift = dc.drift_columns(times, self.model_error, MODEL_ERROR_TIME)
+            g = drift if g is None else np.concatenate([np.asarray(g), drift], axis=1)
+            u = np.ones(drift.shape[1]) if u is None else np.concatenate([np.asarray(u), np.ones(drift.shape[1])])
+        return (None, None) if g is None else (np.asarray(g), np.asarray(u))
 
     @property
     def index(self) -> np.ndarray:
@@ -101,8 +122,9 @@ class Residuals:
         return -np.asarray(g) @ np.asarray(self.centre)
 
     def _terms(self, index):
-        g = None if self.sensitivity is None else jnp.asarray(np.asarray(self.sensitivity)[index])
-        u = None if self.tolerance is None else jnp.asarray(self.tolerance)
+        g, u = self.columns()
+        g = None if g is None else jnp.asarray(g[index])
+        u = None if u is None else jnp.asarray(u)
         mean = self.rig_mean()
         offset = jnp.asarray(mean[index] if np.ndim(mean) else mean)
         return jnp.asarray(np.asarray(self.times)[index]), g, u, offset
@@ -153,8 +175,9 @@ class DirectMean:
         return predicted_length(theta, self.base, self.inputs, self.config, self.times)
 
     def value_and_jacobian(self, names):
-        """``v (d,) → (μ (m,), ∂μ/∂v (m, d))`` over θ = ``dict(zip(names, v))`` (:func:`growjax.simulation.simulate.length_jacobian`:
-        a solve fewer than a forward-mode derivative of :meth:`__call__`; NaN where the run failed)."""
+        """``v (d,) → (μ (m,), ∂μ/∂v (m, d))`` over θ = ``dict(zip(names, v))``
+        (`growjax.simulation.simulate.length_jacobian`: a solve fewer than a forward-mode derivative of `__call__`;
+        NaN where the run failed)."""
         names, base = tuple(names), self.base
         breaks = input_breaks(self.inputs, self.config)
         ts = sample_times(self.times, self.config)
@@ -189,8 +212,8 @@ def build_emulator(priors: Sequence[Prior], base, inputs, config, times, seed: i
 def value_and_jacobian(mean_length, names):
     """``v (d,) → (μ (m,), ∂μ/∂v (m, d))`` for ``mean_length`` over θ = ``dict(zip(names, v))``: the model's own
     (:meth:`DirectMean.value_and_jacobian`, one solve) where it has one, else one forward-mode pass carrying d
-    tangent directions (:func:`growjax.calibration.fit.linearise`)."""
-    from growjax.calibration.fit import linearise
+    tangent directions (`growjax.calibration.linearise`)."""
+    from growjax.calibration.least_squares import linearise
 
     names = tuple(names)
     if hasattr(mean_length, "value_and_jacobian"):

@@ -14,18 +14,17 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import numpyro
-from jaxtyping import ArrayLike, Float
+from jaxtyping import Float
 
 from growjax import progress as prog
-from growjax.calibration import discrepancy as dc
+from growjax.calibration import Likelihood
 from growjax.calibration import tolerance as tl
-from growjax.data import experiment
-from growjax.model import params as gp
+from growjax.data.sets import ExperimentSet
 from growjax.posterior import emulator as em
 from growjax.simulation.config import Config
 
 from ._checks import diagnostics
-from ._laplace import _scout, bound_start, precondition
+from ._laplace import bound_start, precondition
 from ._model import (
     Residuals,
     build_emulator,
@@ -36,18 +35,33 @@ from ._model import (
 )
 from ._priors import Prior, coordinate, paper_priors
 from ._record import inference_data
+from ._residuals import likelihood_record, likelihood_terms, observation_draws
 
 
 @dataclasses.dataclass
 class PosteriorResult:
-    """NUTS output: ``idata``, the run as an xarray DataTree (ArviZ 1.x, :func:`inference_data`), plus the headline
-    diagnostics."""
+    """NUTS output.
+
+    Attributes:
+        idata: the run as an xarray DataTree (ArviZ 1.x, `inference_data`): the sampled sites in the posterior, the
+            replicated and the model's length in the posterior predictive, the pointwise log-likelihood for LOO,
+            the measured length as observed data, NUTS's sample stats.
+        summary: per-parameter mean and 90 % interval, ``rhat_max``, ``ess_bulk_min``, ``ess_tail_min``,
+            ``divergences``, ``bfmi_min``, ``coverage_90`` (share of measured points inside the 90 % predictive
+            band), ``emulator`` (its error and build time), ``chain_method``, ``coordinates`` (each prior's:
+            ``"numpyro"``, ``"softplus"`` or ``"ridge"``, `bound_start`), ``laplace_s`` (the start and mass matrix
+            through the model, `laplace_unconstrained`, compilation included), ``configuration_error_m`` (the
+            configuration's drift, sd m) and ``wall_s`` (everything).
+        wall_s: s, everything.
+        residuals: the likelihood's discrepancy, samples, tolerances and drift (None: independent noise).
+        data: (times (n,) s, length (n,) m) the posterior was fitted on.
+    """
 
     idata: object
     summary: dict
     wall_s: float
-    residuals: Residuals | None = None  # the likelihood's discrepancy, samples and tolerances (None: independent)
-    data: tuple = ()  # (times (n,) s, length (n,) m) the posterior was fitted on
+    residuals: Residuals | None = None
+    data: tuple[Float[np.ndarray, " n"], Float[np.ndarray, " n"]] = ()
 
 
 def _window(times, length, config, window):
@@ -57,107 +71,157 @@ def _window(times, length, config, window):
 
 
 def sample(
-    times: Float[ArrayLike, " m"],
-    length: Float[ArrayLike, " m"],
-    inputs,
-    base: gp.Parameters | None = None,
+    experiments: ExperimentSet,
+    *,
     config: Config | None = None,
     priors: Sequence[Prior] | None = None,
+    likelihood: Likelihood = Likelihood(),
     chains: int = 4,
     warmup: int = 500,
     samples: int = 500,
     seed: int = 0,
     dense_mass: bool = True,
     target_accept: float = 0.9,
-    window=None,
     progress: bool = True,
     emulate: bool | em.Emulator = False,
     max_tree_depth: int = 10,
     chain_method: str | None = None,
-    discrepancy: str = "matern32",
-    tolerances: dict | None = None,
     rig_centre: dict | None = None,
 ) -> PosteriorResult:
-    """NUTS over the priors and σ given a measured length (m) at ``times`` (s).
+    """NUTS over the priors and σ given one experiment's measured length.
 
-    ``emulate``: True samples through an :class:`~growjax.posterior.emulator.Emulator` of the model built over
-    the prior box (its validated RMS error joins the noise); an ``Emulator`` is used as given; False
-    (default) runs the model in every gradient (forward mode). ``max_tree_depth``: NUTS's cap on the
-    tree (at most 2^depth − 1 leapfrog steps per draw). ``chain_method``: NumPyro's; None runs the chains
-    ``"vectorized"`` through an emulator, and through the model ``"parallel"`` (one chain per JAX device,
-    each on its own thread: expose CPU cores as devices before JAX starts, as ``growjax posterior`` does)
-    when there are as many devices as chains, else ``"sequential"``: the vmapped forward-mode solve
-    (members stepped together) costs what the chains cost one after another, and the chains' trees, built
-    in lockstep, would wait for the deepest (`benchmarks/nuts_direct.py` measures both).
+    Args:
+        experiments: the set of one experiment (`growjax.data.sets.ExperimentSet.single`): its length (m) at its
+            times (s) inside its window, its parameters and inputs.
+        config, priors: the simulation's settings (its drive is the run's); the priors (default `paper_priors`).
+        likelihood: the likelihood's options, as the fit takes them (`growjax.calibration.Likelihood`): the
+            discrepancy's amplitude and time scale are sampled with the parameters; the rig's tolerances enter
+            through the length's sensitivities (linearised), marginalised exactly (``rig`` must be
+            ``"inferred"``); the configuration's own error (``model_error``, default the configuration's) enters
+            as the slow drift the fit carries, marginalised too.
+        emulate: True samples through an `growjax.posterior.emulator.Emulator` of the model built over the prior
+            box (its validated RMS error joins the noise); an ``Emulator`` is used as given; False (default) runs
+            the model in every gradient (forward mode).
+        max_tree_depth: NUTS's cap on the tree (at most 2^depth − 1 leapfrog steps per draw).
+        chain_method: NumPyro's; None: vectorized (emulator), parallel (a device per chain) or sequential.
+        progress: a line per phase and NumPyro's bars on stderr (the draws do not depend on where it goes).
+        rig_centre: {tolerance: ln(ψ/ψ₀)} where the rig is linearised (the model runs with the rig there, its
+            errors' prior stays about nominal), or None: where `growjax.calibration.fit` puts it on the same data.
+        chains, warmup, samples, seed, dense_mass, target_accept: NUTS's.
 
-    ``progress``: a line per phase (emulator, likelihood, start point, NUTS's start and end) and NumPyro's bars
-    on stderr where it is a terminal; elsewhere (a log) the bars' progress as a plain line every ~10 % of each
-    chain's draws. The draws do not depend on where stderr goes.
+    Returns:
+        The `PosteriorResult`: the draws as a DataTree and the summary.
 
-    ``discrepancy`` and ``tolerances``: the likelihood, as in :func:`growjax.calibration.fit.fit`
-    (:func:`growth_model`): the discrepancy's amplitude and time scale are sampled with the parameters; the rig's
-    tolerances enter through the length's sensitivities (linearised), marginalised exactly. The rig is linearised where
-    the fit puts it: ``rig_centre`` {tolerance: ln(ψ/ψ₀)}, or None to take it from :func:`growjax.calibration.fit.fit`
-    on the same data and likelihood (its ``rig_offset``), so that the fit and the posterior
-    linearise the rig alike. The model runs with the rig there, and the rig's errors keep their prior about
-    nominal.
-
-    Returns a DataTree (:func:`inference_data`: the sampled sites in the posterior, the replicated and the
-    model's length in the posterior predictive, the pointwise log-likelihood for LOO, the measured length as
-    observed data, NUTS's sample stats) and a summary: per-parameter
-    mean and 90 % interval, ``rhat_max``, ``ess_bulk_min``, ``ess_tail_min``,
-    ``divergences``, ``bfmi_min``, ``coverage_90`` (share of measured points inside the 90 %
-    predictive band), ``emulator`` (its error and build time), ``chain_method``, ``coordinates`` (each prior's:
-    ``"numpyro"``, ``"softplus"`` or ``"ridge"``, :func:`bound_start`), ``laplace_s`` (the start and
-    mass matrix through the model, :func:`laplace_unconstrained`, compilation included) and ``wall_s`` (everything).
+    Raises:
+        ValueError: more than one experiment, a fixed rig, or a ``rig_centre`` naming an untoleranced parameter.
     """
-    base = base if base is not None else gp.reference()
-    config = (config if config is not None else Config()).replace(adjoint="forward")
+    run, config = _one_run(experiments, config, likelihood)
     priors = tuple(priors) if priors is not None else paper_priors()
-    t, y = _window(times, length, config, window)
+    t, y = _window(run.times, run.length, config, run.window)
     start = time.perf_counter()
     if emulate is True:
         prog.note("posterior: building the emulator", progress)
-    if discrepancy not in dc.KINDS:
-        raise ValueError(f"discrepancy must be one of {dc.KINDS}, got {discrepancy!r}")
-    tol = tl.budget(
-        base, tolerances, [p.name for p in priors], use_default=tolerances is None and discrepancy != "none"
-    )
-    centre, linearisations = _rig_centre(
-        rig_centre, tol, times, length, inputs, priors, base, config, window, discrepancy, tolerances, seed, progress
-    )
-    base = tl.rig_at(base, tol, centre)
-    mean, model_error, emu_info = _mean_length(emulate, priors, base, inputs, config, t, seed, start)
-    prog.note(f"posterior: the likelihood ({discrepancy} discrepancy)", progress)
-    residuals, extra_init = _likelihood_terms(discrepancy, tol, t, y, mean, priors, base, inputs, config, seed, centre)
+    terms = _terms(experiments, config, priors, likelihood, (t, y), rig_centre, emulate, seed, start, progress)
+    mean, model_error, residuals = terms["mean"], terms["model_error"], terms["residuals"]
 
     def make_model(mean_length, priors=priors):
         return functools.partial(
             growth_model, mean_length=mean_length, priors=priors, model_error=model_error, residuals=residuals
         )
 
+    nuts = dict(dense_mass=dense_mass, target_accept=target_accept, max_tree_depth=max_tree_depth, chains=chains)
+    nuts.update(warmup=warmup, samples=samples, progress=progress)
+    nuts["chain_method"] = chain_method or _chain_method(chains, emulate is not False)
+    mcmc, sampled, precondition_s = _nuts(make_model, priors, mean, y, seed, emulate, terms["extra_init"], nuts)
+    idata = _inference_data(mcmc, model_error, t, y, seed, residuals)
+    wall = time.perf_counter() - start
+    summary = diagnostics(idata, priors, y, mcmc, residuals)
+    summary.update(
+        {
+            "wall_s": wall,
+            "emulator": terms["emulator"],
+            "laplace_s": precondition_s if emulate is False else None,
+            "chain_method": mcmc.chain_method,
+            "coordinates": {p.site: coordinate(p) for p in sampled},
+            **{k: nuts[k] for k in ("chains", "warmup", "samples")},
+            "discrepancy": likelihood.discrepancy,
+            **{k: terms[k] for k in ("rig_centre", "linearisations", "configuration_error_m")},
+            **likelihood_record(residuals, y),
+        }
+    )
+    return PosteriorResult(idata, summary, wall, residuals, (t, y))
+
+
+def _terms(experiments, config, priors, likelihood: Likelihood, data, given, emulate, seed: int, start, progress):
+    """The likelihood's terms of the set's one run: {mean (its ``mean_length``), model_error (the emulator's RMS
+    error, m), emulator (its record), residuals (`Residuals` or None), extra_init (start values), rig_centre
+    {tolerance: ln(ψ/ψ₀)}, linearisations (the fit's), configuration_error_m (the drift's sd, m)}. The rig is
+    linearised at ``given`` or where the fit puts it (`_rig_centre`); ``data`` = (t (n,) s, y (n,) m)."""
+    run = experiments.runs[0]
+    base = run.base()
+    inputs = run.model_inputs(base, config.t0, config.t1)
+    tol = likelihood.budget(base, [p.name for p in priors])
+    centre, linearisations = _rig_centre(given, tol, experiments, priors, config, likelihood, seed, progress)
+    base = tl.rig_at(base, tol, centre)
+    t, y = data
+    mean, model_error, emu_info = _mean_length(emulate, priors, base, inputs, config, t, seed, start)
+    prog.note(f"posterior: the likelihood ({likelihood.discrepancy} discrepancy)", progress)
+    drift = likelihood.model_error_for(config)
+    residuals, extra_init = likelihood_terms(
+        likelihood.discrepancy, tol, t, y, mean, priors, (base, inputs, config), seed, centre, drift
+    )
+    return {
+        "mean": mean,
+        "model_error": model_error,
+        "emulator": emu_info,
+        "residuals": residuals,
+        "extra_init": extra_init,
+        "rig_centre": dict(zip(tol, map(float, centre))) if centre is not None else {},
+        "linearisations": linearisations,
+        "configuration_error_m": drift,
+    }
+
+
+def _one_run(experiments: ExperimentSet, config: Config | None, likelihood: Likelihood):
+    """(the set's one run, the configuration on its drive with forward-mode derivatives).
+
+    Raises:
+        ValueError: a set of more than one experiment, or the rig fixed.
+    """
+    if len(experiments) != 1:
+        raise ValueError(
+            f"a posterior takes one experiment, got {len(experiments)}: several robots' experiments are the "
+            "population's (growjax.posterior.population)"
+        )
+    if likelihood.rig != "inferred":
+        raise ValueError("the posterior marginalises the rig's errors under their tolerances: give rig='inferred'")
+    run = experiments.runs[0]
+    return run, (config if config is not None else Config()).replace(adjoint="forward", drive=run.drive)
+
+
+def _nuts(make_model, priors, mean, y, seed: int, emulate, extra_init: dict, nuts: dict):
+    """(NumPyro's MCMC run, the priors as sampled, the start's and mass matrix's time s): NUTS's start
+    (`_nuts_start`), then its chains with the options ``nuts``."""
     start_precondition = time.perf_counter()
+    progress = nuts["progress"]
     prog.note("posterior: start point and mass matrix", progress)
     sampled, init_values, inverse_mass = _nuts_start(make_model, priors, mean, y, seed, emulate, extra_init)
     precondition_s = time.perf_counter() - start_precondition
-    nuts = {
-        "dense_mass": dense_mass,
-        "target_accept": target_accept,
-        "max_tree_depth": max_tree_depth,
-        "chains": chains,
-        "warmup": warmup,
-        "samples": samples,
-        "progress": progress,
-        "chain_method": chain_method or _chain_method(chains, emulate is not False),
-    }
     prog.note(
-        f"posterior: NUTS, {chains} chains of {warmup} warm-up and {samples} kept draws ({nuts['chain_method']})",
+        f"posterior: NUTS, {nuts['chains']} chains of {nuts['warmup']} warm-up and {nuts['samples']} kept draws "
+        f"({nuts['chain_method']})",
         progress,
     )
     start_nuts = time.perf_counter()
     with _numpyro_progress(progress):
         mcmc = _run_nuts(make_model(mean, sampled), init_values, inverse_mass, y, seed, emulate is False, **nuts)
     prog.note(f"posterior: NUTS done in {time.perf_counter() - start_nuts:.1f} s", progress)
+    return mcmc, sampled, precondition_s
+
+
+def _inference_data(mcmc, model_error: float, t, y, seed: int, residuals):
+    """The run's DataTree (`inference_data`) with the pointwise log-likelihood and the replicated lengths of every
+    draw (`observation_draws`)."""
     post = mcmc.get_samples(group_by_chain=True)
     loglik, predicted, new = observation_draws(
         post["length_model"],
@@ -171,26 +235,7 @@ def sample(
         post.get("noise_time"),
     )
     scored = residuals.observed if residuals is not None else np.ones(len(y), bool)
-    idata = inference_data(post, mcmc.get_extra_fields(group_by_chain=True), t, y, scored, loglik, predicted, new)
-    wall = time.perf_counter() - start
-    summary = diagnostics(idata, priors, y, mcmc, residuals)
-    summary.update(
-        {
-            "wall_s": wall,
-            "emulator": emu_info,
-            "laplace_s": precondition_s if emulate is False else None,
-            "chain_method": mcmc.chain_method,
-            "coordinates": {p.site: coordinate(p) for p in sampled},
-            "chains": chains,
-            "warmup": warmup,
-            "samples": samples,
-            "discrepancy": discrepancy,
-            "rig_centre": dict(zip(tol, map(float, centre))) if centre is not None else {},
-            "linearisations": linearisations,
-            **_likelihood_record(residuals, y),
-        }
-    )
-    return PosteriorResult(idata, summary, wall, residuals, (t, y))
+    return inference_data(post, mcmc.get_extra_fields(group_by_chain=True), t, y, scored, loglik, predicted, new)
 
 
 def _mean_length(emulate, priors, base, inputs, config, t, seed: int, start: float):
@@ -212,31 +257,10 @@ def _mean_length(emulate, priors, base, inputs, config, t, seed: int, start: flo
     return emulated_mean(emu), float(emu.error_rms), emu_info
 
 
-def _likelihood_terms(discrepancy: str, tol: dict, t, y, mean, priors, base, inputs, config, seed: int, centre=None):
-    """(:class:`Residuals` or None for independent noise, start values of σ and the discrepancy's sites)."""
-    if discrepancy == "none" and not tol:
-        return None, {}
-    residuals, hyper = build_residuals(discrepancy, t, y, mean, priors, base, inputs, config, tol, seed, centre)
-    return residuals, {**residuals.hyper_sites(hyper), "sigma": float(hyper.noise)}
-
-
-def _rig_centre(
-    given,
-    tol: dict,
-    times,
-    length,
-    inputs,
-    priors,
-    base,
-    config,
-    window,
-    discrepancy: str,
-    tolerances,
-    seed: int,
-    progress: bool,
-):
+def _rig_centre(given, tol: dict, experiments, priors, config, likelihood, seed: int, progress: bool):
     """(the rig's errors (q,) ln(ψ/ψ₀) where the posterior linearises it, or None at nominal; the fit's number of
-    linearisations, 0 when given or without tolerances): ``given`` {tolerance: value}, or the fit's."""
+    linearisations, 0 when given or without tolerances): ``given`` {tolerance: value}, or the fit's of the
+    experiment's length (its pressure is not scored)."""
     if not tol:
         return None, 0
     if given is not None:
@@ -245,23 +269,13 @@ def _rig_centre(
             raise ValueError(f"rig_centre names {unknown}, which carry no tolerance here (tolerances: {sorted(tol)})")
         centre = np.array([float(given.get(name, 0.0)) for name in tol])
         return (centre if np.any(centre != 0) else None), 0
-    from growjax.calibration import fit as gf
+    from growjax.calibration import fit
 
     prog.note("posterior: the fit, for where the data put the rig", progress)
-    fitted = gf.fit(
-        times,
-        length,
-        inputs,
-        free=[p.name for p in priors],
-        base=base,
-        config=config,
-        window=window,
-        seed=seed,
-        discrepancy=discrepancy,
-        tolerances=tolerances,
-        relinearise=True,
-    )
-    centre = np.array([fitted.rig_offset.get(name, 0.0) for name in tol])
+    length_only = ExperimentSet(tuple(dataclasses.replace(r, sensors=("length",)) for r in experiments))
+    fitted = fit(length_only, [p.name for p in priors], likelihood=likelihood, config=config, seed=seed)
+    offsets = next(iter(fitted.rig_offset.values()), {})
+    centre = np.array([offsets.get(name, 0.0) for name in tol])
     if not np.all(np.isfinite(centre)) or not np.any(centre):  # the rig stayed at nominal
         return None, fitted.linearisations
     return centre, fitted.linearisations
@@ -350,115 +364,12 @@ def _run_nuts(
     return mcmc
 
 
-def _likelihood_record(residuals: Residuals | None, y) -> dict:
-    """The summary's ``tolerances`` {name: relative sd} and ``samples_used``."""
-    tolerances = (
-        dict(zip(residuals.tolerance_names, map(float, residuals.tolerance)))
-        if (residuals is not None and residuals.tolerance is not None)
-        else {}
-    )
-    return {
-        "tolerances": tolerances,
-        "samples_used": int(np.sum(residuals.observed)) if residuals is not None else int(y.size),
-    }
-
-
-def build_residuals(
-    discrepancy: str, times, length, mean_length, priors, base, inputs, config, tol: dict, seed: int = 0, centre=None
-) -> tuple[Residuals, dc.Hyper]:
-    """The :class:`Residuals` of a posterior and its hyperparameters' start: the samples scored
-    (:func:`growjax.data.experiment.informative_samples` with a discrepancy), the rig's sensitivities at the scout's
-    best θ (``base`` holds the rig where it is linearised; ``centre`` (q,) its errors ln(ψ/ψ₀) there, None at
-    nominal: the slope there, as the fit takes it, rather than the secant from nominal), and the hyperparameters'
-    mode given the residuals there."""
-    theta, _, _, _ = _scout(priors, mean_length, length, seed)
-    observed = experiment.informative_samples(length) if discrepancy != "none" else np.ones(len(length), bool)
-    g = u = None
-    if tol:
-        g = tl.length_sensitivity(theta, base, inputs, config, times, tol, central=centre is not None)
-        u = np.asarray(list(tol.values()))
-    residuals = Residuals(
-        discrepancy,
-        np.asarray(times),
-        observed,
-        g,
-        u,
-        tuple(tol),
-        None if centre is None else np.asarray(centre, float),
-    )
-    r = (
-        np.asarray(length)
-        - np.asarray(jax.jit(mean_length)({k: jnp.asarray(v) for k, v in theta.items()}))
-        - residuals.rig_mean()
-    )
-    hyper = dc.estimate(r, times, discrepancy, g, u, observed)
-    return residuals, hyper
-
-
-def observation_draws(
-    mean_length,
-    sigma,
-    model_error: float,
-    observed,
-    seed: int,
-    residuals: Residuals | None = None,
-    amplitude=None,
-    time_scale=None,
-    noise_time=None,
-):
-    """Pointwise log-likelihood and two posterior predictives of the length (m), all (C, S, T), of every draw.
-
-    ``mean_length`` (C, S, T): the model's length (m) at each draw, which :func:`growth_model` records as
-    ``length_model`` while NUTS samples; ``sigma`` (C, S): the noise scale (m); ``model_error`` (m) joins it as in
-    the model; ``residuals``, ``amplitude``, ``time_scale`` and ``noise_time`` (C, S): the discrepancy, the noise's
-    correlation time and the tolerances, if any. The
-    pointwise terms are then the one-step-ahead log-densities log p(yᵢ | earlier y) (0 at samples not scored).
-    Returns (log-likelihood, this experiment replicated, a new experiment): a replication keeps this experiment's
-    discrepancy and rig error as the data determine them (:func:`growjax.calibration.discrepancy.smooth`, each sample
-    drawn from its marginal) with fresh sensor noise; a new experiment draws a fresh discrepancy and rig error (the
-    band for running the rig again). Nothing is simulated again: NumPyro's ``Predictive`` and ArviZ's
-    log-likelihood would each run the model once more per draw. Seeded by ``seed``.
-    """
-    from scipy.stats import norm
-
-    mean_length = np.asarray(mean_length, float)
-    scale = np.sqrt(np.asarray(sigma, float) ** 2 + model_error**2)
-    finite = np.isfinite(mean_length)
-    if residuals is None:
-        loglik = np.where(
-            finite,
-            norm.logpdf(np.asarray(observed, float), np.where(finite, mean_length, 0.0), scale[..., None]),
-            -np.inf,
-        )
-        noise = np.random.default_rng(seed).standard_normal(mean_length.shape)
-        predicted = mean_length + scale[..., None] * noise
-        return loglik, predicted, predicted
-    shape = mean_length.shape
-    mu = np.where(finite, mean_length, 0.0).reshape(-1, shape[-1])
-    ones = np.ones(shape[:-1])
-    amp = np.zeros(shape[:-1]) if amplitude is None else np.asarray(amplitude, float)
-    ell = ones if time_scale is None else np.asarray(time_scale, float)
-    tau = np.zeros(shape[:-1]) if noise_time is None else np.asarray(noise_time, float)
-    hyper = dc.Hyper(
-        jnp.asarray(amp.ravel()), jnp.asarray(ell.ravel()), jnp.asarray(scale.ravel()), jnp.asarray(tau.ravel())
-    )
-    y = jnp.asarray(observed, float)
-
-    def one(args):
-        m, h, key = args
-        k_same, k_new = jax.random.split(key)
-        mean, var = residuals.conditional(y, m, h)
-        same = m + mean + jnp.sqrt(var + h.noise**2) * jax.random.normal(k_same, m.shape)
-        return residuals.pointwise(y, m, h), same, residuals.replicate(m, h).sample(k_new)
-
-    keys = jax.random.split(jax.random.PRNGKey(seed), mu.shape[0])
-    # in batches: the smoother keeps every step's states, (T, 3 + q, 3 + q) a draw
-    loglik, predicted, new = jax.jit(lambda *a: jax.lax.map(one, a, batch_size=64))(jnp.asarray(mu), hyper, keys)
-    loglik = np.where(np.all(finite, axis=-1, keepdims=True), np.asarray(loglik).reshape(shape), -np.inf)
-    return loglik, np.asarray(predicted).reshape(shape), np.asarray(new).reshape(shape)
-
-
 def _chain_method(chains: int, emulated: bool) -> str:
+    """``"vectorized"`` through an emulator; through the model ``"parallel"`` (one chain per JAX device, each on its
+    own thread: expose CPU cores as devices before JAX starts, as ``growjax posterior`` does) when there are as many
+    devices as chains, else ``"sequential"``: the vmapped forward-mode solve (members stepped together) costs what
+    the chains cost one after another, and the chains' trees, built in lockstep, would wait for the deepest
+    (`benchmarks/nuts_direct.py` measures both)."""
     if emulated:
         return "vectorized"
     return "parallel" if chains > 1 and jax.local_device_count() >= chains else "sequential"

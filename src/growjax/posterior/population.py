@@ -6,7 +6,7 @@ population predictive for a new robot of the same build.
     ln θ_i ~ Normal(μ, s²),  i = 1..R robots
     (ln θ̂, b̂) ~ Normal((ln θ, b), F)           the set's data, through its joint fit
 
-The data enter through the joint fit of the set (:func:`growjax.calibration.joint.fit_set` with ``NAME@robot``): its
+The data enter through the fit of the set (`growjax.calibration.fit` with ``NAME@robot``): its
 estimate of the robots' ln θ and of the rig's relative errors b, with their covariance F, is the likelihood of
 (ln θ, b) linearised at the estimate (rig tolerance priors included, every run's discrepancy, noise and the fast
 model's error marginalised, other free parameters marginalised). That is the fit's own treatment of the rig and
@@ -37,9 +37,8 @@ import numpy as np
 import numpyro
 import numpyro.distributions as dist
 
+from growjax.calibration import MODEL_ERROR_TIME, FitResult, default_range
 from growjax.calibration import discrepancy as dc
-from growjax.calibration import fit as gf
-from growjax.calibration.joint import SetFitResult
 from growjax.data import experiment as ex
 from growjax.data.sets import Run
 from growjax.model import params as gp
@@ -74,7 +73,7 @@ class PopulationResult:
     rig: np.ndarray  # (D, Q) the rig's relative errors b, drawn given ln θ
     rig_labels: tuple  # (Q,) (rig key, tolerance name)
     diagnostics: dict  # {site: {"r_hat", "ess"}}, "divergences"
-    set_fit: SetFitResult
+    set_fit: FitResult
     mu_prior: tuple  # (m₀, w₀)
     spread_scale: float
     chains: int = 1
@@ -105,16 +104,16 @@ class PopulationResult:
         }
 
 
-def linearised_likelihood(set_fit: SetFitResult, name: str):
+def linearised_likelihood(set_fit: FitResult, name: str):
     """(robots (R,), labels (R,), ln θ̂ (R,) SI, b̂ (Q,), F (R + Q, R + Q)) from a joint fit that freed
     ``name@robot`` with the rig inferred. Other free coordinates are marginalised (rows and columns dropped)."""
     if set_fit.joint_covariance is None:
         raise ValueError("a population needs the joint fit's rig inferred (rig='inferred' and a tolerance budget)")
-    keep = [i for i, lab in enumerate(set_fit.labels) if lab.split("@")[0] == name and "@" in lab]
+    keep = [i for i, c in enumerate(set_fit.coordinates) if c.name == name and c.scope == "robot"]
     if not keep:
         raise ValueError(f"the joint fit has no per-robot {name}: free it as {name}@robot")
     labels = tuple(set_fit.labels[i] for i in keep)
-    robots = tuple(lab.split("@", 1)[1] for lab in labels)
+    robots = tuple(set_fit.coordinates[i].key for i in keep)
     p = len(set_fit.labels)
     rows = np.array(keep + list(range(p, p + len(set_fit.rig_labels))))
     cov = np.asarray(set_fit.joint_covariance)[np.ix_(rows, rows)]
@@ -146,7 +145,7 @@ def robots_given(mu, s, z_hat, cov, rng: np.random.Generator) -> np.ndarray:
 
 
 def sample_population(
-    set_fit: SetFitResult,
+    set_fit: FitResult,
     name: str = "Y",
     *,
     chains: int = 4,
@@ -167,7 +166,7 @@ def sample_population(
     robots, _, z_hat, b_hat, cov = linearised_likelihood(set_fit, full)
     r = z_hat.size
     if mu_prior is None:
-        lo, hi = gf.default_range(base, full)
+        lo, hi = default_range(base, full)
         mu_prior = (0.5 * math.log(lo * hi), 0.5 * math.log(hi / lo))
     czz, czb, cbb = cov[:r, :r], cov[:r, r:], cov[r:, r:]
     if chains < 1 or warmup < 1 or samples < 2:
@@ -303,9 +302,9 @@ def predict_new_robot(
     hyper = _median_hyper(population.set_fit.runs)
     key = jax.random.PRNGKey(seed)
     noise = np.asarray(dc.draw(key, times, hyper, shape=(theta.size,), noise=True))
-    model_error = gf.default_model_error(config)
+    model_error = population.set_fit.likelihood.model_error_for(config)
     if model_error > 0:
-        k = dc.drift_kernel(times, model_error, gf.MODEL_ERROR_TIME) + 1e-18 * np.eye(times.size)
+        k = dc.drift_kernel(times, model_error, MODEL_ERROR_TIME) + 1e-18 * np.eye(times.size)
         noise = (
             noise + np.random.default_rng(seed + 1).standard_normal((theta.size, times.size)) @ np.linalg.cholesky(k).T
         )
@@ -324,16 +323,9 @@ def predict_new_robot(
 
 
 def _run_base(population: PopulationResult, run: Run) -> gp.Parameters:
-    """``run``'s parameters with the set fit's other estimates that apply to it (shared, its rig's)."""
-    fit = population.set_fit
-    values = {}
-    for lab, v in fit.estimate.items():
-        name, _, key = lab.partition("@")
-        if name == population.name:
-            continue
-        if not key or key in (run.rig, run.robot, run.name):
-            values[name] = v
-    return gp.replace(run.base(), **values)
+    """``run``'s parameters with the set fit's other estimates that apply to it (shared, its rig's), the rig
+    nominal (each draw sets its own)."""
+    return population.set_fit.parameters(run, rig=False)
 
 
 def _median_hyper(runs: list) -> dc.Hyper:

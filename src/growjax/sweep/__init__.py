@@ -20,7 +20,6 @@ from ._sweep import (
     resume,
     sobol_indices,
 )
-from .store import StoreError
 
 __all__ = [
     "Dimension",

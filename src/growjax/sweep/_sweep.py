@@ -22,7 +22,6 @@ languages read as it is (``xarray.open_zarr(DIR)``), with that bookkeeping alrea
 from __future__ import annotations
 
 import dataclasses
-import math
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -36,6 +35,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 from growjax import progress as prog
 from growjax.hashing import content_key
 from growjax.model import params as gp
+from growjax.model.params import Dimension, latin_hypercube, paper_box
 from growjax.simulation import xla_flags
 from growjax.simulation.config import Config
 from growjax.simulation.metrics import rmse_at_samples
@@ -57,38 +57,6 @@ REASONS = {
 StoreError = _store.StoreError  # a missing or corrupt store, or one of another sweep (a ValueError)
 
 
-@dataclasses.dataclass(frozen=True)
-class Dimension:
-    """One swept parameter: qualified ``name`` (``block.field``), bounds in SI units, linear or log scale."""
-
-    name: str
-    low: float
-    high: float
-    log: bool = False
-
-    def __post_init__(self):
-        if not (math.isfinite(self.low) and math.isfinite(self.high)) or not self.high > self.low:
-            raise ValueError(f"{self.name}: need finite LOW < HIGH, got {self.low}:{self.high}")
-        if self.log and self.low <= 0:
-            raise ValueError(f"{self.name}: a log scale needs LOW > 0, got {self.low}")
-
-    def from_unit(self, u):
-        """Map u ∈ [0, 1] to the parameter value."""
-        u = np.asarray(u, float)
-        if self.log:
-            return np.exp(np.log(self.low) + u * (np.log(self.high) - np.log(self.low)))
-        return self.low + u * (self.high - self.low)
-
-
-def paper_box() -> tuple[Dimension, ...]:
-    """The published investigation: n 0.9–1.1, Y 5–15 kPa, ext 4000–10000."""
-    return (
-        Dimension("robot.growth_exponent", 0.9, 1.1),
-        Dimension("robot.yield_pressure", 5e3, 15e3),
-        Dimension("robot.extensibility", 4000.0, 10000.0),
-    )
-
-
 def parse_dimension(text: str, params: gp.Parameters) -> Dimension:
     """``NAME=LOW:HIGH[:log]`` → :class:`Dimension` (NAME as accepted by :func:`growjax.replace`)."""
     if "=" not in text:
@@ -102,16 +70,6 @@ def parse_dimension(text: str, params: gp.Parameters) -> Dimension:
     except ValueError:
         raise ValueError(f"--param {name}: bounds {rng!r} are not numbers") from None
     return Dimension(gp.resolve_name(params, name.strip()), low, high, len(parts) == 3 and parts[2] == "log")
-
-
-def latin_hypercube(dims: Sequence[Dimension], n: int, seed: int) -> np.ndarray:
-    """(n, d) Latin-hypercube design in parameter units (``scipy.stats.qmc.LatinHypercube``, seeded)."""
-    from scipy.stats import qmc
-
-    if n < 1:
-        raise ValueError(f"a sweep needs n ≥ 1 points, got {n}")
-    unit = qmc.LatinHypercube(d=len(dims), seed=np.random.default_rng(seed)).random(n)
-    return np.column_stack([d.from_unit(unit[:, i]) for i, d in enumerate(dims)])
 
 
 @dataclasses.dataclass
@@ -178,7 +136,7 @@ class SweepResult:
 
 def _valid_rows(names, values, base: gp.Parameters) -> np.ndarray:
     """Rows whose parameter values are finite and inside their physical ranges
-    (:func:`growjax.model.params.admissible_rows`)."""
+    (`growjax.model.params.admissible_rows`)."""
     return gp.admissible_rows(base, names, values)
 
 
