@@ -1,5 +1,5 @@
 """The generated pages: docs/results.md is what calibration/results_page.py renders from the committed results
-files, and benchmarks/report.py keeps the sections whose results file is absent."""
+files, of one version of growjax, and benchmarks/report.py keeps the sections whose results file is absent."""
 
 import importlib.util
 import json
@@ -33,16 +33,6 @@ def test_results_page_is_rendered_from_the_committed_files(page):
     )
 
 
-def test_results_page_quotes_the_benchmarks_page(page, report):
-    """The discovery and control rows copied into calibration/results/ are those docs/benchmarks.md shows."""
-    copied = json.loads((REPO / "calibration" / "results" / "benchmarks.json").read_text())
-    shown = report.sections((REPO / "docs" / "benchmarks.md").read_text())
-    for name in page.COPIED:
-        assert copied[name]["rows"] == report.table_rows(shown[name]), (
-            f"{name}: run python calibration/results_page.py --copy-benchmarks"
-        )
-
-
 def test_calibration_figures_reach_the_page(page, tmp_path):
     """A changed figure in a results file changes the page: the numbers are read, not written in."""
     results = tmp_path / "results"
@@ -56,6 +46,18 @@ def test_calibration_figures_reach_the_page(page, tmp_path):
     text = page.render(results)
     assert "1234–5678 Pa" in text and "9.87" in text
     assert text != page.render()
+
+
+def test_results_page_refuses_files_of_two_versions(page, tmp_path):
+    results = tmp_path / "results"
+    results.mkdir()
+    for f in (REPO / "calibration" / "results").glob("*.json"):
+        (results / f.name).write_text(f.read_text())
+    record = json.loads((results / "paper.json").read_text())
+    record["environment"]["growjax"] = "0.0.1"
+    (results / "paper.json").write_text(json.dumps(record))
+    with pytest.raises(SystemExit, match="rerun the older script"):
+        page.render(results)
 
 
 def _result(stem: str, results: Path, **extra):

@@ -5,7 +5,7 @@ spans pressures of 1e5 Pa and compliances of 1e-13 m³/Pa, which float32 cannot 
 :mod:`growjax.simulation.xla_flags` holds an opt-in XLA:CPU option that compiles the solver's loop into one kernel.
 """
 
-__version__ = "0.8.0"  # the one version string: pyproject.toml reads it (setuptools dynamic version)
+__version__ = "0.9.0"  # the one version string: pyproject.toml reads it (setuptools dynamic version)
 
 import jax
 

@@ -24,7 +24,12 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-OK, RUN_FAILED, BAD_INPUT = 0, 1, 2  # exit statuses: success, a run failed, a bad option or file
+OK = 0
+"""Exit status: every run succeeded."""
+RUN_FAILED = 1
+"""Exit status: a run failed (the reason on standard error, the summary still written)."""
+BAD_INPUT = 2
+"""Exit status: a bad option or file (one line naming it)."""
 SHOWN_WRITTEN = 4  # files an interrupted command names (then how many more)
 
 

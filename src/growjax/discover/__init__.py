@@ -56,8 +56,8 @@ Effect parameters are moved in u with η = s·softplus(u) (η ≥ 0) or η = s·
 s is a tenth of the range's upper end. Every fit is bounded to the physical ranges (η to its effect's, above a
 thousandth of its top, ``ETA_FLOOR``; the base parameters to theirs): a wrong candidate that would climb past its
 range to absorb a misfit stops at the edge (``at_range_edge`` in the evidence), where its runs are also the slowest.
-Intervals on η are Gauss–Newton (delta method) at σ, clipped to the physical range. A fit stops once its steps no
-longer move 2ΔlogL by ``LR_RESOLUTION`` (σ estimated from the data's second differences) nor its cost by
+Intervals on η are Gauss–Newton (delta method) at σ, clipped to the physical range. A fit stops once its steps move
+neither 2ΔlogL by ``LR_RESOLUTION`` (σ estimated from the data's second differences) nor its cost by
 ``COST_NOISE`` of itself, the fast configuration's own noise: below that its trial points only wander
 (`growjax.calibration.levenberg_marquardt`).
 

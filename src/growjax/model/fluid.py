@@ -31,7 +31,7 @@ class Fluid(eqx.Module):
         kinematic_viscosity: ν, m²/s.
         bulk_modulus_liquid: E_l of the pure liquid, Pa.
         air_fraction: α, relative volume of entrained air at atmospheric pressure (–).
-        polytropic_index: gas index n of the air (1.4 adiabatic, as modelled).
+        polytropic_index: polytropic index γ of the air (1.4 adiabatic, as modelled).
     """
 
     density: float = 997.41

@@ -31,11 +31,11 @@ class SyringePump(eqx.Module):
     Attributes:
         syringe_area: plunger area A_s of each syringe, m².
         syringe_stroke: plunger stroke, m (the syringe starts full, at its extend stop).
-        n_syringes: syringes on the platform (static).
+        n_syringes: N_s, syringes on the platform (static).
         lead: lead-screw lead, m/rev.
         screw_viscous_friction: viscous friction μ_S on each screw, N·m/(rad/s).
         platform_mass: carrier platform mass m_p, kg.
-        penetration_coefficient: end-stop penetration coefficient K_p, N·s/m² (Simscape 'Simple' cylinder).
+        penetration_coefficient: end-stop penetration coefficient K_pen, N·s/m² (Simscape 'Simple' cylinder).
     """
 
     syringe_area: float = 2.5e-4
@@ -53,14 +53,14 @@ class SyringePump(eqx.Module):
 
     @property
     def screw_damping(self):
-        """Viscous damping of all screws seen at the platform, b_p = n μ_S R_NS², N·s/m."""
+        """Viscous damping of all screws seen at the platform, b_p = N_s μ_S R_NS², N·s/m."""
         return self.n_syringes * self.screw_viscous_friction * self.screw_ratio**2
 
 
 def cylinder_stop_force(penetration_coefficient, displacement, velocity, extend_limit, retract_limit, width):
     """End-stop force F_c (N) of a Simscape single-acting 'Simple' cylinder, regularised.
 
-    F_c = K_p |ξ − ξ_E| ξ̇ beyond the extend limit while extending, K_p |ξ − ξ_R| ξ̇ beyond
+    F_c = K_pen |ξ − ξ_E| ξ̇ beyond the extend limit while extending, K_pen |ξ − ξ_R| ξ̇ beyond
     the retract limit while retracting, zero otherwise (fully inelastic stop). The
     penetration and the velocity gate are C¹ ramps of ``width`` (m) and ``width``/s.
     """
@@ -81,7 +81,7 @@ def syringe_stop_force(pump: SyringePump, x_platform, v_platform, width):
 
 
 def syringe_load_force(pump: SyringePump, syringe_pressure, x_platform, v_platform, width):
-    """Force of all syringes on the platform (N, +x pushes the plungers in): −n (A_s p_s − F_c)."""
+    """Force of all syringes on the platform (N, +x pushes the plungers in): −N_s (A_s p_s − F_c)."""
     stop = syringe_stop_force(pump, x_platform, v_platform, width)
     return -pump.n_syringes * (pump.syringe_area * syringe_pressure - stop)
 
@@ -108,10 +108,10 @@ def _ramp_balance(damping, stop, drive, width):
 def platform_velocity(pump: SyringePump, drive_force, line_pressure, line_resistance, x_platform, width):
     """Velocity (m/s) of a massless platform: the exact root of :func:`platform_force` = 0.
 
-    The syringes see the line pressure plus a linear line drop, p_s = P + R·n·A_s·v
+    The syringes see the line pressure plus a linear line drop, p_s = P + R·N_s·A_s·v
     (``line_resistance`` R in Pa·s/m³ of total flow). The balance
-    F₀ − B v + n K_p (pen_E·ramp(−v) − pen_R·ramp(v)) = 0, with F₀ = drive − n A_s P and
-    B = b_p + n² A_s² R, is linear outside the end stops' velocity band and quadratic inside
+    F₀ − B v + N_s K_pen (pen_E·ramp(−v) − pen_R·ramp(v)) = 0, with F₀ = drive − N_s A_s P and
+    B = b_p + N_s² A_s² R, is linear outside the end stops' velocity band and quadratic inside
     it, so the root has a closed form on each side of v = 0.
     """
     n, a_s = pump.n_syringes, pump.syringe_area

@@ -4,19 +4,19 @@ The robot is a massless single-acting cylinder of annular area A_r = π(r_o² �
 The Simulink force S_F (eq. 1) acts on its rod, so the rod balance A_r p_r + S_F − F_c = 0
 gives the robot pressure p_r needed to move at velocity v:
 
-    p_r = Y + F_AC/A_r − P·2π r_i μ_c L_c/A_r + ψ(v) + (F_c + F_hs + F_e)/A_r
+    p_r = Y + F_AC/A_r − P·2π r_i μ_c L_c/A_r + p_g(v) + (F_c + F_hs + F_e)/A_r
 
 with F_c the cylinder's end stops, F_hs the rod hard stop and F_e the forces of added
 effects (:mod:`growjax.model.effects`), all opposing the motion. The catheter-friction term enters
 with the sign that *assists* growth, as in the shipped model.
 
-Two growth laws set the velocity term ψ(v) (``GrowingRobot.growth_law``):
+Two growth laws set the velocity term p_g(v) (``GrowingRobot.growth_law``):
 
 * ``"reference"`` — the shipped diagram's sgn(v)|v/ext|^n (Pa). With the published ext it is
   ~1e-10 of the other forces, so ext and n cannot be identified.
 * ``"lockhart"`` — Lockhart's law v = φ_L·((p_r − p_0)/p_ref)^(n_L) while the robot grows,
   with φ_L a velocity (m/s) at the reference excess p_ref = 1 kPa and p_0 the rest pressure.
-  Its inverse ψ(v) = p_ref·(v/φ_L)^(1/n_L) for v > 0 (and 0 while it holds or retracts: the law
+  Its inverse p_g(v) = p_ref·(v/φ_L)^(1/n_L) for v > 0 (and 0 while it holds or retracts: the law
   describes irreversible extension of the membrane) gives the everting membrane a physically
   sized resistance in series with the check valve. A deviation added beside the reference,
   not in place of it.
@@ -65,10 +65,10 @@ class GrowingRobot(eqx.Module):
 
     Attributes:
         yield_pressure: Y, Pa; growth needs the pressure to exceed it.
-        extensibility: ext (φ), the velocity-term divisor, (m/s)·Pa^(−1/n) in the paper's reading.
+        extensibility: ext, the velocity-term divisor, (m/s)·Pa^(−1/n) in the paper's reading.
         growth_exponent: n (–).
         inner_radius: r_i, m.  outer_radius: r_o, m.
-        membrane_thickness: t, m.  membrane_yield_stress: σ_y, Pa.
+        membrane_thickness: t_m, m.  membrane_yield_stress: σ_y, Pa.
         safety_factor: on the membrane hoop-stress limit (–).
         catheter_friction: μ_c (–), friction coefficient between catheter and membrane.
         active_channel_force: F_AC, N, pull of the active channel (0 in the shipped model).
@@ -113,7 +113,7 @@ class GrowingRobot(eqx.Module):
 
 
 def pressure_limit(robot: GrowingRobot):
-    """Safe pressure of the membrane, Pa: 2 t σ_y / (r_o · safety factor) (paper eq. 8)."""
+    """Safe pressure of the membrane, Pa: 2 t_m σ_y / (r_o · safety factor) (paper eq. 8)."""
     return 2.0 * robot.membrane_thickness * robot.membrane_yield_stress / (robot.outer_radius * robot.safety_factor)
 
 
@@ -133,7 +133,7 @@ class RodBalance(eqx.Module):
     friction: jax.Array  # 2π r_i μ_c / A_r, per m of catheter (–/m)
     law_scale: jax.Array  # 1/ext (reference) or 1/φ_L (Lockhart), s/m
     law_exponent: jax.Array  # n (reference) or 1/n_L (Lockhart)
-    stop_per_area: jax.Array  # K_p/A_r, N·s/m² per m²
+    stop_per_area: jax.Array  # K_pen/A_r, N·s/m² per m²
     extend_limit: jax.Array  # stroke − L0, m of displacement
     retract_limit: jax.Array  # −L0
     initial_length: jax.Array  # L0, m
@@ -173,7 +173,7 @@ def rod_balance(robot: GrowingRobot, widths) -> RodBalance:
 
 
 def growth_pressure(rod: RodBalance, velocity):
-    """Growth-law term ψ(v) of the rod balance, Pa (regularised at v = 0 over ``rod.velocity_eps`` m/s).
+    """Growth-law term p_g(v) of the rod balance, Pa (regularised at v = 0 over ``rod.velocity_eps`` m/s).
 
     Reference: sgn(v)|v/ext|^n (eq. 1). Lockhart: p_ref (v/φ_L)^(1/n_L) for v > 0, 0 otherwise
     (the inverse of v = φ_L((p_r − p_0)/p_ref)^(n_L)).
@@ -193,7 +193,7 @@ def lockhart_pressure(velocity, inverse_speed, exponent, eps):
 
 
 def velocity_pressure(robot: GrowingRobot, velocity, velocity_eps):
-    """ψ(v) of ``robot``'s growth law, Pa (see :func:`growth_pressure`)."""
+    """p_g(v) of ``robot``'s growth law, Pa (see :func:`growth_pressure`)."""
     return growth_pressure(rod_balance(robot, (velocity_eps, 1e-6)), velocity)
 
 

@@ -11,8 +11,12 @@ from jaxtyping import Array, Float, Int
 
 __all__ = ["OK", "PRESSURE_LIMIT", "SOLVER_FAILED", "STATUS_NAMES", "Trajectory", "finish", "status_name"]
 
-# Status codes of a trajectory.
-OK, PRESSURE_LIMIT, SOLVER_FAILED = 0, 1, 2
+OK = 0
+"""Status of a trajectory: the run reached the end of its window."""
+PRESSURE_LIMIT = 1
+"""Status of a trajectory: the sensed pressure crossed the membrane's limit, and the run stopped there."""
+SOLVER_FAILED = 2
+"""Status of a trajectory: the solver failed (a non-finite state, the step budget spent, NaN parameters)."""
 STATUS_NAMES = {OK: "ok", PRESSURE_LIMIT: "pressure_limit", SOLVER_FAILED: "solver_failed"}
 
 
