@@ -26,7 +26,7 @@ class _Echo:
 
         def add_arguments(parser):
             parser.add_argument("--out", default="out/echo")
-            options.json_option(parser, "the summary as JSON")
+            options.json_option(parser)
 
         def run(args):
             (command.out_dir(args) / "partial.txt").write_text("kept\n")
@@ -48,9 +48,9 @@ def _terminate(*args, **kwargs):
 
 
 def test_ctrl_c_during_a_fit_exits_130_in_one_line_before_writing_anything(monkeypatch, tmp_path, capsys):
-    from growjax.calibration import fit as gf
+    import growjax.calibration as cal
 
-    monkeypatch.setattr(gf, "fit", _interrupt)
+    monkeypatch.setattr(cal, "fit", _interrupt)
     assert cli.main(["fit", "--quiet", "--out", str(tmp_path / "out")]) == 130
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ["growjax fit: interrupted before writing anything"]
@@ -205,7 +205,7 @@ def test_chains_that_did_not_mix_are_said_not_to_give_the_posterior():
 
 def test_a_population_stopped_at_its_joint_fit_reports_that_and_no_population(monkeypatch, tmp_path, capsys):
     """The joint fit does not converge: exit 1, the summary says no population was sampled (and is written)."""
-    from growjax.calibration import joint
+    import growjax.calibration as cal
 
     class NotConverged:
         status = "max_steps"
@@ -213,7 +213,7 @@ def test_a_population_stopped_at_its_joint_fit_reports_that_and_no_population(mo
         def summary(self):
             return {"status": self.status}
 
-    monkeypatch.setattr(joint, "fit_set", lambda *a, **k: NotConverged())
+    monkeypatch.setattr(cal, "fit", lambda *a, **k: NotConverged())
     manifest = Path(__file__).parents[1] / "src/growjax/data/datasets/population/population.toml"
     out, summary = tmp_path / "out", tmp_path / "p.json"
     argv = ["posterior", str(manifest), "--hierarchical", "Y", "--quiet", "--out", str(out), "--json", str(summary)]

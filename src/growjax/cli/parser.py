@@ -59,7 +59,9 @@ class Parser(argparse.ArgumentParser):
         self.exit(BAD_INPUT, f"{self.prog}: error: {where}{message}\n")
 
     def parse_args(self, args=None, namespace=None):
-        parsed = super().parse_args(args, namespace)
+        parsed, extras = self.parse_known_args(args, namespace)
+        if extras:  # named by the command's own parser: "growjax control: error: unrecognized arguments: …"
+            self._parser_of(parsed).error(f"unrecognized arguments: {' '.join(extras)}")
         if namespace is None:
             parsed.given = _given(self, args)
             if getattr(parsed, "config", None):
@@ -67,6 +69,13 @@ class Parser(argparse.ArgumentParser):
 
                 config.apply(self, parsed)
         return parsed
+
+    def _parser_of(self, parsed) -> argparse.ArgumentParser:
+        """The subcommand's parser of ``parsed`` (this parser where there is none)."""
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                return action.choices.get(getattr(parsed, action.dest or "command", None), self)
+        return self
 
     def format_help(self, rare: bool = False) -> str:
         """The help: the common options, and with ``rare`` the rare ones in a section of their own."""
