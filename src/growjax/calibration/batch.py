@@ -264,10 +264,16 @@ def pad_samples(problems):
             pr, m = problems[e], int(np.size(problems[e].times))
             pad = lambda a, k=size - m: jnp.concatenate([jnp.asarray(a), jnp.repeat(jnp.asarray(a)[-1:], k)])  # noqa: E731
             pressure = pad(pr.pressure) if pr.pressure is not None else jnp.zeros(size) if sensed else None
+            weight = None
+            if sensed:  # the padded rows and a run without the pressure score none
+                own = pr.pressure_weight
+                if own is None:
+                    own = jnp.ones(m) if pr.pressure is not None else jnp.zeros(m)
+                weight = jnp.concatenate([jnp.asarray(own, float), jnp.zeros(size - m)])
             out[e] = eqx.tree_at(
-                lambda p: (p.times, p.length, p.pressure),
+                lambda p: (p.times, p.length, p.pressure, p.pressure_weight),
                 pr,
-                (pad(pr.times), pad(pr.length), pressure),
+                (pad(pr.times), pad(pr.length), pressure, weight),
                 is_leaf=lambda x: x is None,
             )
             rows[e] = np.r_[np.arange(m), size + np.arange(m)] if pr.pressure is not None else np.arange(m)

@@ -153,6 +153,7 @@ def _problems(runs, bases, modelled, config: Config, likelihood: Likelihood) -> 
             window,
             likelihood.sigma_length,
             likelihood.sigma_pressure,
+            thin_pressure=likelihood.discrepancy != "none",
         )
         if pr.times.size < 2:
             raise ValueError(f"experiment {run.name!r}: fewer than two samples inside the window")

@@ -15,6 +15,7 @@ import numpy as np
 
 import growjax.calibration.tolerance as tl
 from growjax.calibration.least_squares import linearise
+from growjax.data.experiment import informative_samples
 from growjax.model import params as gp
 from growjax.simulation.simulate import as_arrays, input_breaks, sample_times, simulate
 from growjax.simulation.trajectory import OK
@@ -91,6 +92,7 @@ class Problem(eqx.Module):
     config: object = eqx.field(static=True)
     sigma_length: jax.Array  # () m, the length's scale (a leaf: one compiled program serves every scale)
     sigma_pressure: jax.Array  # () Pa
+    pressure_weight: jax.Array | None = None  # (m,) 1 where a pressure sample is scored, 0 where it repeats others
 
     def residuals(self, z, args=None):
         """Non-dimensional residuals r(z), shape (m,) or (2m,), at the coordinates z (p,)."""
@@ -109,7 +111,8 @@ class Problem(eqx.Module):
     def _scaled(self, traj):
         r = (traj.length - self.length) / self.sigma_length
         if self.pressure is not None:
-            r = jnp.concatenate([r, (traj.pressure - self.pressure) / self.sigma_pressure])
+            weight = 1.0 if self.pressure_weight is None else self.pressure_weight
+            r = jnp.concatenate([r, weight * (traj.pressure - self.pressure) / self.sigma_pressure])
         return r
 
     def _residuals(self, z):
@@ -124,10 +127,22 @@ def _residuals(z, problem: Problem):
 
 
 def make_problem(
-    base, names, inputs, config, times, length, pressure=None, window=None, sigma_length=1e-3, sigma_pressure=5e3
+    base,
+    names,
+    inputs,
+    config,
+    times,
+    length,
+    pressure=None,
+    window=None,
+    sigma_length=1e-3,
+    sigma_pressure=5e3,
+    thin_pressure: bool = False,
 ) -> Problem:
     """The `Problem` for the parameters ``names`` on the data inside ``window`` (t_start, t_end) s (default: the
-    configuration's span); ``times`` (m,) s, ``length`` (m,) m, ``pressure`` (m,) Pa or None."""
+    configuration's span); ``times`` (m,) s, ``length`` (m,) m, ``pressure`` (m,) Pa or None. ``thin_pressure``:
+    a pressure record interpolated between keyframes is scored at its keyframes alone
+    (`growjax.data.experiment.informative_samples`), so that resampling it does not change its information."""
     names = tuple(gp.resolve_name(base, n) for n in names)
     config = config.replace(adjoint="forward")
     refs = jnp.asarray([float(gp.get(base, n)) for n in names])
@@ -148,7 +163,16 @@ def make_problem(
         config,
         jnp.asarray(sigma_length, float),
         jnp.asarray(sigma_pressure, float),
+        _pressure_weight(pick(pressure), thin_pressure),
     )
+
+
+def _pressure_weight(pressure, thin: bool):
+    """(m,) 1.0 at the pressure samples scored, 0.0 at those an interpolation fixed; None without a pressure."""
+    if pressure is None:
+        return None
+    used = informative_samples(np.asarray(pressure)) if thin else np.ones(np.size(pressure), bool)
+    return jnp.asarray(used, float)
 
 
 @eqx.filter_jit
