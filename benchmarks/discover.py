@@ -1,7 +1,7 @@
 """The discovery matrix: every catalogue effect × two magnitudes × seeds, plus clean seeds.
 
 Run: ``python benchmarks/discover.py [--seeds 10] [--clean 20] [--t-end 10] [--effects NAME ...] [--factors 1 2]
-[--first-seed 1000] [--first-clean-seed 2000] [--profile] [--tolerance NAME=REL ...] [--baseline N] [--merge FILE ...]``
+[--first-seed 1000] [--first-clean-seed 2000] [--tolerance NAME=REL ...] [--baseline N] [--merge FILE ...]``
 → ``benchmarks/results/discover.json``. Data come from :func:`growjax.data.synthetic.make_experiment`
 (the reference configuration; one noise-free trace per effect and magnitude, seeds add noise), and
 every run is :func:`growjax.discover.discover` over the whole catalogue on the fast configuration.
@@ -10,9 +10,8 @@ Reported: the share of runs that name the hidden effect (or, where it trades wit
 another effect, report it confounded), the share that claim another catalogue effect, the false-positive rate on clean
 data (any effect claimed or confounded), the coverage of the magnitude by its 90 % interval where the effect is named,
 the median RMSE after / noise, and what a run's time is made of (fits, linearisations, wall time per linearisation).
-``--profile`` also times every linearisation and adds to each run ``profile``: per model (the candidates switched on,
-``base`` for none) the count, the summed and the largest wall time, s (threads overlap, so sums exceed the run's wall
-time), and its largest effect parameter in discover's coordinates (η = top/10 · softplus(u)).
+A linearisation's time per candidate switched on, and what it is made of: ``benchmarks/discover_linearise.py
+--per-effect``.
 """
 
 from __future__ import annotations
@@ -24,7 +23,6 @@ import sys
 import time
 from pathlib import Path
 
-import jax
 import numpy as np
 
 import growjax as gj
@@ -33,7 +31,6 @@ from growjax.calibration import Likelihood
 from growjax.calibration import tolerance as tl
 from growjax.data import experiment as ex
 from growjax.data import synthetic as sy
-from growjax.discover import _candidates as gd_fits
 from growjax.model import effects as fx
 from growjax.model import params as gp
 
@@ -42,53 +39,19 @@ sys.path.insert(0, str(REPO / "benchmarks"))
 from _environment import environment
 
 
-class Profile:
-    """Times every call of discover's linearisation (one forward-mode solve), by the candidates switched on; installed
-    in ``growjax.discover._candidates``, where the fits look the linearisation up."""
-
-    def __init__(self):
-        self.calls, self.inner = [], gd_fits._linearised
-
-    def __call__(self, w, problem, mask, select, z_fixed):
-        start = time.perf_counter()
-        out = jax.block_until_ready(self.inner(w, problem, mask, select, z_fixed))
-        on = tuple(int(i) for i in np.nonzero(np.asarray(mask))[0])
-        # w = (ln(Y/Y_ref), u of each effect on): the benchmark fits Y alone, so w[1:] are the effects' u
-        self.calls.append((on, time.perf_counter() - start, float(np.max(np.asarray(w)[1:], initial=0.0))))
-        return out
-
-    def summary(self) -> dict:
-        names, out = tuple(fx.CATALOGUE), {}
-        for on, wall, u in self.calls:
-            row = out.setdefault(
-                ",".join(names[i] for i in on) or "base", {"n": 0, "total_s": 0.0, "max_s": 0.0, "max_u": u}
-            )
-            row["n"] += 1
-            row["total_s"] += wall
-            row["max_s"], row["max_u"] = max(row["max_s"], wall), max(row["max_u"], u)
-        return dict(sorted(out.items(), key=lambda kv: -kv[1]["total_s"]))
-
-
-def one_run(effect, magnitude, seed, t_end, profile=False, discrepancy="matern32", tolerances=None):
+def one_run(effect, magnitude, seed, t_end, discrepancy="matern32", tolerances=None):
     exp = sy.make_experiment(effect, magnitude, seed=seed, t_end=t_end)
     cfg = gj.Config(t1=t_end)
     inputs = ex.to_inputs(exp, "forward", gj.reference(), cfg.t0, cfg.t1)
     keep = exp.time >= cfg.t0
-    timer = Profile() if profile else None
-    if timer is not None:
-        gd_fits._linearised = timer
     start = time.perf_counter()
-    try:
-        res = gd.discover(
-            exp.time[keep],
-            exp["robot_length_m"][keep],
-            inputs,
-            config=cfg,
-            likelihood=Likelihood(discrepancy=discrepancy, tolerances=tolerances),
-        )
-    finally:
-        if timer is not None:
-            gd_fits._linearised = timer.inner
+    res = gd.discover(
+        exp.time[keep],
+        exp["robot_length_m"][keep],
+        inputs,
+        config=cfg,
+        likelihood=Likelihood(discrepancy=discrepancy, tolerances=tolerances),
+    )
     truth = exp.metadata
     named = res.effect == effect
     confounded = res.effect == "confounded" and effect in res.confounded_with  # not if another effect is claimed
@@ -123,7 +86,6 @@ def one_run(effect, magnitude, seed, t_end, profile=False, discrepancy="matern32
         "threshold": res.threshold,
         "misfit_before": res.misfit_before,
         "tolerances": tolerances,
-        **({"profile": timer.summary()} if timer is not None else {}),
     }
 
 
@@ -209,7 +171,6 @@ def main() -> None:
     parser.add_argument("--first-seed", type=int, default=1000, help="seed of the first hidden-effect run")
     parser.add_argument("--first-clean-seed", type=int, default=2000, help="seed of the first clean run")
     parser.add_argument("--out", default=str(REPO / "benchmarks" / "results" / "discover.json"))
-    parser.add_argument("--profile", action="store_true", help="time every linearisation, by the candidates on")
     parser.add_argument(
         "--tolerance",
         action="append",
@@ -248,12 +209,10 @@ def main() -> None:
         for factor in args.factors:
             magnitude = factor * sy.moderate_magnitude(effect)
             for seed in range(args.seeds):
-                runs.append(
-                    one_run(effect, magnitude, args.first_seed + seed, args.t_end, args.profile, tolerances=rig)
-                )
+                runs.append(one_run(effect, magnitude, args.first_seed + seed, args.t_end, tolerances=rig))
                 print(json.dumps(runs[-1]), flush=True)
     for seed in range(args.clean):
-        runs.append(one_run(None, None, args.first_clean_seed + seed, args.t_end, args.profile, tolerances=rig))
+        runs.append(one_run(None, None, args.first_clean_seed + seed, args.t_end, tolerances=rig))
         print(json.dumps(runs[-1]), flush=True)
     baseline = [
         one_run(None, None, args.first_clean_seed + seed, args.t_end, discrepancy="none")

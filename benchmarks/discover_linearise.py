@@ -71,7 +71,7 @@ def main():
     model = (jnp.asarray(mask), jnp.asarray(select), jnp.zeros(p + k))
     w = jnp.asarray([0.0, 0.3, 0.0])
     start = time.perf_counter()
-    lowered = gd._linearised.lower(w, problem, *model)
+    lowered = gd.linearised.lower(w, problem, *model)
     lower_s = time.perf_counter() - start
     start = time.perf_counter()
     lowered.compile()
@@ -80,7 +80,7 @@ def main():
         f"{len(names)} candidates: tracing and lowering {lower_s:.1f} s ({lowered.as_text().count(chr(10))} lines of "
         f"StableHLO), XLA compile {compile_s:.1f} s"
     )
-    first, wall = timed(lambda: gd._linearised(w, problem, *model))
+    first, wall = timed(lambda: gd.linearised(w, problem, *model))
     print(f"{len(names)} candidates: first call after that {first:.1f} s, then {1e3 * wall:.0f} ms per linearisation")
     if args.per_effect:
         primal = eqx.filter_jit(
@@ -114,7 +114,7 @@ def main():
                 u = 0.0 if bool(problem.signed[j]) else float(np.log(np.expm1(10.0 * frac)))
                 wj = jnp.asarray([0.0, u, 0.0])
                 model_j = (jnp.asarray(m), jnp.asarray(sel), jnp.zeros(p + k))
-                _, wall = timed(lambda wj=wj, model_j=model_j: gd._linearised(wj, problem, *model_j), repeat=3)
+                _, wall = timed(lambda wj=wj, model_j=model_j: gd.linearised(wj, problem, *model_j), repeat=3)
                 row.append(f"{1e3 * wall:5.0f}")
             ms, steps = simulation(j)
             print(
@@ -124,9 +124,9 @@ def main():
     if args.batch:
         ws = jnp.stack([w.at[1].set(-1.0 + 0.3 * b) for b in range(args.batch)])
         batched = eqx.filter_jit(
-            jax.vmap(lambda x, m, s, z: gd._linearised(x, problem, m, s, z), in_axes=(0, None, None, None))
+            jax.vmap(lambda x, m, s, z: gd.linearised(x, problem, m, s, z), in_axes=(0, None, None, None))
         )
-        _, loop = timed(lambda: [gd._linearised(x, problem, *model) for x in ws])
+        _, loop = timed(lambda: [gd.linearised(x, problem, *model) for x in ws])
         _, vmapped = timed(lambda: batched(ws, *model))
         print(f"{args.batch} linearisations: {loop:.2f} s one after another, {vmapped:.2f} s under one vmap")
 

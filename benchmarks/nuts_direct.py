@@ -216,7 +216,7 @@ def geometry(exp, inputs, base, cfg, chains, warmup, samples, target_accepts, ma
     init, inverse_mass = gpost.precondition(make_model(mean), priors, mean, y, make_model=make_model)
     laplace_s = time.perf_counter() - start
     v0 = jnp.asarray([init[p.site] for p in priors])
-    mu0, jac = gpost._jitted_jacobian(mean, tuple(names))(v0)  # the Laplace start's compiled Jacobian
+    mu0, jac = jax.jit(gpost.value_and_jacobian(mean, tuple(names)))(v0)  # the model's Jacobian at the start
 
     def linear(theta):
         return mu0 + jac @ (jnp.stack([theta[n] for n in names]) - v0)

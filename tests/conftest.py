@@ -23,6 +23,7 @@ if "xla_disable_hlo_passes" not in os.environ.get("XLA_FLAGS", ""):
     )
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -44,6 +45,31 @@ def one_experiment(times, length, inputs=None, *, base=None, drive="forward", pr
     ``inputs`` (None: made from the columns) on the parameters ``base`` (None: the drive's reference)."""
     experiment = ex.from_arrays(times, length, pressure)
     return xs.ExperimentSet.single(experiment, drive=drive, defaults=base, inputs=inputs, window=window)
+
+
+def linear_emulator(prior, times):
+    """An emulator for the prior ``prior`` of Y at ``times`` (s) whose table is a known length,
+    L = 20 mm/s · (1 − (Y − 9 kPa)/20 kPa) · t, linear in Y (so its ghost nodes are exact): NUTS runs in seconds,
+    no model solve or compile of the simulator."""
+    from growjax.posterior import emulator as em
+
+    spacing = (prior.high - prior.low) / (prior.nodes - 1)
+    nodes = prior.low + spacing * np.arange(-1, prior.nodes + 1)  # with one ghost node per side
+    values = 2e-2 * (1.0 - (nodes[:, None] - 9000.0) / 20000.0) * times[None, :]
+    return em.Emulator(
+        values=jnp.asarray(values),
+        times=jnp.asarray(times),
+        lows=jnp.asarray([prior.low]),
+        highs=jnp.asarray([prior.high]),
+        error_rms=jnp.asarray(0.0),
+        error_max=jnp.asarray(0.0),
+        base=gj.reference(),
+        inputs=None,
+        names=(prior.name,),
+        log=(False,),
+        nodes=(prior.nodes,),
+        config=gj.Config(t1=0.8),
+    )
 
 
 # The test run spreads whole files over its workers (``--dist loadfile``), except the files that fit the published

@@ -49,12 +49,12 @@ def test_phases_split_a_pulse_into_growing_holding_and_retracting():
 def test_a_correlated_effect_is_determined_only_when_its_interval_pins_its_size():
     """The growth-rate cap recovered as 353 s/m (interval within a factor 2) is named despite its correlation with
     Y; the public pull's interval 0.0038–0.0156 N around 0.0097 N is not; an interval touching 0 never is."""
-    assert gd._pinned(353.0, (320.0, 390.0))
-    assert gd._pinned(-8.7e-5, (-1.2e-4, -6e-5))  # a signed effect, on one side of 0
-    assert not gd._pinned(0.0097, (0.0038, 0.0156))
-    assert not gd._pinned(1.0, (0.0, 1.5))
-    assert not gd._pinned(-8.7e-5, (-1.7e-4, 3e-6))
-    assert not gd._pinned(2.6e-21, (2.6e-21, 2.6e-21))  # zero width: a vanished Jacobian column, not a pinned size
+    assert gd.is_pinned(353.0, (320.0, 390.0))
+    assert gd.is_pinned(-8.7e-5, (-1.2e-4, -6e-5))  # a signed effect, on one side of 0
+    assert not gd.is_pinned(0.0097, (0.0038, 0.0156))
+    assert not gd.is_pinned(1.0, (0.0, 1.5))
+    assert not gd.is_pinned(-8.7e-5, (-1.7e-4, 3e-6))
+    assert not gd.is_pinned(2.6e-21, (2.6e-21, 2.6e-21))  # zero width: a vanished Jacobian column, not a pinned size
 
 
 def test_candidate_parameters_are_named_with_units_and_ranges():
@@ -249,7 +249,7 @@ def test_candidate_fits_stay_in_their_physical_ranges():
     mask, select = np.eye(3)[k], np.zeros((4, 2))  # Y and the leak fitted: discover's first-round shape
     select[0, 0] = select[1 + k, 1] = 1.0
     w0 = np.array([0.0, math.log(math.expm1(2.0))])  # the leak starts at a fifth of its range
-    z, _, _, _, _, _ = gd._fit_model(problem, *(jnp.asarray(a) for a in (w0, mask, select, np.zeros(4))), 40)
+    z, _, _, _, _, _ = gd.fit_model(problem, *(jnp.asarray(a) for a in (w0, mask, select, np.zeros(4))), 40)
     leak = float(problem.effect_values(jnp.asarray(z[1:]), jnp.asarray(mask))[k])
     assert leak == pytest.approx(top, rel=1e-6)  # pressed against the bound: the data ask for more
 

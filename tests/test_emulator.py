@@ -15,7 +15,7 @@ def _table(f, axes):
     lows = [np.log(a.low) if a.log else a.low for a in axes]
     highs = [np.log(a.high) if a.log else a.high for a in axes]
     return em.Emulator(
-        values=jnp.asarray(em._pad_linear(values, len(axes))),
+        values=jnp.asarray(em.pad_linear(values, len(axes))),
         times=jnp.zeros(2),
         lows=jnp.asarray(lows),
         highs=jnp.asarray(highs),

@@ -13,19 +13,17 @@ import matplotlib
 matplotlib.use("Agg")
 
 import arviz_stats as azs
-import jax.numpy as jnp
 import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 import xarray as xr
-from conftest import one_experiment
+from conftest import linear_emulator, one_experiment
 from packaging.requirements import Requirement
 
 import growjax as gj
 from growjax import plotting as gplot
 from growjax import posterior as gpost
 from growjax.calibration import Likelihood
-from growjax.posterior import emulator as em
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -42,28 +40,6 @@ TIMES = np.arange(0.01, 0.81, 0.01)  # s
 GROUPS = {"posterior", "posterior_predictive", "log_likelihood", "sample_stats", "observed_data", "constant_data"}
 
 
-def _linear_emulator(prior, times=TIMES):
-    """An emulator whose table is a known length, L = 20 mm/s · (1 − (Y − 9 kPa)/20 kPa) · t, linear in Y (so its
-    ghost nodes are exact): NUTS runs in seconds, no model solve or compile of the simulator."""
-    spacing = (prior.high - prior.low) / (prior.nodes - 1)
-    nodes = prior.low + spacing * np.arange(-1, prior.nodes + 1)  # with one ghost node per side
-    values = 2e-2 * (1.0 - (nodes[:, None] - 9000.0) / 20000.0) * times[None, :]
-    return em.Emulator(
-        values=jnp.asarray(values),
-        times=jnp.asarray(times),
-        lows=jnp.asarray([prior.low]),
-        highs=jnp.asarray([prior.high]),
-        error_rms=jnp.asarray(0.0),
-        error_max=jnp.asarray(0.0),
-        base=gj.reference(),
-        inputs=None,
-        names=(prior.name,),
-        log=(False,),
-        nodes=(prior.nodes,),
-        config=gj.Config(t1=0.8),
-    )
-
-
 @pytest.fixture(scope="module")
 def small_posterior():
     """2 chains × 40 draws of Y and σ, through the emulator above, on data made at Y = 9 kPa with 0.2 mm noise."""
@@ -78,7 +54,7 @@ def small_posterior():
         samples=40,
         seed=0,
         progress=False,
-        emulate=_linear_emulator(prior),
+        emulate=linear_emulator(prior, TIMES),
         likelihood=Likelihood(discrepancy="none", tolerances={}, model_error=0.0),
     )
 
@@ -137,7 +113,7 @@ def test_the_posterior_carries_the_fits_model_error_allowance_without_a_discrepa
     config = gj.Config(t1=10.0)
     none = Likelihood(discrepancy="none", tolerances={})
     kw = dict(config=config, priors=[prior], chains=2, warmup=150, samples=300, seed=0, progress=False)
-    emulate = _linear_emulator(prior, times)
+    emulate = linear_emulator(prior, times)
     carried = gpost.sample(one_experiment(times, length), likelihood=none, emulate=emulate, **kw)
     bare = gpost.sample(one_experiment(times, length), likelihood=none.replace(model_error=0.0), emulate=emulate, **kw)
     assert none.model_error_for(config) == FAST_MODEL_ERROR  # what the fit propagates (its fast_model_error)

@@ -203,6 +203,24 @@ def test_no_library_module_selects_a_matplotlib_backend():
     assert not offenders, offenders
 
 
+def _uses_mock(tree) -> bool:
+    """Whether a module imports ``unittest.mock`` (``import unittest.mock``, ``from unittest import mock``, ...)."""
+    return any(
+        imported == "unittest.mock" or (imported == "unittest" and (names is None or "mock" in names))
+        for imported, names in _imports(tree)
+    )
+
+
 def test_no_library_module_uses_unittest_mock():
-    offenders = [name for name, path, _ in _modules() if "unittest.mock" in path.read_text()]
+    offenders = [name for name, path, tree in _modules() if "unittest.mock" in path.read_text() or _uses_mock(tree)]
+    assert not offenders, offenders
+
+
+def test_no_test_or_benchmark_mocks_growjax():
+    offenders = [
+        str(path.relative_to(REPO))
+        for folder in ("tests", "benchmarks")
+        for path in sorted((REPO / folder).rglob("*.py"))
+        if _uses_mock(ast.parse(path.read_text(), filename=str(path)))
+    ]
     assert not offenders, offenders

@@ -1,10 +1,17 @@
-"""Progress output: bars on a terminal, a line every ~10 % on other streams, nothing when quiet."""
+"""Progress output: bars on a terminal, a line every ~10 % on other streams, nothing when quiet; a posterior's
+draws the same wherever its progress goes."""
 
 import io
+import sys
 
+import numpy as np
+from conftest import linear_emulator, one_experiment
 from tqdm import tqdm
 
+import growjax as gj
+from growjax import posterior as gpost
 from growjax import progress as prog
+from growjax.calibration import Likelihood
 
 
 class _Terminal(io.StringIO):
@@ -60,38 +67,29 @@ def test_quiet_prints_nothing_and_a_terminal_gets_a_bar():
     assert prog.terminal(terminal) and not prog.terminal(io.StringIO())
 
 
-def test_numpyro_progress_in_a_log_is_plain_lines_with_the_same_draws(monkeypatch, capsys):
-    """Where stderr is not a terminal, NumPyro's bars become ~10 % lines; the sampler runs the same loop as with
-    its bars, so the draws are equal bit for bit."""
-    import jax
-    import numpy as np
-    import numpyro
-    import numpyro.distributions as dist
-    from numpyro.infer import MCMC, NUTS
-
-    from growjax.posterior._sample import _numpyro_progress
-
+def test_posterior_draws_do_not_depend_on_where_progress_goes(monkeypatch):
+    """A posterior (2 chains through a linear emulator) drawn with its phases in a log, and with NumPyro's bars on a
+    terminal: a line per phase in the log, bars only on the terminal, the same draws. NumPyro steps its bars' loop
+    from Python and compiles the quiet one whole, so the two round apart by a few units in the last place (a log's
+    draws and a quiet run's are the same loop, equal bit for bit)."""
     for name in ("CI", "PYTEST_XDIST_WORKER"):  # NumPyro turns its bars off under these
         monkeypatch.delenv(name, raising=False)
-    data = np.random.default_rng(0).normal(1.0, 0.5, 30)
+    prior = gpost.paper_priors()[0]
+    times = np.arange(0.01, 0.81, 0.01)  # s
+    length = 2e-2 * times + np.random.default_rng(0).normal(0.0, 2e-4, times.size)
+    kw = dict(config=gj.Config(t1=0.8), priors=[prior], chains=2, warmup=30, samples=30, seed=1, progress=True)
+    kw.update(emulate=linear_emulator(prior, times))
+    kw.update(likelihood=Likelihood(discrepancy="none", tolerances={}, model_error=0.0))
 
-    def model(y):
-        m = numpyro.sample("m", dist.Normal(0.0, 10.0))
-        numpyro.sample("y", dist.Normal(m, 0.5), obs=y)
+    def draws(stream):
+        monkeypatch.setattr(sys, "stderr", stream)
+        post = gpost.sample(one_experiment(times, length), **kw)
+        return np.asarray(post.idata.posterior["Y"]), stream.getvalue()
 
-    def draws(patched: bool):
-        mcmc = MCMC(NUTS(model), num_warmup=60, num_samples=60, num_chains=2, chain_method="vectorized")
-        if patched:
-            with _numpyro_progress(True):
-                mcmc.run(jax.random.PRNGKey(3), data)
-        else:
-            mcmc.run(jax.random.PRNGKey(3), data)
-        return np.asarray(mcmc.get_samples()["m"])
-
-    bars = draws(False)
-    capsys.readouterr()
-    lines = draws(True)
-    err = capsys.readouterr().err
-    np.testing.assert_array_equal(lines, bars)
-    assert "\r" not in err and len(err.splitlines()) == 10
-    assert err.splitlines()[0].startswith("posterior: NUTS: 12/120 draws (10 %)") and err.endswith("sample\n")
+    logged, log = draws(io.StringIO())
+    shown, bars = draws(_Terminal())
+    assert "\r" not in log and all(line.startswith("posterior: ") for line in log.splitlines())
+    assert log.splitlines()[-1].startswith("posterior: NUTS done in ")
+    assert "\r" in bars and "sample: 100%" in bars  # NumPyro's bar, at the end of its kept draws
+    assert logged.shape == (2, 30) and np.std(logged) > 1.0  # Pa: the chains move
+    np.testing.assert_allclose(shown, logged, rtol=1e-9, atol=0.0)

@@ -1,5 +1,6 @@
 """Batched sweeps: design, equality with single runs, chunking, sharding, failures, Sobol, CLI."""
 
+import io
 import json
 import os
 import shutil
@@ -16,7 +17,6 @@ import pytest
 import growjax as gj
 from growjax import sweep as sw
 from growjax.data import experiment as ex
-from growjax.sweep import _sweep as sweep_impl
 
 CFG = gj.Config(t1=2.0)
 REPO = Path(__file__).resolve().parents[1]
@@ -227,20 +227,24 @@ def test_stored_sweep_stopped_and_resumed_equals_an_uninterrupted_one(setup, tmp
         sw.lhs_sweep(6, base, inputs, CFG, measured=measured, max_chunks=1)
 
 
-def test_a_signal_stops_a_stored_sweep_after_the_chunk_in_flight(setup, tmp_path, monkeypatch):
-    """SIGTERM raised while the first chunk runs: that chunk is kept, the sweep stops before the next."""
-    base, inputs, measured = setup
-    run_chunk = sweep_impl._run_chunk
+class _SignalOnFirstChunk(io.StringIO):
+    """A log (stderr) that raises SIGTERM in the process as the sweep reports its first chunk done."""
 
-    def signalled(plan, c):
-        if c == 0:
+    def write(self, text):
+        if text.startswith("sweep: 1/3 chunks"):
             os.kill(os.getpid(), signal.SIGTERM)
-        return run_chunk(plan, c)
+        return super().write(text)
 
-    monkeypatch.setattr(sweep_impl, "_run_chunk", signalled)
+
+def test_a_signal_stops_a_stored_sweep_after_the_chunk_in_flight(setup, tmp_path, monkeypatch):
+    """SIGTERM raised while the sweep runs (as it reports its first chunk): that chunk is kept, the sweep stops
+    before the next."""
+    base, inputs, measured = setup
+    monkeypatch.setattr(sys, "stderr", _SignalOnFirstChunk())
     with pytest.raises(sw.SweepInterrupted, match="1 of 3 chunks") as stop:
-        sw.lhs_sweep(6, base, inputs, CFG, seed=7, measured=measured, chunk_size=2, store=tmp_path / "s")
+        sw.lhs_sweep(6, base, inputs, CFG, seed=7, measured=measured, chunk_size=2, store=tmp_path / "s", progress=True)
     assert stop.value.signal == signal.SIGTERM
+    assert "sweep: 1/3 chunks" in sys.stderr.getvalue()
     assert sw.load(tmp_path / "s").reasons == ["ok"] * 2 + ["not_run"] * 4
     assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # the handlers are put back
 

@@ -2,8 +2,8 @@
 when quiet.
 
 ``bar(total, desc, unit, enabled)`` returns an object with ``update(n)`` and ``close()`` (also a context
-manager): ``tqdm`` where the stream is a terminal; :class:`Lines` where it is a file or a pipe (a log of a
-batch job: at most ~11 lines of ~60 characters per bar); :class:`Silent` when not ``enabled``.
+manager): ``tqdm`` where the stream is a terminal; `Lines` where it is a file or a pipe (a log of a
+batch job: at most ~11 lines of ~60 characters per bar); `Silent` when not ``enabled``.
 ``note(text, enabled)`` writes one line (a phase starting or ending) on the same stream. The stream is
 ``sys.stderr`` unless given, read when called (so that a redirected or captured stream is the one used).
 """
@@ -45,16 +45,19 @@ class Silent:
 
 
 class Lines(Silent):
-    """One line ``desc: k/total unit (p %), t s[, phase]`` each time another ``step`` of ``total`` is done, and at
-    the end. Also stands in for the part of tqdm's interface that NumPyro uses (iteration over ``iterable``,
-    ``set_description``: the phase shown where ``phases``, ``set_postfix_str``: ignored); thread-safe."""
+    """One line ``desc: k/total unit (p %), t s`` each time another ``step`` of ``total`` is done, and at the end;
+    thread-safe.
 
-    def __init__(
-        self, total: int, desc: str, unit: str = "", stream=None, step: float = STEP, iterable=None, phases: bool = True
-    ):
-        self.total, self.desc, self.unit, self.step, self.phases = max(int(total), 0), desc, unit, step, phases
+    Args:
+        total: the number of steps.
+        desc, unit: the line's label and the steps' unit (plural with an s).
+        stream: where the lines go (``sys.stderr`` if None).
+        step: the share of ``total`` between lines.
+    """
+
+    def __init__(self, total: int, desc: str, unit: str = "", stream=None, step: float = STEP):
+        self.total, self.desc, self.unit, self.step = max(int(total), 0), desc, unit, step
         self.stream = stream if stream is not None else sys.stderr
-        self.iterable, self.phase = iterable, ""
         self.done, self._shown, self._written, self._closed = 0, 0, -1, False
         self._start = time.perf_counter()
         self._lock = threading.Lock()
@@ -76,25 +79,12 @@ class Lines(Silent):
                 self._write()
             self._closed = True
 
-    def __iter__(self):
-        for item in self.iterable if self.iterable is not None else range(self.total):
-            yield item
-            self.update(1)
-
-    def set_description(self, desc: str = "", refresh: bool = True) -> None:
-        self.phase = str(desc).strip()
-
-    def set_postfix_str(self, s: str = "", refresh: bool = True) -> None:
-        pass
-
     def _write(self) -> None:
         self._written = self.done
         unit = f" {self.unit}s" if self.unit else ""
         pct = 100.0 * self.done / self.total
-        phase = f", {self.phase}" if self.phase and self.phases else ""
         _write_line(
-            f"{self.desc}: {self.done}/{self.total}{unit} ({pct:.0f} %), "
-            f"{time.perf_counter() - self._start:.1f} s{phase}",
+            f"{self.desc}: {self.done}/{self.total}{unit} ({pct:.0f} %), {time.perf_counter() - self._start:.1f} s",
             self.stream,
         )
 
@@ -109,7 +99,7 @@ def _write_line(text: str, stream) -> None:
 
 
 def bar(total: int, desc: str, unit: str = "", enabled: bool = True, stream=None):
-    """A progress object of ``total`` steps: tqdm on a terminal, :class:`Lines` elsewhere, :class:`Silent` when
+    """A progress object of ``total`` steps: tqdm on a terminal, `Lines` elsewhere, `Silent` when
     not ``enabled``."""
     if not enabled:
         return Silent()

@@ -22,50 +22,58 @@ Jacobian's columns are whitened together); ``sensitivity`` (n, q) m, or None.
 
 from __future__ import annotations
 
-import math
 from concurrent.futures import ThreadPoolExecutor
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 import numpyro.distributions as _dist
 from jaxtyping import ArrayLike, Float
 
-KINDS = ("matern32", "none")
+from growjax.calibration.hyperparameters import (
+    AMPLITUDE_SCALE,
+    KINDS,
+    NOISE_SCALE,
+    NOISE_TIME_BOUNDS,
+    NOISE_TIME_LOG_SD,
+    NOISE_TIME_MEDIAN,
+    TIME_SCALE_LOG_SD,
+    TIME_SCALE_MEDIAN,
+    Hyper,
+    log_prior,
+)
+from growjax.calibration.kernels import DRIFT_GRID, DRIFT_SHARE, drift_columns, drift_kernel, kernel, noise_kernel
 
-# Priors of the hyperparameters (fit: MAP; posterior: marginalised). See the docs' "Uncertainty" page.
-AMPLITUDE_SCALE = 2e-3  # m, half-normal scale of a: model errors up to a few mm on a robot of 10–60 mm
-TIME_SCALE_MEDIAN = 1.0  # s, log-normal median of ℓ: the drive's pulse period (1.3 s) to the whole run
-TIME_SCALE_LOG_SD = 1.0  # 90 % of the prior's mass on 0.19–5.2 s
-NOISE_SCALE = 1e-3  # m, half-normal scale of σ
-NOISE_TIME_MEDIAN = 0.03  # s, log-normal median of τ: a tracker's noise spans a few video frames
-NOISE_TIME_LOG_SD = 1.5  # 90 % of the prior's mass on 2.5 ms – 0.36 s, below the discrepancy's time scale
-NOISE_TIME_BOUNDS = (1e-4, 10.0)  # s, the estimate's search range
+__all__ = [
+    "AMPLITUDE_SCALE",
+    "DRIFT_GRID",
+    "DRIFT_SHARE",
+    "KINDS",
+    "NOISE_SCALE",
+    "NOISE_TIME_BOUNDS",
+    "NOISE_TIME_LOG_SD",
+    "NOISE_TIME_MEDIAN",
+    "TIME_SCALE_LOG_SD",
+    "TIME_SCALE_MEDIAN",
+    "Hyper",
+    "MeasuredLength",
+    "distribution",
+    "draw",
+    "drift_columns",
+    "drift_kernel",
+    "estimate",
+    "forecast",
+    "kalman_filter",
+    "kernel",
+    "log_likelihood",
+    "log_likelihood_runs",
+    "log_prior",
+    "noise_kernel",
+    "smooth",
+    "whiten",
+]
+
 _JITTER = 1e-24  # m², keeps an innovation variance positive where two samples coincide
-
-
-class Hyper(eqx.Module):
-    """Hyperparameters of the residual model: discrepancy amplitude ``a`` (m), time scale ``ell`` (s), noise
-    sd ``sigma`` (m) and the noise's correlation time ``tau`` (s; 0: independent). ``a = 0`` is noise alone."""
-
-    amplitude: jax.Array
-    time_scale: jax.Array
-    noise: jax.Array
-    noise_time: jax.Array
-
-    @classmethod
-    def of(cls, amplitude, time_scale, noise, noise_time=0.0) -> Hyper:
-        f = lambda x: jnp.asarray(x, float)
-        return cls(f(amplitude), f(time_scale), f(noise), f(noise_time))
-
-    def as_dict(self) -> dict:
-        return {
-            "amplitude_m": float(self.amplitude),
-            "time_scale_s": float(self.time_scale),
-            "noise_m": float(self.noise),
-            "noise_time_s": float(self.noise_time),
-        }
 
 
 def _transition(dt, hyper: Hyper):
@@ -314,68 +322,6 @@ def draw(key, times, hyper: Hyper, shape=(), noise: bool = False):
 
     _, d = jax.lax.scan(step, x0, (dts, xi))
     return jnp.moveaxis(d, 0, -1)
-
-
-def kernel(times, hyper: Hyper) -> np.ndarray:
-    """Dense covariance (n, n) m² of δ at ``times``: a²(1 + √3|Δt|/ℓ)exp(−√3|Δt|/ℓ). For reports on small n."""
-    t = np.asarray(times, float)
-    x = math.sqrt(3.0) * np.abs(t[:, None] - t[None, :]) / float(hyper.time_scale)
-    return float(hyper.amplitude) ** 2 * (1.0 + x) * np.exp(-x)
-
-
-def drift_kernel(times, sd: float, time_scale: float) -> np.ndarray:
-    """Dense covariance (n, n) m² of a slow drift at ``times``: sd² exp(−½(Δt/``time_scale``)²) (squared
-    exponential), the fitted configuration's own error against the reference."""
-    t = np.asarray(times, float)
-    return sd**2 * np.exp(-0.5 * ((t[:, None] - t[None, :]) / time_scale) ** 2)
-
-
-DRIFT_GRID = 64  # points of the grid a drift's columns are built on (over the span of the times)
-DRIFT_SHARE = 1e-6  # the share of a drift's variance its columns may leave out
-
-
-def drift_columns(times, sd: float, time_scale: float) -> np.ndarray:
-    """Columns G (n, k) m at ``times`` (n,) s whose weights w ~ N(0, I) make G·w the slow drift of
-    `drift_kernel` (G Gᵀ ≈ sd² exp(−½(Δt/``time_scale``)²)): the kernel's leading eigenvectors on a grid of
-    `DRIFT_GRID` points over the times' span, extended to the times (Nyström), as many as carry all but
-    `DRIFT_SHARE` of its variance. A smooth kernel over a span of a few of its time scales needs a handful, so
-    the drift enters a likelihood as a few more static states of its filter, like the rig's errors."""
-    t = np.asarray(times, float)
-    grid = np.linspace(t.min(), t.max(), DRIFT_GRID if t.max() > t.min() else 1)
-    kernel_of = lambda a, b: np.exp(-0.5 * ((a[:, None] - b[None, :]) / time_scale) ** 2)  # noqa: E731
-    lam, vec = np.linalg.eigh(kernel_of(grid, grid))
-    lam, vec = lam[::-1], vec[:, ::-1]
-    k = int(np.searchsorted(np.cumsum(lam) / np.sum(lam), 1.0 - DRIFT_SHARE) + 1)
-    return sd * kernel_of(t, grid) @ vec[:, :k] / np.sqrt(lam[:k])
-
-
-def noise_kernel(times, hyper: Hyper) -> np.ndarray:
-    """Dense covariance (n, n) m² of the sensor noise at ``times``: σ² exp(−|Δt|/τ) (σ² I for τ = 0)."""
-    t = np.asarray(times, float)
-    tau = float(hyper.noise_time)
-    dt = np.abs(t[:, None] - t[None, :])
-    corr = np.exp(-dt / tau) if tau > 0 else (dt == 0).astype(float)
-    return float(hyper.noise) ** 2 * corr
-
-
-def log_prior(
-    hyper: Hyper,
-    amplitude_scale: float = AMPLITUDE_SCALE,
-    noise_scale: float = NOISE_SCALE,
-    time_scale_median: float = TIME_SCALE_MEDIAN,
-    time_scale_log_sd: float = TIME_SCALE_LOG_SD,
-):
-    """Log density (up to a constant) of the hyperparameters' priors, in the log coordinates (ln a, ln ℓ, ln σ,
-    ln τ): a ~ HalfNormal, ℓ ~ LogNormal, σ ~ HalfNormal, τ ~ LogNormal (the Jacobians of the logs included)."""
-    a, ell, s, tau = hyper.amplitude, hyper.time_scale, hyper.noise, hyper.noise_time
-    return (
-        -0.5 * (a / amplitude_scale) ** 2
-        + jnp.log(a)
-        - 0.5 * ((jnp.log(ell) - jnp.log(time_scale_median)) / time_scale_log_sd) ** 2
-        - 0.5 * (s / noise_scale) ** 2
-        + jnp.log(s)
-        - 0.5 * ((jnp.log(tau) - jnp.log(NOISE_TIME_MEDIAN)) / NOISE_TIME_LOG_SD) ** 2
-    )
 
 
 def _negative_log_posterior(log_hyper, residuals, times, sensitivity, tolerance, observed, kind):

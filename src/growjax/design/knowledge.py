@@ -2,7 +2,7 @@
 tolerances and the residual model's hyperparameters, from a fit of the experiments already run.
 
 The design's prior on w = (ln θ, b) is blockdiag(Σ_θ, U): Σ_θ the fit's covariance of ln θ (what the data
-already say), U = diag(u²) the rig's tolerances (its relative errors b = ln ψ/ψ₀, :mod:`growjax.calibration.tolerance`).
+already say), U = diag(u²) the rig's tolerances (its relative errors b = ln ψ/ψ₀, `growjax.calibration.tolerance`).
 The rig enters the next experiment as a fresh nuisance with its tolerance prior: what the old data said of the
 rig is not carried over (conservative where the next experiment runs on the same rig). A parameter the fit left
 undetermined (no interval, or one wider than its sampling box, `growjax.calibration.default_range`) takes a uniform
@@ -23,6 +23,8 @@ from growjax.calibration import FitResult, Likelihood, default_range
 from growjax.calibration import discrepancy as dc
 from growjax.calibration import tolerance as tl
 from growjax.model import params as gp
+
+__all__ = ["DEFAULT_HYPER", "Knowledge", "box_variance", "from_fit", "from_summary"]
 
 # Residual model when no fit gives one: white length noise of 0.2 mm, no discrepancy.
 DEFAULT_HYPER = {"amplitude_m": 0.0, "time_scale_s": 1.0, "noise_m": 2e-4, "noise_time_s": 0.0}

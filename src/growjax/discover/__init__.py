@@ -76,10 +76,10 @@ from ._candidates import (
     CandidateFit,
     Candidates,
     candidate_parameter,
+    fit_model,
+    linearised,
     make_candidates,
 )
-from ._candidates import _fit_model as _fit_model
-from ._candidates import _linearised as _linearised
 from ._decision import SEPARATING
 from ._fitting import LR_RESOLUTION, Fitter
 from ._report import PHASES, DiscoveryResult, locate, phases, summary_text
@@ -88,12 +88,12 @@ from ._scoring import (
     PINNED_FACTOR,
     STRUCTURE_THRESHOLD,
     Scorer,
+    is_pinned,
     misfit_test,
     noise_from_differences,
     score_candidate,
     score_round,
 )
-from ._scoring import _pinned as _pinned
 from ._set import SetDiscoveryResult, discover_set, set_summary_text
 from ._workflow import discover
 
@@ -118,7 +118,10 @@ __all__ = [
     "candidate_parameter",
     "discover",
     "discover_set",
+    "fit_model",
     "fx",
+    "is_pinned",
+    "linearised",
     "locate",
     "make_candidates",
     "misfit_test",

@@ -110,13 +110,24 @@ class Candidates(eqx.Module):
 
 
 @eqx.filter_jit
-def _linearised(w, problem: Candidates, mask, select, z_fixed):
-    """Residuals r (m,), Jacobian J (m, q) and the model's pressure (m,) Pa of one model at its fitted
-    coordinates w (q,), in one forward-mode pass (as `growjax.calibration.linearise`). The candidate is data
-    (``mask``, ``select``, ``z_fixed``), so one compiled program serves every fit with the same q: q = p + 1 for the
-    base fit, the first round and the base-held fits, p + 2 for the second round (each tangent direction costs a
-    share of a linearisation, so a fit carries only as many as it can move). The traces
-    reported come from it too."""
+def linearised(w, problem: Candidates, mask, select, z_fixed):
+    """One model's residuals, Jacobian and pressure at its fitted coordinates, in one forward-mode pass (as
+    `growjax.calibration.linearise`).
+
+    The candidate is data (``mask``, ``select``, ``z_fixed``), so one compiled program serves every fit with the
+    same q: q = p + 1 for the base fit, the first round and the base-held fits, p + 2 for the second round (each
+    tangent direction costs a share of a linearisation, so a fit carries only as many as it can move).
+
+    Args:
+        w: the fitted coordinates (q,).
+        problem: the `Candidates` problem.
+        mask: (K,) which candidate effects are on.
+        select: (p + K, q) 0/1, the coordinate of z each coordinate of w moves.
+        z_fixed: (p + K,) the coordinates held.
+
+    Returns:
+        (residuals r (m,) in units of 1 mm, Jacobian J (m, q), the model's pressure (m,) Pa).
+    """
     units = jnp.eye(w.shape[0], dtype=w.dtype)
     (r, pressure), (jac_t, _) = jax.vmap(
         lambda v: jax.jvp(lambda x: problem.residuals(x, (mask, select, z_fixed)), (w,), (v,)),
@@ -125,11 +136,21 @@ def _linearised(w, problem: Candidates, mask, select, z_fixed):
     return r, jac_t.T, pressure
 
 
-def _fit_model(problem: Candidates, w0, mask, select, z_fixed, max_steps: int, resolution: float = 0.0):
-    """Levenberg–Marquardt for one model (`growjax.calibration.levenberg_marquardt` around :func:`_linearised`),
-    each fitted coordinate kept in its physical range (:meth:`Candidates.bounds`), stopping at the cost's
-    ``resolution`` (mm², absolute) or :data:`COST_NOISE` of itself: (z (p + K,),
-    residuals (m,), Jacobian (m, q), converged, pressure (m,) Pa at the optimum, linearisations run)."""
+def fit_model(problem: Candidates, w0, mask, select, z_fixed, max_steps: int, resolution: float = 0.0):
+    """Levenberg–Marquardt for one model (`growjax.calibration.levenberg_marquardt` around `linearised`), each
+    fitted coordinate kept in its physical range (`Candidates.bounds`).
+
+    Args:
+        problem, mask, select, z_fixed: the problem and the model, as `linearised` takes them.
+        w0: the start (q,).
+        max_steps: the most steps.
+        resolution: the cost's resolution (mm², absolute) below which steps stop counting; also `COST_NOISE` of
+            the cost itself when positive.
+
+    Returns:
+        (z (p + K,), residuals (m,) mm, Jacobian (m, q), converged, pressure (m,) Pa at the optimum, the number
+        of linearisations run).
+    """
     pressures, runs = {}, 0
     lo, hi = problem.bounds()
     sel = np.asarray(select)
@@ -137,15 +158,15 @@ def _fit_model(problem: Candidates, w0, mask, select, z_fixed, max_steps: int, r
     row = sel.argmax(axis=0)  # the coordinate of z each coordinate of w moves (select is a 0/1 selection)
     w_bounds = (np.where(used, lo[row], -np.inf), np.where(used, hi[row], np.inf))
 
-    def linearised(x):
+    def evaluate(x):
         nonlocal runs
-        r, jac, pressure = _linearised(x, problem, mask, select, z_fixed)
+        r, jac, pressure = linearised(x, problem, mask, select, z_fixed)
         pressures[np.asarray(x).tobytes()] = pressure
         runs += 1
         return r, jac
 
     w, _, ok, r, jac = levenberg_marquardt(
-        linearised,
+        evaluate,
         w0,
         max_steps,
         LM_TOLERANCE,
@@ -155,7 +176,7 @@ def _fit_model(problem: Candidates, w0, mask, select, z_fixed, max_steps: int, r
     )
     pressure = pressures.get(np.asarray(jnp.asarray(w)).tobytes())
     if pressure is None:  # not expected: the optimum is always an evaluated point
-        pressure = _linearised(jnp.asarray(w), problem, mask, select, z_fixed)[2]
+        pressure = linearised(jnp.asarray(w), problem, mask, select, z_fixed)[2]
         runs += 1
     return np.asarray(z_fixed) + np.asarray(select) @ w, r, jac, ok, np.asarray(pressure), runs
 

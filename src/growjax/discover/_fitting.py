@@ -15,8 +15,8 @@ from ._candidates import (
     START_FRACTIONS,
     CandidateFit,
     Candidates,
-    _fit_model,
     _summarise,
+    fit_model,
 )
 from ._scoring import noise_from_differences
 
@@ -96,7 +96,7 @@ class Fitter:
 
         def run(job):
             m = job[1]
-            z, r, jac, ok, pressure, runs = _fit_model(
+            z, r, jac, ok, pressure, runs = fit_model(
                 self.problem, *(jnp.asarray(a) for a in m), self.max_steps, self.resolution
             )
             return job[0], (np.asarray(z), np.asarray(r), np.asarray(jac), bool(ok), m, pressure), runs

@@ -188,10 +188,19 @@ class Scorer:
         return out
 
 
-def _pinned(estimate: float, interval) -> bool:
-    """Whether a 90 % interval excludes zero and lies within a factor :data:`PINNED_FACTOR` of the estimate. An
-    interval of (near) zero width is not pinned: the effect's Jacobian column vanished (η deep in softplus's flat
-    end) and the pseudo-inverse dropped its variance instead of making it infinite."""
+def is_pinned(estimate: float, interval) -> bool:
+    """Whether the data fix an effect's size: its 90 % interval excludes zero and lies within a factor
+    `PINNED_FACTOR` of the estimate. An interval of (near) zero width is not pinned: the effect's Jacobian column
+    vanished (η deep in softplus's flat end) and the pseudo-inverse dropped its variance instead of making it
+    infinite.
+
+    Args:
+        estimate: the effect parameter's estimate (its units).
+        interval: (low, high), its 90 % interval (the same units).
+
+    Returns:
+        True where pinned.
+    """
     lo, hi = interval
     size = abs(estimate)
     return (
@@ -226,7 +235,7 @@ def score_candidate(
     corr = fitted.correlation.get(qname, {})
     _, c = max(corr.items(), key=lambda kv: abs(kv[1]), default=(None, 0.0))
     bar = threshold + (allowance if abs(c) > confounding_correlation else 0.0)
-    pinned = lr > bar and _pinned(fitted.estimate[qname], fitted.interval_90[qname])
+    pinned = lr > bar and is_pinned(fitted.estimate[qname], fitted.interval_90[qname])
     return {
         "parameter": qname,
         "unit": unit,

@@ -19,7 +19,7 @@ from growjax.simulation.config import Config
 from ._candidates import START_FRACTIONS, candidate_parameter
 from ._decision import SEPARATING, choose, confounded_with_base, final_effect
 from ._report import _unit, confounded_lines
-from ._scoring import MATERIAL_MISFIT, Scorer, _pinned, noise_from_differences
+from ._scoring import MATERIAL_MISFIT, Scorer, is_pinned, noise_from_differences
 
 EFFECT_START = START_FRACTIONS[1]  # an effect's joint fit starts at this fraction of its range's top
 
@@ -190,7 +190,7 @@ def _score(
     c_max = max(corr.values(), key=abs, default=0.0)
     estimate = {fit.labels[k]: fit.estimate[fit.labels[k]] for k in mine}
     interval = {fit.labels[k]: fit.interval_90[fit.labels[k]] for k in mine}
-    pinned = lr > threshold and all(iv is not None and _pinned(estimate[lab], iv) for lab, iv in interval.items())
+    pinned = lr > threshold and all(iv is not None and is_pinned(estimate[lab], iv) for lab, iv in interval.items())
     return {
         "parameter": qname,
         "unit": unit,

@@ -53,9 +53,6 @@ from ._model import (
     value_and_jacobian,
     with_model_tangents,
 )
-from ._model import (
-    _jitted_jacobian as _jitted_jacobian,  # benchmarks/nuts_direct.py times the compiled Jacobian
-)
 from ._priors import (
     BOUND_FRACTION,
     Prior,

@@ -29,7 +29,7 @@ from growjax.model import params as gp
 from growjax.simulation.simulate import sample_times, simulate
 from growjax.simulation.trajectory import OK
 
-__all__ = ["Axis", "Emulator", "build", "model_lengths", "predicted_length", "validate"]
+__all__ = ["Axis", "Emulator", "build", "model_lengths", "pad_linear", "predicted_length", "validate"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -112,7 +112,17 @@ def _catmull_rom_weights(f):
     return 0.5 * jnp.stack([-f3 + 2 * f2 - f, 3 * f3 - 5 * f2 + 2, -3 * f3 + 4 * f2 + f, f3 - f2])
 
 
-def _pad_linear(values: np.ndarray, n_axes: int) -> np.ndarray:
+def pad_linear(values: np.ndarray, n_axes: int) -> np.ndarray:
+    """A table of lengths at the nodes with one ghost node per side along each axis, extrapolated linearly from
+    the two nodes nearest that side: the `Emulator`'s ``values``.
+
+    Args:
+        values: (n_1, …, n_d, m) lengths at the nodes, m (``n_axes`` = d leading axes, the times last).
+        n_axes: d, the number of parameter axes.
+
+    Returns:
+        (n_1 + 2, …, n_d + 2, m) lengths, m.
+    """
     for ax in range(n_axes):
         lo = 2 * np.take(values, [0], axis=ax) - np.take(values, [1], axis=ax)
         hi = 2 * np.take(values, [-1], axis=ax) - np.take(values, [-2], axis=ax)
@@ -168,7 +178,7 @@ def build(axes: Sequence[Axis], base, inputs, config, times, chunk: int = 512) -
     lows = [np.log(a.low) if a.log else a.low for a in axes]
     highs = [np.log(a.high) if a.log else a.high for a in axes]
     return Emulator(
-        values=jnp.asarray(_pad_linear(values, len(axes))),
+        values=jnp.asarray(pad_linear(values, len(axes))),
         times=jnp.asarray(times),
         lows=jnp.asarray(lows),
         highs=jnp.asarray(highs),

@@ -18,7 +18,7 @@ faster than anything the robot's length shows:
 Everything else, the rod and valve balance (:func:`growjax.model.robot.inflow`), the motor, the
 PID and every added effect (:mod:`growjax.model.effects`), is the same code as the reference's.
 The remaining stiffness (the opened bypass, ~1e5 s⁻¹; the stepper rotor, ~3e5 s⁻¹) is
-damped by the L-stable ROS34PW2 method (:mod:`growjax.simulation._rosenbrock`) with the exact Jacobian,
+damped by the L-stable ROS34PW2 method (:mod:`growjax.simulation.rosenbrock`) with the exact Jacobian,
 at steps set by the slow dynamics, with input edges declared to the step-size controller.
 """
 

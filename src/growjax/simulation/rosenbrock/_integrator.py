@@ -1,6 +1,6 @@
 """The driver: :func:`integrate` steps a Rosenbrock method from t0 to t1, one run or a batch in one loop, composing
-its stage solves (:mod:`.method`), the field's slopes (:mod:`.slopes`), W⁻¹ and the variation check
-(:mod:`.linear`), step control (:mod:`.step_control`), saving (:mod:`.saving`) and the stop event (:mod:`.events`).
+its stage solves (`_method`), the field's slopes (`_slopes`), W⁻¹ and the variation check
+(`_linear`), step control (`_step_control`), saving (`_saving`) and the stop event (`_events`).
 """
 
 from __future__ import annotations
@@ -13,13 +13,13 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-import growjax.simulation._rosenbrock.linear as linear
-import growjax.simulation._rosenbrock.method as method
-import growjax.simulation._rosenbrock.saving as saving
-import growjax.simulation._rosenbrock.slopes as slopes
-from growjax.simulation._rosenbrock.events import locate_event
-from growjax.simulation._rosenbrock.method import ROS34PW2, RosenbrockTableau
-from growjax.simulation._rosenbrock.step_control import error_norm, land, next_size
+import growjax.simulation.rosenbrock._linear as linear
+import growjax.simulation.rosenbrock._method as method
+import growjax.simulation.rosenbrock._saving as saving
+import growjax.simulation.rosenbrock._slopes as slopes
+from growjax.simulation.rosenbrock._events import locate_event
+from growjax.simulation.rosenbrock._method import ROS34PW2, RosenbrockTableau
+from growjax.simulation.rosenbrock._step_control import error_norm, land, next_size
 
 OK, EVENT, FAILED = 0, 1, 2
 
@@ -126,7 +126,7 @@ def integrate(
         s0: (p, n) sensitivities at t0.  s_atol: (p,) absolute tolerance of each sensitivity row;
             s_rtol: their relative tolerance (default ``rtol``).
         forward_jacobian: with ``tangent_field``, the state's Jacobian in forward mode instead of by forward
-            differences (:func:`growjax.simulation._rosenbrock.slopes.jacobian`).
+            differences (:func:`growjax.simulation.rosenbrock._slopes.jacobian`).
         event: ``g(t, y, args)``, decreasing through zero where the run must stop (e.g. 1 − p/p_limit).
         batched: ``y0``, ``args``, ``breaks``, ``jumps`` (and ``s0``, ``s_atol``) carry a leading batch axis B
             of independent problems, stepped together: one loop while any member runs, each member's
@@ -138,7 +138,7 @@ def integrate(
             kept (only the last step, for the event). A step then covers at most ``SAVE_WINDOW`` of them
             (binding only where they lie closer than about dtmax / (SAVE_WINDOW − 1)); times beyond the end get its
             state.
-        small_loops: a single run writes W⁻¹ in elementwise operations (`growjax.simulation._rosenbrock.linear.inverse`)
+        small_loops: a single run writes W⁻¹ in elementwise operations (`growjax.simulation.rosenbrock._linear.inverse`)
             instead of a LAPACK call, so that XLA:CPU can compile its whole loop into one kernel
             (`growjax.simulation.xla_flags`).
 

@@ -39,21 +39,16 @@ the loop; a stop event (the pressure limit) is located by bisection on that inte
 Derivatives: forward mode (``jax.jvp``, ``jax.jacfwd``) through the loop; reverse mode is not
 supported (the loop's length is not static).
 
-Layout: :mod:`.method` (the tableau as data, one step's stage solves), :mod:`.slopes` (F, ∂F/∂t and J at a
-point), :mod:`.linear` (W⁻¹ and the variation check, one run or a batch), :mod:`.step_control` (landing on
-breaks, error norm, step size), :mod:`.saving` (step records, interpolant, save times), :mod:`.events` (the stop
-event's location) and :mod:`.integrator` (:func:`integrate`, the loop that composes them).
+Layout: `_method` (the tableau as data, one step's stage solves), `_slopes` (F, ∂F/∂t and J at a
+point), `_linear` (W⁻¹ and the variation check, one run or a batch), `_step_control` (landing on
+breaks, error norm, step size), `_saving` (step records, interpolant, save times), `_events` (the stop
+event's location) and `_integrator` (`integrate`, the loop that composes them).
 """
 
-from growjax.simulation._rosenbrock import linear
-from growjax.simulation._rosenbrock.integrator import EVENT, FAILED, OK, Result, integrate
-from growjax.simulation._rosenbrock.linear import spread
-from growjax.simulation._rosenbrock.method import ROS34PW2, RosenbrockTableau
-from growjax.simulation._rosenbrock.saving import SAVE_WINDOW, Steps, evaluate, hermite
-
-# The linear algebra by the names the tests check it under.
-_inverse, _variation = linear.inverse, linear.variation
-_batchable_inverse, _batchable_variation = linear.batchable_inverse, linear.batchable_variation
+from growjax.simulation.rosenbrock._integrator import EVENT, FAILED, OK, Result, integrate
+from growjax.simulation.rosenbrock._linear import batchable_inverse, batchable_variation, inverse, spread, variation
+from growjax.simulation.rosenbrock._method import ROS34PW2, RosenbrockTableau
+from growjax.simulation.rosenbrock._saving import SAVE_WINDOW, Steps, evaluate, hermite
 
 __all__ = [
     "EVENT",
@@ -64,8 +59,12 @@ __all__ = [
     "Result",
     "RosenbrockTableau",
     "Steps",
+    "batchable_inverse",
+    "batchable_variation",
     "evaluate",
     "hermite",
     "integrate",
+    "inverse",
     "spread",
+    "variation",
 ]
