@@ -88,8 +88,7 @@ def levenberg_marquardt(
     ``residuals(z) → r (m,)``, where given: trial points are scored by it alone and linearised once accepted
     (r from ``residuals``, J from ``linearised``), for residuals whose Jacobian costs many evaluations of them;
     ``max_steps`` then counts accepted steps (a rejected one costs one evaluation of the residuals).
-    Returns (z, cost, converged, r, J at z). One function: the damping, the active set, the last rejected
-    point and the stall count are the state of one loop, and read best together.
+    Returns (z, cost, converged, r, J at z).
     """
     z = np.asarray(z0, float)
     r, jac = (np.asarray(a) for a in linearised(jnp.asarray(z)))

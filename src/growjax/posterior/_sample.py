@@ -101,9 +101,8 @@ def sample(
             the model in every gradient (forward mode).
         max_tree_depth: NUTS's cap on the tree (at most 2^depth − 1 leapfrog steps per draw).
         chain_method: NumPyro's; None: vectorized (emulator), parallel (a device per chain) or sequential.
-        progress: a line per phase on stderr, and NumPyro's bars where stderr is a terminal. The draws do not depend
-            on it; NumPyro's loop with bars rounds apart from the loop without (relative 1e-15 to 1e-11 over a
-            thousand draws).
+        progress: a line per phase on stderr, and NumPyro's bars where stderr is a terminal (the draws agree to
+            rounding, below 1e-11 relative).
         rig_centre: {tolerance: ln(ψ/ψ₀)} where the rig is linearised (the model runs with the rig there, its
             errors' prior stays about nominal), or None: where `growjax.calibration.fit` puts it on the same data.
         chains, warmup, samples, seed, dense_mass, target_accept: NUTS's.
@@ -118,8 +117,7 @@ def sample(
     priors = tuple(priors) if priors is not None else paper_priors()
     t, y = _window(run.times, run.length, config, run.window)
     start = time.perf_counter()
-    if emulate is True:
-        prog.note("posterior: building the emulator", progress)
+    prog.note("posterior: building the emulator", progress and emulate is True)
     terms = _terms(experiments, config, priors, likelihood, (t, y), rig_centre, emulate, seed, start, progress)
     mean, model_error, residuals = terms["mean"], terms["model_error"], terms["residuals"]
 
