@@ -261,7 +261,7 @@ def test_fits_and_the_emulator_score_the_model_at_the_samples():
 
 def test_a_batch_saves_in_its_loop_what_single_runs_interpolate_afterwards():
     """A vmapped ``simulate`` steps its members in one loop, takes the state's Jacobian in forward mode and
-    interpolates each save time as its step is taken (``_rosenbrock.integrate(save_ts=…)``, no step records);
+    interpolates each save time as its step is taken (``rosenbrock.integrate(save_ts=…)``, no step records);
     a single run keeps every step and interpolates after the loop. The two agree at the solver's tolerance on
     a grid through every demand edge and denser than one step may cover (1 ms: ``SAVE_WINDOW`` then
     shortens the batch's steps), at a stop on the pressure limit (a 10 µm membrane: limit 107 kPa), and for a
@@ -296,12 +296,12 @@ def test_a_batch_saves_in_its_loop_what_single_runs_interpolate_afterwards():
 
 @pytest.mark.parametrize("batched", [False, True], ids=["single", "batch"])
 def test_the_integrator_saves_in_its_loop_the_solution_it_would_record(batched):
-    """``_rosenbrock.integrate(save_ts=…)`` on y' = −k y with an input jump (k doubles at t = 0.5 s): the values
+    """``rosenbrock.integrate(save_ts=…)`` on y' = −k y with an input jump (k doubles at t = 0.5 s): the values
     saved in the loop equal those interpolated from the recorded steps of the same run without ``save_ts`` (to
     rounding, 4e-16 measured), and
     the exact solution to the tolerance (measured 1.0e-6 relative at k = 3, 1.1e-8 at k = 1), on a 2 ms grid and
     through the jump, with and without a leading batch axis."""
-    from growjax.simulation import _rosenbrock as rb
+    from growjax.simulation import rosenbrock as rb
 
     def field(t, y, k):
         return -k * jnp.where(t < 0.5, 1.0, 2.0) * y
@@ -336,7 +336,7 @@ def test_a_batch_inverts_and_measures_the_variation_as_single_members_do():
     (‖W₀⁻¹ΔW‖∞, refined by the spectral radius above 1) against the single-member LAPACK inverse and
     ``_variation``: members that need row exchanges (zero leading entries), one ill-conditioned, and changes on both
     sides of the bound (a non-normal one whose ∞-norm exceeds 1 while its spectral radius does not)."""
-    from growjax.simulation import _rosenbrock as rb
+    from growjax.simulation import rosenbrock as rb
 
     rng = np.random.default_rng(7)
     n = 6
@@ -350,7 +350,7 @@ def test_a_batch_inverts_and_measures_the_variation_as_single_members_do():
             np.eye(n) - 50.0 * rng.normal(size=(n, n)),
         ]
     )
-    inverse = np.asarray(jax.vmap(rb._batchable_inverse)(jnp.asarray(mats)))
+    inverse = np.asarray(jax.vmap(rb.batchable_inverse)(jnp.asarray(mats)))
     expected = np.stack([np.linalg.inv(m) for m in mats])
     np.testing.assert_allclose(inverse, expected, rtol=1e-9, atol=1e-12 * np.abs(expected).max())
 
@@ -365,8 +365,8 @@ def test_a_batch_inverts_and_measures_the_variation_as_single_members_do():
         ]
     )
     w_inv = np.broadcast_to(np.eye(n), changes.shape)
-    batch = np.asarray(jax.vmap(rb._batchable_variation)(jnp.asarray(w_inv), jnp.asarray(changes)))
-    single = np.array([float(rb._variation(jnp.asarray(w), jnp.asarray(c))) for w, c in zip(w_inv, changes)])
+    batch = np.asarray(jax.vmap(rb.batchable_variation)(jnp.asarray(w_inv), jnp.asarray(changes)))
+    single = np.array([float(rb.variation(jnp.asarray(w), jnp.asarray(c))) for w, c in zip(w_inv, changes)])
     np.testing.assert_allclose(batch, single, rtol=1e-12)
     assert single[0] < 1.0 and single[1] < 1.0 < np.abs(changes[1]).sum(axis=1).max() and single[2] > 1.0
 

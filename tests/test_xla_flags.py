@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from growjax.simulation import xla_flags
-from growjax.simulation._rosenbrock import _inverse
+from growjax.simulation.rosenbrock import inverse
 
 OPTION = "xla_cpu_small_while_loop_byte_threshold"
 
@@ -47,12 +47,12 @@ def test_elementwise_inverse_matches_lapack_on_stiff_solver_matrices(n):
     for _ in range(5):
         jac = rng.normal(size=(n, n)) * 10.0 ** rng.uniform(-2, 6, size=(n, 1))
         w = np.eye(n) - 1e-3 * 0.4358665 * jac
-        inv = np.asarray(_inverse(jnp.asarray(w)))
+        inv = np.asarray(inverse(jnp.asarray(w)))
         assert np.max(np.abs(inv @ w - np.eye(n))) < 1e-9
         np.testing.assert_allclose(inv, np.linalg.inv(w), rtol=1e-9, atol=1e-12 * np.max(np.abs(inv)))
     if n > 1:
         perm = np.roll(np.eye(n), 1, axis=0)  # zero diagonal: fails without row exchanges
-        np.testing.assert_allclose(np.asarray(_inverse(jnp.asarray(perm))), perm.T, atol=1e-15)
+        np.testing.assert_allclose(np.asarray(inverse(jnp.asarray(perm))), perm.T, atol=1e-15)
 
 
 def test_quick_compile_joins_flags_and_falls_back_where_jaxlib_lacks_it(monkeypatch):

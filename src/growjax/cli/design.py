@@ -243,7 +243,7 @@ def _design(args, known, space, lim, names):
             known,
             space,
             args.discriminate,
-            args.size,
+            sizes=args.size,
             random=args.random,
             starts=args.starts,
             iterations=args.iterations,

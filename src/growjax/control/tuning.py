@@ -5,12 +5,14 @@ it. SI units."""
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, ArrayLike, Float
 
 import growjax as gj
 from growjax.control.controllers import (
@@ -121,7 +123,14 @@ def _draw_axes(base, draws):
     return gj.replace(jax.tree_util.tree_map(lambda _: None, base), **{k: 0 for k in draws})
 
 
-def tune_pid(cost, log_gains, iterations: int = 10, step: float = 0.3, fd: float = 0.02) -> TuneResult:
+def tune_pid(
+    cost: Callable[[Float[Array, " 3"]], Float[Array, ""]],
+    log_gains: Float[ArrayLike, " 3"],
+    *,
+    iterations: int = 10,
+    step: float = 0.3,
+    fd: float = 0.02,
+) -> TuneResult:
     """Gradient descent on ``cost(log_gains)`` with backtracking; the gradient by central differences in
     log-gain space (``fd`` decades, a smoothed slope: at tuned high gains the closed loop's tangent grows along a
     10 s run and the cost is rough on small scales, so exact forward-mode derivatives diverge there; see
@@ -160,6 +169,7 @@ def tune_stepper(
     params,
     target: Target,
     t1: float,
+    *,
     microsteps: int = 1,
     rates=(20.0, 25.0, 50.0),
     leads=(0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4),
@@ -182,14 +192,21 @@ def tune_stepper(
     return best
 
 
-def plan_steps(params, target: Target, t1: float, microsteps: int = 1, controller: StepController | None = None):
+def plan_steps(
+    params: gj.Parameters,
+    target: Target,
+    t1: float,
+    *,
+    microsteps: int = 1,
+    controller: StepController | None = None,
+) -> tuple[StepController, float, Float[np.ndarray, " K"], Float[np.ndarray, " K"]]:
     """The open-loop step schedule planned on the fast model: the tuned closed-loop `StepController`
     (``controller``, default `tune_stepper`'s) runs on the model, and the step counts it issues there are
     the schedule, replayed on the robot without measuring it. The feedback acts on the model's length, so the
     plan inherits the controller's back steps and pressure gate but not its correction of model error.
     → (controller, RMSE m on the model, tick times (s), step counts)."""
     if controller is None:
-        controller, _ = tune_stepper(params, target, t1, microsteps)
+        controller, _ = tune_stepper(params, target, t1, microsteps=microsteps)
     plant = Plant.make(params, gj.Config(drive="inverse", t1=t1), microstep=microsteps > 1)
     res = run_closed_loop(plant, controller, target, t1, limits(params))
     return controller, res.rmse_m, np.asarray(res.tick_time, float), np.asarray(res.command, float)

@@ -24,9 +24,13 @@ Two growth laws set the velocity term ψ(v) (``GrowingRobot.growth_law``):
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Bool, Float
 
 from growjax.model import hydraulics as hy
 from growjax.model.pump import cylinder_stop_force
@@ -227,41 +231,45 @@ def rod_pressure(rod: RodBalance, sensor_pressure, velocity, length, catheter_le
 
 def inflow(
     rod: RodBalance,
-    valves,
-    pressure,
-    length,
-    catheter_length,
-    effect_force,
+    valves: hy.ValveNetwork,
+    pressure: Float[ArrayLike, "*b"],
+    length: Float[ArrayLike, "*b"],
+    catheter_length: Float[ArrayLike, "*b"],
+    effect_force: Callable[[Float[Array, "*b"]], Float[Array, "*b"]],
     iterations: int = INFLOW_MAX_ITERATIONS,
-    newton=None,
-):
-    """Flow into the robot (m³/s) and its pressure (Pa) at node pressure ``pressure`` (Pa) before the valves.
+    newton: Bool[ArrayLike, ""] | None = None,
+) -> tuple[Float[Array, "*b"], Float[Array, "*b"]]:
+    """Flow into the robot and its pressure, from the node pressure before the valves.
 
     Solves the series balance of the valve network (check valve ∥ bypass,
-    :func:`growjax.model.hydraulics.valve_network_flow` with constants ``valves``) and the rod:
-    q = Q_valves(P − p_r), p_r = rod_pressure(v = q/A_r). With p_rest the rod pressure at rest
-    and s = sign(P − p_rest) the direction of motion, the unknown is the pressure the motion
-    adds, x = s·(p_r − p_rest) ∈ (0, X), X = |P − p_rest|:
+    `growjax.model.hydraulics.valve_network_flow`) and the rod: q = Q_valves(P − p_r), p_r = rod_pressure(v = q/A_r).
+    With p_rest the rod pressure at rest and s = sign(P − p_rest) the direction of motion, the unknown is the
+    pressure the motion adds, x = s·(p_r − p_rest) ∈ (0, X), X = |P − p_rest|:
 
         f(x) = ln(s·(p_r(v(P − p_rest − s·x)) − p_rest)) − ln x = 0,    decreasing in x.
 
-    In z = ln(x/(X − x)) both ends of f are asymptotically linear (power laws of the growth
-    law at x → 0, of the valve at x → X). Safeguarded Newton steps from z = 0, each capped at ±8,
-    bisect the bracket the evaluations have found where a step would leave it, and stop once a
-    Newton step moves z < 1e-7 (quadratic convergence leaves ~1e-14 after it) or the bracket has
-    shrunk to roundoff (or after ``iterations``): the root for every growth law and effect force,
-    converged to roundoff (the sensitivities' difference quotients amplify any residual of it).
-    A residual of exactly 0 ends the search there, and a step past an end of the bracket no
-    evaluation has moved tries that end first: without them, bisection crawled to 1e-12 (on the
-    public experiment under the Lockhart law, 3–4 % of the evaluations took 34–40 steps instead of
-    5–8, and every evaluation batched with them as many).
-    Derivatives are implicit. ``iterations = 0`` takes one fixed-point pass instead, exact when
-    the motion's pressure is negligible against the valve's (the published law: x ~ 1e-5 Pa).
-    ``effect_force(v)`` (N) is the effects' force opposing growth at velocity v (non-decreasing).
-    ``newton`` (bool array or None): where given, the Newton solve runs only where it is True and the
-    one pass where False (``lax.cond``: the pass alone is paid when every velocity-dependent force is
-    absent, e.g. the candidates of a superset model switched off).
-    One function: the bracket, the step cap and the stopping tests are the state of one safeguarded loop.
+    In z = ln(x/(X − x)) both ends of f are asymptotically linear (power laws of the growth law at x → 0, of the
+    valve at x → X). Safeguarded Newton steps from z = 0, each capped at ±8, bisect the bracket the evaluations
+    have found where a step would leave it, and stop once a Newton step moves z < 1e-7 (quadratic convergence
+    leaves ~1e-14 after it) or the bracket has shrunk to roundoff: the root for every growth law and effect force,
+    converged to roundoff (the sensitivities' difference quotients amplify any residual of it). A residual of
+    exactly 0 ends the search there, and a step past an end of the bracket no evaluation has moved tries that end
+    first. Derivatives are implicit.
+
+    Args:
+        rod: the rod balance's constants.
+        valves: the valve network's constants.
+        pressure: P, the node pressure before the valves, Pa.
+        length: the robot's length, m.
+        catheter_length: the catheter's length inside the robot, m.
+        effect_force: the effects' force opposing growth (N) at velocity v (m/s); non-decreasing in v.
+        iterations: the most Newton steps; 0 takes one fixed-point pass instead, exact when the motion's pressure
+            is negligible against the valve's (the published law: x ~ 1e-5 Pa).
+        newton: where given, the Newton solve runs only where it is True and the one pass where False
+            (``lax.cond``: the pass alone is paid when every velocity-dependent force is absent).
+
+    Returns:
+        (q, the flow into the robot, m³/s; p_r, the robot's pressure, Pa).
     """
     if iterations > 0 and newton is not None:
         return jax.lax.cond(
@@ -269,14 +277,8 @@ def inflow(
             lambda: inflow(rod, valves, pressure, length, catheter_length, effect_force, iterations),
             lambda: inflow(rod, valves, pressure, length, catheter_length, effect_force, 0),
         )
-    tiny = 1e-30  # Pa: floor inside the logarithms
-
-    def p_robot(v):
-        return rod_pressure(rod, pressure, v, length, catheter_length, effect_force(v))
-
-    def valves_at(delta):
-        return hy.valve_network_flow(valves, delta, pressure - 0.5 * delta)
-
+    p_robot = functools.partial(_robot_pressure_at, rod, pressure, length, catheter_length, effect_force)
+    valves_at = functools.partial(_valve_flow, valves, pressure)
     p_rest = p_robot(jnp.zeros_like(pressure))
     delta0 = pressure - p_rest
     if iterations == 0:
@@ -285,54 +287,81 @@ def inflow(
 
     s = jnp.where(delta0 >= 0.0, 1.0, -1.0)
     span = jnp.maximum(jnp.abs(delta0), 1e-12)
-
-    def excess(x):
-        return s * (p_robot(valves_at(delta0 - s * x) / rod.area) - p_rest)
-
-    def residual(z):
-        x = span * jax.nn.sigmoid(z)
-        return jnp.log(jnp.maximum(excess(x), 0.0) + tiny) - jnp.log(x + tiny)
-
-    def solve(f, z):
-        # Newton inside a bracket [lo, hi] that every evaluation narrows (f decreases in z); a step that
-        # leaves the bracket bisects it instead, so steep stretches (a friction force turning over
-        # FRICTION_VELOCITY) cannot throw the iterate off.
-        def newton(carry):
-            z, lo, hi, _, k = carry
-            fz, dfz = jax.jvp(f, (z,), (jnp.ones_like(z),))
-            lo, hi = jnp.where(fz > 0.0, z, lo), jnp.where(fz > 0.0, hi, z)
-            step = z - jnp.clip(fz / jnp.where(dfz < 0.0, dfz, -1.0), -8.0, 8.0)
-            inside = (step > lo) & (step < hi) & jnp.isfinite(step)
-            # A step past an end of the bracket that no evaluation has moved goes to that end: where the
-            # root lies beyond it (f keeps its sign there; a motion's pressure below 4e-18 of the span) that
-            # end is the answer.
-            low_edge, high_edge = (step <= lo) & (lo <= -BRACKET_LOGIT), (step >= hi) & (hi >= BRACKET_LOGIT)
-            z_new = jnp.where(
-                inside, step, jnp.where(low_edge, -BRACKET_LOGIT, jnp.where(high_edge, BRACKET_LOGIT, 0.5 * (lo + hi)))
-            )
-            exact = fz == 0.0  # the root itself (its bracket end would otherwise be bisected away)
-            beyond = ((z <= -BRACKET_LOGIT) & (fz < 0.0)) | ((z >= BRACKET_LOGIT) & (fz > 0.0))
-            z_new = jnp.where(exact | beyond, z, z_new)
-            converged = (inside & (jnp.abs(z_new - z) <= INFLOW_NEWTON_TOL)) | exact | beyond
-            collapsed = hi - lo <= INFLOW_BRACKET_TOL * jnp.maximum(1.0, jnp.abs(z_new))
-            return z_new, lo, hi, jnp.all(converged | collapsed), k + 1
-
-        def moving(carry):
-            return ~carry[3] & (carry[4] < iterations)
-
-        bound = jnp.full_like(z, BRACKET_LOGIT)
-        start = (z, -bound, bound, jnp.asarray(False), 0)
-        return jax.lax.while_loop(moving, newton, start)[0]
-
-    def no_tangent(g, y):  # the root's derivative is taken below, not through the logit
-        return jnp.zeros_like(y)
-
-    z = jax.lax.stop_gradient(jax.lax.custom_root(residual, jnp.zeros_like(delta0), solve, no_tangent))
-    # Derivatives by the implicit function theorem on g(x) = excess(x) − x, whose slope is ≤ −1 (never
-    # singular, unlike the log–logit form's where the sigmoid saturates): one Newton step in x from the
-    # root, its slope held constant, carries dx/dθ = −(∂g/∂θ)/g′ and leaves the value at the root.
-    x_root = jax.lax.stop_gradient(span * jax.nn.sigmoid(z))
-    g_root, slope = jax.jvp(lambda x: excess(x) - x, (x_root,), (jnp.ones_like(x_root),))
-    x = x_root - (g_root - jax.lax.stop_gradient(g_root)) / jax.lax.stop_gradient(jnp.minimum(slope, -1.0))
+    excess = functools.partial(_excess, p_robot, valves_at, rod.area, p_rest, delta0, s)
+    residual = functools.partial(_log_residual, excess, span)
+    solve = functools.partial(_bracketed_newton, iterations=iterations)
+    z = jax.lax.stop_gradient(jax.lax.custom_root(residual, jnp.zeros_like(delta0), solve, _no_tangent))
+    x = _implicit_root(excess, span, z)
     delta = delta0 - s * x
     return valves_at(delta), pressure - delta
+
+
+_LOG_FLOOR = 1e-30  # Pa: floor inside the logarithms of the rod balance's residual
+
+
+def _robot_pressure_at(rod, pressure, length, catheter_length, effect_force, v):
+    return rod_pressure(rod, pressure, v, length, catheter_length, effect_force(v))
+
+
+def _valve_flow(valves, pressure, delta):
+    """The valves' flow (m³/s) at a drop ``delta`` (Pa) across them below ``pressure``."""
+    return hy.valve_network_flow(valves, delta, pressure - 0.5 * delta)
+
+
+def _excess(p_robot, valves_at, area, p_rest, delta0, s, x):
+    """The pressure the motion adds (Pa) when ``x`` of the drop is spent on it."""
+    return s * (p_robot(valves_at(delta0 - s * x) / area) - p_rest)
+
+
+def _log_residual(excess, span, z):
+    """f of the rod balance in the logit z of x/X."""
+    x = span * jax.nn.sigmoid(z)
+    return jnp.log(jnp.maximum(excess(x), 0.0) + _LOG_FLOOR) - jnp.log(x + _LOG_FLOOR)
+
+
+def _newton_step(f, carry):
+    """One safeguarded Newton step on the decreasing ``f`` inside the bracket [lo, hi] every evaluation narrows;
+    a step that leaves the bracket bisects it instead, so steep stretches (a friction force turning over
+    FRICTION_VELOCITY) cannot throw the iterate off."""
+    z, lo, hi, _, k = carry
+    fz, dfz = jax.jvp(f, (z,), (jnp.ones_like(z),))
+    lo, hi = jnp.where(fz > 0.0, z, lo), jnp.where(fz > 0.0, hi, z)
+    step = z - jnp.clip(fz / jnp.where(dfz < 0.0, dfz, -1.0), -8.0, 8.0)
+    inside = (step > lo) & (step < hi) & jnp.isfinite(step)
+    # A step past an end of the bracket that no evaluation has moved goes to that end: where the root lies
+    # beyond it (f keeps its sign there; a motion's pressure below 4e-18 of the span) that end is the answer.
+    low_edge, high_edge = (step <= lo) & (lo <= -BRACKET_LOGIT), (step >= hi) & (hi >= BRACKET_LOGIT)
+    z_new = jnp.where(
+        inside, step, jnp.where(low_edge, -BRACKET_LOGIT, jnp.where(high_edge, BRACKET_LOGIT, 0.5 * (lo + hi)))
+    )
+    exact = fz == 0.0  # the root itself (its bracket end would otherwise be bisected away)
+    beyond = ((z <= -BRACKET_LOGIT) & (fz < 0.0)) | ((z >= BRACKET_LOGIT) & (fz > 0.0))
+    z_new = jnp.where(exact | beyond, z, z_new)
+    converged = (inside & (jnp.abs(z_new - z) <= INFLOW_NEWTON_TOL)) | exact | beyond
+    collapsed = hi - lo <= INFLOW_BRACKET_TOL * jnp.maximum(1.0, jnp.abs(z_new))
+    return z_new, lo, hi, jnp.all(converged | collapsed), k + 1
+
+
+def _bracketed_newton(f, z, iterations: int):
+    """The root of the decreasing ``f`` in (−BRACKET_LOGIT, BRACKET_LOGIT) from ``z``, in at most ``iterations``
+    safeguarded Newton steps."""
+
+    def moving(carry):
+        return ~carry[3] & (carry[4] < iterations)
+
+    bound = jnp.full_like(z, BRACKET_LOGIT)
+    start = (z, -bound, bound, jnp.asarray(False), 0)
+    return jax.lax.while_loop(moving, functools.partial(_newton_step, f), start)[0]
+
+
+def _no_tangent(g, y):  # the root's derivative is taken below, not through the logit
+    return jnp.zeros_like(y)
+
+
+def _implicit_root(excess, span, z):
+    """x at the root z, carrying its derivatives by the implicit function theorem on g(x) = excess(x) − x, whose
+    slope is ≤ −1 (never singular, unlike the log–logit form's where the sigmoid saturates): one Newton step in x
+    from the root, its slope held constant, carries dx/dθ = −(∂g/∂θ)/g′ and leaves the value at the root."""
+    x_root = jax.lax.stop_gradient(span * jax.nn.sigmoid(z))
+    g_root, slope = jax.jvp(lambda x: excess(x) - x, (x_root,), (jnp.ones_like(x_root),))
+    return x_root - (g_root - jax.lax.stop_gradient(g_root)) / jax.lax.stop_gradient(jnp.minimum(slope, -1.0))

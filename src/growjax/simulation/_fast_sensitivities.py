@@ -1,5 +1,5 @@
 """The fast configuration's forward sensitivities: the problem a solve along directions in (params, inputs) sets
-its integrator (:func:`growjax.simulation._rosenbrock.integrate`), with the field's derivative either in forward mode or by
+its integrator (:func:`growjax.simulation.rosenbrock.integrate`), with the field's derivative either in forward mode or by
 central differences (``Config.tangents``).
 
 θ is one member's (params, inputs, prepared constants); a direction d has the structure of (params, inputs) with

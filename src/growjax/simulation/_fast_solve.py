@@ -1,4 +1,4 @@
-"""The fast configuration's solve: its Rosenbrock integration (:mod:`growjax.simulation._rosenbrock`), one member or a batch
+"""The fast configuration's solve: its Rosenbrock integration (:mod:`growjax.simulation.rosenbrock`), one member or a batch
 stepped together, its outputs on the save grid, and its derivatives.
 
 Forward mode (``jax.jvp``, ``jax.jacfwd``) integrates the sensitivities along the tangents with the state
@@ -23,7 +23,7 @@ from growjax.model.robot import pressure_limit
 from growjax.simulation import _assembly as assembly
 from growjax.simulation import _fast_sensitivities as fs
 from growjax.simulation import fast as fm
-from growjax.simulation._rosenbrock import evaluate, integrate, spread
+from growjax.simulation.rosenbrock import evaluate, integrate, spread
 from growjax.simulation.config import Config
 from growjax.simulation.trajectory import finish
 
@@ -57,7 +57,7 @@ def _tangent_run(run, ts, saved, block, th, output_tangents):
 
 
 def _sensitivity_run(params, config: Config, y0, theta_s, size, s0, tangent_field, **kw):
-    """The state and its sensitivities integrated together (:func:`growjax.simulation._rosenbrock.integrate`; ``kw``: breaks,
+    """The state and its sensitivities integrated together (:func:`growjax.simulation.rosenbrock.integrate`; ``kw``: breaks,
     jumps, batched), θ_s from :func:`sensitivities`, with twice the step budget of a plain solve. With
     forward-mode tangents the state's Jacobian is taken in forward mode too: the field's ``jvp`` is compiled
     anyway, and under the Lockhart law each difference column would repeat the rod balance's Newton solve
@@ -324,7 +324,7 @@ def solve(params: Parameters, inputs, config: Config, ts, jump_ts, step_ts):
     """Integrate the fast configuration and return a :class:`growjax.simulation.trajectory.Trajectory` on ``ts``.
 
     Differentiable in ``params`` and ``inputs``: the sensitivities are integrated with the state under the same
-    error control (:func:`growjax.simulation._rosenbrock.integrate`), and a batch of directions is one solve. With
+    error control (:func:`growjax.simulation.rosenbrock.integrate`), and a batch of directions is one solve. With
     ``config.adjoint == "forward"`` along the tangents themselves (forward mode only); with ``"reverse"`` as the
     Jacobian in every leaf that carries a tangent, contracted with them (forward mode and ``jax.grad``).
     """

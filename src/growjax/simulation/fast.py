@@ -18,7 +18,7 @@ faster than anything the robot's length shows:
 Everything else, the rod and valve balance (:func:`growjax.model.robot.inflow`), the motor, the
 PID and every added effect (:mod:`growjax.model.effects`), is the same code as the reference's.
 The remaining stiffness (the opened bypass, ~1e5 s⁻¹; the stepper rotor, ~3e5 s⁻¹) is
-damped by the L-stable ROS34PW2 method (:mod:`growjax.simulation._rosenbrock`) with the exact Jacobian,
+damped by the L-stable ROS34PW2 method (:mod:`growjax.simulation.rosenbrock`) with the exact Jacobian,
 at steps set by the slow dynamics, with input edges declared to the step-size controller.
 """
 
@@ -285,11 +285,3 @@ def pressure_of(params: Parameters, config: Config, ys, storage: StorageLaw | No
     wall_index = 3 if config.drive == "forward" else 6
     return line_pressure(params, ys[0] * scales[0], ys[wall_index] * scales[wall_index], storage)
 
-
-def __getattr__(name):
-    """The solve's entry points, defined in :mod:`growjax.simulation._fast_solve`, by their names here."""
-    if name in ("solve", "solve_members", "solve_with_sensitivities", "Run"):
-        from growjax.simulation import _fast_solve
-
-        return getattr(_fast_solve, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -4,7 +4,7 @@ quick compile the sweep's program takes.
 **Small loops.** XLA:CPU runs a compiled program as a sequence of operations, each launched on its own (a few µs),
 except a ``while`` loop whose operations it can all emit as one kernel and whose data fit under a size limit
 (``xla_cpu_small_while_loop_byte_threshold``, 1 kB by default): that loop runs as one compiled function.
-With the limit raised, the solver's loop (:mod:`growjax.simulation._rosenbrock`) qualifies when its linear solve is
+With the limit raised, the solver's loop (:mod:`growjax.simulation.rosenbrock`) qualifies when its linear solve is
 written in elementwise operations instead of a LAPACK call, which it is while this option is in
 ``XLA_FLAGS``. Measured on a 2-core CPU (``benchmarks/simulate.py``, README "Benchmarks"): a 10 s simulation
 10–11 ms instead of 15.5–17 ms, a forward-mode gradient in 3 parameters 24–33 ms instead of 41–47 ms; but a

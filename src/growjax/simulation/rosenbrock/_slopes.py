@@ -1,5 +1,5 @@
 """The field a step needs at one point: the block field F (state and sensitivities), ∂F/∂t and the state's
-Jacobian J, all held constant under differentiation except F (a W-method: see :mod:`growjax.simulation._rosenbrock`).
+Jacobian J, all held constant under differentiation except F (a W-method: see :mod:`growjax.simulation.rosenbrock`).
 
 The state block z is (1 + p, n): row 0 the state, rows 1… its sensitivities (p = 0 without them).
 """

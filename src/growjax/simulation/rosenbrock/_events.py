@@ -5,7 +5,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from growjax.simulation._rosenbrock.saving import Steps, hermite
+from growjax.simulation.rosenbrock._saving import Steps, hermite
 
 
 def locate_event(event, steps: Steps, occurred, y_final, iterations: int = 60):

@@ -13,13 +13,13 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-import growjax.simulation._rosenbrock.linear as linear
-import growjax.simulation._rosenbrock.method as method
-import growjax.simulation._rosenbrock.saving as saving
-import growjax.simulation._rosenbrock.slopes as slopes
-from growjax.simulation._rosenbrock.events import locate_event
-from growjax.simulation._rosenbrock.method import ROS34PW2, RosenbrockTableau
-from growjax.simulation._rosenbrock.step_control import error_norm, land, next_size
+import growjax.simulation.rosenbrock._linear as linear
+import growjax.simulation.rosenbrock._method as method
+import growjax.simulation.rosenbrock._saving as saving
+import growjax.simulation.rosenbrock._slopes as slopes
+from growjax.simulation.rosenbrock._events import locate_event
+from growjax.simulation.rosenbrock._method import ROS34PW2, RosenbrockTableau
+from growjax.simulation.rosenbrock._step_control import error_norm, land, next_size
 
 OK, EVENT, FAILED = 0, 1, 2
 
@@ -126,7 +126,7 @@ def integrate(
         s0: (p, n) sensitivities at t0.  s_atol: (p,) absolute tolerance of each sensitivity row;
             s_rtol: their relative tolerance (default ``rtol``).
         forward_jacobian: with ``tangent_field``, the state's Jacobian in forward mode instead of by forward
-            differences (:func:`growjax.simulation._rosenbrock.slopes.jacobian`).
+            differences (:func:`growjax.simulation.rosenbrock._slopes.jacobian`).
         event: ``g(t, y, args)``, decreasing through zero where the run must stop (e.g. 1 − p/p_limit).
         batched: ``y0``, ``args``, ``breaks``, ``jumps`` (and ``s0``, ``s_atol``) carry a leading batch axis B
             of independent problems, stepped together: one loop while any member runs, each member's
@@ -138,7 +138,7 @@ def integrate(
             kept (only the last step, for the event). A step then covers at most ``SAVE_WINDOW`` of them
             (binding only where they lie closer than about dtmax / (SAVE_WINDOW − 1)); times beyond the end get its
             state.
-        small_loops: a single run writes W⁻¹ in elementwise operations (`growjax.simulation._rosenbrock.linear.inverse`)
+        small_loops: a single run writes W⁻¹ in elementwise operations (`growjax.simulation.rosenbrock._linear.inverse`)
             instead of a LAPACK call, so that XLA:CPU can compile its whole loop into one kernel
             (`growjax.simulation.xla_flags`).
 
@@ -148,38 +148,62 @@ def integrate(
     (a stiff mode switched on inside it) rejects the step.
     """
     y0 = jnp.asarray(y0)
-    dtype = y0.dtype
-    s = _Setup(
-        functools.partial(slopes.block, field, tangent_field),
-        functools.partial(
-            slopes.block_slopes, field, tangent_field, batched=batched, forward_jacobian=forward_jacobian
-        ),
-        tableau.coefficients(dtype),
-        jnp.asarray(t0, dtype),
-        jnp.asarray(t1, dtype),
-        rtol,
-        atol,
-        s_rtol,
-        tangent_field is not None,
-        max_steps,
-        dt0,
-        dtmax,
-        event,
-        batched,
-        save_ts is not None,
-        small_loops,
-        dtype,
+    s = _setup(
+        field,
+        tangent_field,
+        y0.dtype,
+        t0,
+        t1,
+        rtol=rtol,
+        atol=atol,
+        s_rtol=s_rtol,
+        forward_jacobian=forward_jacobian,
+        max_steps=max_steps,
+        dt0=dt0,
+        dtmax=dtmax,
+        event=event,
+        tableau=tableau,
+        batched=batched,
+        saving=save_ts is not None,
+        small_loops=small_loops,
     )
     if not batched:
-        prob = (*_problem(s, y0, breaks, jumps, s0, s_atol), saving.padded(save_ts, dtype), args)
-        final = jax.lax.while_loop(
-            lambda c: c.status < 0, functools.partial(_attempt, s, prob), _init(s, prob[0], args, prob[3], prob[5])
-        )
-        return _finish(s, prob, final)
+        return _run_one(s, y0, args, breaks, jumps, s0, s_atol, save_ts)
+    return _run_batch(s, y0, args, breaks, jumps, s0, s_atol, save_ts)
+
+
+def _setup(field, tangent_field, dtype, t0, t1, *, forward_jacobian, tableau, batched, **settings) -> _Setup:
+    """The `_Setup` of one `integrate` call (``settings``: its fields of the same names)."""
+    return _Setup(
+        block=functools.partial(slopes.block, field, tangent_field),
+        slopes=functools.partial(
+            slopes.block_slopes, field, tangent_field, batched=batched, forward_jacobian=forward_jacobian
+        ),
+        coef=tableau.coefficients(dtype),
+        t_start=jnp.asarray(t0, dtype),
+        t_end=jnp.asarray(t1, dtype),
+        sensitivities=tangent_field is not None,
+        batched=batched,
+        dtype=dtype,
+        **settings,
+    )
+
+
+def _run_one(s: _Setup, y0, args, breaks, jumps, s0, s_atol, save_ts) -> Result:
+    """One run's loop of attempts, and its result."""
+    prob = (*_problem(s, y0, breaks, jumps, s0, s_atol), saving.padded(save_ts, s.dtype), args)
+    final = jax.lax.while_loop(
+        lambda c: c.status < 0, functools.partial(_attempt, s, prob), _init(s, prob[0], args, prob[3], prob[5])
+    )
+    return _finish(s, prob, final)
+
+
+def _run_batch(s: _Setup, y0, args, breaks, jumps, s0, s_atol, save_ts) -> Result:
+    """A batch's one loop of attempts while any member runs, and the members' results."""
     probs = jax.vmap(functools.partial(_problem, s))(y0, breaks, jumps, s0, s_atol)
     probs = (
         *probs,
-        None if save_ts is None else jax.vmap(functools.partial(saving.padded, dtype=dtype))(save_ts),
+        None if save_ts is None else jax.vmap(functools.partial(saving.padded, dtype=s.dtype))(save_ts),
         args,
     )
     carry0 = jax.vmap(functools.partial(_init, s))(probs[0], args, probs[3], probs[5])
