@@ -7,7 +7,7 @@ gives the robot pressure p_r needed to move at velocity v:
     p_r = Y + F_AC/A_r − P·2π r_i μ_c L_c/A_r + ψ(v) + (F_c + F_hs + F_e)/A_r
 
 with F_c the cylinder's end stops, F_hs the rod hard stop and F_e the forces of added
-effects (:mod:`growjax.model.effects`), all opposing the motion. The catheter-friction term enters
+effects (`growjax.model.effects`), all opposing the motion. The catheter-friction term enters
 with the sign that *assists* growth, as in the shipped model.
 
 Two growth laws set the velocity term ψ(v) (``GrowingRobot.growth_law``):
@@ -32,7 +32,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float
 
-from growjax.model import hydraulics as hy
+import growjax.model.hydraulics as hy
 from growjax.model.pump import cylinder_stop_force
 from growjax.model.smooth import smooth_abs_power, smooth_ramp
 
@@ -111,25 +111,55 @@ class GrowingRobot(eqx.Module):
             raise ValueError(f"growth_law must be one of {GROWTH_LAWS}, got {self.growth_law!r}")
 
     @property
-    def area(self):
+    def area(self) -> Float[ArrayLike, ""]:
         """Annular piston area A_r, m²."""
         return jnp.pi * (self.outer_radius**2 - self.inner_radius**2)
 
 
-def pressure_limit(robot: GrowingRobot):
-    """Safe pressure of the membrane, Pa: 2 t σ_y / (r_o · safety factor) (paper eq. 8)."""
+def pressure_limit(robot: GrowingRobot) -> Float[ArrayLike, "*b"]:
+    """Safe pressure of the membrane: 2 t σ_y / (r_o · safety factor) (paper eq. 8).
+
+    Args:
+        robot: the robot (its fields may carry a batch axis).
+
+    Returns:
+        The limit, Pa.
+    """
     return 2.0 * robot.membrane_thickness * robot.membrane_yield_stress / (robot.outer_radius * robot.safety_factor)
 
 
-def catheter_friction_gain(robot: GrowingRobot, catheter_length):
-    """k = 2π r_i μ_c L_c / A_r (–): the friction force per unit pressure P, per unit area."""
+def catheter_friction_gain(robot: GrowingRobot, catheter_length: Float[ArrayLike, "*b"]) -> Float[Array, "*b"]:
+    """The catheter's friction force per unit pressure P, per unit area: k = 2π r_i μ_c L_c / A_r.
+
+    Args:
+        robot: the robot.
+        catheter_length: L_c, m.
+
+    Returns:
+        k (–).
+    """
     return 2.0 * jnp.pi * robot.inner_radius * robot.catheter_friction * catheter_length / robot.area
 
 
 class RodBalance(eqx.Module):
-    """Constants of the rod balance of a :class:`GrowingRobot`, computed once per solve (:func:`rod_balance`).
+    """Constants of the rod balance of a `GrowingRobot`, computed once per solve (`rod_balance`).
 
-    Pressures in Pa, lengths in m; ``*_per_area`` terms are forces (N) divided by A_r.
+    Attributes:
+        area: A_r, m².
+        rest: Y + F_AC/A_r, Pa.
+        friction: 2π r_i μ_c / A_r, per m of catheter, 1/m.
+        law_scale: 1/ext (reference) or 1/φ_L (Lockhart), s/m.
+        law_exponent: n (reference) or 1/n_L (Lockhart).
+        stop_per_area: K_p/A_r, the end stops' coefficient per area.
+        extend_limit: stroke − L0, m of displacement.
+        retract_limit: −L0, m.
+        initial_length: L0, m.
+        hard_bound: the rod hard stop's bound, m.
+        hard_stiffness_per_area: Pa/m.
+        hard_damping_per_area: Pa·s/m.
+        velocity_eps: the growth law's regularisation, m/s.
+        stop_width: the stops' transition band, m.
+        growth_law: ``"reference"`` or ``"lockhart"``.
     """
 
     area: jax.Array  # A_r, m²
@@ -149,8 +179,16 @@ class RodBalance(eqx.Module):
     growth_law: str = eqx.field(static=True)
 
 
-def rod_balance(robot: GrowingRobot, widths) -> RodBalance:
-    """The :class:`RodBalance` of ``robot``; ``widths`` = (velocity_eps m/s, stop_width m) of the regularisations."""
+def rod_balance(robot: GrowingRobot, widths: tuple[float, float]) -> RodBalance:
+    """The `RodBalance` of a robot.
+
+    Args:
+        robot: the robot.
+        widths: (velocity_eps m/s, stop_width m) of the regularisations.
+
+    Returns:
+        The constants.
+    """
     velocity_eps, stop_width = widths
     area = robot.area
     if robot.growth_law == "lockhart":
@@ -176,11 +214,18 @@ def rod_balance(robot: GrowingRobot, widths) -> RodBalance:
     )
 
 
-def growth_pressure(rod: RodBalance, velocity):
-    """Growth-law term ψ(v) of the rod balance, Pa (regularised at v = 0 over ``rod.velocity_eps`` m/s).
+def growth_pressure(rod: RodBalance, velocity: Float[ArrayLike, "*b"]) -> Float[Array, "*b"]:
+    """Growth-law term ψ(v) of the rod balance, regularised at v = 0 over ``rod.velocity_eps``.
 
     Reference: sgn(v)|v/ext|^n (eq. 1). Lockhart: p_ref (v/φ_L)^(1/n_L) for v > 0, 0 otherwise
     (the inverse of v = φ_L((p_r − p_0)/p_ref)^(n_L)).
+
+    Args:
+        rod: the rod balance's constants.
+        velocity: v, m/s.
+
+    Returns:
+        ψ(v), Pa.
     """
     eps = rod.velocity_eps
     if rod.growth_law == "lockhart":
@@ -188,21 +233,56 @@ def growth_pressure(rod: RodBalance, velocity):
     return smooth_abs_power(velocity * rod.law_scale, rod.law_exponent, eps * rod.law_scale)
 
 
-def lockhart_pressure(velocity, inverse_speed, exponent, eps):
-    """Excess pressure (Pa) of Lockhart's law to grow at ``velocity`` (m/s): p_ref·(κ·v)^m for v > 0, 0 otherwise
-    (p_ref = 1 kPa, κ = ``inverse_speed`` s/m, m = ``exponent``), the ramp of v and the power regularised over
-    ``eps`` m/s (C¹ at v = 0). The inverse of v = ((p − p₀)/p_ref)^(1/m)/κ."""
+def lockhart_pressure(
+    velocity: Float[ArrayLike, "*b"],
+    inverse_speed: Float[ArrayLike, "*b"],
+    exponent: Float[ArrayLike, "*b"],
+    eps: float,
+) -> Float[Array, "*b"]:
+    """Excess pressure of Lockhart's law to grow at a velocity: p_ref·(κ·v)^m for v > 0, 0 otherwise (p_ref = 1 kPa),
+    the inverse of v = ((p − p₀)/p_ref)^(1/m)/κ.
+
+    Args:
+        velocity: v, m/s.
+        inverse_speed: κ, s/m.
+        exponent: m.
+        eps: the band over which the ramp of v and the power are regularised (C¹ at v = 0), m/s.
+
+    Returns:
+        The excess pressure, Pa.
+    """
     growth = smooth_ramp(velocity, eps) * inverse_speed
     return LOCKHART_PRESSURE_SCALE * smooth_abs_power(growth, exponent, eps * inverse_speed)
 
 
-def velocity_pressure(robot: GrowingRobot, velocity, velocity_eps):
-    """ψ(v) of ``robot``'s growth law, Pa (see :func:`growth_pressure`)."""
+def velocity_pressure(robot: GrowingRobot, velocity: Float[ArrayLike, "*b"], velocity_eps: float) -> Float[Array, "*b"]:
+    """ψ(v) of a robot's growth law (`growth_pressure`).
+
+    Args:
+        robot: the robot.
+        velocity: v, m/s.
+        velocity_eps: the regularisation at v = 0, m/s.
+
+    Returns:
+        ψ(v), Pa.
+    """
     return growth_pressure(rod_balance(robot, (velocity_eps, 1e-6)), velocity)
 
 
-def hard_stop_force(robot: GrowingRobot, length, velocity, width):
-    """Rod hard-stop force (N, opposing motion beyond ±bound; reference 'smooth' model over ``width`` m)."""
+def hard_stop_force(
+    robot: GrowingRobot, length: Float[ArrayLike, "*b"], velocity: Float[ArrayLike, "*b"], width: float
+) -> Float[Array, "*b"]:
+    """Rod hard-stop force, opposing motion beyond ±bound (the reference's 'smooth' model).
+
+    Args:
+        robot: the robot.
+        length: its length, m.
+        velocity: its velocity, m/s.
+        width: the stop's transition band, m.
+
+    Returns:
+        The force, N.
+    """
     rod = rod_balance(robot, (1e-6, width))
     return rod.area * _hard_stop_pressure(rod, length, velocity)
 
@@ -216,10 +296,26 @@ def _hard_stop_pressure(rod: RodBalance, length, velocity):
     return rod.hard_stiffness_per_area * (pen_up - pen_lo) + rod.hard_damping_per_area * velocity * gate
 
 
-def rod_pressure(rod: RodBalance, sensor_pressure, velocity, length, catheter_length, force):
-    """Robot chamber pressure p_r (Pa) satisfying the massless rod balance at velocity ``velocity`` (m/s).
+def rod_pressure(
+    rod: RodBalance,
+    sensor_pressure: Float[ArrayLike, "*b"],
+    velocity: Float[ArrayLike, "*b"],
+    length: Float[ArrayLike, "*b"],
+    catheter_length: Float[ArrayLike, "*b"],
+    force: Float[ArrayLike, "*b"],
+) -> Float[Array, "*b"]:
+    """Robot chamber pressure p_r satisfying the massless rod balance at a velocity.
 
-    ``force`` (N) is the sum of the added effects' forces opposing growth.
+    Args:
+        rod: the rod balance's constants.
+        sensor_pressure: P, the sensed pressure, Pa (the catheter's friction grows with it).
+        velocity: v, m/s.
+        length: the robot's length, m.
+        catheter_length: L_c, m.
+        force: the sum of the added effects' forces opposing growth, N.
+
+    Returns:
+        p_r, Pa.
     """
     displacement = length - rod.initial_length
     stops = rod.stop_per_area * (
