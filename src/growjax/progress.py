@@ -2,8 +2,8 @@
 when quiet.
 
 ``bar(total, desc, unit, enabled)`` returns an object with ``update(n)`` and ``close()`` (also a context
-manager): ``tqdm`` where the stream is a terminal; :class:`Lines` where it is a file or a pipe (a log of a
-batch job: at most ~11 lines of ~60 characters per bar); :class:`Silent` when not ``enabled``.
+manager): ``tqdm`` where the stream is a terminal; `Lines` where it is a file or a pipe (a log of a
+batch job: at most ~11 lines of ~60 characters per bar); `Silent` when not ``enabled``.
 ``note(text, enabled)`` writes one line (a phase starting or ending) on the same stream. The stream is
 ``sys.stderr`` unless given, read when called (so that a redirected or captured stream is the one used).
 """
@@ -13,13 +13,15 @@ from __future__ import annotations
 import sys
 import threading
 import time
+from collections.abc import Iterable, Iterator
+from typing import Any, TextIO
 
 __all__ = ["Lines", "Silent", "bar", "is_terminal", "note", "terminal"]
 
 STEP = 0.1  # a line each time this share of the total is passed (non-terminal streams)
 
 
-def is_terminal(stream) -> bool:
+def is_terminal(stream: TextIO) -> bool:
     """Whether ``stream`` is an interactive terminal."""
     try:
         return bool(stream.isatty())
@@ -31,15 +33,15 @@ class Silent:
     """A progress object that shows nothing."""
 
     def update(self, n: int = 1) -> None:
-        pass
+        """Count ``n`` more steps done."""
 
     def close(self) -> None:
-        pass
+        """End the progress."""
 
-    def __enter__(self):
+    def __enter__(self) -> Silent:
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> bool:
         self.close()
         return False
 
@@ -47,11 +49,28 @@ class Silent:
 class Lines(Silent):
     """One line ``desc: k/total unit (p %), t s[, phase]`` each time another ``step`` of ``total`` is done, and at
     the end. Also stands in for the part of tqdm's interface that NumPyro uses (iteration over ``iterable``,
-    ``set_description``: the phase shown where ``phases``, ``set_postfix_str``: ignored); thread-safe."""
+    ``set_description``: the phase shown where ``phases``, ``set_postfix_str``: ignored); thread-safe.
+
+    Args:
+        total: the number of steps.
+        desc: the label at the start of each line.
+        unit: the steps' unit (pluralised with an "s"), or none.
+        stream: where the lines go (default ``sys.stderr``, read when made).
+        step: a line each time this share of ``total`` is passed.
+        iterable: what iterating over the object yields (default ``range(total)``).
+        phases: whether ``set_description`` adds its phase to the lines.
+    """
 
     def __init__(
-        self, total: int, desc: str, unit: str = "", stream=None, step: float = STEP, iterable=None, phases: bool = True
-    ):
+        self,
+        total: int,
+        desc: str,
+        unit: str = "",
+        stream: TextIO | None = None,
+        step: float = STEP,
+        iterable: Iterable[Any] | None = None,
+        phases: bool = True,
+    ) -> None:
         self.total, self.desc, self.unit, self.step, self.phases = max(int(total), 0), desc, unit, step, phases
         self.stream = stream if stream is not None else sys.stderr
         self.iterable, self.phase = iterable, ""
@@ -60,6 +79,7 @@ class Lines(Silent):
         self._lock = threading.Lock()
 
     def update(self, n: int = 1) -> None:
+        """Count ``n`` more steps done; write a line where another ``step`` of the total is passed."""
         with self._lock:
             self.done += n
             if (
@@ -71,21 +91,23 @@ class Lines(Silent):
                 self._write()
 
     def close(self) -> None:
+        """Write the last line (unless written) and end."""
         with self._lock:
             if not self._closed and self.total and self._written != self.done:
                 self._write()
             self._closed = True
 
-    def __iter__(self):
+    def __iter__(self) -> Iterator[Any]:
         for item in self.iterable if self.iterable is not None else range(self.total):
             yield item
             self.update(1)
 
     def set_description(self, desc: str = "", refresh: bool = True) -> None:
+        """The phase ``desc`` shown at the end of the next lines (``refresh`` ignored)."""
         self.phase = str(desc).strip()
 
     def set_postfix_str(self, s: str = "", refresh: bool = True) -> None:
-        pass
+        """Ignored (tqdm's postfix)."""
 
     def _write(self) -> None:
         self._written = self.done
@@ -102,15 +124,25 @@ class Lines(Silent):
 _WRITING = threading.Lock()  # one line at a time, whole, from any thread
 
 
-def _write_line(text: str, stream) -> None:
+def _write_line(text: str, stream: TextIO) -> None:
     with _WRITING:
         stream.write(text + "\n")
         stream.flush()
 
 
-def bar(total: int, desc: str, unit: str = "", enabled: bool = True, stream=None):
-    """A progress object of ``total`` steps: tqdm on a terminal, :class:`Lines` elsewhere, :class:`Silent` when
-    not ``enabled``."""
+def bar(total: int, desc: str, unit: str = "", enabled: bool = True, stream: TextIO | None = None) -> Any:
+    """A progress object, with ``update(n)`` and ``close()`` and usable as a context manager.
+
+    Args:
+        total: the number of steps.
+        desc: its label.
+        unit: the steps' unit, or none.
+        enabled: whether it shows anything.
+        stream: where it goes (default ``sys.stderr``, read when called).
+
+    Returns:
+        ``tqdm`` on a terminal, `Lines` elsewhere, `Silent` when not ``enabled``.
+    """
     if not enabled:
         return Silent()
     stream = stream if stream is not None else sys.stderr
@@ -121,12 +153,13 @@ def bar(total: int, desc: str, unit: str = "", enabled: bool = True, stream=None
     return Lines(total, desc, unit, stream)
 
 
-def note(text: str, enabled: bool = True, stream=None) -> None:
-    """One line of progress (a phase starting or ending), unless not ``enabled``."""
+def note(text: str, enabled: bool = True, stream: TextIO | None = None) -> None:
+    """Write one line of progress (a phase starting or ending) on ``stream`` (default ``sys.stderr``), unless not
+    ``enabled``."""
     if enabled:
         _write_line(text, stream if stream is not None else sys.stderr)
 
 
-def terminal(stream=None) -> bool:
+def terminal(stream: TextIO | None = None) -> bool:
     """Whether progress goes to a terminal (``sys.stderr`` unless ``stream``): where bars belong."""
     return is_terminal(stream if stream is not None else sys.stderr)

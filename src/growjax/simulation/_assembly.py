@@ -1,7 +1,7 @@
 """What both assemblies share: the state layout, the scaled field, and every law between the network and the
 state rates that does not depend on how the hydraulic network is resolved.
 
-An assembly (:mod:`growjax.simulation.fast`, :mod:`growjax.simulation.reference`) owns only its network's states and its
+An assembly (`growjax.simulation.fast`, `growjax.simulation.reference`) owns only its network's states and its
 solver; the drive (PID and ideal torque, or the stepper), the robot's length, the effects' view of the rod and
 of the instant, the constants of the valve and rod laws and the masking of failed states are written here once.
 All quantities SI.
@@ -13,7 +13,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from growjax.model import effects as fx
+import growjax.model.effects as fx
 from growjax.model.effects import Instant, Rod
 from growjax.model.hydraulics import ValveNetwork, valve_network
 from growjax.model.motor import (

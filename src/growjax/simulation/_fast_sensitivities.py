@@ -1,5 +1,5 @@
 """The fast configuration's forward sensitivities: the problem a solve along directions in (params, inputs) sets
-its integrator (:func:`growjax.simulation.rosenbrock.integrate`), with the field's derivative either in forward mode or by
+its integrator (`growjax.simulation.rosenbrock.integrate`), with the field's derivative either in forward mode or by
 central differences (``Config.tangents``).
 
 θ is one member's (params, inputs, prepared constants); a direction d has the structure of (params, inputs) with
@@ -14,10 +14,10 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+import growjax.simulation._assembly as assembly
+import growjax.simulation.fast as fm
 from growjax.model.params import Parameters
 from growjax.model.robot import pressure_limit
-from growjax.simulation import _assembly as assembly
-from growjax.simulation import fast as fm
 from growjax.simulation.config import Config
 
 
@@ -74,7 +74,7 @@ def member(params, inputs, config: Config, jump_ts, step_ts):
 
 
 def callbacks(config: Config):
-    """(field, outputs, event) of the scaled state, each ``(t, y, θ)`` with θ from :func:`member`."""
+    """(field, outputs, event) of the scaled state, each ``(t, y, θ)`` with θ from `member`."""
 
     def field(t, y, th):
         p, i, pr = th
@@ -97,21 +97,29 @@ def callbacks(config: Config):
 
 
 def forward_mode_tangents(params: Parameters, config: Config) -> bool:
-    """Whether the sensitivities' field is taken in forward mode, else by central differences (``config.tangents``;
-    decided when a solve is traced). ``jax.jvp`` evaluates the primal field, and its inner Newton solve, once for
-    all p directions where differences evaluate it 1 + 2p times; but its many small operations are launched one
-    by one unless the solver's loop is compiled whole (``config.small_loops``, :mod:`growjax.simulation.xla_flags`). ``"auto"`` takes forward mode
-    where the loop is compiled whole (``config.small_loops``) or the rod balance is solved by Newton in every evaluation (the Lockhart law)
-    (``python benchmarks/simulate.py --tangents``, 3 parameters: Lockhart 31 ms against 60 ms by differences with
-    small loops, 88 against 115 ms without; published law 17 against 24 ms with, but 62 against 41 ms without)."""
+    """Whether the sensitivities' field is taken in forward mode, else by central differences.
+
+    ``jax.jvp`` evaluates the primal field, and its inner Newton solve, once for all p directions where
+    differences evaluate it 1 + 2p times; but its many small operations are launched one by one unless the
+    solver's loop is compiled whole (``config.small_loops``, `growjax.simulation.xla_flags`). ``"auto"`` takes
+    forward mode where the loop is compiled whole or the rod balance is solved by Newton in every evaluation (the
+    Lockhart law); ``python benchmarks/simulate.py --tangents`` measures both.
+
+    Args:
+        params: the parameters (their growth law and effects decide the rod solve).
+        config: the configuration (``config.tangents``, ``config.small_loops``).
+
+    Returns:
+        True for forward mode; decided when a solve is traced.
+    """
     if config.tangents == "auto":
         return bool(config.small_loops) or fm.rod_solve(params) == "newton"
     return config.tangents == "forward"
 
 
 def sensitivities(params, inputs, config: Config, jump_ts, step_ts, directions):
-    """One member's sensitivity problem along ``directions`` (see :func:`_integrate`): (θ_s, sizes |d|/|θ| (p,),
-    S0 (p, n)), θ_s for the callbacks of :func:`sensitivity_callbacks`."""
+    """One member's sensitivity problem along ``directions`` (see `_integrate`): (θ_s, sizes |d|/|θ| (p,),
+    S0 (p, n)), θ_s for the callbacks of `sensitivity_callbacks`."""
     build = _forward_sensitivities if forward_mode_tangents(params, config) else _difference_sensitivities
     return build(params, inputs, config, jump_ts, step_ts, directions)
 
@@ -129,7 +137,7 @@ def difference_step(size):
 def _difference_sensitivities(params, inputs, config: Config, jump_ts, step_ts, directions):
     """One member's sensitivity problem along ``directions`` = (parameter tangents, input tangents), each leaf
     with a leading axis p: (θ_s = (θ, θ moved by ±εd (2p, …), ±ε (2p,), 1/2ε (p,)), sizes |d|/|θ| (p,),
-    S0 (p, n)), for :func:`_difference_callbacks`."""
+    S0 (p, n)), for `_difference_callbacks`."""
     d_params, d_inputs = directions
     theta = member(params, inputs, config, jump_ts, step_ts)[0]
     typical = (typical_sizes(params), inputs)
@@ -165,7 +173,7 @@ def _central(quotient, values):
 
 
 def _difference_callbacks(config: Config):
-    """(tangent field, output tangents) over θ_s from :func:`_difference_sensitivities`: central difference
+    """(tangent field, output tangents) over θ_s from `_difference_sensitivities`: central difference
     quotients of the primal field and outputs along every direction, in one batched evaluation."""
     field, outputs, _ = callbacks(config)
 
@@ -189,7 +197,7 @@ def _difference_callbacks(config: Config):
 def _forward_sensitivities(params, inputs, config: Config, jump_ts, step_ts, directions):
     """One member's sensitivity problem along ``directions`` = (parameter tangents, input tangents), each leaf
     with a leading axis p: (θ_s = (θ, dθ: the tangents of θ's floating-point leaves (p, …)), sizes |d|/|θ| (p,),
-    S0 (p, n)), for :func:`_forward_callbacks`."""
+    S0 (p, n)), for `_forward_callbacks`."""
     d_params, d_inputs = directions
     theta = member(params, inputs, config, jump_ts, step_ts)[0]
     typical = (typical_sizes(params), inputs)
@@ -211,7 +219,7 @@ def _forward_sensitivities(params, inputs, config: Config, jump_ts, step_ts, dir
 
 
 def _forward_callbacks(config: Config):
-    """(tangent field, output tangents) over θ_s from :func:`_forward_sensitivities`: forward-mode derivatives of the
+    """(tangent field, output tangents) over θ_s from `_forward_sensitivities`: forward-mode derivatives of the
     primal field and outputs along every direction, the primal (and its inner Newton solve) evaluated once."""
     field, outputs, _ = callbacks(config)
 

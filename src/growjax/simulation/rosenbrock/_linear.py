@@ -1,7 +1,7 @@
 """The small dense linear algebra of a step: W⁻¹ and the Jacobian's variation check, for one run and for a batch.
 
-One run inverts W by LAPACK, or in elementwise operations (:func:`inverse`) where XLA:CPU is to compile the whole
-loop into one kernel (:mod:`growjax.simulation.xla_flags`). A batch (under ``vmap``) writes both with the batch axis last, in
+One run inverts W by LAPACK, or in elementwise operations (`inverse`) where XLA:CPU is to compile the whole
+loop into one kernel (`growjax.simulation.xla_flags`). A batch (under ``vmap``) writes both with the batch axis last, in
 elementwise operations (``custom_vmap`` rules; for 250 6 × 6 matrices in a loop, measured: an inverse ~70 µs
 against LAPACK's ~120 µs, a product ~12 µs against a batched ``dot``'s ~45 µs).
 """
@@ -15,7 +15,7 @@ import jax.numpy as jnp
 def inverse(m):
     """Inverse of a small square matrix (n, n) by Gauss–Jordan elimination with partial pivoting, unrolled over
     its n columns in elementwise operations (no LAPACK call: XLA:CPU can then compile the solver's whole loop
-    into one kernel, :mod:`growjax.simulation.xla_flags`; without that option LAPACK is faster)."""
+    into one kernel, `growjax.simulation.xla_flags`; without that option LAPACK is faster)."""
     n = m.shape[-1]
     rows = jnp.arange(n)[:, None]
     a = jnp.concatenate([m, jnp.eye(n, dtype=m.dtype)], axis=1)
@@ -65,14 +65,15 @@ def inverse_batch(m):
 
 def variation(w_inv, dw):
     """Spectral radius of W₀⁻¹ (W₀ − W₁) for W₀⁻¹ = ``w_inv`` and W₀ − W₁ = ``dw`` (n, n): its ∞-norm, refined by
-    :func:`spectral_radius` where that bound exceeds 1 (a step is rejected above 1)."""
+    `spectral_radius` where that bound exceeds 1 (a step is rejected above 1)."""
     change = w_inv @ dw
     bound = norm_inf(change)
     return jax.lax.cond(bound > 1.0, spectral_radius, lambda m: bound, change)
 
 
 def spread(args, in_batched, axis_size: int):
-    """``custom_vmap`` arguments (a tuple of pytrees) with the unbatched leaves broadcast to the batch's leading axis."""
+    """``custom_vmap`` arguments (a tuple of pytrees) with the unbatched leaves broadcast to the leading batch
+    axis of size ``axis_size``; ``in_batched`` tells, per leaf, which are batched."""
 
     def one(x, batched):
         return x if batched else jnp.broadcast_to(x, (axis_size,) + jnp.shape(x))
@@ -82,7 +83,7 @@ def spread(args, in_batched, axis_size: int):
 
 @jax.custom_batching.custom_vmap
 def batchable_inverse(m):
-    """W⁻¹ of one (n, n) matrix by LAPACK; of a batch (under ``vmap``) by :func:`inverse_batch`."""
+    """W⁻¹ of one (n, n) matrix by LAPACK; of a batch (under ``vmap``) by `inverse_batch`."""
     return jnp.linalg.inv(m)
 
 
@@ -96,7 +97,7 @@ batchable_variation = jax.custom_batching.custom_vmap(variation)
 
 @batchable_variation.def_vmap
 def _variation_rule(axis_size, in_batched, w_inv, dw):
-    """:func:`variation` of a batch, its matrices with the batch axis last: elementwise operations instead of
+    """`variation` of a batch, its matrices with the batch axis last: elementwise operations instead of
     batched 6 × 6 products, and the refinement computed for every member (as a vmapped ``cond`` would)."""
     w_inv, dw = spread((w_inv, dw), in_batched, axis_size)
     change = product_last(jnp.moveaxis(w_inv, 0, -1), jnp.moveaxis(dw, 0, -1))
@@ -111,8 +112,8 @@ def norm_inf(m):
 
 def spectral_radius(m, squarings: int = 3, norm=norm_inf, product=jnp.matmul):
     """Upper estimate of the spectral radius of a square matrix: ‖m^(2^k)‖∞^(1/2^k) (k squarings, rescaled).
-    ``norm`` and ``product`` fit the layout: a batch with its axis last passes :func:`row_sums_max` and
-    :func:`product_last` and gets (B,)."""
+    ``norm`` and ``product`` fit the layout: a batch with its axis last passes `row_sums_max` and
+    `product_last` and gets (B,)."""
     log_scale = 0.0
     for _ in range(squarings):
         size = jnp.maximum(norm(m), 1e-300)

@@ -1,5 +1,5 @@
 """The field a step needs at one point: the block field F (state and sensitivities), ∂F/∂t and the state's
-Jacobian J, all held constant under differentiation except F (a W-method: see :mod:`growjax.simulation.rosenbrock`).
+Jacobian J, all held constant under differentiation except F (a W-method: see `growjax.simulation.rosenbrock`).
 
 The state block z is (1 + p, n): row 0 the state, rows 1… its sensitivities (p = 0 without them).
 """
@@ -46,8 +46,8 @@ def forward_slopes(field, t, y, t_left=None):
     direction and along time, the primal evaluated once; F_left = F(t_left, y) (default F). ∂F/∂t is the
     derivative of the input's piece that starts at t. Shapes as the state block: (1, n), (1, n), (n, n), (1, n).
 
-    Used for batches: there it costs less than the difference columns (500-set sweep 1.35 → 1.06 s), in a
-    single run more (a 10 s simulation 18.5 → 28 ms, with the stage loop), at a longer compile (+1.6–2.1 s for the sweep).
+    Used for batches, where it costs less than the difference columns; in a single run it costs more, and it
+    compiles longer (``benchmarks/simulate.py``).
     """
     t, y = jax.lax.stop_gradient((t, y))
     units = jnp.eye(y.shape[0] + 1, dtype=y.dtype)
@@ -73,8 +73,8 @@ def block_slopes(
     """(F, ∂F/∂t, J, F_left) at (t, z): the block field (1 + p, n), its time derivative (forward difference,
     (1 + p, n)), the state's Jacobian (n, n) and the block field at ``t_left`` (default t). The block's evaluations
     are one vmapped call (each copy of the field in the program costs compile time), F_left apart in one run.
-    A batch (``batched``) without sensitivities takes them in forward mode instead (:func:`forward_slopes`);
-    ``forward_jacobian``: with sensitivities, J in forward mode (:func:`jacobian`)."""
+    A batch (``batched``) without sensitivities takes them in forward mode instead (`forward_slopes`);
+    ``forward_jacobian``: with sensitivities, J in forward mode (`jacobian`)."""
     if tangent_field is None and batched:
         return forward_slopes(lambda t, y: field(t, y, args), t, z[0], t_left)
     n = z.shape[-1]
