@@ -105,34 +105,59 @@ def design_controller(
         "max_demand_Pa": lim.pressure_ceiling,
     }
     design = _Design(params, target, t1, lim, evaluate_cfg, summary, time.perf_counter())
-    if drive == "inverse":
-        if method == "mpc":
-            raise ValueError("the MPC is designed for the forward drive; use --method feedback for the stepper")
-        if method == "open-loop":
-            res = _stepper_open_loop(design, microsteps)
-        else:
-            res = _stepper_feedback(design, microsteps)
-    else:
-        prof = optimize_profile(params, target, t1, knot_dt=knot_dt, iterations=iterations, lim=lim)
-        summary["profile_optimisation_s"] = prof.wall_s
-        summary["profile"] = {"knots_s": prof.knots.tolist(), "demand_Pa": prof.demand.tolist()}
-        if method == "open-loop":
-            res = _forward_open_loop(design, prof)
-        elif method == "feedback":
-            res = _forward_feedback(design, prof, robust, n_draws, seed, tol, iterations)
-        else:
-            res = _forward_mpc(design)
-    summary["evaluation_s"] = time.perf_counter() - design.start - summary["design_s"]
-    summary["tracking_rmse_m"] = res.rmse_m
-    summary["pressure_limit_crossed"] = res.pressure_limit_crossed
-    summary["peak_pressure_Pa"] = float(np.nanmax(res.pressure))
-    summary["status"] = gj.status_name(res.status) if res.status != 1 else "pressure_limit"
+    options = dict(microsteps=microsteps, knot_dt=knot_dt, iterations=iterations, robust=robust, n_draws=n_draws)
+    res = _designed(design, drive, method, seed=seed, tol=tol, **options)
+    summary |= _evaluation(res, time.perf_counter() - design.start - summary["design_s"])
     if figure is not None:
         from growjax.plotting import control_figure
 
         title = f"{drive} drive, {method}: RMSE {1e3 * res.rmse_m:.2f} mm ({evaluate_on})"
         summary["figure"] = str(control_figure(res, target, figure, lim, title, drive))
     return summary
+
+
+def _evaluation(res: ClosedLoopResult, seconds: float) -> dict:
+    """The summary's evaluation of a run: its time (s), tracking RMSE (m), peak pressure (Pa) and status."""
+    return {
+        "evaluation_s": seconds,
+        "tracking_rmse_m": res.rmse_m,
+        "pressure_limit_crossed": res.pressure_limit_crossed,
+        "peak_pressure_Pa": float(np.nanmax(res.pressure)),
+        "status": gj.status_name(res.status) if res.status != 1 else "pressure_limit",
+    }
+
+
+def _designed(
+    design: _Design,
+    drive: str,
+    method: str,
+    *,
+    microsteps: int,
+    knot_dt: float,
+    iterations: int,
+    robust: str | None,
+    n_draws: int,
+    seed: int,
+    tol: dict,
+) -> ClosedLoopResult:
+    """The design of ``method`` for ``drive`` (options as `design_controller` takes them), run on the
+    evaluation's configuration; the forward drive's profile enters the summary."""
+    if drive == "inverse":
+        if method == "mpc":
+            raise ValueError("the MPC is designed for the forward drive; use --method feedback for the stepper")
+        if method == "open-loop":
+            return _stepper_open_loop(design, microsteps)
+        return _stepper_feedback(design, microsteps)
+    prof = optimize_profile(
+        design.params, design.target, design.t1, knot_dt=knot_dt, iterations=iterations, lim=design.lim
+    )
+    design.summary["profile_optimisation_s"] = prof.wall_s
+    design.summary["profile"] = {"knots_s": prof.knots.tolist(), "demand_Pa": prof.demand.tolist()}
+    if method == "open-loop":
+        return _forward_open_loop(design, prof)
+    if method == "feedback":
+        return _forward_feedback(design, prof, robust, n_draws, seed, tol, iterations)
+    return _forward_mpc(design)
 
 
 @dataclasses.dataclass
