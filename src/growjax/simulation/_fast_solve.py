@@ -17,15 +17,17 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, ArrayLike, Float
 
 import growjax.simulation._assembly as assembly
 import growjax.simulation._fast_sensitivities as fs
 import growjax.simulation.fast as fm
 from growjax.model.params import Parameters
 from growjax.model.robot import pressure_limit
+from growjax.model.signals import Inputs
 from growjax.simulation.config import Config
 from growjax.simulation.rosenbrock import evaluate, integrate, spread
-from growjax.simulation.trajectory import finish
+from growjax.simulation.trajectory import Trajectory, finish
 
 # Loosest of rtol and this bounds the sensitivities' error control (see _integrate).
 SENSITIVITY_TOL_FLOOR = 1e-6
@@ -326,7 +328,14 @@ def _run_reverse_jvp(config, primals, tangents):
 _run_reverse.defjvp(_run_reverse_jvp, symbolic_zeros=True)
 
 
-def solve(params: Parameters, inputs, config: Config, ts, jump_ts, step_ts):
+def solve(
+    params: Parameters,
+    inputs: Inputs,
+    config: Config,
+    ts: Float[Array, " T"],
+    jump_ts: Float[Array, " J"],
+    step_ts: Float[Array, " K"],
+) -> Trajectory:
     """Integrate the fast configuration and return a `growjax.simulation.trajectory.Trajectory` on ``ts``.
 
     Differentiable in ``params`` and ``inputs``: the sensitivities are integrated with the state under the same
@@ -338,14 +347,29 @@ def solve(params: Parameters, inputs, config: Config, ts, jump_ts, step_ts):
     return _trajectory(params, inputs, config, ts, run, status, n_steps)
 
 
-def solve_from(params: Parameters, inputs, config: Config, ts, jump_ts, step_ts, start):
+def solve_from(
+    params: Parameters,
+    inputs: Inputs,
+    config: Config,
+    ts: Float[Array, " T"],
+    jump_ts: Float[Array, " J"],
+    step_ts: Float[Array, " K"],
+    start: tuple[Float[ArrayLike, ""], Float[ArrayLike, ""], Float[Array, " n"]],
+) -> Trajectory:
     """`solve` from a scaled state over a window that may be traced, ``start`` = (t_start s, t_end s, state
     (n,)); under ``vmap`` a loop per member. Forward mode only (through the integrator's loop)."""
     run, _, status, n_steps = _integrate(params, inputs, config, ts, jump_ts, step_ts, start=start)
     return _trajectory(params, inputs, config, ts, run, status, n_steps)
 
 
-def solve_members(params: Parameters, inputs, config: Config, ts, jump_ts, step_ts):
+def solve_members(
+    params: Parameters,
+    inputs: Inputs,
+    config: Config,
+    ts: Float[Array, " T"],
+    jump_ts: Float[Array, " J"],
+    step_ts: Float[Array, " K"],
+) -> Trajectory:
     """`solve` for a batch of parameter sets (every leaf of ``params`` with a leading axis B; inputs, ``ts``
     and breaks shared): a `growjax.simulation.trajectory.Trajectory` with a leading axis B.
 
@@ -392,7 +416,15 @@ def _trajectory(params, inputs, config: Config, ts, run: Run, status, n_steps):
     )
 
 
-def solve_with_sensitivities(params: Parameters, inputs, config: Config, ts, jump_ts, step_ts, directions):
+def solve_with_sensitivities(
+    params: Parameters,
+    inputs: Inputs,
+    config: Config,
+    ts: Float[Array, " T"],
+    jump_ts: Float[Array, " J"],
+    step_ts: Float[Array, " K"],
+    directions: tuple[Parameters, Inputs],
+) -> tuple[Trajectory, dict[str, Float[Array, "p T"]]]:
     """(`growjax.simulation.trajectory.Trajectory` on ``ts``, tangent outputs {field: (p, T)}) from one solve that
     integrates the state with its sensitivities along ``directions`` = (parameter tangents, input tangents),
     each leaf with a leading axis p (`_integrate`).
