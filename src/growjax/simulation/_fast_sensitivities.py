@@ -9,19 +9,22 @@ a leading axis p. The callbacks take the scaled state y (n,), its sensitivities 
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jaxtyping import Array, Bool, Float, PyTree
 
 import growjax.simulation._assembly as assembly
 import growjax.simulation.fast as fm
 from growjax.model.params import Parameters
 from growjax.model.robot import pressure_limit
+from growjax.model.signals import Inputs
 from growjax.simulation.config import Config
 
 
-def relative_size(theta, direction, typical):
+def relative_size(theta: PyTree, direction: PyTree, typical: PyTree) -> Float[Array, ""]:
     """How large a direction is relative to the values it perturbs: max |d|/|θ| over the leaves (–). Where θ = 0
     the leaf's ``typical`` size stands in (an effect parameter: the top of its physical range; a leak of
     3e-13 m³/(s·Pa) absent at 0 and moved along d = 1 must be shifted by ε·1e-12, not by ε), and where that is
@@ -44,7 +47,7 @@ def relative_size(theta, direction, typical):
     return jnp.max(jnp.stack(ratios)) if ratios else jnp.asarray(0.0)
 
 
-def typical_sizes(params: Parameters):
+def typical_sizes(params: Parameters) -> Parameters:
     """``params`` with each effect's parameters set to the top of their physical ranges (their typical size)."""
     effects = tuple(
         dataclasses.replace(e, **{f: max(abs(lo), abs(hi)) for f, (lo, hi) in e.ranges.items()}) for e in params.effects
@@ -52,7 +55,7 @@ def typical_sizes(params: Parameters):
     return dataclasses.replace(params, effects=effects)
 
 
-def moved_by(theta, direction, step):
+def moved_by(theta: PyTree, direction: PyTree, step: Float[Array, ""]) -> PyTree:
     """θ + step·d, leaf by leaf (leaves that are not floating point are left alone)."""
 
     def shift(x, d):
@@ -63,7 +66,9 @@ def moved_by(theta, direction, step):
     return jax.tree_util.tree_map(shift, theta, direction)
 
 
-def member(params, inputs, config: Config, jump_ts, step_ts):
+def member(
+    params: Parameters, inputs: Inputs, config: Config, jump_ts: Float[Array, " J"], step_ts: Float[Array, " K"]
+) -> tuple[tuple, Float[Array, " n"], Float[Array, " J+K"], Bool[Array, " J+K"]]:
     """One member's solver inputs: (θ = (params, inputs, prepared constants), scaled initial state, sorted
     breaks, jump flags)."""
     theta = (params, inputs, fm.prepare(params, config))
@@ -73,7 +78,7 @@ def member(params, inputs, config: Config, jump_ts, step_ts):
     return theta, fm.initial_state(params, config), times[order], is_jump[order]
 
 
-def callbacks(config: Config):
+def callbacks(config: Config) -> tuple[Callable, Callable, Callable | None]:
     """(field, outputs, event) of the scaled state, each ``(t, y, θ)`` with θ from `member`."""
 
     def field(t, y, th):
@@ -117,19 +122,26 @@ def forward_mode_tangents(params: Parameters, config: Config) -> bool:
     return config.tangents == "forward"
 
 
-def sensitivities(params, inputs, config: Config, jump_ts, step_ts, directions):
+def sensitivities(
+    params: Parameters,
+    inputs: Inputs,
+    config: Config,
+    jump_ts: Float[Array, " J"],
+    step_ts: Float[Array, " K"],
+    directions: tuple[Parameters, Inputs],
+) -> tuple[tuple, Float[Array, " p"], Float[Array, "p n"]]:
     """One member's sensitivity problem along ``directions`` (see `_integrate`): (θ_s, sizes |d|/|θ| (p,),
     S0 (p, n)), θ_s for the callbacks of `sensitivity_callbacks`."""
     build = _forward_sensitivities if forward_mode_tangents(params, config) else _difference_sensitivities
     return build(params, inputs, config, jump_ts, step_ts, directions)
 
 
-def sensitivity_callbacks(params: Parameters, config: Config):
+def sensitivity_callbacks(params: Parameters, config: Config) -> tuple[Callable, Callable]:
     """(tangent field ``(t, y, S, θ_s) → (f, S')``, output tangents ``(t, y, S, θ_s) → {output: (p,)}``)."""
     return (_forward_callbacks if forward_mode_tangents(params, config) else _difference_callbacks)(config)
 
 
-def difference_step(size):
+def difference_step(size: Float[Array, " p"]) -> Float[Array, " p"]:
     """Step ε along each direction (p,) that moves the parameters by (machine ε)^⅓ of themselves (0 where |d| = 0)."""
     return jnp.where(size > 0, jnp.finfo(jnp.result_type(float)).eps ** (1 / 3) / jnp.where(size > 0, size, 1.0), 0.0)
 
