@@ -214,7 +214,15 @@ def discriminate(
         space: the forward drive's demand a design may take.
         effects: the two rival catalogue effects' names (A, B).
         sizes: (a, b), the effects' assumed sizes, SI; default their moderate magnitudes.
-        random, starts, iterations, n_draws, seed, limits, learning_rate, gradient, progress: as `design`.
+        random: random admissible inputs drawn and scored (as `design`).
+        starts: the best random inputs the optimiser starts from.
+        iterations: Adam steps per start.
+        n_draws: draws of the rig and θ the check runs over.
+        seed: the draws' and the random inputs' seed.
+        limits: the rig's limits; default those of ``knowledge``'s parameters.
+        learning_rate: Adam's step, in the design variables.
+        gradient: the descent's slope, ``"differences"`` or ``"jax"`` (as `design`).
+        progress: progress lines on stderr.
         false_positive_rate: the discovery's false-positive rate over the catalogue, from which the threshold
             follows (`growjax.calibration.likelihood_ratio.boundary_threshold`).
 
