@@ -1,6 +1,5 @@
 """Batched sweeps: design, equality with single runs, chunking, sharding, failures, Sobol, CLI."""
 
-import io
 import json
 import os
 import shutil
@@ -61,7 +60,11 @@ def test_sweep_equals_one_at_a_time_and_chunking_changes_nothing(setup):
     values = sw.latin_hypercube(sw.paper_box(), 5, seed=1)
     names = [d.name for d in sw.paper_box()]
     whole = sw.evaluate(values, names, base, inputs, CFG, measured=measured)
-    chunked = sw.evaluate(values, names, base, inputs, CFG, measured=measured, chunk_size=2)
+    seen = []
+    chunked = sw.evaluate(
+        values, names, base, inputs, CFG, measured=measured, chunk_size=2, on_chunk=lambda *a: seen.append(a)
+    )
+    assert seen == [(1, 3), (2, 3), (3, 3)]  # 5 rows in chunks of 2: the hook after each
     # Equal within the solver's own tolerance: XLA vectorises a batch of 1, 2 and 5 differently, and
     # rounding-level differences can move an adaptive step. The shift depends on the CPU's code generation
     # (1e-6 relative on one machine, 2.4e-5 on another for member 0 against its single run); the error
@@ -227,24 +230,23 @@ def test_stored_sweep_stopped_and_resumed_equals_an_uninterrupted_one(setup, tmp
         sw.lhs_sweep(6, base, inputs, CFG, measured=measured, max_chunks=1)
 
 
-class _SignalOnFirstChunk(io.StringIO):
-    """A log (stderr) that raises SIGTERM in the process as the sweep reports its first chunk done."""
-
-    def write(self, text):
-        if text.startswith("sweep: 1/3 chunks"):
-            os.kill(os.getpid(), signal.SIGTERM)
-        return super().write(text)
-
-
-def test_a_signal_stops_a_stored_sweep_after_the_chunk_in_flight(setup, tmp_path, monkeypatch):
-    """SIGTERM raised while the sweep runs (as it reports its first chunk): that chunk is kept, the sweep stops
-    before the next."""
+def test_a_signal_stops_a_stored_sweep_after_the_chunk_in_flight(setup, tmp_path):
+    """SIGTERM raised as the first chunk is written (the ``on_chunk`` hook): that chunk is kept, the sweep stops
+    before the next, and the hook has seen the one chunk done of three."""
     base, inputs, measured = setup
-    monkeypatch.setattr(sys, "stderr", _SignalOnFirstChunk())
+    seen = []
+
+    def signalled(done, total):
+        seen.append((done, total))
+        if done == 1:
+            os.kill(os.getpid(), signal.SIGTERM)
+
     with pytest.raises(sw.SweepInterrupted, match="1 of 3 chunks") as stop:
-        sw.lhs_sweep(6, base, inputs, CFG, seed=7, measured=measured, chunk_size=2, store=tmp_path / "s", progress=True)
+        sw.lhs_sweep(
+            6, base, inputs, CFG, seed=7, measured=measured, chunk_size=2, store=tmp_path / "s", on_chunk=signalled
+        )
     assert stop.value.signal == signal.SIGTERM
-    assert "sweep: 1/3 chunks" in sys.stderr.getvalue()
+    assert seen == [(1, 3)]
     assert sw.load(tmp_path / "s").reasons == ["ok"] * 2 + ["not_run"] * 4
     assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # the handlers are put back
 

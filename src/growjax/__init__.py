@@ -2,7 +2,7 @@
 
 Importing growjax turns on float64 in JAX for the process (``jax_enable_x64``): the model
 spans pressures of 1e5 Pa and compliances of 1e-13 m³/Pa, which float32 cannot resolve.
-:mod:`growjax.simulation.xla_flags` holds an opt-in XLA:CPU option that compiles the solver's loop into one kernel.
+`growjax.simulation.xla_flags` holds an opt-in XLA:CPU option that compiles the solver's loop into one kernel.
 """
 
 __version__ = "0.9.0"  # the one version string: pyproject.toml reads it (setuptools dynamic version)

@@ -6,13 +6,20 @@ import hashlib
 
 import jax
 import numpy as np
+from jaxtyping import PyTree
 
 __all__ = ["content_key"]
 
 
-def content_key(tree) -> tuple[str, str]:
-    """(structure, SHA-1 of every leaf's dtype, shape and values): equal for pytrees of equal structure and leaves.
-    Leaves that are not numeric enter by their ``repr``."""
+def content_key(tree: PyTree) -> tuple[str, str]:
+    """A key equal for pytrees of equal structure and leaves.
+
+    Args:
+        tree: any pytree; leaves that are not numeric enter by their ``repr``.
+
+    Returns:
+        (the structure, the SHA-1 of every leaf's dtype, shape and values).
+    """
     leaves, treedef = jax.tree_util.tree_flatten(tree)
     digest = hashlib.sha1()
     for leaf in leaves:

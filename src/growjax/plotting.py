@@ -3,7 +3,9 @@ the closed-loop figure of a control design."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import matplotlib.pyplot as plt
 import numpy as np
@@ -22,7 +24,7 @@ __all__ = [
 ]
 
 
-def _save(fig, path):
+def _save(fig: Any, path: str | Path) -> str | Path:
     """Write ``fig`` to ``path`` (folders created), close it, return the path."""
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=120)
@@ -30,10 +32,26 @@ def _save(fig, path):
     return path
 
 
-def trajectory_figure(traj, path, measured=None, desired=None, title: str = "", pressure_limit=None):
+def trajectory_figure(
+    traj: Any,
+    path: str | Path,
+    measured: tuple[Any, Any] | None = None,
+    desired: tuple[Any, Any] | None = None,
+    title: str = "",
+    pressure_limit: float | None = None,
+) -> str | Path:
     """Two panels: pressure demand and sensed pressure (kPa); simulated (and measured) length (mm).
 
-    ``measured``/``desired``: optional (time s, length m) pairs.
+    Args:
+        traj: a `growjax.Trajectory` (unbatched).
+        path: the PNG file to write (folders created).
+        measured: (time s, length m), the measured length, if any.
+        desired: (time s, length m), the desired length, if any.
+        title: the figure's title.
+        pressure_limit: the membrane's limit, Pa, drawn where given.
+
+    Returns:
+        ``path``.
     """
     t = np.asarray(traj.time)
     fig, (ax_p, ax_l) = plt.subplots(2, 1, figsize=(8, 6), sharex=True, constrained_layout=True)
@@ -58,7 +76,7 @@ def trajectory_figure(traj, path, measured=None, desired=None, title: str = "", 
     return _save(fig, path)
 
 
-def set_figure(traces, path, title: str = ""):
+def set_figure(traces: Sequence[tuple[str, Any, tuple[Any, Any]]], path: str | Path, title: str = "") -> str | Path:
     """One panel per experiment of a set: measured and fitted length (mm). ``traces``: [(name, trajectory,
     (time s, measured length m))]."""
     n = len(traces)
@@ -79,7 +97,9 @@ def set_figure(traces, path, title: str = ""):
     return _save(fig, path)
 
 
-def population_figure(population, band: dict, path, measured=None):
+def population_figure(
+    population: Any, band: dict, path: str | Path, measured: tuple[Any, Any] | None = None
+) -> str | Path:
     """Left: each robot's posterior of the population's parameter (median, 90 %) and the population's median
     with its 90 % interval. Right: a new robot's predictive length band (mm) against time, with ``measured``
     (time s, length m) if given."""
@@ -122,11 +142,11 @@ _LABELS = {
 }
 
 
-def _axis(name):
+def _axis(name: str) -> tuple[str, float]:
     return _LABELS.get(name, (name, 1.0))
 
 
-def sweep_figure(result, path, title: str = ""):
+def sweep_figure(result: Any, path: str | Path, title: str = "") -> str | Path:
     """The paper's Fig. 2: every swept set in 3-D (first three parameters) coloured by length RMSE (mm), best starred.
 
     With fewer than three parameters, a 2-D scatter (or RMSE against the one parameter).
@@ -166,7 +186,7 @@ def sweep_figure(result, path, title: str = ""):
     return _save(fig, path)
 
 
-def sobol_figure(sobol: dict, path, title: str = ""):
+def sobol_figure(sobol: dict, path: str | Path, title: str = "") -> str | Path:
     """Bar chart of first-order (S1) and total-order (ST) Sobol indices with 95 % bootstrap intervals, per output."""
     outputs = [k for k, v in sobol["indices"].items() if "S1" in v]
     names = [_axis(n)[0] for n in sobol["names"]]
@@ -187,7 +207,9 @@ def sobol_figure(sobol: dict, path, title: str = ""):
     return _save(fig, path)
 
 
-def predictive_figure(times, observed, bands: dict, path, title: str = ""):
+def predictive_figure(
+    times: Any, observed: Any, bands: dict[str, tuple[Any, Any, Any]], path: str | Path, title: str = ""
+) -> str | Path:
     """Measured length with posterior predictive 90 % bands, one per model ({label: (lower, upper, median)}, m)."""
     fig, ax = plt.subplots(figsize=(8, 3.8), constrained_layout=True)
     for k, (label, (lo, hi, med)) in enumerate(bands.items()):
@@ -204,12 +226,12 @@ def predictive_figure(times, observed, bands: dict, path, title: str = ""):
     return _save(fig, path)
 
 
-def _figure(plots):
+def _figure(plots: Any) -> Any:
     """The matplotlib figure of an arviz-plots ``PlotCollection`` or ``PlotMatrix``."""
     return plots.viz["figure"].item()
 
 
-def rank_figure(idata, sites, bins: int = 20):
+def rank_figure(idata: Any, sites: Sequence[str], bins: int = 20) -> Any:
     """The rank-bar trace plot: per chain, each scalar site's histogram (left) and the histogram of its draws'
     ranks among all chains' draws (right, ``bins`` bars; dashed: each bar's count when every chain samples the same
     distribution). ``idata``: a DataTree with a ``posterior`` group of (chain, draw) variables → the figure."""
@@ -235,7 +257,9 @@ def rank_figure(idata, sites, bins: int = 20):
     return fig
 
 
-def posterior_figures(idata, sites, folder, prefix: str = ""):
+def posterior_figures(
+    idata: Any, sites: Sequence[str], folder: str | Path, prefix: str = ""
+) -> tuple[str | Path, str | Path]:
     """Figures of a posterior as PNG files: the rank-bar trace (`rank_figure`) and arviz-plots' pair plot with
     marginals (``plot_pair``, in ArviZ's ``arviz-variat`` style).
 
@@ -258,7 +282,7 @@ def posterior_figures(idata, sites, folder, prefix: str = ""):
     return trace, pair
 
 
-def discovery_figure(result, path, title: str = ""):
+def discovery_figure(result: Any, path: str | Path, title: str = "") -> str | Path:
     """Measured length and the base / extended fits (mm), and their residuals over time (mm)."""
     t = np.asarray(result.times)
     fig, (ax_l, ax_r) = plt.subplots(2, 1, figsize=(8, 6), sharex=True, constrained_layout=True)
@@ -296,7 +320,7 @@ def discovery_figure(result, path, title: str = ""):
     return path
 
 
-def control_figure(res, target, path, lim, title: str, drive: str):
+def control_figure(res: Any, target: Any, path: str | Path, lim: Any, title: str, drive: str) -> Path:
     """Command, pressure and length against the target (three panels) of a closed loop ``res``
     (`growjax.control.ClosedLoopResult`), a `growjax.control.Target` and the rig's `growjax.model.limits.Limits`."""
     fig, ax = plt.subplots(3, 1, figsize=(8, 8), sharex=True)

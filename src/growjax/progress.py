@@ -13,13 +13,14 @@ from __future__ import annotations
 import sys
 import threading
 import time
+from typing import Any, TextIO
 
 __all__ = ["Lines", "Silent", "bar", "is_terminal", "note", "terminal"]
 
 STEP = 0.1  # a line each time this share of the total is passed (non-terminal streams)
 
 
-def is_terminal(stream) -> bool:
+def is_terminal(stream: TextIO) -> bool:
     """Whether ``stream`` is an interactive terminal."""
     try:
         return bool(stream.isatty())
@@ -31,15 +32,15 @@ class Silent:
     """A progress object that shows nothing."""
 
     def update(self, n: int = 1) -> None:
-        pass
+        """Count ``n`` more steps done."""
 
     def close(self) -> None:
-        pass
+        """End the progress."""
 
-    def __enter__(self):
+    def __enter__(self) -> Silent:
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> bool:
         self.close()
         return False
 
@@ -63,6 +64,7 @@ class Lines(Silent):
         self._lock = threading.Lock()
 
     def update(self, n: int = 1) -> None:
+        """Count ``n`` more steps done; write a line where another ``step`` of the total is passed."""
         with self._lock:
             self.done += n
             if (
@@ -74,6 +76,7 @@ class Lines(Silent):
                 self._write()
 
     def close(self) -> None:
+        """Write the last line (unless written) and end."""
         with self._lock:
             if not self._closed and self.total and self._written != self.done:
                 self._write()
@@ -92,15 +95,25 @@ class Lines(Silent):
 _WRITING = threading.Lock()  # one line at a time, whole, from any thread
 
 
-def _write_line(text: str, stream) -> None:
+def _write_line(text: str, stream: TextIO) -> None:
     with _WRITING:
         stream.write(text + "\n")
         stream.flush()
 
 
-def bar(total: int, desc: str, unit: str = "", enabled: bool = True, stream=None):
-    """A progress object of ``total`` steps: tqdm on a terminal, `Lines` elsewhere, `Silent` when
-    not ``enabled``."""
+def bar(total: int, desc: str, unit: str = "", enabled: bool = True, stream: TextIO | None = None) -> Any:
+    """A progress object, with ``update(n)`` and ``close()`` and usable as a context manager.
+
+    Args:
+        total: the number of steps.
+        desc: its label.
+        unit: the steps' unit, or none.
+        enabled: whether it shows anything.
+        stream: where it goes (default ``sys.stderr``, read when called).
+
+    Returns:
+        ``tqdm`` on a terminal, `Lines` elsewhere, `Silent` when not ``enabled``.
+    """
     if not enabled:
         return Silent()
     stream = stream if stream is not None else sys.stderr
@@ -111,12 +124,13 @@ def bar(total: int, desc: str, unit: str = "", enabled: bool = True, stream=None
     return Lines(total, desc, unit, stream)
 
 
-def note(text: str, enabled: bool = True, stream=None) -> None:
-    """One line of progress (a phase starting or ending), unless not ``enabled``."""
+def note(text: str, enabled: bool = True, stream: TextIO | None = None) -> None:
+    """Write one line of progress (a phase starting or ending) on ``stream`` (default ``sys.stderr``), unless not
+    ``enabled``."""
     if enabled:
         _write_line(text, stream if stream is not None else sys.stderr)
 
 
-def terminal(stream=None) -> bool:
+def terminal(stream: TextIO | None = None) -> bool:
     """Whether progress goes to a terminal (``sys.stderr`` unless ``stream``): where bars belong."""
     return is_terminal(stream if stream is not None else sys.stderr)

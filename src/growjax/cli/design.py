@@ -254,7 +254,7 @@ def _design(args, known, space, lim, names):
             known,
             space,
             args.discriminate,
-            args.size,
+            sizes=args.size,
             random=args.scout,
             starts=args.starts,
             iterations=args.descent_steps,

@@ -74,16 +74,6 @@ from growjax.control.tuning import (
 )
 from growjax.control.workflow import design_controller
 
-
-def __getattr__(name):
-    """The figure of a closed loop, from `growjax.plotting` (matplotlib is imported only where it is used)."""
-    if name == "control_figure":
-        from growjax.plotting import control_figure
-
-        return control_figure
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
 __all__ = [
     "DEFAULT_LOG_GAINS",
     "MPC",

@@ -11,7 +11,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
+from jaxtyping import Array, ArrayLike, Float, Int
 
 import growjax as gj
 from growjax.control.plant import Plant, catheter_signal, segment_inputs
@@ -26,7 +26,13 @@ class LengthPID(eqx.Module):
     """Sampled PI-D on length over the pressure loop (forward drive), with feed-forward and anti-windup.
 
     demand_k = clip(ff(t_k+1) + Kp e + Ki ∫e + Kd ė_f, 0, pressure ceiling), e = L_ref(t_k) − L_k (m).
-    Gains as log10 of SI values: Kp Pa/m, Ki Pa/(m·s), Kd Pa·s/m. ``ff``: (knots, values) of a demand profile.
+    Gains as log10 of SI values: Kp Pa/m, Ki Pa/(m·s), Kd Pa·s/m.
+
+    Attributes:
+        log_gains: (3,) log10(Kp, Ki, Kd).
+        ff_knots: the feed-forward demand profile's knots, s.
+        ff_values: its values, Pa.
+        dt: the tick, s.
     """
 
     log_gains: Float[Array, " gains"]  # (3,): log10(Kp, Ki, Kd)
@@ -34,13 +40,19 @@ class LengthPID(eqx.Module):
     ff_values: jax.Array
     dt: float = eqx.field(static=True, default=0.01)
 
-    def gains(self):
+    def gains(self) -> Float[Array, " 3"]:
+        """(Kp Pa/m, Ki Pa/(m·s), Kd Pa·s/m)."""
         return 10.0**self.log_gains
 
-    def init(self):
+    def init(self) -> Float[Array, " 2"]:
+        """The controller's state at rest: (integral of the error m·s, filtered derivative m/s)."""
         return jnp.zeros(2)  # (integral of error m·s, filtered derivative m/s)
 
-    def __call__(self, state, t, error, lim: Limits):
+    def __call__(
+        self, state: Float[Array, " 2"], t: Float[ArrayLike, ""], error: Float[ArrayLike, ""], lim: Limits
+    ) -> tuple[Float[Array, ""], Float[Array, " 2"]]:
+        """One tick: (demand Pa, next state) from the state, the time ``t`` (s) and the length error (m); the
+        integral holds while the demand saturates against the error."""
         kp, ki, kd = self.gains()
         integral, deriv = state
         ff = jnp.interp(t + self.dt, self.ff_knots, self.ff_values)
@@ -66,8 +78,21 @@ class ClosedLoopResult(NamedTuple):
     step_s: np.ndarray | None = None  # controller compute time per tick (MPC), s
 
 
-def pid_loop(plant: Plant, pid: LengthPID, target_ts, target_len, catheter, lim: Limits, t1: float):
-    """The PID closed loop as one ``lax.scan`` over ticks of ``pid.dt`` → (ts, length, pressure, demand, status)."""
+def pid_loop(
+    plant: Plant,
+    pid: LengthPID,
+    target_ts: Float[Array, " N"],
+    target_len: Float[Array, " N"],
+    catheter: gj.Sampled,
+    lim: Limits,
+    t1: float,
+) -> tuple[Float[Array, " K"], Float[Array, " K"], Float[Array, " K"], Float[Array, " K"], Int[Array, " K"]]:
+    """The PID closed loop as one ``lax.scan`` over K ticks of ``pid.dt`` over [0, t1] s, tracking the target
+    length ``target_len`` (m) at ``target_ts`` (s) with the catheter length ``catheter`` (m).
+
+    Returns:
+        (tick ends s, length m, pressure Pa, demand Pa, solver status), each (K,).
+    """
     dt = pid.dt
     n = int(round(t1 / dt))  # noqa: RUF046 (t1 may be an array scalar)
     ticks = jnp.arange(n) * dt
@@ -108,7 +133,20 @@ def run_closed_loop(
     return controller.run(plant, target, t1, lim, cath)
 
 
-def score(ts, length, pressure, command, ticks, target, lim, status, step_s=None) -> ClosedLoopResult:
+def score(
+    ts: Float[np.ndarray, " T"],
+    length: Float[np.ndarray, " T"],
+    pressure: Float[np.ndarray, " T"],
+    command: Float[np.ndarray, " K"],
+    ticks: Float[np.ndarray, " K"],
+    target: Target,
+    lim: Limits,
+    status: int,
+    step_s: np.ndarray | None = None,
+) -> ClosedLoopResult:
+    """A run's `ClosedLoopResult`: its tracking RMSE against ``target`` on the samples at t ≥ 0.01 s (m; NaN where
+    not finite) and whether the pressure passed the membrane limit or was not finite (fields as in
+    `ClosedLoopResult`)."""
     keep = ts >= 0.01 - 1e-12
     e = rmse(ts[keep], length[keep], target)
     crossed = bool(np.any(~np.isfinite(pressure)) or np.nanmax(pressure) > lim.membrane_limit)
@@ -138,7 +176,9 @@ class StepController(eqx.Module):
     microsteps: int = eqx.field(static=True, default=1)
     pressure_gate: float = float("inf")
 
-    def run(self, plant: Plant, target: Target, t1: float, lim: Limits, cath) -> ClosedLoopResult:
+    def run(self, plant: Plant, target: Target, t1: float, lim: Limits, cath: gj.Sampled) -> ClosedLoopResult:
+        """The closed loop around ``plant`` from rest over [0, t1] s, the catheter length ``cath`` (m), scored
+        against ``target`` (`score`)."""
         if self.microsteps > 1 and not plant.microstep:
             raise ValueError("microsteps > 1 needs a plant made with microstep=True")
         dt = 1.0 / self.rate
@@ -234,7 +274,9 @@ class MPC(eqx.Module):
 
         return plan_step
 
-    def run(self, plant: Plant, target: Target, t1: float, lim: Limits, cath) -> ClosedLoopResult:
+    def run(self, plant: Plant, target: Target, t1: float, lim: Limits, cath: gj.Sampled) -> ClosedLoopResult:
+        """The closed loop around ``plant`` from rest over [0, t1] s, the catheter length ``cath`` (m), scored
+        against ``target`` (`score`)."""
         model = plant
         if plant.config.fidelity != "fast":  # the internal model: the fast configuration of the same parameters
             cfg = gj.Config(drive="forward", t1=t1)

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, Float
 
 import growjax as gj
 from growjax.control.plant import Plant
@@ -24,12 +27,24 @@ def operating_point(
     steps: float = 0.0,
     settle: float = 1.0,
     microstep: bool = True,
-):
-    """(plant, scaled state, inputs) at an operating point.
+) -> tuple[Plant, Float[Array, " n"], gj.Inputs]:
+    """A plant at an operating point.
 
-    Forward drive: the state after ``settle`` s at constant demand ``pressure`` (Pa): growing at a steady
-    rate above the yield pressure, holding below it. Inverse drive: held at step command ``steps``.
-    ``length`` (m) sets the robot length of the point (default: where the settling run ends).
+    Forward drive: the state after ``settle`` s at constant demand ``pressure``: growing at a steady rate above
+    the yield pressure, holding below it. Inverse drive: held at step command ``steps``.
+
+    Args:
+        params: the parameters.
+        drive: ``"forward"`` or ``"inverse"``.
+        pressure: the constant demand, Pa.
+        length: the robot length of the point, m (default: where the settling run ends).
+        catheter: the catheter length in contact, m.
+        steps: the step command (inverse drive).
+        settle: the settling run's length, s.
+        microstep: the stepper's microstepping driver (inverse drive).
+
+    Returns:
+        (the plant, its scaled state (n,), the constant inputs).
     """
     config = gj.Config(drive=drive, t1=settle)
     plant = Plant.make(params, config, microstep=microstep and drive == "inverse")
@@ -53,7 +68,7 @@ def linearize(
     catheter: float = 0.0,
     steps: float = 0.0,
     settle: float = 1.0,
-):
+) -> Any:
     """Linear model of demand → length about an operating point, as a ``control.StateSpace``.
 
     Forward drive: input the pressure demand (Pa), output the robot length (m); operating point after

@@ -5,11 +5,12 @@ outputs of a state for linear models and state estimates. SI units."""
 from __future__ import annotations
 
 import dataclasses
+from typing import TYPE_CHECKING
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float, Int
+from jaxtyping import Array, ArrayLike, Float, Int
 
 import growjax as gj
 from growjax.model import effects as fx
@@ -17,15 +18,19 @@ from growjax.simulation import fast as fm
 from growjax.simulation import reference as rm
 from growjax.simulation.simulate import simulate_from
 
+if TYPE_CHECKING:
+    from growjax.control.targets import Target
+
 __all__ = ["TICK_STEPS", "Plant", "catheter_signal", "segment_inputs", "with_microstepping"]
 
 # Step budget of one tick, per fidelity (a tick spans at most a few hundred steps).
 TICK_STEPS = {"fast": 400, "reference": 20_000}
 
 
-def with_microstepping(params, on: bool = True):
+def with_microstepping(params: gj.Parameters, on: bool = True) -> gj.Parameters:
     """``params`` with the stepper's driver swapped for the sine–cosine microstepping one (both configurations;
-    `growjax.model.motor.winding_voltages`): the step command may then be any real number."""
+    `growjax.model.motor.winding_voltages`), or back to full steps where not ``on``: with it the step command may
+    be any real number."""
     return eqx.tree_at(lambda p: p.motor, params, dataclasses.replace(params.motor, microstepping=on))
 
 
@@ -35,6 +40,11 @@ class Plant(eqx.Module):
     ``config`` is the simulation's, made explicit (`growjax.Config.resolved`), with the pressure limit
     flagged rather than stopping a tick and a tick's step budget (`TICK_STEPS`) unless it sets one.
     ``microstep`` swaps the stepper's full-step driver for the microstepping one (`with_microstepping`).
+
+    Attributes:
+        params: the parameters.
+        config: the configuration, resolved.
+        prep: the configuration's prepared constants (``growjax.simulation.fast.prepare`` or the reference's).
     """
 
     params: object
@@ -42,7 +52,20 @@ class Plant(eqx.Module):
     prep: object
 
     @classmethod
-    def make(cls, params, config: gj.Config, microstep: bool = False) -> Plant:
+    def make(cls, params: gj.Parameters, config: gj.Config, microstep: bool = False) -> Plant:
+        """The plant of ``params`` under ``config``.
+
+        Args:
+            params: the parameters.
+            config: the simulation's configuration.
+            microstep: the stepper's microstepping driver in place of its full-step one.
+
+        Returns:
+            The plant.
+
+        Raises:
+            ValueError: for microstepping with the forward drive.
+        """
         if microstep and config.drive != "inverse":
             raise ValueError("microstepping is a driver of the stepper (inverse) drive")
         params = with_microstepping(params) if microstep else params
@@ -60,7 +83,7 @@ class Plant(eqx.Module):
         """Does the stepper's driver microstep?"""
         return bool(self.params.motor.microstepping)
 
-    def applied(self):
+    def applied(self) -> gj.Parameters:
         """The parameters with every effect's parameter change applied (what the field sees)."""
         return fx.apply_all(self.params)
 
@@ -69,14 +92,17 @@ class Plant(eqx.Module):
         return self._module(self.config).initial_state(self.applied(), self.config)
 
     def scales(self) -> Float[Array, " n"]:
+        """The state's scales, SI per unit of the scaled state."""
         return jnp.asarray(self._module(self.config).layout(self.params, self.config.drive)[1])
 
-    def field(self, t, y, inputs) -> Float[Array, " n"]:
-        """Scaled state rates (the solver's field)."""
+    def field(self, t: Float[ArrayLike, ""], y: Float[Array, " n"], inputs: gj.Inputs) -> Float[Array, " n"]:
+        """Scaled state rates (the solver's field) at time ``t`` (s) and scaled state ``y``."""
         return self._module(self.config).vector_field(t, y, (self.applied(), inputs, self.config, self.prep))
 
-    def outputs(self, t, y, inputs):
-        """(length m, sensed pressure Pa, syringe displacement m) of a scaled state."""
+    def outputs(
+        self, t: Float[ArrayLike, ""], y: Float[Array, " n"], inputs: gj.Inputs
+    ) -> tuple[Float[Array, ""], Float[Array, ""], Float[Array, ""]]:
+        """(length m, sensed pressure Pa, syringe displacement m) of a scaled state ``y`` at time ``t`` (s)."""
         applied = self.applied()
         if self.config.fidelity == "fast":
             length, pressure, _, x_p, _ = fm.rates(t, y * self.scales(), applied, inputs, self.config, self.prep)[1]
@@ -88,8 +114,8 @@ class Plant(eqx.Module):
         self,
         y: Float[Array, " n"],
         inputs: gj.Inputs,
-        ta,
-        tb,
+        ta: Float[ArrayLike, ""],
+        tb: Float[ArrayLike, ""],
         ts: Float[Array, " S"],
         knots: Float[Array, " K"] | None = None,
     ) -> tuple[Float[Array, " n"], tuple, Int[Array, ""]]:
@@ -106,8 +132,16 @@ class Plant(eqx.Module):
         return traj.final_state, (traj.length, traj.pressure, traj.syringe_displacement), status
 
 
-def segment_inputs(catheter, ta, tb, ua, ub, steps):
-    """Inputs of one tick: the demand ramps from ``ua`` at ``ta`` to ``ub`` at ``tb`` (first-order hold)."""
+def segment_inputs(
+    catheter: gj.Sampled,
+    ta: Float[ArrayLike, ""],
+    tb: Float[ArrayLike, ""],
+    ua: Float[ArrayLike, ""],
+    ub: Float[ArrayLike, ""],
+    steps: Float[ArrayLike, ""],
+) -> gj.Inputs:
+    """Inputs of one tick: the demand ramps from ``ua`` at ``ta`` to ``ub`` at ``tb`` (Pa, s; first-order hold),
+    the step command held at ``steps``, the catheter length ``catheter`` (m)."""
     return gj.Inputs(
         catheter_length=catheter,
         pressure_demand=gj.Sampled(jnp.stack([ta, tb]), jnp.stack([ua, ub])),
@@ -115,6 +149,6 @@ def segment_inputs(catheter, ta, tb, ua, ub, steps):
     )
 
 
-def catheter_signal(target):
+def catheter_signal(target: Target) -> gj.Sampled:
     """The catheter length of a `growjax.control.targets.Target` as an input signal (m)."""
     return gj.Sampled(np.asarray(target.time, float), np.asarray(target.catheter, float))

@@ -4,12 +4,13 @@ and the stepper's step schedules (integer commands: searched, not differentiated
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Float
+from jaxtyping import ArrayLike, Float
 
 import growjax as gj
 from growjax.calibration.least_squares import levenberg_marquardt, linearise
@@ -31,8 +32,15 @@ __all__ = [
 
 
 class ProfileResult(NamedTuple):
-    """An optimised demand profile: knots (K,) s, demand (K,) Pa, the sum of squared residuals at the first guess
-    and after each accepted step, the tracking RMSE (m) on the configuration optimised on, and the wall time (s)."""
+    """An optimised demand profile.
+
+    Attributes:
+        knots: (K,) s.
+        demand: (K,) Pa.
+        cost_history: the sum of squared residuals at the first guess and after each accepted step.
+        rmse_m: the tracking RMSE on the configuration optimised on, m.
+        wall_s: the optimisation's wall time, s.
+    """
 
     knots: Float[np.ndarray, " K"]  # s
     demand: Float[np.ndarray, " K"]  # Pa
@@ -46,7 +54,8 @@ class ProfileResult(NamedTuple):
 MAX_STEP = 60e3
 
 
-def profile_inputs(target: Target, knots, values):
+def profile_inputs(target: Target, knots: Float[ArrayLike, " K"], values: Float[ArrayLike, " K"]) -> gj.Inputs:
+    """The forward drive's inputs: the demand through ``values`` (Pa) at ``knots`` (s), the target's catheter."""
     return gj.Inputs(catheter_length=catheter_signal(target), pressure_demand=gj.KnotProfile(knots, values))
 
 
@@ -119,17 +128,24 @@ def optimize_profile(
     )
 
 
-def simulate_profile(params, target: Target, profile: ProfileResult, config: gj.Config):
+def simulate_profile(params: Parameters, target: Target, profile: ProfileResult, config: gj.Config) -> gj.Trajectory:
     """The trajectory of the forward drive under an optimised profile (any configuration), on the target's grid."""
     ts = target.time[(target.time >= config.t0) & (target.time <= config.t1)]
     return gj.simulate(params, profile_inputs(target, profile.knots, profile.demand), config, ts=ts)
 
 
 def step_commands(
-    params, target: Target, rate: float, lead: float, t1: float, lim: Limits | None = None, microsteps: int = 1
-):
+    params: Parameters,
+    target: Target,
+    rate: float,
+    lead: float,
+    t1: float,
+    lim: Limits | None = None,
+    microsteps: int = 1,
+) -> tuple[Float[np.ndarray, " K"], Float[np.ndarray, " K"]]:
     """Open-loop stepper command: (tick times (s), step counts) = round(demand(t + lead)·microsteps)/microsteps
-    at ``rate`` Hz (≤ ``lim.max_step_rate``), at most one step per tick, back steps included."""
+    at ``rate`` Hz (≤ ``lim.max_step_rate``) over [0, t1) s, ``lead`` s ahead of the target, at most one step per
+    tick, back steps included; ValueError where ``rate`` exceeds the motor's step rate."""
     lim = lim or limits(params)
     ticks = np.arange(0.0, t1, 1.0 / rate)
     demand = (target.at(ticks + lead) - target.length[0]) / step_length(params)
@@ -143,7 +159,14 @@ def step_commands(
     return ticks, np.asarray(counts)
 
 
-def optimize_steps(params, target: Target, t1: float, rate: float = 50.0, leads=None, config: gj.Config | None = None):
+def optimize_steps(
+    params: Parameters,
+    target: Target,
+    t1: float,
+    rate: float = 50.0,
+    leads: Sequence[float] | None = None,
+    config: gj.Config | None = None,
+) -> tuple[float, float, Float[np.ndarray, " K"], Float[np.ndarray, " K"]]:
     """The open-loop step schedule (integer steps: a search over the lead time, not gradients) of the stepper
     drive minimising the length RMSE on ``config`` (default fast). → (best lead s, RMSE m, ticks, counts)."""
     config = config or gj.Config(drive="inverse", t1=t1)
@@ -159,8 +182,16 @@ def optimize_steps(params, target: Target, t1: float, rate: float = 50.0, leads=
     return best
 
 
-def simulate_steps(params, target: Target, ticks, counts, config: gj.Config, ts):
-    """Simulate the stepper drive under a step schedule (tick times, counts; changes only)."""
+def simulate_steps(
+    params: Parameters,
+    target: Target,
+    ticks: Float[np.ndarray, " K"],
+    counts: Float[np.ndarray, " K"],
+    config: gj.Config,
+    ts: Float[ArrayLike, " T"],
+) -> gj.Trajectory:
+    """Simulate the stepper drive on the save grid ``ts`` (s) under a step schedule (tick times s, step counts;
+    only the changes enter the inputs)."""
     change = np.concatenate([[counts[0] != 0], np.diff(counts) != 0])
     sched = gj.StepSchedule(jnp.asarray(ticks[change]), jnp.asarray(counts[change]))
     inputs = gj.Inputs(catheter_length=catheter_signal(target), steps=sched)

@@ -5,12 +5,14 @@ it. SI units."""
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, ArrayLike, Float
 
 import growjax as gj
 from growjax.control.controllers import (
@@ -36,14 +38,24 @@ __all__ = [
 DEFAULT_LOG_GAINS = (7.0, 7.0, 4.5)  # Kp 1e7 Pa/m (10 kPa per mm), Ki 1e7 Pa/(m s), Kd 3e4 Pa s/m
 
 
-def parameter_draws(n: int, seed: int = 0, posterior: str | None = None, base=None, rel_sd: float = 0.05, names=None):
-    """Parameter sets as {name: (n,) array}.
+def parameter_draws(
+    n: int,
+    seed: int = 0,
+    posterior: str | None = None,
+    base: gj.Parameters | None = None,
+    rel_sd: float = 0.05,
+    names: Sequence[str] | None = None,
+) -> dict[str, Float[np.ndarray, " n"]]:
+    """Parameter sets as {name: (n,) array}, SI.
 
     From an ArviZ posterior file (netCDF, read as an xarray DataTree): joint draws (picked at random, seeded) of
     its posterior's variables that name a model parameter (``names`` restricts them; noise scales such as σ and
     derived sites are skipped), so the draws keep the posterior's correlations. With no file: Gaussian around the
     point estimate of ``base`` with relative s.d. ``rel_sd`` (seeded; a stand-in when no posterior is at hand),
     ``names`` default ("Y",).
+
+    Raises:
+        ValueError: for a posterior file with none of the parameters.
     """
     rng = np.random.default_rng(seed)
     base = base if base is not None else gj.reference("forward")
@@ -76,6 +88,15 @@ def _batched_params(base, draws: dict):
 
 
 class TuneResult(NamedTuple):
+    """The tuned gains.
+
+    Attributes:
+        log_gains: (3,) log10(Kp, Ki, Kd), SI.
+        gains: {"Kp_Pa_per_m", "Ki_Pa_per_m_s", "Kd_Pa_s_per_m"}: the gains, SI.
+        cost_history: the cost at the start and after each iteration.
+        wall_s: the tuning's wall time, s.
+    """
+
     log_gains: np.ndarray
     gains: dict
     cost_history: list
@@ -83,14 +104,14 @@ class TuneResult(NamedTuple):
 
 
 def pid_cost_fn(
-    base,
+    base: gj.Parameters,
     target: Target,
     t1: float,
     pid: LengthPID,
     draws: dict | None = None,
     lim: Limits | None = None,
     config: gj.Config | None = None,
-):
+) -> Callable[[Float[Array, " 3"]], Float[Array, ""]]:
     """J(log_gains) = mean over parameter draws of the squared length RMSE (mm²) of the PID closed loop on the
     fast configuration (+ a penalty on pressure above the membrane limit); jitted, vmapped over draws."""
     lim = lim or limits(base)
@@ -121,7 +142,14 @@ def _draw_axes(base, draws):
     return gj.replace(jax.tree_util.tree_map(lambda _: None, base), **{k: 0 for k in draws})
 
 
-def tune_pid(cost, log_gains, iterations: int = 10, step: float = 0.3, fd: float = 0.02) -> TuneResult:
+def tune_pid(
+    cost: Callable[[Float[Array, " 3"]], Float[Array, ""]],
+    log_gains: Float[ArrayLike, " 3"],
+    *,
+    iterations: int = 10,
+    step: float = 0.3,
+    fd: float = 0.02,
+) -> TuneResult:
     """Gradient descent on ``cost(log_gains)`` with backtracking; the gradient by central differences in
     log-gain space (``fd`` decades, a smoothed slope: at tuned high gains the closed loop's tangent grows along a
     10 s run and the cost is rough on small scales, so exact forward-mode derivatives diverge there; see
@@ -157,17 +185,18 @@ def tune_pid(cost, log_gains, iterations: int = 10, step: float = 0.3, fd: float
 
 
 def tune_stepper(
-    params,
+    params: gj.Parameters,
     target: Target,
     t1: float,
+    *,
     microsteps: int = 1,
-    rates=(20.0, 25.0, 50.0),
-    leads=(0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4),
-    gates=(160e3, 200e3, 240e3, float("inf")),
-):
+    rates: Sequence[float] = (20.0, 25.0, 50.0),
+    leads: Sequence[float] = (0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4),
+    gates: Sequence[float] = (160e3, 200e3, 240e3, float("inf")),
+) -> tuple[StepController, float] | None:
     """The step controller's rate (Hz), lead (s) and pressure gate (Pa) by search on the fast model (its cost is
     piecewise constant in them, so a grid, not a gradient; leads 50 ms apart).
-    → (best `StepController`, its RMSE m)."""
+    → (best `StepController`, its RMSE m), None where no setting is admissible."""
     plant = Plant.make(params, gj.Config(drive="inverse", t1=t1), microstep=microsteps > 1)
     lim = limits(params)
     best = None
@@ -182,14 +211,21 @@ def tune_stepper(
     return best
 
 
-def plan_steps(params, target: Target, t1: float, microsteps: int = 1, controller: StepController | None = None):
+def plan_steps(
+    params: gj.Parameters,
+    target: Target,
+    t1: float,
+    *,
+    microsteps: int = 1,
+    controller: StepController | None = None,
+) -> tuple[StepController, float, Float[np.ndarray, " K"], Float[np.ndarray, " K"]]:
     """The open-loop step schedule planned on the fast model: the tuned closed-loop `StepController`
     (``controller``, default `tune_stepper`'s) runs on the model, and the step counts it issues there are
     the schedule, replayed on the robot without measuring it. The feedback acts on the model's length, so the
     plan inherits the controller's back steps and pressure gate but not its correction of model error.
     → (controller, RMSE m on the model, tick times (s), step counts)."""
     if controller is None:
-        controller, _ = tune_stepper(params, target, t1, microsteps)
+        controller, _ = tune_stepper(params, target, t1, microsteps=microsteps)
     plant = Plant.make(params, gj.Config(drive="inverse", t1=t1), microstep=microsteps > 1)
     res = run_closed_loop(plant, controller, target, t1, limits(params))
     return controller, res.rmse_m, np.asarray(res.tick_time, float), np.asarray(res.command, float)

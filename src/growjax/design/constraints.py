@@ -16,6 +16,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, ArrayLike, Float
 
 from growjax.calibration import physical_bounds
 from growjax.calibration.tolerance import rig_draws
@@ -23,7 +24,9 @@ from growjax.design.knowledge import Knowledge
 from growjax.design.sensitivity import Sensitivities
 from growjax.model import params as gp
 from growjax.model.limits import Limits
-from growjax.simulation.simulate import as_arrays, simulate
+from growjax.model.signals import Inputs
+from growjax.simulation.config import Config
+from growjax.simulation.simulate import Breaks, as_arrays, simulate
 from growjax.simulation.trajectory import OK
 
 __all__ = ["CHUNK", "DRAWS", "SPREAD", "Check", "check", "draws", "penalty", "stack"]
@@ -33,7 +36,7 @@ DRAWS = 32  # rig and θ draws a design is checked on
 CHUNK = 128  # runs per compiled batch of the check
 
 
-def draws(knowledge: Knowledge, n: int = DRAWS, seed: int = 0) -> dict:
+def draws(knowledge: Knowledge, n: int = DRAWS, seed: int = 0) -> dict[str, Float[np.ndarray, " n"]]:
     """n draws {qualified name: (n,) SI} of the rig within its tolerances and of θ from N(ln θ̂, Σ_θ), clipped into
     each parameter's physical range; seeded."""
     out = dict(rig_draws(n, knowledge.base, knowledge.tolerances, seed))
@@ -46,7 +49,9 @@ def draws(knowledge: Knowledge, n: int = DRAWS, seed: int = 0) -> dict:
     return out
 
 
-def penalty(s: Sensitivities, prior_covariance, lim: Limits, spread: float = SPREAD):
+def penalty(
+    s: Sensitivities, prior_covariance: Float[Array, "m m"], lim: Limits, spread: float = SPREAD
+) -> Float[Array, ""]:
     """Σ over samples of the squared excess (kPa, mm) of the nominal run plus ``spread`` linearised sds over the
     prior (Σ₀ = ``prior_covariance`` (m, m)) above the pressure and length ceilings: 0 inside them (traceable)."""
     # (a floor of 1 nm and 1 mPa keeps the square root's derivative finite where a run does not move)
@@ -61,7 +66,18 @@ class Check(eqx.Module):
     """A check of inputs over draws, per input (C,): the worst over the draws of the sensed pressure (Pa), the
     length (m), the syringes' travel (m), the platform's speed (m/s), whether every run reached its end, and
     whether all of it is inside the `Limits`; ``length`` and ``pressure`` (C, D, n) the runs
-    themselves when kept."""
+    themselves when kept.
+
+    Attributes:
+        peak_pressure: (C,) Pa.
+        peak_length: (C,) m.
+        peak_syringe: (C,) the syringes' travel, m.
+        peak_speed: (C,) the platform's speed, m/s.
+        completed: (C,) bool, every run reached its end.
+        admissible: (C,) bool, completed and inside the limits.
+        length: (C, D, n) m, the runs' length where kept.
+        pressure: (C, D, n) Pa, their sensed pressure where kept.
+    """
 
     peak_pressure: np.ndarray
     peak_length: np.ndarray
@@ -72,7 +88,8 @@ class Check(eqx.Module):
     length: np.ndarray | None = None
     pressure: np.ndarray | None = None
 
-    def row(self, i: int) -> dict:
+    def row(self, i: int) -> dict[str, bool | float]:
+        """Input ``i``'s check as a JSON-ready summary (SI, units in the keys)."""
         return {
             "admissible": bool(self.admissible[i]),
             "runs_completed": bool(self.completed[i]),
@@ -83,12 +100,21 @@ class Check(eqx.Module):
         }
 
 
-def stack(inputs: list):
+def stack(inputs: list[Inputs]) -> Inputs:
     """Inputs of one structure stacked into one pytree with a leading axis (C, …) on every leaf."""
     return jax.tree_util.tree_map(lambda *leaves: jnp.stack([jnp.asarray(v) for v in leaves]), *inputs)
 
 
-def check(inputs, knowledge: Knowledge, config, ts, breaks, lim: Limits, drawn: dict, keep_runs: bool = False) -> Check:
+def check(
+    inputs: Inputs,
+    knowledge: Knowledge,
+    config: Config,
+    ts: Float[ArrayLike, " n"],
+    breaks: Breaks,
+    lim: Limits,
+    drawn: dict[str, Float[np.ndarray, " D"]],
+    keep_runs: bool = False,
+) -> Check:
     """Simulate every input × draw (the fast configuration, batched ``CHUNK`` runs at a time) and compare the worst
     of each input with ``lim``. ``inputs``: C inputs of one structure stacked (`stack`), sharing their
     ``breaks``; ``drawn`` from `draws`; ``ts`` (n,) s; ``keep_runs``: keep the runs' length and pressure."""

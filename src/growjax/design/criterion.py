@@ -23,12 +23,13 @@ Bayesian because the covariance has the prior in it. A new criterion is one subc
 from __future__ import annotations
 
 import abc
+from collections.abc import Sequence
 from typing import ClassVar, NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Float
+from jaxtyping import Array, ArrayLike, Float
 
 from growjax.calibration import discrepancy as dc
 from growjax.design.sensitivity import Sensitivities
@@ -51,10 +52,16 @@ PRESSURE_NOISE = 1e3  # Pa, sd of the pressure sensor's noise (independent sampl
 
 
 class Prediction(NamedTuple):
-    """What an input gives: ``sensitivities`` on the sample times, the covariance of the estimate of w with what is
-    known (``covariance`` (m, m)) and from the next experiment alone (``covariance_alone``: no prior on θ, the
-    rig under its tolerances), each with the rig's nonlinearity where it was given; ``covariance_linear``: with
-    what is known, the rig linearised (the posterior covariance alone)."""
+    """What an input gives.
+
+    Attributes:
+        sensitivities: the `Sensitivities` on the sample times.
+        covariance: (m, m) the covariance of the estimate of w with what is known, with the rig's nonlinearity
+            where it was given.
+        covariance_alone: (m, m) the same from the next experiment alone (no prior on θ, the rig under its
+            tolerances).
+        covariance_linear: (m, m) with what is known, the rig linearised (the posterior covariance alone).
+    """
 
     sensitivities: Sensitivities
     covariance: jax.Array
@@ -62,7 +69,7 @@ class Prediction(NamedTuple):
     covariance_linear: jax.Array
 
 
-def check_sensors(sensors) -> tuple:
+def check_sensors(sensors: Sequence[str]) -> tuple[str, ...]:
     """``sensors`` as a tuple; ValueError unless it is ('length',) or ('length', 'pressure')."""
     sensors = tuple(sensors)
     if set(sensors) - set(SENSORS) or "length" not in sensors:
@@ -70,9 +77,15 @@ def check_sensors(sensors) -> tuple:
     return sensors
 
 
-def information(s: Sensitivities, times, hyper: dc.Hyper, sensors=("length",), pressure_noise: float = PRESSURE_NOISE):
+def information(
+    s: Sensitivities,
+    times: Float[ArrayLike, " n"],
+    hyper: dc.Hyper,
+    sensors: Sequence[str] = ("length",),
+    pressure_noise: float = PRESSURE_NOISE,
+) -> Float[Array, "m m"]:
     """The information J̃ᵀK⁻¹J̃ (+ J_PᵀJ_P/σ_P² with ``"pressure"`` in ``sensors``) (m, m) on w of the samples at
-    ``times`` (n,) s."""
+    ``times`` (n,) s, under the discrepancy's hyperparameters ``hyper`` and the pressure noise σ_P (Pa)."""
     check_sensors(sensors)
     w = dc.whiten(s.jac_length, times, hyper)
     info = w.T @ w
@@ -84,13 +97,13 @@ def information(s: Sensitivities, times, hyper: dc.Hyper, sensors=("length",), p
 
 def posterior(
     s: Sensitivities,
-    times,
+    times: Float[ArrayLike, " n"],
     hyper: dc.Hyper,
-    precision_known,
-    precision_alone,
-    sensors=("length",),
+    precision_known: Float[Array, "m m"],
+    precision_alone: Float[Array, "m m"],
+    sensors: Sequence[str] = ("length",),
     pressure_noise: float = PRESSURE_NOISE,
-    remainder=None,
+    remainder: Float[Array, "n D"] | None = None,
 ) -> Prediction:
     """The `Prediction` of sensitivities ``s``: Σ = (Λ₀ + information)⁻¹ for the prior precisions Λ₀
     ``precision_known`` and ``precision_alone`` (m, m) (`growjax.design.knowledge.Knowledge.prior_precision`).
@@ -160,6 +173,7 @@ class DOptimal(Criterion):
         return jnp.linalg.slogdet(covariance)[1]
 
 
-def standard_deviations(cov, size: int):
-    """sd (size,) of ln θ: each parameter's relative standard uncertainty."""
+def standard_deviations(cov: Float[Array, "m m"], size: int) -> Float[Array, " size"]:
+    """sd (size,) of ln θ, the first ``size`` coordinates of the covariance ``cov``: each parameter's relative
+    standard uncertainty."""
     return jnp.sqrt(jnp.clip(jnp.diag(cov)[:size], 0.0, None))

@@ -26,10 +26,13 @@ rival must move far to imitate it, is rejected more surely than T says), and the
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, ArrayLike, Float
 
 import growjax.design.constraints as dcon
 import growjax.design.sensitivity as sensitivity
@@ -43,14 +46,18 @@ from growjax.model.limits import Limits
 from growjax.model.limits import limits as limits_of
 from growjax.model.signals import Inputs, KnotProfile
 from growjax.simulation.config import Config
-from growjax.simulation.simulate import as_arrays
+from growjax.simulation.simulate import Breaks, as_arrays
 
 __all__ = ["FLOOR", "Discrimination", "make", "rivals", "statistic", "statistics", "value_and_gradient"]
 
 FLOOR = 1e-12  # T below which the objective −ln T is held (rivals indistinguishable there)
 
 
-def rivals(effects) -> tuple[str, str]:
+# One model's run: (length (n,) m, pressure (n,) Pa, jac_length (n, m), jac_pressure (n, m)); two stacked: (2, …).
+_Run = tuple[Float[Array, "*two n"], Float[Array, "*two n"], Float[Array, "*two n m"], Float[Array, "*two n m"]]
+
+
+def rivals(effects: Sequence[str]) -> tuple[str, str]:
     """``effects`` as a pair of distinct catalogue names; ValueError naming what is wrong."""
     effects = tuple(effects)
     if len(effects) != 2:
@@ -65,7 +72,9 @@ def rivals(effects) -> tuple[str, str]:
     return effects
 
 
-def checked_pair(effects, sizes=None, drive: str = "forward") -> tuple[tuple[str, str], tuple[float, float]]:
+def checked_pair(
+    effects: Sequence[str], sizes: Sequence[float] | None = None, drive: str = "forward"
+) -> tuple[tuple[str, str], tuple[float, float]]:
     """The rivals and their sizes for a design of ``drive``'s input, checked.
 
     Args:
@@ -92,7 +101,14 @@ def checked_pair(effects, sizes=None, drive: str = "forward") -> tuple[tuple[str
     return effects, sizes
 
 
-def statistic(r, jac, rig, tolerance, times, hyper: dc.Hyper):
+def statistic(
+    r: Float[Array, " n"],
+    jac: Float[Array, "n k"],
+    rig: Float[Array, "n q"],
+    tolerance: Float[ArrayLike, " q"],
+    times: Float[ArrayLike, " n"],
+    hyper: dc.Hyper,
+) -> Float[Array, ""]:
     """T = rᵀΣ⁻¹r − rᵀΣ⁻¹J(JᵀΣ⁻¹J)⁻¹JᵀΣ⁻¹r ≥ 0 for Σ = K + G U Gᵀ: ``r`` (n,) m, ``jac`` J (n, k) m per unit,
     ``rig`` G (n, q) m per unit of the rig's relative errors, ``tolerance`` u (q,), ``times`` (n,) s, K of
     ``hyper``. The Kalman filter whitens by K with the rig's terms in its state (traceable)."""
@@ -106,7 +122,28 @@ def statistic(r, jac, rig, tolerance, times, hyper: dc.Hyper):
 class Discrimination(eqx.Module):
     """The problem of designing an input that tells ``effects`` (A, B) apart; build it with `make`. Its
     ``parts`` and ``inputs`` are those of `growjax.design.DesignProblem`, so the random batch, the descent and
-    the check (`.optimise`, `.constraints`) take it as they take a precision problem."""
+    the check (`growjax.design.optimise`, `growjax.design.constraints`) take it as they take a precision problem.
+
+    Attributes:
+        base: the parameters at the estimate, both effects present (numbers as arrays).
+        sizes: (2, 2) SI, the two models' effect sizes: A's model (a, 0), then B's (0, b).
+        scales: (2,) SI per unit of each effect's coordinate.
+        knots: (K,) the demand's knots, s.
+        p_max: the demand's ceiling, Pa.
+        catheter: the catheter length signal, m.
+        times: (n,) the sample times, s.
+        hyper: the residual model's hyperparameters.
+        tolerance: (q,) the rig's relative sds.
+        prior_covariance: (m, m) of w = (ln θ, u_A, u_B, b): the penalty's spread.
+        breaks: the inputs' breaks.
+        limits: the rig's limits.
+        names: θ, the base parameters refitted.
+        effects: (A, B), catalogue names.
+        fields: their parameters, qualified.
+        rig: the rig's toleranced parameters.
+        config: the configuration, resolved.
+        spread: the penalty's sds (`growjax.design.constraints.penalty`).
+    """
 
     base: object  # Parameters at the estimate, both effects present (numbers as arrays)
     sizes: jax.Array  # (2, 2) SI: the two models' effect sizes, A's model (a, 0) then B's (0, b)
@@ -127,13 +164,13 @@ class Discrimination(eqx.Module):
     config: object = eqx.field(static=True)
     spread: float = eqx.field(static=True, default=dcon.SPREAD)
 
-    def inputs(self, x) -> Inputs:
+    def inputs(self, x: Float[ArrayLike, " K-1"]) -> Inputs:
         """The inputs of design x (K − 1,) (traceable)."""
         return Inputs(
             catheter_length=self.catheter, pressure_demand=KnotProfile(self.knots, demand_at_knots(x, self.p_max))
         )
 
-    def solve(self, inputs, sizes, breaks=None):
+    def solve(self, inputs: Inputs, sizes: Float[Array, " 2"], breaks: Breaks | None = None) -> _Run:
         """(length (n,), pressure (n,), jac_length (n, m), jac_pressure (n, m)) of the model at effect ``sizes``
         (2,), along w = (ln θ (p), u_A, u_B, ln ψ/ψ₀ (q)) (traceable)."""
         p = len(self.names)
@@ -149,11 +186,11 @@ class Discrimination(eqx.Module):
         )
         return s.length, s.pressure, s.jac_length, s.jac_pressure
 
-    def solves(self, inputs, breaks=None):
+    def solves(self, inputs: Inputs, breaks: Breaks | None = None) -> _Run:
         """`solve` of A's model and B's, stacked (2, …) (traceable)."""
         return jax.lax.map(lambda sz: self.solve(inputs, sz, breaks), self.sizes)
 
-    def statistics(self, runs):
+    def statistics(self, runs: _Run) -> Float[Array, " 2"]:
         """(T_AB, T_BA) of the stacked runs of `solves`: data from A's model fitted by B's, and the
         reverse."""
         length, _, jac, _ = runs
@@ -173,7 +210,7 @@ class Discrimination(eqx.Module):
             )
         return jnp.stack(out)
 
-    def of_runs(self, runs):
+    def of_runs(self, runs: _Run) -> tuple[Float[Array, ""], Float[Array, ""]]:
         """(criterion −ln min(T_AB, T_BA), penalty of the limits summed over both models) of `solves`'s
         runs (traceable)."""
         t = self.statistics(runs)
@@ -184,11 +221,12 @@ class Discrimination(eqx.Module):
             pen = pen + dcon.penalty(s, self.prior_covariance, self.limits, self.spread)
         return crit, pen
 
-    def parts(self, inputs, breaks=None):
+    def parts(self, inputs: Inputs, breaks: Breaks | None = None) -> tuple[Float[Array, ""], Float[Array, ""]]:
         """(criterion, penalty) of ``inputs`` (traceable): what `growjax.design.evaluate` returns."""
         return self.of_runs(self.solves(inputs, breaks))
 
-    def objective(self, x):
+    def objective(self, x: Float[ArrayLike, " K-1"]) -> Float[Array, ""]:
+        """criterion + penalty of design x; +inf where not finite (traceable)."""
         crit, pen = self.parts(self.inputs(x))
         value = crit + pen
         return jnp.where(jnp.isfinite(value), value, jnp.inf)
@@ -197,8 +235,8 @@ class Discrimination(eqx.Module):
 def make(
     knowledge: Knowledge,
     space: DesignSpace,
-    effects,
-    sizes=None,
+    effects: Sequence[str],
+    sizes: Sequence[float] | None = None,
     limits: Limits | None = None,
     config: Config | None = None,
 ) -> Discrimination:
@@ -238,13 +276,15 @@ def make(
 
 
 @eqx.filter_jit
-def statistics(problem: Discrimination, inputs, breaks):
+def statistics(problem: Discrimination, inputs: Inputs, breaks: Breaks) -> Float[Array, " 2"]:
     """(T_AB, T_BA) (2,) of ``inputs`` with their ``breaks`` (one compiled program per inputs' structure)."""
     return problem.statistics(problem.solves(inputs, breaks))
 
 
 @eqx.filter_jit
-def value_and_gradient(problem: Discrimination, x):
+def value_and_gradient(
+    problem: Discrimination, x: Float[Array, " K-1"]
+) -> tuple[Float[Array, ""], Float[Array, " K-1"]]:
     """(objective, its exact gradient (K − 1,)) of design x by forward mode through both models' sensitivity
     solves (the map over the two models outside the batch of directions)."""
     units = jnp.eye(x.shape[0], dtype=x.dtype)

@@ -5,8 +5,12 @@ the draws of the rig and θ (bands: the range over the draws)."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from growjax.design.workflow import DesignResult
 
 __all__ = ["BASELINE_COLOUR", "STYLE", "design_figure"]
 
@@ -14,7 +18,7 @@ STYLE = {"design": "C3", "best random input": "C0"}
 BASELINE_COLOUR = "0.45"
 
 
-def design_figure(result, path) -> Path:
+def design_figure(result: DesignResult, path: str | Path) -> Path:
     """Three panels over the run: demand (kPa; for the stepper, the commanded length, mm), sensed pressure (kPa)
     with the ceiling and the membrane limit, and length (mm) with the stroke's ceiling; ``result`` a
     `growjax.design.DesignResult`."""

@@ -14,15 +14,17 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
+from jaxtyping import ArrayLike, Float
 
 import growjax.design.constraints as dcon
 import growjax.design.discrimination as ddis
 import growjax.design.problem as dprob
 from growjax import progress as prog
 from growjax.design.knowledge import Knowledge
-from growjax.design.space import DesignSpace
+from growjax.design.space import DesignSpace, StepperSpace
 
 __all__ = [
     "BATCH",
@@ -46,8 +48,14 @@ ROUNDS = 4  # rounds of random draws for n admissible inputs
 
 @dataclasses.dataclass
 class Descent:
-    """One start's descent: ``x`` (K,) the best design met, ``value`` its objective, ``history`` the objective
-    at every iterate, ``start`` (K,)."""
+    """One start's descent.
+
+    Attributes:
+        x: (K,) the best design met.
+        value: its objective.
+        history: the objective at every iterate.
+        start: (K,) the start.
+    """
 
     x: np.ndarray
     value: float
@@ -56,18 +64,19 @@ class Descent:
 
 
 def adam(
-    value_and_grad: Callable,
-    x0,
+    value_and_grad: Callable[[np.ndarray], tuple[ArrayLike, ArrayLike]],
+    x0: Float[ArrayLike, " K"],
     iterations: int = ITERATIONS,
     learning_rate: float = LEARNING_RATE,
     beta1: float = 0.9,
     beta2: float = 0.999,
     eps: float = 1e-8,
-    progress=None,
+    progress: Any = None,
 ) -> Descent:
     """Adam on ``value_and_grad(x) → (f, ∇f)`` from ``x0`` (K,), the step decaying linearly to a tenth over
     ``iterations``. A non-finite value (the model failed there) sends the search back to the best point with half
-    the step. Returns the best iterate (the start included)."""
+    the step. ``progress``: a progress object (`growjax.progress.bar`) counting the evaluations. Returns the best
+    iterate (the start included)."""
     x = np.asarray(x0, float).copy()
     m, v = np.zeros_like(x), np.zeros_like(x)
     best_x, best_f, history = x.copy(), np.inf, []
@@ -99,7 +108,7 @@ GRADIENTS = ("differences", "jax")
 
 def multistart(
     problem: dprob.DesignProblem,
-    starts,
+    starts: Float[ArrayLike, "S K"],
     iterations: int = ITERATIONS,
     learning_rate: float = LEARNING_RATE,
     gradient: str = "differences",
@@ -126,7 +135,7 @@ def multistart(
     return sorted(runs, key=lambda r: r.value)
 
 
-def neighbours(space, x) -> np.ndarray:
+def neighbours(space: StepperSpace, x: Float[ArrayLike, " N"]) -> Float[np.ndarray, "M N"]:
     """The stepper schedules one change from x (N,): one edge's choice set to either of the other two, or two
     neighbouring edges' different choices swapped (a step moved by one period); those whose count stays ≥ 0,
     each once (M, N)."""
@@ -151,8 +160,8 @@ BATCH = 8  # neighbours scored together in the local search (one compiled evalua
 
 def local_search(
     problem: dprob.DesignProblem,
-    space,
-    starts,
+    space: StepperSpace,
+    starts: Float[ArrayLike, "S N"],
     moves: int = ITERATIONS,
     seed: int = 0,
     batch: int = BATCH,
@@ -190,8 +199,14 @@ def local_search(
 
 @dataclasses.dataclass
 class RandomBatch:
-    """Random admissible inputs: ``designs`` (N, K), their ``criterion`` (N,), how many inputs were ``drawn`` to
-    find them and the ``wall_s``."""
+    """Random admissible inputs.
+
+    Attributes:
+        designs: (N, K) the designs.
+        criterion: (N,) their criterion.
+        drawn: how many inputs were drawn to find them.
+        wall_s: the wall time, s.
+    """
 
     designs: np.ndarray
     criterion: np.ndarray
@@ -204,6 +219,7 @@ class RandomBatch:
         return int(np.argmin(np.where(np.isfinite(self.criterion), self.criterion, np.inf)))
 
     def order(self) -> np.ndarray:
+        """The designs' indices, best (lowest criterion) first."""
         return np.argsort(self.criterion)
 
 

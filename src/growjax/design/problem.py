@@ -20,12 +20,15 @@ shapes.
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
+from typing import TYPE_CHECKING
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, ArrayLike, Float
 
 import growjax.design.constraints as dcon
 import growjax.design.criterion as dcrit
@@ -39,7 +42,10 @@ from growjax.model.limits import Limits
 from growjax.model.limits import limits as limits_of
 from growjax.model.signals import Inputs, KnotProfile
 from growjax.simulation.config import Config
-from growjax.simulation.simulate import as_arrays
+from growjax.simulation.simulate import Breaks, as_arrays
+
+if TYPE_CHECKING:
+    from growjax.design.discrimination import Discrimination
 
 __all__ = [
     "DEMAND_STEP",
@@ -62,7 +68,31 @@ NONLINEAR_DRAWS = 16  # draws of the rig on which what its linearisation misses 
 
 
 class DesignProblem(eqx.Module):
-    """The design problem (see the module docstring). Build it with `make`."""
+    """The design problem (see the module docstring). Build it with `make`.
+
+    Attributes:
+        base: the parameters at the estimate on the nominal rig, numbers as arrays.
+        knots: (K,) s, the demand's knots (forward drive) or the step controller's edges (stepper).
+        p_max: the demand's ceiling, Pa (forward drive; unused by the stepper).
+        catheter: the catheter length signal, m.
+        times: (n,) the sensors' sample times, s.
+        hyper: the residual model's hyperparameters.
+        precision_known: (m, m) the prior precision of w with what is known.
+        precision_alone: (m, m) the prior precision of the next experiment alone.
+        prior_covariance: (m, m) of w: the penalty's spread.
+        points: (P, m) points of w the criterion is averaged over (the first: 0).
+        offsets: (D, q) the rig's relative errors at the draws its nonlinearity is measured on.
+        breaks: the inputs' breaks.
+        limits: the rig's limits.
+        names: the parameters of interest θ.
+        rig: the rig's toleranced parameters.
+        sensors: ``("length",)`` or ``("length", "pressure")``.
+        pressure_noise: sd of the pressure sensor's noise, Pa.
+        criterion: what the design minimises.
+        config: the fast configuration, resolved.
+        spread: the penalty's sds (`growjax.design.constraints.penalty`).
+        drive: ``"forward"`` or ``"inverse"``.
+    """
 
     base: object  # Parameters at the estimate on the nominal rig, numbers as arrays
     knots: jax.Array  # (K,) s: the demand's knots (forward drive) or the step controller's edges (stepper)
@@ -86,7 +116,7 @@ class DesignProblem(eqx.Module):
     spread: float = eqx.field(static=True, default=dcon.SPREAD)
     drive: str = eqx.field(static=True, default="forward")
 
-    def inputs(self, x) -> Inputs:
+    def inputs(self, x: Float[ArrayLike, " k"]) -> Inputs:
         """The inputs of design x (traceable): the demand's logits (K − 1,) or the stepper's steps (N,)."""
         if self.drive == "inverse":
             return stepper_inputs(self.catheter, self.knots, x)
@@ -94,7 +124,11 @@ class DesignProblem(eqx.Module):
             catheter_length=self.catheter, pressure_demand=KnotProfile(self.knots, demand_at_knots(x, self.p_max))
         )
 
-    def sensitivities(self, inputs, breaks=None, z=None) -> sensitivity.Sensitivities:
+    def sensitivities(
+        self, inputs: Inputs, breaks: Breaks | None = None, z: Float[ArrayLike, " m"] | None = None
+    ) -> sensitivity.Sensitivities:
+        """The `growjax.design.sensitivity.Sensitivities` of ``inputs`` (their ``breaks``, default the design
+        space's) at the point ``z`` of w (default 0) (traceable)."""
         return sensitivity.solve(
             self.base,
             inputs,
@@ -106,7 +140,14 @@ class DesignProblem(eqx.Module):
             z,
         )
 
-    def predict(self, inputs, breaks=None, z=None, sensors=None, nonlinear: bool = False) -> dcrit.Prediction:
+    def predict(
+        self,
+        inputs: Inputs,
+        breaks: Breaks | None = None,
+        z: Float[ArrayLike, " m"] | None = None,
+        sensors: tuple[str, ...] | None = None,
+        nonlinear: bool = False,
+    ) -> dcrit.Prediction:
         """The `growjax.design.criterion.Prediction` of ``inputs`` (their ``breaks``, default the design
         space's) at the point ``z`` of w (default 0), with ``sensors`` (default the problem's); ``nonlinear``: with
         what the rig's linearisation misses at the problem's ``offsets``."""
@@ -128,7 +169,9 @@ class DesignProblem(eqx.Module):
             rem,
         )
 
-    def covariance(self, inputs, breaks=None):
+    def covariance(
+        self, inputs: Inputs, breaks: Breaks | None = None
+    ) -> tuple[Float[Array, "m m"], sensitivity.Sensitivities]:
         """The covariance (m, m) of the estimate of w with what is known that the table reports
         (`covariances`' ``"known"``): averaged over the points, plus what the rig's linearisation misses at
         the estimate (at the problem's ``offsets``); and the sensitivities at the estimate (traceable)."""
@@ -137,17 +180,17 @@ class DesignProblem(eqx.Module):
         mean = (first.covariance_linear + rest.sum(axis=0)) / self.points.shape[0]
         return mean + (first.covariance - first.covariance_linear), first.sensitivities
 
-    def criterion_of(self, covariance):
+    def criterion_of(self, covariance: Float[Array, "m m"]) -> Float[Array, ""]:
         """The criterion of a covariance (m, m) of w: of its block on the parameters of interest (p, p)."""
         p = len(self.names)
         return self.criterion(covariance[:p, :p])
 
-    def parts(self, inputs, breaks=None):
+    def parts(self, inputs: Inputs, breaks: Breaks | None = None) -> tuple[Float[Array, ""], Float[Array, ""]]:
         """(criterion of `covariance`, penalty at the estimate) of ``inputs`` (traceable)."""
         cov, s = self.covariance(inputs, breaks)
         return self.criterion_of(cov), dcon.penalty(s, self.prior_covariance, self.limits, self.spread)
 
-    def objective(self, x):
+    def objective(self, x: Float[ArrayLike, " k"]) -> Float[Array, ""]:
         """criterion + penalty of design x (K,); +inf where the model failed."""
         crit, pen = self.parts(self.inputs(x))
         value = crit + pen
@@ -158,7 +201,7 @@ def make(
     knowledge: Knowledge,
     space: DesignSpace,
     criterion: dcrit.Criterion | None = None,
-    sensors=("length",),
+    sensors: Sequence[str] = ("length",),
     pressure_noise: float = dcrit.PRESSURE_NOISE,
     limits: Limits | None = None,
     points: int = POINTS,
@@ -234,7 +277,7 @@ def make(
 
 
 @eqx.filter_jit
-def value_and_gradient(problem: DesignProblem, x):
+def value_and_gradient(problem: DesignProblem, x: Float[Array, " k"]) -> tuple[Float[Array, ""], Float[Array, " k"]]:
     """(objective, its exact gradient (K − 1,)) of design x by forward mode through the model: the sensitivities
     (and the plain solves of what the rig's linearisation misses) differentiated again through the solver's loop
     along every design variable."""
@@ -247,7 +290,9 @@ def value_and_gradient(problem: DesignProblem, x):
     return jnp.where(jnp.isfinite(value), value, jnp.inf), tangent
 
 
-def information(problem: DesignProblem, inputs, breaks):
+def information(
+    problem: DesignProblem, inputs: Inputs, breaks: Breaks
+) -> tuple[Float[Array, "P m m"], Float[Array, "P m m"], Float[Array, "m D"], Float[Array, " n"], Float[Array, " n"]]:
     """At every point (P of them): the information of the length rows (P, m, m) and of the pressure rows (P, m, m);
     at the estimate, the whitened cross term J̃ᵀK⁻¹V (m, D) of what the rig's linearisation misses
     (`growjax.design.criterion.posterior`), the run's length (n,) m and pressure (n,) Pa. One compiled
@@ -287,7 +332,13 @@ def _information(problem: DesignProblem, inputs, breaks):
     )
 
 
-def covariances(problem: DesignProblem, info_length, info_pressure, cross, sensors) -> dict:
+def covariances(
+    problem: DesignProblem,
+    info_length: Float[ArrayLike, "P m m"],
+    info_pressure: Float[ArrayLike, "P m m"],
+    cross: Float[ArrayLike, "m D"],
+    sensors: Sequence[str],
+) -> dict[str, Float[np.ndarray, "m m"]]:
     """Covariances (m, m) of the estimate of w under ``sensors``, from `information`'s output:
     ``"known"`` (with what is known) and ``"alone"`` (the next experiment alone), each averaged over the points
     plus what the rig's linearisation misses (at the estimate); ``"known_local"``, ``"alone_local"``: at the
@@ -307,7 +358,7 @@ def covariances(problem: DesignProblem, info_length, info_pressure, cross, senso
     return out
 
 
-def evaluate(problem, x):
+def evaluate(problem: DesignProblem | Discrimination, x: Float[ArrayLike, " k"]) -> tuple[np.ndarray, np.ndarray]:
     """(criterion, penalty) of design x (K − 1,): the objective's two parts (`DesignProblem.parts`). For a
     `DesignProblem`, through `information`'s compiled program, the one the design's table reports from
     (the same numbers to rounding); NaN where the model failed or the information is singular (a design that
@@ -326,7 +377,9 @@ def _parts(problem, x):
     return problem.parts(problem.inputs(x))
 
 
-def evaluate_many(problem: DesignProblem, xs, workers: int | None = None) -> np.ndarray:
+def evaluate_many(
+    problem: DesignProblem | Discrimination, xs: Float[ArrayLike, "S k"], workers: int | None = None
+) -> Float[np.ndarray, "S 2"]:
     """(criterion, penalty) (S, 2) of designs ``xs`` (S, K − 1), one compiled evaluation each, ``workers`` at a time
     (threads: a compiled evaluation releases the GIL; default one per CPU core)."""
     xs = np.atleast_2d(np.asarray(xs, float))
@@ -341,13 +394,20 @@ def evaluate_many(problem: DesignProblem, xs, workers: int | None = None) -> np.
         return np.array(list(pool.map(one, xs)))
 
 
-def values(problem: DesignProblem, xs, workers: int | None = None) -> np.ndarray:
+def values(
+    problem: DesignProblem | Discrimination, xs: Float[ArrayLike, "S k"], workers: int | None = None
+) -> Float[np.ndarray, " S"]:
     """The objective (S,) of designs ``xs`` (S, K − 1) (`evaluate_many`); +inf where the model failed."""
     v = evaluate_many(problem, xs, workers).sum(axis=1)
     return np.where(np.isfinite(v), v, np.inf)
 
 
-def smoothed_gradient(problem: DesignProblem, x, step: float = DEMAND_STEP, workers: int | None = None):
+def smoothed_gradient(
+    problem: DesignProblem | Discrimination,
+    x: Float[ArrayLike, " k"],
+    step: float = DEMAND_STEP,
+    workers: int | None = None,
+) -> tuple[float, Float[np.ndarray, " k"]]:
     """(objective, its gradient (K − 1,)) of design x by forward differences of the demand at each knot by
     ``step`` × p_max (backward where that would pass p_max), the K perturbed designs evaluated together
     (`values`).

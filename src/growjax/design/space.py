@@ -26,17 +26,20 @@ from __future__ import annotations
 import dataclasses
 import functools
 from pathlib import Path
+from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, ArrayLike, Float
 
 from growjax.data import experiment as ex
 from growjax.model.limits import Limits
 from growjax.model.motor import step_schedule
+from growjax.model.params import Parameters
 from growjax.model.signals import Constant, Inputs, KnotProfile, Sampled, StepSchedule, published_pulse
 from growjax.simulation.config import Config
-from growjax.simulation.simulate import input_breaks
+from growjax.simulation.simulate import Breaks, input_breaks
 
 __all__ = [
     "KNOT_SPACING",
@@ -72,7 +75,7 @@ class DesignSpace:
     drive = "forward"
     baseline_label = "published pulse train"
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if not np.isfinite(self.duration) or self.duration <= 0:
             raise ValueError(f"the duration must be a positive number of seconds, got {self.duration}")
         if not np.isfinite(self.p_max) or self.p_max <= 0:
@@ -100,27 +103,27 @@ class DesignSpace:
         """(n,) s: the sensors' sample times."""
         return sample_times(self.duration, self.sample_interval)
 
-    def config(self, **changes) -> Config:
+    def config(self, **changes: Any) -> Config:
         """The fast configuration over the design's run, forward-mode derivatives (``changes``: other fields)."""
         return Config(t1=float(self.duration), adjoint="forward", **changes)
 
-    def demand(self, x):
+    def demand(self, x: Float[ArrayLike, "*S k"]) -> Float[Array, "*S K"]:
         """Demand at the knots (K,) Pa of a design x (K − 1,): 0 at the first (traceable)."""
         return demand_at_knots(x, self.p_max)
 
-    def unconstrained(self, demand) -> np.ndarray:
+    def unconstrained(self, demand: Float[ArrayLike, "*S K"]) -> Float[np.ndarray, "*S k"]:
         """The design x (K − 1,) whose demand at the knots after the first is ``demand`` (K,) Pa's (clipped a
         hair inside (0, p_max); the first knot's value is ignored: it is 0)."""
         u = np.clip(np.asarray(demand, float)[..., 1:] / self.p_max, _EDGE, 1.0 - _EDGE)
         return np.log(u) - np.log1p(-u)
 
-    def inputs(self, x) -> Inputs:
+    def inputs(self, x: Float[ArrayLike, " k"]) -> Inputs:
         """The model's inputs under design x (K − 1,) (traceable)."""
         return Inputs(
             catheter_length=self.catheter, pressure_demand=KnotProfile(jnp.asarray(self.knots), self.demand(x))
         )
 
-    def breaks(self):
+    def breaks(self) -> Breaks:
         """The inputs' (jump, slope-break) times the solver steps onto: the same for every design."""
         return input_breaks(self.inputs(np.zeros(self.size)), self.config())
 
@@ -131,7 +134,7 @@ class DesignSpace:
         scale = np.where(scale > 0, scale, 1.0)
         return self.unconstrained(self.p_max * scale * rng.uniform(0.0, 1.0, (n, self.size + 1)))
 
-    def table(self, x) -> tuple[np.ndarray, dict]:
+    def table(self, x: Float[ArrayLike, " k"]) -> tuple[Float[np.ndarray, " T"], dict[str, Float[np.ndarray, " T"]]]:
         """(time (T,) s, {column: (T,)}) of design x in the experiment CSV's columns: the demand and the catheter
         length every sample interval from 0 to the end."""
         n = int(np.floor(self.duration / self.sample_interval + 1e-9))
@@ -142,7 +145,7 @@ class DesignSpace:
         catheter = np.asarray(jax.vmap(self.catheter)(jnp.asarray(t)), float)
         return t, {"pressure_demand_Pa": demand, "catheter_length_m": catheter}
 
-    def write_csv(self, path, x) -> Path:
+    def write_csv(self, path: str | Path, x: Float[ArrayLike, " k"]) -> Path:
         """Write design x as an experiment CSV (time_s, pressure_demand_Pa, catheter_length_m), which
         ``growjax simulate`` and ``growjax fit`` (once the length is measured) take."""
         t, series = self.table(x)
@@ -153,22 +156,24 @@ class DesignSpace:
         """The baseline: the published pulse train with the design's catheter."""
         return Inputs(catheter_length=self.catheter, pressure_demand=published_pulse())
 
-    def scaled(self, x, share: float) -> np.ndarray:
+    def scaled(self, x: Float[ArrayLike, " k"], share: float) -> Float[np.ndarray, " k"]:
         """Design x with its demand scaled by ``share`` (a design that fails its check, turned down)."""
         return self.unconstrained(share * np.asarray(self.demand(x)))
 
-    def command(self, x, t) -> np.ndarray:
+    def command(self, x: Float[ArrayLike, " k"], t: Float[ArrayLike, " T"]) -> Float[np.ndarray, " T"]:
         """The demand (Pa) of design x at times ``t`` (T,) s, for figures."""
         return np.interp(t, self.knots, np.asarray(self.demand(x)))
 
-    def baseline_command(self, t) -> np.ndarray:
+    def baseline_command(self, t: Float[ArrayLike, " T"]) -> Float[np.ndarray, " T"]:
+        """The baseline's demand (Pa) at times ``t`` (T,) s, for figures."""
         return np.asarray(jax.vmap(self.baseline_inputs().pressure_demand)(jnp.asarray(t)))
 
-    def describe(self, x) -> dict:
+    def describe(self, x: Float[ArrayLike, " k"]) -> dict[str, list[float]]:
         """Design x in the summary's terms."""
         return {"knots_s": self.knots.tolist(), "demand_Pa": np.asarray(self.demand(x)).tolist()}
 
-    def settings(self) -> dict:
+    def settings(self) -> dict[str, Any]:
+        """The space's settings, JSON-ready (SI, units in the keys)."""
         return {
             "drive": self.drive,
             "duration_s": self.duration,
@@ -178,7 +183,7 @@ class DesignSpace:
         }
 
 
-def demand_at_knots(x, p_max):
+def demand_at_knots(x: Float[ArrayLike, "*S k"], p_max: Float[ArrayLike, ""]) -> Float[Array, "*S K"]:
     """(K,) Pa: 0, then p_max·σ(x) for design x (K − 1,) (traceable)."""
     x = jnp.asarray(x)
     return jnp.concatenate([jnp.zeros(x.shape[:-1] + (1,)), p_max * jax.nn.sigmoid(x)], axis=-1)
@@ -200,7 +205,7 @@ def held(experiment: ex.Experiment, column: str, duration: float) -> Sampled:
     return Sampled(jnp.asarray(t), jnp.asarray(v))
 
 
-def catheter_of(experiment: ex.Experiment | None, duration: float):
+def catheter_of(experiment: ex.Experiment | None, duration: float) -> Sampled | Constant:
     """The catheter length (m) of an experiment already run, as a signal over [0, ``duration``] s: its samples,
     held at their last value after its end (a constant 0 where it had no catheter, or none is given)."""
     if experiment is None or "catheter_length_m" not in experiment:
@@ -208,7 +213,7 @@ def catheter_of(experiment: ex.Experiment | None, duration: float):
     return held(experiment, "catheter_length_m", duration)
 
 
-def stepper_inputs(catheter, edges, x) -> Inputs:
+def stepper_inputs(catheter: Sampled | Constant, edges: Float[ArrayLike, " N"], x: Float[ArrayLike, " N"]) -> Inputs:
     """The stepper's inputs under design x (N,): the count after each edge (N,) s its running sum (traceable)."""
     return Inputs(catheter_length=catheter, steps=StepSchedule(jnp.asarray(edges), jnp.cumsum(jnp.asarray(x), axis=-1)))
 
@@ -233,7 +238,7 @@ class StepperSpace:
     drive = "inverse"
     baseline_label = "recorded length as demand"
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name in ("duration", "metres_per_step", "rate"):
             v = getattr(self, name)
             if not np.isfinite(v) or v <= 0:
@@ -258,27 +263,27 @@ class StepperSpace:
         """(n,) s: the sensors' sample times."""
         return sample_times(self.duration, self.sample_interval)
 
-    def config(self, **changes) -> Config:
+    def config(self, **changes: Any) -> Config:
         """The fast configuration of the stepper drive over the run, forward-mode derivatives."""
         return Config(drive="inverse", t1=float(self.duration), adjoint="forward", **changes)
 
-    def counts(self, x):
+    def counts(self, x: Float[ArrayLike, "*S N"]) -> Float[Array, "*S N"]:
         """(N,) the driver's step count after each edge of design x (N,) (traceable)."""
         return jnp.cumsum(jnp.asarray(x), axis=-1)
 
-    def demand(self, x):
+    def demand(self, x: Float[ArrayLike, "*S N"]) -> Float[Array, "*S N"]:
         """(N,) m: the commanded length after each edge of design x."""
         return self.metres_per_step * self.counts(x)
 
-    def inputs(self, x) -> Inputs:
+    def inputs(self, x: Float[ArrayLike, " N"]) -> Inputs:
         """The model's inputs under design x (N,) (traceable)."""
         return stepper_inputs(self.catheter, self.edges, x)
 
-    def breaks(self):
+    def breaks(self) -> Breaks:
         """The inputs' jump times (every edge) the solver steps onto: the same for every design."""
         return input_breaks(self.inputs(np.zeros(self.size)), self.config())
 
-    def admissible_counts(self, x) -> np.ndarray:
+    def admissible_counts(self, x: Float[ArrayLike, " N"]) -> Float[np.ndarray, " N"]:
         """Design x with every step that would take the count below 0 dropped."""
         x = np.asarray(np.rint(x), float).copy()
         c = 0.0
@@ -297,7 +302,7 @@ class StepperSpace:
         x = np.where(u < a, 1.0, np.where(u < a + r, -1.0, 0.0))
         return np.stack([self.admissible_counts(row) for row in x])
 
-    def from_length(self, desired) -> np.ndarray:
+    def from_length(self, desired: Sampled) -> Float[np.ndarray, " N"]:
         """The design (N,) the shipped position controller issues for a desired length ``desired`` (a signal, m)."""
         grid = np.arange(0.0, self.duration + 1.0 / self.rate, 0.25 / self.rate)
         d = np.asarray(jax.vmap(desired)(jnp.asarray(grid)), float) / self.metres_per_step
@@ -312,23 +317,25 @@ class StepperSpace:
         return np.zeros(self.size) if self.recorded is None else self.from_length(self.recorded)
 
     def baseline_inputs(self) -> Inputs:
+        """The inputs of the `baseline` design."""
         return self.inputs(self.baseline())
 
-    def scaled(self, x, share: float) -> np.ndarray:
+    def scaled(self, x: Float[ArrayLike, " k"], share: float) -> Float[np.ndarray, " k"]:
         """Design x with its count scaled by ``share`` ≤ 1 (rounded down): still at most one step per edge."""
         counts = np.floor(share * np.asarray(self.counts(x), float) + 1e-9)
         return np.diff(np.concatenate([[0.0], counts]))
 
-    def command(self, x, t) -> np.ndarray:
+    def command(self, x: Float[ArrayLike, " k"], t: Float[ArrayLike, " T"]) -> Float[np.ndarray, " T"]:
         """The commanded length (m) of design x at times ``t`` (T,) s (held between edges), for figures."""
         c = np.asarray(self.demand(x), float)
         j = np.searchsorted(self.edges, np.asarray(t), side="right") - 1
         return np.where(j >= 0, c[np.maximum(j, 0)], 0.0)
 
-    def baseline_command(self, t) -> np.ndarray:
+    def baseline_command(self, t: Float[ArrayLike, " T"]) -> Float[np.ndarray, " T"]:
+        """The baseline's commanded length (m) at times ``t`` (T,) s, for figures."""
         return self.command(self.baseline(), t)
 
-    def table(self, x) -> tuple[np.ndarray, dict]:
+    def table(self, x: Float[ArrayLike, " k"]) -> tuple[Float[np.ndarray, " T"], dict[str, Float[np.ndarray, " T"]]]:
         """(time (T,) s, {column: (T,)}) of design x in the experiment CSV's columns: the desired length the shipped
         controller turns back into exactly this schedule (the count after each edge, reached at the controller's
         sample before it, linear between samples) and the catheter length, every sample interval and at each of
@@ -342,21 +349,23 @@ class StepperSpace:
         catheter = np.asarray(jax.vmap(self.catheter)(jnp.asarray(t)), float)
         return t, {"desired_length_m": desired, "catheter_length_m": catheter}
 
-    def write_csv(self, path, x) -> Path:
+    def write_csv(self, path: str | Path, x: Float[ArrayLike, " k"]) -> Path:
         """Write design x as an experiment CSV (time_s, desired_length_m, catheter_length_m), which ``growjax
         simulate --drive inverse`` and ``growjax fit --drive inverse`` (once the length is measured) take."""
         t, series = self.table(x)
         ex.write_csv(path, t, series)
         return Path(path)
 
-    def describe(self, x) -> dict:
+    def describe(self, x: Float[ArrayLike, " N"]) -> dict[str, list[float]]:
+        """Design x in the summary's terms."""
         return {
             "edges_s": self.edges.tolist(),
             "steps": np.asarray(x, float).tolist(),
             "commanded_length_m": np.asarray(self.demand(x)).tolist(),
         }
 
-    def settings(self) -> dict:
+    def settings(self) -> dict[str, Any]:
+        """The space's settings, JSON-ready (SI, units in the keys)."""
         return {
             "drive": self.drive,
             "duration_s": self.duration,
@@ -366,7 +375,7 @@ class StepperSpace:
         }
 
 
-def stepper_space(base, duration: float, experiment: ex.Experiment | None = None) -> StepperSpace:
+def stepper_space(base: Parameters, duration: float, experiment: ex.Experiment | None = None) -> StepperSpace:
     """The `StepperSpace` of the stepper drive's parameters ``base`` over ``duration`` s, with the catheter
     and the baseline (its recorded length as the desired length) of an experiment already run, if given."""
     recorded = None

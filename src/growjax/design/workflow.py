@@ -7,7 +7,9 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
+from typing import Any, NamedTuple
 
 import jax
 import numpy as np
@@ -109,7 +111,8 @@ def design(
     knowledge: Knowledge,
     space: DesignSpace | StepperSpace,
     criterion: dcrit.Criterion | None = None,
-    sensors=("length",),
+    *,
+    sensors: Sequence[str] = ("length",),
     random: int = 64,
     starts: int = 1,
     iterations: int = dopt.ITERATIONS,
@@ -125,77 +128,69 @@ def design(
 ) -> DesignResult:
     """Design the next experiment's input for the precision of ``knowledge``'s parameters.
 
-    ``criterion``: what the design minimises, a `growjax.design.Criterion` of the predicted covariance of the
-    parameters of interest (None: `growjax.design.AOptimal`; any subclass serves).
-    ``random`` random admissible inputs are drawn and scored (`growjax.design.optimise.random_admissible`);
-    the optimiser descends from the ``starts`` best of them (``iterations`` Adam steps each; for a
-    `growjax.design.StepperSpace`, ``iterations`` moves of `growjax.design.optimise.local_search`);
-    the best result that passes the check over ``n_draws`` draws of the rig and θ (scaled down a little where it
-    does not) is the design.
-    ``points``: the points of (θ, rig) the criterion is averaged over (1: the local design at the estimate; the
-    criterion's cost grows with each point);
-    ``nonlinear_draws``: draws of the rig on which what its linearisation misses is measured (0: none);
-    ``gradient``: the descent's slope, ``"differences"`` over a step of the demand or ``"jax"``, exact
-    (`growjax.design.optimise.multistart`). The
-    table reports the design, the best random input and the space's baseline under ``sensors`` and, where
-    the pressure is recorded, under the length alone. DesignError where nothing admissible is found.
+    Random admissible inputs are drawn and scored; the optimiser descends from the best of them; the best result
+    that passes the check over draws of the rig and θ (scaled down a little where it does not) is the design. The
+    table reports the design, the best random input and the space's baseline under ``sensors`` and, where the
+    pressure is recorded, under the length alone.
+
+    Args:
+        knowledge: what is known (the parameters of interest, their covariance, the rig's tolerances).
+        space: the inputs a design may take: the forward drive's demand or the stepper's schedule.
+        criterion: what the design minimises, a `growjax.design.Criterion` of the predicted covariance of the
+            parameters of interest (None: `growjax.design.AOptimal`; any subclass serves).
+        sensors: the sensors recorded, ``"length"`` and optionally ``"pressure"``.
+        random: random admissible inputs drawn and scored (`growjax.design.optimise.random_admissible`).
+        starts: the best random inputs the optimiser starts from.
+        iterations: Adam steps per start (for a `growjax.design.StepperSpace`, moves of
+            `growjax.design.optimise.local_search`).
+        n_draws: draws of the rig and θ the check runs over.
+        seed: the draws' and the random inputs' seed.
+        points: the points of (θ, rig) the criterion is averaged over (1: the local design at the estimate).
+        pressure_noise: the pressure sensor's noise sd, Pa.
+        limits: the rig's limits; default those of ``knowledge``'s parameters.
+        learning_rate: Adam's step, in the design variables.
+        nonlinear_draws: draws of the rig on which what its linearisation misses is measured (0: none).
+        gradient: the descent's slope, ``"differences"`` over a step of the demand or ``"jax"``, exact
+            (`growjax.design.optimise.multistart`).
+        progress: progress lines on stderr.
+
+    Returns:
+        The design, its table, checks, random batch and descents.
+
+    Raises:
+        DesignError: where nothing admissible is found.
+        ValueError: for a demand ceiling above the rig's limit.
     """
-    clock, wall = time.perf_counter(), {}
+    clock = time.perf_counter()
     sensors = tuple(sensors)
     problem = dprob.make(
         knowledge, space, criterion, sensors, pressure_noise, limits, points, seed, nonlinear_draws=nonlinear_draws
     )
-    lim = problem.limits
     if space.drive == "forward":
-        check_p_max(space.p_max, lim)
+        check_p_max(space.p_max, problem.limits)
     sets = [sensors] if sensors == ("length",) else [("length",), sensors]
-    rows, batch, descents, x, scaled, checks, wall = _search(
+    settings = _Search(random, starts, iterations, n_draws, seed, learning_rate, gradient, progress)
+    found = _search(
         problem,
         knowledge,
         space,
-        random,
-        starts,
-        iterations,
-        n_draws,
-        seed,
-        learning_rate,
-        gradient,
-        progress,
+        settings,
         lambda inputs, breaks: _row(problem, knowledge, space.baseline_label, inputs, breaks, sets),
     )
-    best_random = batch.designs[batch.best]
-    for label, inputs, breaks in (
-        ("best random input", space.inputs(best_random), problem.breaks),
-        ("design", space.inputs(x), problem.breaks),
-    ):
-        rows += _row(problem, knowledge, label, inputs, breaks, sets)
-    wall["total_s"] = time.perf_counter() - clock
+    rows = found.row
+    for label, x in (("best random input", found.batch.designs[found.batch.best]), ("design", found.x)):
+        rows += _row(problem, knowledge, label, space.inputs(x), problem.breaks, sets)
+    found.wall["total_s"] = time.perf_counter() - clock
     knots = space.edges if space.drive == "inverse" else space.knots
-    return DesignResult(
-        tuple(knowledge.names),
-        knowledge.estimate,
-        space,
-        x,
-        knots,
-        np.asarray(space.demand(x)),
-        rows,
-        checks,
-        batch,
-        descents,
-        lim,
-        problem.criterion.name,
-        sensors,
-        knowledge.summary(),
-        wall,
-        scaled,
-    )
+    return _result(knowledge, space, found, rows, knots, problem, problem.criterion.name, sensors)
 
 
 def discriminate(
     knowledge: Knowledge,
     space: DesignSpace,
-    effects,
-    sizes=None,
+    effects: Sequence[str],
+    *,
+    sizes: Sequence[float] | None = None,
     random: int = 64,
     starts: int = 1,
     iterations: int = dopt.ITERATIONS,
@@ -207,41 +202,72 @@ def discriminate(
     false_positive_rate: float = 0.05,
     progress: bool = False,
 ) -> DesignResult:
-    """Design the next experiment's input to tell two rival catalogue ``effects`` (A, B) apart: the input that
-    maximises min(T_AB, T_BA) (`growjax.design.discrimination`), with ``knowledge``'s parameters refitted
-    beside the rival's effect; ``sizes`` (a, b) SI: the effects' assumed sizes (default their moderate
-    magnitudes). The search, the limits and the check are those of `design` (the objective −ln min T).
+    """Design the next experiment's input to tell two rival catalogue effects (A, B) apart.
 
-    The table (``rows``): per input ("published pulse train", "best random input", "design") T_AB, T_BA, min T and
-    whether min T exceeds the discovery's single-experiment threshold (``false_positive_rate`` over the
-    catalogue, `growjax.calibration.likelihood_ratio.boundary_threshold`): expected to separate. ValueError on a
-    bad pair of effects; DesignError where nothing admissible is found."""
+    The input maximises min(T_AB, T_BA) (`growjax.design.discrimination`), with ``knowledge``'s parameters
+    refitted beside the rival's effect. The search, the limits and the check are those of `design` (the objective
+    −ln min T). The table (``rows``) holds, per input ("published pulse train", "best random input", "design"),
+    T_AB, T_BA, min T and whether min T exceeds the discovery's single-experiment threshold: expected to separate.
+
+    Args:
+        knowledge: what is known (the parameters refitted beside each rival).
+        space: the forward drive's demand a design may take.
+        effects: the two rival catalogue effects' names (A, B).
+        sizes: (a, b), the effects' assumed sizes, SI; default their moderate magnitudes.
+        random: random admissible inputs drawn and scored (as `design`).
+        starts: the best random inputs the optimiser starts from.
+        iterations: Adam steps per start.
+        n_draws: draws of the rig and θ the check runs over.
+        seed: the draws' and the random inputs' seed.
+        limits: the rig's limits; default those of ``knowledge``'s parameters.
+        learning_rate: Adam's step, in the design variables.
+        gradient: the descent's slope, ``"differences"`` or ``"jax"`` (as `design`).
+        progress: progress lines on stderr.
+        false_positive_rate: the discovery's false-positive rate over the catalogue, from which the threshold
+            follows (`growjax.calibration.likelihood_ratio.boundary_threshold`).
+
+    Returns:
+        The design, its table, checks, random batch and descents, and the rivals' record (``discrimination``).
+
+    Raises:
+        ValueError: for a bad pair of effects.
+        DesignError: where nothing admissible is found.
+    """
     effects, sizes = ddis.checked_pair(effects, sizes, space.drive)
     clock = time.perf_counter()
     problem = ddis.make(knowledge, space, effects, sizes, limits)
-    lim = problem.limits
-    check_p_max(space.p_max, lim)
+    check_p_max(space.p_max, problem.limits)
     threshold = boundary_threshold(false_positive_rate / len(fx.CATALOGUE))
-    base_t, batch, descents, x, scaled, checks, wall = _search(
-        problem,
-        knowledge,
-        space,
-        random,
-        starts,
-        iterations,
-        n_draws,
-        seed,
-        learning_rate,
-        gradient,
-        progress,
-        lambda inputs, breaks: ddis.statistics(problem, inputs, breaks),
+    settings = _Search(random, starts, iterations, n_draws, seed, learning_rate, gradient, progress)
+    found = _search(
+        problem, knowledge, space, settings, lambda inputs, breaks: ddis.statistics(problem, inputs, breaks)
     )
+    rows = _discrimination_rows(problem, space, found, threshold)
+    found.wall["total_s"] = time.perf_counter() - clock
+    a, b = problem.effects
+    record = {
+        "effects": [a, b],
+        "parameters": list(problem.fields),
+        "sizes": [float(v) for v in np.diag(np.asarray(problem.sizes))],
+        "refitted": list(knowledge.names),
+        "threshold": threshold,
+        "false_positive_rate": false_positive_rate,
+    }
+    return _result(knowledge, space, found, rows, space.knots, problem, "discrimination", ("length",), (a, b), record)
+
+
+def _discrimination_rows(problem: ddis.Discrimination, space: DesignSpace, found: _Found, threshold: float) -> list:
+    """The table's rows of a discrimination design: T_AB, T_BA and min T of the baseline, the best random input
+    and the design."""
     a, b = problem.effects
     rows = []
     for label, t in (
-        ("published pulse train", base_t),
-        ("best random input", ddis.statistics(problem, space.inputs(batch.designs[batch.best]), problem.breaks)),
-        ("design", ddis.statistics(problem, space.inputs(x), problem.breaks)),
+        ("published pulse train", found.row),
+        (
+            "best random input",
+            ddis.statistics(problem, space.inputs(found.batch.designs[found.batch.best]), problem.breaks),
+        ),
+        ("design", ddis.statistics(problem, space.inputs(found.x), problem.breaks)),
     ):
         t_ab, t_ba = (max(float(v), 0.0) for v in t)
         rows.append(
@@ -254,47 +280,66 @@ def discriminate(
                 "expected_to_separate": bool(min(t_ab, t_ba) > threshold),
             }
         )
-    wall["total_s"] = time.perf_counter() - clock
-    sizes = np.diag(np.asarray(problem.sizes))
-    record = {
-        "effects": [a, b],
-        "parameters": list(problem.fields),
-        "sizes": [float(v) for v in sizes],
-        "refitted": list(knowledge.names),
-        "threshold": threshold,
-        "false_positive_rate": false_positive_rate,
-    }
+    return rows
+
+
+def _result(knowledge, space, found, rows, knots, problem, criterion, sensors, names=None, record=None):
+    """The `DesignResult` of a search (``names``: the result's parameters, default ``knowledge``'s)."""
     return DesignResult(
-        (a, b),
+        tuple(knowledge.names) if names is None else names,
         knowledge.estimate,
         space,
-        x,
-        space.knots,
-        np.asarray(space.demand(x)),
+        found.x,
+        knots,
+        np.asarray(space.demand(found.x)),
         rows,
-        checks,
-        batch,
-        descents,
-        lim,
-        "discrimination",
-        ("length",),
+        found.checks,
+        found.batch,
+        found.descents,
+        problem.limits,
+        criterion,
+        sensors,
         knowledge.summary(),
-        wall,
-        scaled,
+        found.wall,
+        found.scaled,
         record,
     )
 
 
-def _search(
-    problem, knowledge, space, random, starts, iterations, n_draws, seed, learning_rate, gradient, progress, baseline
-):
+@dataclasses.dataclass(frozen=True)
+class _Search:
+    """The search's settings (the arguments of `design` of the same names)."""
+
+    random: int
+    starts: int
+    iterations: int
+    n_draws: int
+    seed: int
+    learning_rate: float
+    gradient: str
+    progress: bool
+
+
+class _Found(NamedTuple):
+    """What `_search` finds: the baseline's row, the random batch, the descents, the design, the share of its
+    demand kept, the checks and the wall times (s)."""
+
+    row: Any
+    batch: dopt.RandomBatch
+    descents: list
+    x: np.ndarray
+    scaled: float
+    checks: dict
+    wall: dict
+
+
+def _search(problem, knowledge: Knowledge, space, settings: _Search, baseline: Callable) -> _Found:
     """The random batch, the search from its best, the check of the result and of the two baselines over the
     draws; beside them (its programs compile while the search runs) ``baseline(inputs, breaks)`` of the space's
-    baseline, the table's row: (that row, batch, descents, design, the share of its demand kept, checks, wall
-    times)."""
+    baseline, the table's row."""
     wall = {}
     lim = problem.limits
-    drawn = dcon.draws(knowledge, n_draws, seed)
+    drawn = dcon.draws(knowledge, settings.n_draws, settings.seed)
     base_inputs = space.baseline_inputs()
     base_breaks = input_breaks(base_inputs, space.config())
     with ThreadPoolExecutor(max_workers=1) as pool:
@@ -313,24 +358,30 @@ def _search(
                 ),
             )
         )
-        prog.note(f"design: {random} random admissible inputs, each checked over {n_draws} draws", progress)
-        batch = dopt.random_admissible(problem, space, knowledge, random, seed, drawn, progress=progress)
-        wall["random_s"] = batch.wall_s
+        batch, descents = _descend(problem, knowledge, space, settings, drawn, wall)
         t = time.perf_counter()
-        order = batch.order()[: max(starts, 1)]
-        if space.drive == "inverse":
-            descents = dopt.local_search(problem, space, batch.designs[order], iterations, seed, progress=progress)
-        else:
-            descents = dopt.multistart(problem, batch.designs[order], iterations, learning_rate, gradient, progress)
-        wall["descent_s"] = time.perf_counter() - t
-        t = time.perf_counter()
-        x, scaled, check = _admissible(
-            problem, space, knowledge, _by_reported(problem, space, descents, batch, starts), drawn, lim
-        )
+        ranked = _by_reported(problem, space, descents, batch, settings.starts)
+        x, scaled, check = _admissible(problem, space, knowledge, ranked, drawn, lim)
         wall["check_s"] = time.perf_counter() - t
         checks = {"design": check, "best random input": _one(space, knowledge, batch.designs[batch.best], drawn, lim)}
         row, checks[space.baseline_label] = published.result()
-    return row, batch, descents, x, scaled, checks, wall
+    return _Found(row, batch, descents, x, scaled, checks, wall)
+
+
+def _descend(problem, knowledge: Knowledge, space, settings: _Search, drawn, wall: dict):
+    """(the random batch, the descents from its best): the optimiser's part of the search, its times in ``wall``."""
+    s = settings
+    prog.note(f"design: {s.random} random admissible inputs, each checked over {s.n_draws} draws", s.progress)
+    batch = dopt.random_admissible(problem, space, knowledge, s.random, s.seed, drawn, progress=s.progress)
+    wall["random_s"] = batch.wall_s
+    t = time.perf_counter()
+    order = batch.order()[: max(s.starts, 1)]
+    if space.drive == "inverse":
+        descents = dopt.local_search(problem, space, batch.designs[order], s.iterations, s.seed, progress=s.progress)
+    else:
+        descents = dopt.multistart(problem, batch.designs[order], s.iterations, s.learning_rate, s.gradient, s.progress)
+    wall["descent_s"] = time.perf_counter() - t
+    return batch, descents
 
 
 def _by_reported(problem, space, descents, batch, starts: int) -> np.ndarray:

@@ -4,34 +4,37 @@ An effect is an ``equinox.Module`` that lives in ``Parameters.effects``, so its 
 are leaves of the parameter pytree: they can be differentiated, swept, fitted and sampled
 like Y. Every effect's parameters are in SI units and zero means absent, so the extended
 model reduces exactly to the base model. An effect contributes through any of five hooks,
-each called by both configurations (:mod:`growjax.simulation.reference` and :mod:`growjax.simulation.fast`) from
+each called by both configurations (`growjax.simulation.reference` and `growjax.simulation.fast`) from
 this one definition:
 
-* :meth:`Effect.apply`: a changed parameter (e.g. the air fraction);
-* :meth:`Effect.rod_force`: a force (N) opposing growth in the rod balance of the growing element;
-* :meth:`Effect.chamber_outflow`: a flow (m³/s) out of the pressurised chamber;
-* :meth:`Effect.drive`: the drive force or torque actually applied, given the commanded one;
-* states of its own (``state_names``), with :meth:`Effect.rates` and :meth:`Effect.length_offset`.
+* `Effect.apply`: a changed parameter (e.g. the air fraction);
+* `Effect.rod_force`: a force (N) opposing growth in the rod balance of the growing element;
+* `Effect.chamber_outflow`: a flow (m³/s) out of the pressurised chamber;
+* `Effect.drive`: the drive force or torque actually applied, given the commanded one;
+* states of its own (``state_names``), with `Effect.rates` and `Effect.length_offset`.
 
 A rod force must not decrease with the robot velocity (friction-like); the rod balance
 relies on that monotonicity to have one root. An effect whose rod force depends on the velocity
 says so (``velocity_dependent``): the fast configuration then solves the rod balance by Newton
 iterations instead of one fixed-point pass.
 
-The catalogue (:data:`CATALOGUE`, name → class): ``active_channel_force``, ``fluid_leak``,
+The catalogue (`CATALOGUE`, name → class): ``active_channel_force``, ``fluid_leak``,
 ``actuation_lag``, ``trapped_air``, ``catheter_friction``, ``lumen_friction``,
-``growth_rate_limit``, ``retraction_folding``. :func:`register` adds an effect of your own.
+``growth_rate_limit``, ``retraction_folding``. `register` adds an effect of your own.
 """
 
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from typing import ClassVar
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
 
+from growjax.model.params import Parameters
 from growjax.model.robot import LOCKHART_PRESSURE_SCALE, lockhart_pressure
 from growjax.model.smooth import smooth_ramp
 
@@ -69,11 +72,16 @@ RAMP_VELOCITY = 1e-6  # m/s: C¹ band of the ramps max(v, 0) of the velocity
 
 
 class Rod(eqx.Module):
-    """The growing element as an effect sees it in the rod balance (SI units); built by keyword only.
+    """The growing element as an effect sees it in the rod balance; built by keyword only.
 
-    t: s.  pressure: sensed pressure P before the check valve, Pa.  velocity: robot
-    velocity (inflow / A_r), m/s.  length: robot length, m.  catheter_length: m.
-    inner_radius: r_i of the robot, m.  area: its annular piston area A_r = π(r_o² − r_i²), m².
+    Attributes:
+        t: the time, s.
+        pressure: sensed pressure P before the check valve, Pa.
+        velocity: robot velocity (inflow / A_r), m/s.
+        length: robot length, m.
+        catheter_length: m.
+        inner_radius: r_i of the robot, m.
+        area: its annular piston area A_r = π(r_o² − r_i²), m².
     """
 
     _: dataclasses.KW_ONLY
@@ -87,11 +95,16 @@ class Rod(eqx.Module):
 
 
 class Instant(eqx.Module):
-    """The solved model at one instant, for the rates of effect states (SI units); built by keyword only.
+    """The solved model at one instant, for the rates of effect states; built by keyword only.
 
-    t: s.  pressure: sensed pressure, Pa.  robot_pressure: Pa.  robot_flow: m³/s.  velocity: robot velocity, m/s.
-    length: robot length, m.  drive: the commanded drive (forward: force on the platform, N; inverse: motor
-    torque, N·m).
+    Attributes:
+        t: the time, s.
+        pressure: sensed pressure, Pa.
+        robot_pressure: Pa.
+        robot_flow: m³/s.
+        velocity: robot velocity, m/s.
+        length: robot length, m.
+        drive: the commanded drive (forward: force on the platform, N; inverse: motor torque, N·m).
     """
 
     _: dataclasses.KW_ONLY
@@ -107,10 +120,13 @@ class Instant(eqx.Module):
 class Effect(eqx.Module):
     """Base class of a physical effect; override only the hooks the effect uses.
 
-    Class attributes: ``name`` (catalogue name, used in parameter names ``name.field``),
-    ``description`` (one line), ``units`` and ``ranges`` (per parameter field),
-    ``state_names`` (states of its own; their typical magnitudes from :meth:`state_scales`),
-    ``velocity_dependent`` (whether :meth:`rod_force` depends on the robot velocity).
+    Attributes:
+        name: the catalogue name, used in parameter names ``name.field`` (a class attribute).
+        description: one line (a class attribute).
+        units: {field: unit} of the parameter fields (a class attribute).
+        ranges: {field: (low, high)} physical range of each parameter field, SI (a class attribute).
+        state_names: the effect's own states (a class attribute); their typical magnitudes from `state_scales`.
+        velocity_dependent: whether `rod_force` depends on the robot velocity (a class attribute).
     """
 
     name: ClassVar[str] = ""
@@ -120,8 +136,8 @@ class Effect(eqx.Module):
     state_names: ClassVar[tuple] = ()
     velocity_dependent: ClassVar[bool] = False  # does rod_force depend on the robot velocity?
 
-    def state_scales(self, drive: str) -> tuple:
-        """Typical magnitude of each state (for error control), in its SI unit."""
+    def state_scales(self, drive: str) -> tuple[float, ...]:
+        """Typical magnitude of each state (for error control), in its SI unit, under ``drive``."""
         return ()
 
     def present(self) -> jax.Array:
@@ -129,31 +145,35 @@ class Effect(eqx.Module):
         leaves = [jnp.any(jnp.asarray(x) != 0) for x in jax.tree_util.tree_leaves(self)]
         return jnp.any(jnp.stack(leaves)) if leaves else jnp.asarray(False)
 
-    def apply(self, params):
+    def apply(self, params: Parameters) -> Parameters:
         """The parameters as changed by this effect (default: unchanged)."""
         return params
 
-    def rod_force(self, rod: Rod, state) -> jax.Array:
-        """Force opposing growth on the rod, N (default 0); non-decreasing in ``rod.velocity``."""
+    def rod_force(self, rod: Rod, state: Float[Array, " m"]) -> Float[Array, "*b"]:
+        """Force opposing growth on the ``rod``, N, of the shape of ``rod.pressure`` (default 0); non-decreasing in
+        ``rod.velocity``. ``state``: (m,) the effect's states."""
         return jnp.zeros_like(rod.pressure)
 
-    def chamber_outflow(self, t, pressure, state) -> jax.Array:
-        """Flow out of the pressurised chamber at gauge ``pressure`` (Pa), m³/s (default 0)."""
+    def chamber_outflow(
+        self, t: Float[ArrayLike, ""], pressure: Float[Array, "*b"], state: Float[Array, " m"]
+    ) -> Float[Array, "*b"]:
+        """Flow out of the pressurised chamber at time ``t`` (s) and gauge ``pressure`` (Pa), m³/s (default 0).
+        ``state``: (m,) the effect's states."""
         return jnp.zeros_like(pressure)
 
-    def drive(self, commanded, state) -> jax.Array:
+    def drive(self, commanded: Float[Array, "*b"], state: Float[Array, " m"]) -> Float[Array, "*b"]:
         """Drive force (N) or torque (N·m) applied, given the ``commanded`` one (default: as commanded)."""
         return commanded
 
-    def initial_state(self, params, drive: str) -> jax.Array:
+    def initial_state(self, params: Parameters, drive: str) -> Float[Array, " m"]:
         """States at t0, shape (len(state_names),)."""
         return jnp.zeros(len(self.state_names))
 
-    def rates(self, instant: Instant, state) -> jax.Array:
+    def rates(self, instant: Instant, state: Float[Array, " m"]) -> Float[Array, " m"]:
         """Time derivatives of the states, shape (len(state_names),)."""
         return jnp.zeros(len(self.state_names))
 
-    def length_offset(self, state) -> jax.Array:
+    def length_offset(self, state: Float[Array, " m"]) -> Float[Array, ""]:
         """Everted length (m) not produced by the volume in the robot (default 0)."""
         return jnp.asarray(0.0)
 
@@ -171,7 +191,8 @@ class ActiveChannelForce(Effect):
     ranges: ClassVar[dict] = {"force": (0.0, 0.5)}
     force: float = 0.0
 
-    def rod_force(self, rod, state):
+    def rod_force(self, rod: Rod, state: Float[Array, " m"]) -> Float[Array, "*b"]:
+        """F_ac, N."""
         return self.force + jnp.zeros_like(rod.pressure)
 
 
@@ -188,7 +209,10 @@ class FluidLeak(Effect):
     ranges: ClassVar[dict] = {"conductance": (0.0, 1e-12)}
     conductance: float = 0.0
 
-    def chamber_outflow(self, t, pressure, state):
+    def chamber_outflow(
+        self, t: Float[ArrayLike, ""], pressure: Float[Array, "*b"], state: Float[Array, " m"]
+    ) -> Float[Array, "*b"]:
+        """G·p, m³/s."""
         return self.conductance * pressure
 
 
@@ -206,13 +230,16 @@ class ActuationLag(Effect):
     state_names: ClassVar[tuple] = ("applied_drive",)
     time_constant: float = 0.0
 
-    def state_scales(self, drive):
+    def state_scales(self, drive: str) -> tuple[float, ...]:
+        """The applied drive's scale: 10 N (forward) or 0.01 N·m (inverse)."""
         return (10.0,) if drive == "forward" else (1e-2,)
 
-    def drive(self, commanded, state):
+    def drive(self, commanded: Float[Array, "*b"], state: Float[Array, " m"]) -> Float[Array, "*b"]:
+        """The lagged drive (its state), or the commanded one where τ = 0."""
         return jnp.where(self.time_constant > 0.0, state[0], commanded)
 
-    def rates(self, instant, state):
+    def rates(self, instant: Instant, state: Float[Array, " m"]) -> Float[Array, " m"]:
+        """(commanded − applied)/τ."""
         tau = jnp.where(self.time_constant > 0.0, self.time_constant, 1.0)
         rate = jnp.where(self.time_constant > 0.0, (instant.drive - state[0]) / tau, 0.0)
         return jnp.stack([rate])
@@ -231,13 +258,14 @@ class TrappedAir(Effect):
     ranges: ClassVar[dict] = {"extra_fraction": (-0.005, 0.05)}
     extra_fraction: float = 0.0
 
-    def apply(self, params):
+    def apply(self, params: Parameters) -> Parameters:
+        """The fluid's air fraction raised by Δα."""
         fluid = dataclasses.replace(params.fluid, air_fraction=params.fluid.air_fraction + self.extra_fraction)
         return dataclasses.replace(params, fluid=fluid)
 
 
-def friction_sign(velocity):
-    """Smooth sign of the robot velocity (m/s), tanh(v / 1e-4 m/s): increasing, odd, ±1 beyond ~0.3 mm/s."""
+def friction_sign(velocity: Float[ArrayLike, "*b"]) -> Float[Array, "*b"]:
+    """Smooth sign tanh(v / 1e-4 m/s) of the robot velocity v (m/s): increasing, odd, ±1 beyond ~0.3 mm/s."""
     return jnp.tanh(velocity / FRICTION_VELOCITY)
 
 
@@ -246,7 +274,7 @@ class CatheterFriction(Effect):
 
     F = μ·P·2π r_i·L_c·s(v), with P the sensed pressure (taken ≥ 0: the contact cannot pull),
     r_i the robot's inner radius, L_c the catheter length in contact and s the smooth sign of the
-    robot velocity (:func:`friction_sign`). The shipped model's own catheter term (μ_c = 0.01)
+    robot velocity (`friction_sign`). The shipped model's own catheter term (μ_c = 0.01)
     *assists* growth; this one opposes growth and retraction alike.
 
     Attributes:
@@ -260,7 +288,8 @@ class CatheterFriction(Effect):
     velocity_dependent: ClassVar[bool] = True
     coefficient: float = 0.0
 
-    def rod_force(self, rod, state):
+    def rod_force(self, rod: Rod, state: Float[Array, " m"]) -> Float[Array, "*b"]:
+        """μ·P·2π r_i·L_c·s(v), N."""
         normal = jnp.maximum(rod.pressure, 0.0) * 2.0 * jnp.pi * rod.inner_radius * rod.catheter_length  # N
         return self.coefficient * normal * friction_sign(rod.velocity)
 
@@ -270,7 +299,7 @@ class LumenFriction(Effect):
 
     c = μ_s·w is the friction force per unit everted length (μ_s the wall friction coefficient,
     w the wall's normal load per unit length), L the robot length, s the smooth sign of the
-    robot velocity (:func:`friction_sign`).
+    robot velocity (`friction_sign`).
 
     Attributes:
         force_per_length: c, N/m (0 = absent).
@@ -283,14 +312,15 @@ class LumenFriction(Effect):
     velocity_dependent: ClassVar[bool] = True
     force_per_length: float = 0.0
 
-    def rod_force(self, rod, state):
+    def rod_force(self, rod: Rod, state: Float[Array, " m"]) -> Float[Array, "*b"]:
+        """c·L·s(v), N."""
         return self.force_per_length * rod.length * friction_sign(rod.velocity)
 
 
 class GrowthRateLimit(Effect):
     """Membrane-limited growth speed: growing at v > 0 needs Δp = p_ref·(κ·v)^m more rod pressure.
 
-    The inverse of a Lockhart-type law v = (Δp/p_ref)^(1/m)/κ (:func:`growjax.model.robot.lockhart_pressure`), with
+    The inverse of a Lockhart-type law v = (Δp/p_ref)^(1/m)/κ (`growjax.model.robot.lockhart_pressure`), with
     p_ref = 1 kPa and m = 4 fixed (the calibration found Lockhart's exponent n_L ≈ 0.25, m = 1/n_L). Zero while
     the robot holds or retracts (a C¹ ramp of v). Rod force A_r·Δp.
 
@@ -307,7 +337,8 @@ class GrowthRateLimit(Effect):
     exponent: ClassVar[float] = 4.0  # m = 1/n_L
     inverse_speed: float = 0.0
 
-    def rod_force(self, rod, state):
+    def rod_force(self, rod: Rod, state: Float[Array, " m"]) -> Float[Array, "*b"]:
+        """A_r·p_ref·(κ·v)^m for v > 0, N."""
         return rod.area * lockhart_pressure(rod.velocity, self.inverse_speed, self.exponent, RAMP_VELOCITY)
 
 
@@ -329,13 +360,16 @@ class RetractionFolding(Effect):
     state_names: ClassVar[tuple] = ("folded_length",)
     folding_fraction: float = 0.0
 
-    def state_scales(self, drive):
+    def state_scales(self, drive: str) -> tuple[float, ...]:
+        """The folded length's scale, m, as the robot displacement's."""
         return (1e-4,) if drive == "forward" else (1e-3,)  # m, as the robot displacement
 
-    def rates(self, instant, state):
+    def rates(self, instant: Instant, state: Float[Array, " m"]) -> Float[Array, " m"]:
+        """dF/dt = f·max(−v, 0), m/s."""
         return jnp.stack([self.folding_fraction * smooth_ramp(-instant.velocity, RAMP_VELOCITY)])
 
-    def length_offset(self, state):
+    def length_offset(self, state: Float[Array, " m"]) -> Float[Array, ""]:
+        """−F, m."""
         return -state[0]  # length = L0 + ξ − offset = L0 + ξ + F
 
 
@@ -355,11 +389,20 @@ CATALOGUE = {
 
 
 def register(cls: type[Effect]) -> type[Effect]:
-    """Add an :class:`Effect` subclass to :data:`CATALOGUE`, so that :func:`growjax.discover.discover` tests it.
+    """Add an `Effect` subclass to `CATALOGUE`, so that `growjax.discover.discover` tests it; usable as a class
+    decorator.
 
-    The class needs a ``name`` not already in the catalogue, a one-line ``description``, and exactly one
-    parameter field with its unit (``units``) and physical range (``ranges``), the range including 0 (absent).
-    Usable as a class decorator; returns the class.
+    Args:
+        cls: the effect's class: a ``name`` not already in the catalogue, a one-line ``description``, and exactly
+            one parameter field with its unit (``units``) and physical range (``ranges``), the range including 0
+            (absent).
+
+    Returns:
+        The class.
+
+    Raises:
+        TypeError: for anything but an `Effect` subclass.
+        ValueError: naming what the class lacks.
     """
     if not (isinstance(cls, type) and issubclass(cls, Effect)):
         raise TypeError(f"register expects an Effect subclass, got {cls!r}")
@@ -377,8 +420,8 @@ def register(cls: type[Effect]) -> type[Effect]:
 # -- what the assemblies call: the sum over a tuple of effects -------------------------------------------
 
 
-def split_states(effects, states):
-    """The state vector of all effects (K,) → one array per effect."""
+def split_states(effects: Sequence[Effect], states: Float[Array, " K"]) -> list[Float[Array, " m"]]:
+    """The state vector of all effects (K,), split into one array per effect."""
     out, k = [], 0
     for e in effects:
         m = len(e.state_names)
@@ -387,54 +430,66 @@ def split_states(effects, states):
     return out
 
 
-def state_size(effects) -> int:
+def state_size(effects: Sequence[Effect]) -> int:
+    """K, the number of the effects' states."""
     return sum(len(e.state_names) for e in effects)
 
 
-def state_scales(effects, drive: str) -> tuple:
+def state_scales(effects: Sequence[Effect], drive: str) -> tuple[float, ...]:
+    """The typical magnitude of each of the effects' states under ``drive``, in order."""
     return tuple(s for e in effects for s in e.state_scales(drive))
 
 
-def initial_states(effects, params, drive: str) -> jax.Array:
+def initial_states(effects: Sequence[Effect], params: Parameters, drive: str) -> Float[Array, " K"]:
+    """The effects' states at t0."""
     parts = [jnp.asarray(e.initial_state(params, drive), float) for e in effects if e.state_names]
     return jnp.concatenate(parts) if parts else jnp.zeros(0)
 
 
-def apply_all(params):
+def apply_all(params: Parameters) -> Parameters:
     """The parameters with every effect's parameter change applied."""
     for e in params.effects:
         params = e.apply(params)
     return params
 
 
-def rod_force(effects, states, rod: Rod):
+def rod_force(effects: Sequence[Effect], states: Float[Array, " K"], rod: Rod) -> Float[Array, "*b"]:
+    """The effects' total force opposing growth, N."""
     total = jnp.zeros_like(rod.pressure)
     for e, s in zip(effects, split_states(effects, states)):
         total = total + e.rod_force(rod, s)
     return total
 
 
-def chamber_outflow(effects, states, t, pressure):
+def chamber_outflow(
+    effects: Sequence[Effect], states: Float[Array, " K"], t: Float[ArrayLike, ""], pressure: Float[Array, "*b"]
+) -> Float[Array, "*b"]:
+    """The effects' total flow out of the chamber at gauge ``pressure`` (Pa), m³/s."""
     total = jnp.zeros_like(pressure)
     for e, s in zip(effects, split_states(effects, states)):
         total = total + e.chamber_outflow(t, pressure, s)
     return total
 
 
-def applied_drive(effects, states, commanded):
+def applied_drive(
+    effects: Sequence[Effect], states: Float[Array, " K"], commanded: Float[Array, "*b"]
+) -> Float[Array, "*b"]:
+    """The drive applied (N or N·m) given the commanded one, through every effect in order."""
     for e, s in zip(effects, split_states(effects, states)):
         commanded = e.drive(commanded, s)
     return commanded
 
 
-def length_offset(effects, states):
+def length_offset(effects: Sequence[Effect], states: Float[Array, " K"]) -> Float[Array, ""]:
+    """The effects' total everted length not produced by the volume in the robot, m."""
     total = jnp.asarray(0.0)
     for e, s in zip(effects, split_states(effects, states)):
         total = total + e.length_offset(s)
     return total
 
 
-def rates(effects, states, instant: Instant):
+def rates(effects: Sequence[Effect], states: Float[Array, " K"], instant: Instant) -> Float[Array, " K"]:
+    """The time derivatives of the effects' states."""
     parts = [
         jnp.asarray(e.rates(instant, s), float) for e, s in zip(effects, split_states(effects, states)) if e.state_names
     ]

@@ -8,6 +8,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, ArrayLike, Float
 
 __all__ = [
     "P_ATM",
@@ -42,7 +43,16 @@ class Fluid(eqx.Module):
 
 
 def water(temperature_c: float = 22.0, air_fraction: float = 0.005, polytropic_index: float = 1.4) -> Fluid:
-    """Water from Simscape's stock correlation at ``temperature_c`` (°C)."""
+    """Water from Simscape's stock correlation.
+
+    Args:
+        temperature_c: the temperature, °C.
+        air_fraction: α, relative volume of entrained air at atmospheric pressure (–).
+        polytropic_index: the air's gas index n.
+
+    Returns:
+        The fluid: density, viscosity and bulk modulus of water at ``temperature_c``.
+    """
     dt = temperature_c - 1.0
     nu_cst = 0.0374 * np.exp(443.5170 / (temperature_c + 273.15 - 158.4127))
     e_bar = 20424 + 87.31 * dt - 0.87045 * dt**2 + 1.7143e-3 * dt**3
@@ -50,8 +60,16 @@ def water(temperature_c: float = 22.0, air_fraction: float = 0.005, polytropic_i
     return Fluid(float(rho), float(nu_cst * 1e-6), float(e_bar * 1e5), air_fraction, polytropic_index)
 
 
-def bulk_modulus(fluid: Fluid, p):
-    """Effective bulk modulus E(p) of the liquid–air mixture, Pa, at gauge pressure ``p`` (Pa)."""
+def bulk_modulus(fluid: Fluid, p: Float[ArrayLike, "*b"]) -> Float[Array, "*b"]:
+    """Effective bulk modulus E(p) of the liquid–air mixture.
+
+    Args:
+        fluid: the fluid.
+        p: gauge pressure, Pa.
+
+    Returns:
+        E(p), Pa.
+    """
     pa = P_ATM
     n = fluid.polytropic_index
     pabs = jnp.maximum(pa + p, 0.05 * pa)
@@ -69,7 +87,7 @@ def _expm1_over(e, z):
 
 
 class StorageLaw(NamedTuple):
-    """Constants of the stored-volume law of a :class:`Fluid` (see :func:`stored_volume_fraction`)."""
+    """Constants of the stored-volume law of a `Fluid` (see `stored_volume_fraction`)."""
 
     air: jax.Array  # α
     index: jax.Array  # n
@@ -80,7 +98,7 @@ class StorageLaw(NamedTuple):
 
 
 def storage_law(fluid: Fluid) -> StorageLaw:
-    """The constants of the stored-volume law, computed once."""
+    """The constants of the stored-volume law of ``fluid``, computed once."""
     n, a = fluid.polytropic_index, fluid.air_fraction
     return StorageLaw(
         jnp.asarray(a, float),
@@ -92,8 +110,8 @@ def storage_law(fluid: Fluid) -> StorageLaw:
     )
 
 
-def stored_volume_fraction(fluid: Fluid | StorageLaw, p):
-    """s(p) = ∫₀ᵖ dp'/E(p'): liquid volume stored per unit chamber volume from gauge 0 to ``p`` (Pa), (–).
+def stored_volume_fraction(fluid: Fluid | StorageLaw, p: Float[ArrayLike, "*b"]) -> Float[Array, "*b"]:
+    """s(p) = ∫₀ᵖ dp'/E(p'): liquid volume stored per unit chamber volume from gauge 0 to p.
 
     Closed form of the Simscape mixture law. With g = α(p_a/(p_a + p))^(1/n),
     1/E = 1/(E_l(1 + g)) − g'/(1 + g); the second term integrates exactly (−ln(1 + g)) and
@@ -103,7 +121,14 @@ def stored_volume_fraction(fluid: Fluid | StorageLaw, p):
         s = ln((1 + α)/(1 + α e^(−L/n))) + (p_a/E_l)[e^L − 1 − α E₁(L) + α² E₂(L)],
         E_k(L) = (e^((1 − k/n)L) − 1)/(1 − k/n).
 
-    Valid for p_a + p ≥ 0.05 p_a, where :func:`bulk_modulus` stops clamping.
+    Valid for p_a + p ≥ 0.05 p_a, where `bulk_modulus` stops clamping.
+
+    Args:
+        fluid: the fluid, or its `StorageLaw`.
+        p: gauge pressure, Pa.
+
+    Returns:
+        s (–).
     """
     law = fluid if isinstance(fluid, StorageLaw) else storage_law(fluid)
     return _stored_and_slopes(law, jnp.log1p(p / P_ATM))[0]
@@ -131,12 +156,21 @@ def _stored_and_slopes(law: StorageLaw, lv):
     return value, slope, curvature
 
 
-def pressure_at_stored_fraction(fluid: Fluid | StorageLaw, s, iterations: int = 3):
-    """Inverse of :func:`stored_volume_fraction`: the gauge pressure (Pa) at which a unit volume stores ``s``.
+def pressure_at_stored_fraction(
+    fluid: Fluid | StorageLaw, s: Float[ArrayLike, "*b"], iterations: int = 3
+) -> Float[Array, "*b"]:
+    """Inverse of `stored_volume_fraction`: the gauge pressure at which a unit volume stores ``s``.
 
-    Halley iterations on L = ln(1 + p/p_a) (``iterations`` unrolled, cubic convergence) from the
-    smaller of the air-only and the liquid-only inverses, which both bound L from above.
-    Derivatives are implicit.
+    Halley iterations on L = ln(1 + p/p_a) (unrolled, cubic convergence) from the smaller of the air-only and the
+    liquid-only inverses, which both bound L from above. Derivatives are implicit.
+
+    Args:
+        fluid: the fluid, or its `StorageLaw`.
+        s: the stored volume per unit volume (–).
+        iterations: the Halley steps.
+
+    Returns:
+        The gauge pressure, Pa.
     """
     law = fluid if isinstance(fluid, StorageLaw) else storage_law(fluid)
     a, n = law.air, law.index

@@ -3,8 +3,8 @@
 Sign convention (Simscape): pressures are gauge, Pa; a flow q (m³/s) is positive
 from port A to port B. Each component is a small pytree of parameters plus pure
 functions of pressures and flows; no component has a state except the pipeline
-chambers, whose derivatives are computed here and integrated by the assemblies (:mod:`growjax.simulation.reference`,
-:mod:`growjax.simulation.fast`).
+chambers, whose derivatives are computed here and integrated by the assemblies (`growjax.simulation.reference`,
+`growjax.simulation.fast`).
 """
 
 from __future__ import annotations
@@ -15,6 +15,7 @@ from typing import NamedTuple
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
 
 from growjax.model.fluid import P_ATM, Fluid, bulk_modulus
 from growjax.model.smooth import smooth_ramp, smooth_step
@@ -43,18 +44,48 @@ __all__ = [
 ]
 
 
-def critical_pressure(p_avg, b_lam):
-    """Laminar–turbulent transition pressure p_cr = (p_avg + p_atm)(1 − B_lam), Pa ('pressure ratio' spec)."""
+def critical_pressure(p_avg: Float[ArrayLike, "*b"], b_lam: Float[ArrayLike, "*b"]) -> Float[Array, "*b"]:
+    """Laminar–turbulent transition pressure p_cr = (p_avg + p_atm)(1 − B_lam) ('pressure ratio' spec).
+
+    Args:
+        p_avg: the mean gauge pressure of the ports, Pa.
+        b_lam: the laminar transition pressure ratio B_lam (–).
+
+    Returns:
+        p_cr, Pa.
+    """
     return jnp.maximum(p_avg + P_ATM, 0.05 * P_ATM) * (1.0 - b_lam)
 
 
-def orifice_flow(conductance, dp, p_cr):
-    """Regularised square-root law q = k Δp / (Δp² + p_cr²)^¼, m³/s; ``conductance`` k = C_D A √(2/ρ)."""
+def orifice_flow(
+    conductance: Float[ArrayLike, "*b"], dp: Float[ArrayLike, "*b"], p_cr: Float[ArrayLike, "*b"]
+) -> Float[Array, "*b"]:
+    """Regularised square-root law q = k Δp / (Δp² + p_cr²)^¼.
+
+    Args:
+        conductance: k = C_D A √(2/ρ), m³/s/√Pa.
+        dp: the pressure drop Δp, Pa.
+        p_cr: the laminar transition pressure, Pa.
+
+    Returns:
+        The flow q, m³/s.
+    """
     return conductance * dp * jax.lax.rsqrt(jnp.sqrt(dp * dp + p_cr * p_cr))
 
 
-def orifice_pressure_drop(conductance, q, p_cr):
-    """Exact inverse of :func:`orifice_flow`: the Δp (Pa) that passes flow ``q``."""
+def orifice_pressure_drop(
+    conductance: Float[ArrayLike, "*b"], q: Float[ArrayLike, "*b"], p_cr: Float[ArrayLike, "*b"]
+) -> Float[Array, "*b"]:
+    """Exact inverse of `orifice_flow`: the pressure drop that passes a flow.
+
+    Args:
+        conductance: k = C_D A √(2/ρ), m³/s/√Pa.
+        q: the flow, m³/s.
+        p_cr: the laminar transition pressure, Pa.
+
+    Returns:
+        Δp, Pa.
+    """
     a = (q / conductance) ** 2
     return (q / conductance) * jnp.sqrt(0.5 * (a + jnp.sqrt(a * a + 4.0 * p_cr * p_cr)))
 
@@ -89,13 +120,22 @@ class Pipeline(eqx.Module):
     initial_pressure: float = 0.0
 
     @property
-    def volume(self):
+    def volume(self) -> Float[ArrayLike, ""]:
         """Chamber volume at zero wall strain, m³."""
         return self.area * self.length
 
 
-def circular_pipeline(diameter: float, length: float, **kw) -> Pipeline:
-    """A circular :class:`Pipeline` of inner ``diameter`` (m)."""
+def circular_pipeline(diameter: float, length: float, **kw: float) -> Pipeline:
+    """A circular `Pipeline`.
+
+    Args:
+        diameter: the inner diameter, m.
+        length: the length, m.
+        **kw: the other fields of `Pipeline`.
+
+    Returns:
+        The pipeline.
+    """
     return Pipeline(area=math.pi * diameter**2 / 4.0, hydraulic_diameter=diameter, length=length, **kw)
 
 
@@ -108,8 +148,17 @@ def _friction_times_reynolds(pipe: Pipeline, re):
     return (1.0 - w) * pipe.shape_factor + w * re_safe * f_turb
 
 
-def pipeline_half_pressure_drop(pipe: Pipeline, fluid: Fluid, q):
-    """Pressure drop (Pa) across one resistive half of ``pipe`` carrying flow ``q`` (m³/s)."""
+def pipeline_half_pressure_drop(pipe: Pipeline, fluid: Fluid, q: Float[ArrayLike, "*b"]) -> Float[Array, "*b"]:
+    """Pressure drop across one resistive half of a pipeline.
+
+    Args:
+        pipe: the pipeline.
+        fluid: the fluid.
+        q: the flow, m³/s.
+
+    Returns:
+        The drop, Pa.
+    """
     d, a = pipe.hydraulic_diameter, pipe.area
     l_eff = 0.5 * (pipe.length + pipe.length_additional)
     re = jnp.abs(q) * d / (a * fluid.kinematic_viscosity)
@@ -117,11 +166,27 @@ def pipeline_half_pressure_drop(pipe: Pipeline, fluid: Fluid, q):
     return laminar_coeff * _friction_times_reynolds(pipe, re) * q
 
 
-def chamber_pressure_rate(pipe: Pipeline, fluid: Fluid, p, wall_strain, net_inflow):
-    """dp/dt (Pa/s) and dδ/dt (m/s) of a pipeline chamber at pressure ``p`` with diameter increase δ.
+def chamber_pressure_rate(
+    pipe: Pipeline,
+    fluid: Fluid,
+    p: Float[ArrayLike, "*b"],
+    wall_strain: Float[ArrayLike, "*b"],
+    net_inflow: Float[ArrayLike, "*b"],
+) -> tuple[Float[Array, "*b"], Float[Array, "*b"]]:
+    """The rates of a pipeline chamber's pressure and wall.
 
     Rigid wall: (V/E) ṗ = q. Flexible wall: τ δ̇ = k_p p − δ and
     q = (V(δ)/E) ṗ + (π(d+δ)/2) L (1 + p/E) δ̇, V(δ) = π(d+δ)²L/4.
+
+    Args:
+        pipe: the pipeline.
+        fluid: the fluid.
+        p: the chamber's gauge pressure, Pa.
+        wall_strain: δ, the diameter increase, m.
+        net_inflow: q, the net flow into the chamber, m³/s.
+
+    Returns:
+        (dp/dt, Pa/s; dδ/dt, m/s).
     """
     e = bulk_modulus(fluid, p)
     rigid = pipe.diameter_compliance == 0.0
@@ -131,14 +196,35 @@ def chamber_pressure_rate(pipe: Pipeline, fluid: Fluid, p, wall_strain, net_infl
     return (net_inflow - wall_flow) * e / volume, dd
 
 
-def strained_volume(pipe: Pipeline, wall_strain, count=1):
-    """Chamber volume of ``count`` pipes like ``pipe`` at diameter increase δ = ``wall_strain`` (m): n·π(d + δ)²L/4,
-    m³."""
+def strained_volume(
+    pipe: Pipeline, wall_strain: Float[ArrayLike, "*b"], count: int | Float[ArrayLike, "*b"] = 1
+) -> Float[Array, "*b"]:
+    """Chamber volume n·π(d + δ)²L/4 of n pipes at a diameter increase.
+
+    Args:
+        pipe: the pipeline.
+        wall_strain: δ, m.
+        count: n, the number of pipes like ``pipe``.
+
+    Returns:
+        The volume, m³.
+    """
     return count * jnp.pi * (pipe.hydraulic_diameter + wall_strain) ** 2 / 4.0 * pipe.length
 
 
-def wall_strain_rate(pipe: Pipeline, p, wall_strain):
-    """dδ/dt (m/s) of the viscoelastic wall at gauge pressure ``p`` (Pa): τ δ̇ = k_p p − δ (0 for a rigid wall)."""
+def wall_strain_rate(
+    pipe: Pipeline, p: Float[ArrayLike, "*b"], wall_strain: Float[ArrayLike, "*b"]
+) -> Float[Array, "*b"]:
+    """dδ/dt of the viscoelastic wall: τ δ̇ = k_p p − δ (0 for a rigid wall).
+
+    Args:
+        pipe: the pipeline.
+        p: gauge pressure, Pa.
+        wall_strain: δ, m.
+
+    Returns:
+        dδ/dt, m/s.
+    """
     rate = (pipe.diameter_compliance * p - wall_strain) / pipe.wall_time_constant
     return jnp.where(pipe.diameter_compliance == 0.0, 0.0, rate)
 
@@ -157,8 +243,17 @@ class Orifice(eqx.Module):
     b_lam: float = 0.999
 
 
-def orifice_conductance(area, cd, fluid: Fluid):
-    """k = C_D A √(2/ρ), m³/s/√Pa."""
+def orifice_conductance(area: Float[ArrayLike, "*b"], cd: Float[ArrayLike, "*b"], fluid: Fluid) -> Float[Array, "*b"]:
+    """The conductance k = C_D A √(2/ρ) of an orifice.
+
+    Args:
+        area: A, m².
+        cd: C_D (–).
+        fluid: the fluid.
+
+    Returns:
+        k, m³/s/√Pa.
+    """
     return cd * area * jnp.sqrt(2.0 / fluid.density)
 
 
@@ -179,7 +274,7 @@ class Nozzle(eqx.Module):
     correction: float = 1.0
     b_lam: float = 0.999
 
-    def loss_coefficients(self):
+    def loss_coefficients(self) -> tuple[Float[Array, "*b"], Float[Array, "*b"]]:
         """(K_expansion A→B, K_contraction B→A), referenced to the small area (α ≤ 45°)."""
         ar = (self.small_diameter / self.large_diameter) ** 2
         s = jnp.sin(self.angle / 2.0)
@@ -188,11 +283,23 @@ class Nozzle(eqx.Module):
         return k_exp, k_con
 
 
-def nozzle_pressure_drop(noz: Nozzle, fluid: Fluid, q_ab, p_avg, flow_width):
-    """Δp = p_A − p_B (Pa) for flow ``q_ab`` (m³/s) from the small to the large side.
+def nozzle_pressure_drop(
+    noz: Nozzle, fluid: Fluid, q_ab: Float[ArrayLike, "*b"], p_avg: Float[ArrayLike, "*b"], flow_width: float
+) -> Float[Array, "*b"]:
+    """The pressure drop of a nozzle for a flow from its small to its large side.
 
-    The loss coefficient switches between expansion and contraction with the flow
-    sign; the switch is blended over ±``flow_width`` (m³/s) to keep the law C¹.
+    The loss coefficient switches between expansion and contraction with the flow sign; the switch is blended to
+    keep the law C¹.
+
+    Args:
+        noz: the nozzle.
+        fluid: the fluid.
+        q_ab: the flow A → B, m³/s.
+        p_avg: the ports' mean gauge pressure, Pa.
+        flow_width: the blend's half-width, m³/s.
+
+    Returns:
+        Δp = p_A − p_B, Pa.
     """
     k_exp, k_con = noz.loss_coefficients()
     k = k_con + (k_exp - k_con) * smooth_step(q_ab + flow_width, 2.0 * flow_width)
@@ -224,8 +331,27 @@ class CheckValve(eqx.Module):
     crack_pressure: float | None = None
 
 
-def check_valve_flow(cv: CheckValve, fluid: Fluid, dp, p_avg, crack_pressure, crack_width):
-    """Flow A→B (m³/s) at Δp = p_A − p_B; the opening starts smoothly (C¹) over ``crack_width`` Pa."""
+def check_valve_flow(
+    cv: CheckValve,
+    fluid: Fluid,
+    dp: Float[ArrayLike, "*b"],
+    p_avg: Float[ArrayLike, "*b"],
+    crack_pressure: Float[ArrayLike, "*b"],
+    crack_width: float,
+) -> Float[Array, "*b"]:
+    """The flow through a check valve, its opening started smoothly (C¹).
+
+    Args:
+        cv: the valve.
+        fluid: the fluid.
+        dp: Δp = p_A − p_B, Pa.
+        p_avg: the ports' mean gauge pressure, Pa.
+        crack_pressure: the cracking pressure, Pa.
+        crack_width: the band over which the opening starts, Pa.
+
+    Returns:
+        The flow A → B, m³/s.
+    """
     net = valve_network(cv, DirectionalValve(), fluid, crack_pressure, crack_width, 1.0)
     return _check_flow(net, dp, critical_pressure(p_avg, net.check_laminar_ratio))
 
@@ -249,7 +375,7 @@ class DirectionalValve(eqx.Module):
 
 
 class ValveNetwork(NamedTuple):
-    """Constants of the check valve ∥ 3-way bypass network, computed once per solve (:func:`valve_network`)."""
+    """Constants of the check valve ∥ 3-way bypass network, computed once per solve (`valve_network`)."""
 
     crack: jax.Array  # Pa, cracking pressure of the check valve
     crack_width: float  # Pa
@@ -266,9 +392,26 @@ class ValveNetwork(NamedTuple):
 
 
 def valve_network(
-    cv: CheckValve, dv: DirectionalValve, fluid: Fluid, crack_pressure, crack_width, switch_width
+    cv: CheckValve,
+    dv: DirectionalValve,
+    fluid: Fluid,
+    crack_pressure: Float[ArrayLike, "*b"],
+    crack_width: float,
+    switch_width: float,
 ) -> ValveNetwork:
-    """The :class:`ValveNetwork` constants for a check valve cracking at ``crack_pressure`` (Pa)."""
+    """The `ValveNetwork` constants.
+
+    Args:
+        cv: the check valve.
+        dv: the directional valve.
+        fluid: the fluid.
+        crack_pressure: the check valve's cracking pressure, Pa.
+        crack_width: the band over which the check valve's opening starts, Pa.
+        switch_width: the band over which the bypass opens, Pa.
+
+    Returns:
+        The constants.
+    """
     root = jnp.sqrt(2.0 / fluid.density)
     gain = (cv.area_max - cv.leak_area) / (cv.max_open_pressure - crack_pressure)
     return ValveNetwork(
@@ -294,14 +437,24 @@ def _check_flow(net: ValveNetwork, dp, p_cr):
     return orifice_flow(net.check_k * area, dp, p_cr)
 
 
-def valve_network_flow(net: ValveNetwork, dp, p_avg):
-    """Flow into the robot (m³/s) from node P through the check valve and the 3-way valve, Δp = P − p_robot.
+def valve_network_flow(
+    net: ValveNetwork, dp: Float[ArrayLike, "*b"], p_avg: Float[ArrayLike, "*b"]
+) -> Float[Array, "*b"]:
+    """Flow into the robot from node P through the check valve and the 3-way valve.
 
     The spool is +1 exactly when flow enters the robot, i.e. when Δp ≥ 0. The bypass
     (A–T) area is therefore opened for Δp < 0 only, ramping from leak to full over
     ``switch_width`` Pa, so no forward flow ever bypasses the check valve. The open P–A
     orifice in series with the check valve is omitted: its resistance is < 1e-5 of the
     check valve's, a relative flow error below 1e-5.
+
+    Args:
+        net: the network's constants.
+        dp: Δp = P − p_robot, Pa.
+        p_avg: the mean gauge pressure, Pa.
+
+    Returns:
+        The flow, m³/s.
     """
     q_check = _check_flow(net, dp, critical_pressure(p_avg, net.check_laminar_ratio))
     bypass_open = 1.0 - smooth_step(dp + net.switch_width, net.switch_width)
@@ -310,12 +463,32 @@ def valve_network_flow(net: ValveNetwork, dp, p_avg):
     return q_check + q_bypass
 
 
-def line_pressure_drop(tube: Pipeline, orifice: Orifice, tank: Pipeline, fluid: Fluid, flow, n_syringes, p_avg):
-    """Pressure drop (Pa) from the syringe outlets to the tank chamber at total pump flow ``flow`` (m³/s).
+def line_pressure_drop(
+    tube: Pipeline,
+    orifice: Orifice,
+    tank: Pipeline,
+    fluid: Fluid,
+    flow: Float[ArrayLike, "*b"],
+    n_syringes: int | Float[ArrayLike, "*b"],
+    p_avg: Float[ArrayLike, "*b"],
+) -> Float[Array, "*b"]:
+    """Pressure drop from the syringe outlets to the tank chamber, where the hoses and tank are lumped into one
+    chamber.
 
-    Series path of the lines at quasi-steady flow: each hose (both resistive halves) at flow/n, the
-    orifice and one resistive half of the tank at the whole flow; ``p_avg`` (Pa) sets the orifice's
-    laminar transition. Used where the hoses and tank are lumped into one chamber.
+    Series path of the lines at quasi-steady flow: each hose (both resistive halves) at flow/n, the orifice and
+    one resistive half of the tank at the whole flow.
+
+    Args:
+        tube: each syringe's hose.
+        orifice: the orifice.
+        tank: the tank.
+        fluid: the fluid.
+        flow: the total pump flow, m³/s.
+        n_syringes: n, the hoses in parallel.
+        p_avg: the mean gauge pressure, Pa, that sets the orifice's laminar transition.
+
+    Returns:
+        The drop, Pa.
     """
     k_or = orifice_conductance(orifice.area, orifice.discharge_coefficient, fluid)
     hoses = 2.0 * pipeline_half_pressure_drop(tube, fluid, flow / n_syringes)

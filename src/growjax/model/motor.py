@@ -5,7 +5,7 @@
   stepper driver → permanent-magnet stepper motor.
 
 The step controller is open loop in the demand, so its whole step sequence is
-computed once from the input (:func:`step_schedule`) and enters the ODE as data.
+computed once from the input (`step_schedule`) and enters the ODE as data.
 """
 
 from __future__ import annotations
@@ -15,6 +15,7 @@ import math
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, ArrayLike, Float
 
 __all__ = [
     "PID",
@@ -32,7 +33,7 @@ __all__ = [
 class PID(eqx.Module):
     """Continuous parallel PID with filtered derivative: C(s) = P + I/s + D N s/(s + N).
 
-    Shipped gains P 20, I 80, D 0.5, N 100 s⁻¹ (the paper quotes 80/25/0.5: :func:`paper_pid`).
+    Shipped gains P 20, I 80, D 0.5, N 100 s⁻¹ (the paper quotes 80/25/0.5: `paper_pid`).
     Units: output Pa of equivalent syringe pressure per Pa of error.
 
     Attributes:
@@ -49,19 +50,42 @@ class PID(eqx.Module):
 
 
 def paper_pid() -> PID:
-    """The gains printed in the paper (K_P 80, K_I 25, K_D 0.5)."""
+    """The PID with the gains printed in the paper (K_P 80, K_I 25, K_D 0.5)."""
     return PID(80.0, 25.0, 0.5, 100.0)
 
 
-def pid_output(pid: PID, error, z_integral, z_filter):
-    """Controller output u and the state derivatives (ż_I, ż_D) for pressure error ``error`` (Pa)."""
+def pid_output(
+    pid: PID, error: Float[ArrayLike, "*b"], z_integral: Float[ArrayLike, "*b"], z_filter: Float[ArrayLike, "*b"]
+) -> tuple[Float[Array, "*b"], Float[Array, "*b"], Float[Array, "*b"]]:
+    """The controller's output and state derivatives.
+
+    Args:
+        pid: the controller.
+        error: the pressure error, Pa.
+        z_integral: z_I, the error's integral, Pa·s.
+        z_filter: z_D, the derivative filter's state, Pa.
+
+    Returns:
+        (u, Pa of equivalent syringe pressure; ż_I, Pa; ż_D, Pa/s).
+    """
     d_term = pid.filter_coefficient * (error - z_filter)
     u = pid.proportional * error + pid.integral * z_integral + pid.derivative * d_term
     return u, error, d_term
 
 
-def ideal_torque_drive_force(syringe_area, n_syringes, u):
-    """Force on the platform (N) from the torque sources: torque L·A_s·u/(2π) per screw → A_s·u per nut."""
+def ideal_torque_drive_force(
+    syringe_area: Float[ArrayLike, "*b"], n_syringes: int, u: Float[ArrayLike, "*b"]
+) -> Float[Array, "*b"]:
+    """Force on the platform from the torque sources: torque L·A_s·u/(2π) per screw → A_s·u per nut.
+
+    Args:
+        syringe_area: A_s, m².
+        n_syringes: the syringes (and screws).
+        u: the controller's output, Pa.
+
+    Returns:
+        The force, N.
+    """
     return n_syringes * syringe_area * u
 
 
@@ -69,13 +93,17 @@ class StepperMotor(eqx.Module):
     """Permanent-magnet stepper (Minebea 08PM-K139BSTDCN data) with its full-step driver.
 
     Attributes:
-        winding_resistance: R, Ω.  winding_inductance: L, H.
-        torque_constant: K_m, N·m/A.  detent_torque: T_d, N·m.
-        rotor_inertia: J, kg·m².  rotor_damping: B, N·m/(rad/s).
-        step_angle: full step, rad.  supply_voltage: driver output amplitude V_m, V.
+        winding_resistance: R, Ω.
+        winding_inductance: L, H.
+        torque_constant: K_m, N·m/A.
+        detent_torque: T_d, N·m.
+        rotor_inertia: J, kg·m².
+        rotor_damping: B, N·m/(rad/s).
+        step_angle: full step, rad.
+        supply_voltage: driver output amplitude V_m, V.
         controller_rate: f, Hz, of the step controller (undefined in the shipped model; see README).
         microstepping: the driver (static): False the shipped full-step driver, True a sine–cosine
-            microstepping driver that takes a continuous step command (:func:`winding_voltages`).
+            microstepping driver that takes a continuous step command (`winding_voltages`).
     """
 
     winding_resistance: float = 6.5
@@ -90,18 +118,27 @@ class StepperMotor(eqx.Module):
     microstepping: bool = eqx.field(static=True, default=False)
 
     @property
-    def teeth(self):
+    def teeth(self) -> Float[ArrayLike, ""]:
         """Rotor teeth N_r = (π/2)/step angle."""
         return 0.5 * jnp.pi / self.step_angle
 
 
-def winding_voltages(motor: StepperMotor, step_count):
-    """Driver phase voltages (v_A, v_B), V, at step command k.
+def winding_voltages(
+    motor: StepperMotor, step_count: Float[ArrayLike, "*b"]
+) -> tuple[Float[Array, "*b"], Float[Array, "*b"]]:
+    """Driver phase voltages at a step command.
 
     Full-step driver (the shipped one), integer k: (+,−),(+,+),(−,+),(−,−) by k mod 4.
     Microstepping driver (``motor.microstepping``), continuous k: √2 V (cos φ, sin φ), φ = −π/4 + kπ/2,
     equal to the full-step driver at every integer k and smooth in between (a deviation from the
     shipped model, added for control design: it removes the 3.1 mm grid of full steps).
+
+    Args:
+        motor: the motor and its driver.
+        step_count: k, the step command.
+
+    Returns:
+        (v_A, v_B), V.
     """
     if motor.microstepping:
         phi = -0.25 * jnp.pi + 0.5 * jnp.pi * step_count
@@ -113,13 +150,34 @@ def winding_voltages(motor: StepperMotor, step_count):
     return motor.supply_voltage * v_a, motor.supply_voltage * v_b
 
 
-def motor_equilibrium_offset(motor: StepperMotor):
+def motor_equilibrium_offset(motor: StepperMotor) -> Float[ArrayLike, ""]:
     """Rotor angle (rad) at which step 0 of the driver is a stable equilibrium: −π/(4 N_r)."""
     return -0.25 * jnp.pi / motor.teeth
 
 
-def motor_derivatives(motor: StepperMotor, theta, omega, i_a, i_b, v_a, v_b):
-    """Electrical torque T_e (N·m) and current rates (A/s) of the PM stepper."""
+def motor_derivatives(
+    motor: StepperMotor,
+    theta: Float[ArrayLike, "*b"],
+    omega: Float[ArrayLike, "*b"],
+    i_a: Float[ArrayLike, "*b"],
+    i_b: Float[ArrayLike, "*b"],
+    v_a: Float[ArrayLike, "*b"],
+    v_b: Float[ArrayLike, "*b"],
+) -> tuple[Float[Array, "*b"], Float[Array, "*b"], Float[Array, "*b"]]:
+    """Electrical torque and current rates of the PM stepper.
+
+    Args:
+        motor: the motor.
+        theta: the rotor angle, rad.
+        omega: the rotor speed, rad/s.
+        i_a: phase A's current, A.
+        i_b: phase B's current, A.
+        v_a: phase A's voltage, V.
+        v_b: phase B's voltage, V.
+
+    Returns:
+        (T_e, N·m; di_A/dt, A/s; di_B/dt, A/s).
+    """
     nr = motor.teeth
     km = motor.torque_constant
     e_a = -km * omega * jnp.sin(nr * theta)
@@ -131,12 +189,21 @@ def motor_derivatives(motor: StepperMotor, theta, omega, i_a, i_b, v_a, v_b):
     return torque, di_a, di_b
 
 
-def step_schedule(demand_steps: np.ndarray, times: np.ndarray, rate: float, t0: float, t1: float):
+def step_schedule(
+    demand_steps: Float[ArrayLike, " N"], times: Float[ArrayLike, " N"], rate: float, t0: float, t1: float
+) -> tuple[Float[np.ndarray, " K"], Float[np.ndarray, " K"]]:
     """Steps issued by the shipped position controller for a demand in steps.
 
     Every 1/f s the demand is sampled (zero-order hold) and the counter c advances by
     e = sat(d − c, −1, 1). The driver sees a pulse of 5|e| V in the second half of the
     period and steps only if it crosses 2.5 V, i.e. if |e| > 0.5, in the direction of e.
+
+    Args:
+        demand_steps: (N,) the demand, steps.
+        times: (N,) its times, s.
+        rate: f, the controller's rate, Hz.
+        t0: the run's start, s.
+        t1: the run's end, s.
 
     Returns:
         step_times: (K,) times of the step edges, s, sorted.

@@ -9,10 +9,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
+from typing import Any
 
 import equinox as eqx
 import jax
 import numpy as np
+from jaxtyping import ArrayLike, Bool, Float
 
 from growjax.model.fluid import Fluid
 from growjax.model.hydraulics import (
@@ -49,8 +52,20 @@ DRIVES = ("forward", "inverse")  # pressure demand with an ideal torque source; 
 class Parameters(eqx.Module):
     """Every physical parameter of the MAMMOBOT drive chain, grouped by subsystem (see each block's docstring).
 
-    ``effects`` holds the physical effects added to the published model (:mod:`growjax.model.effects`);
-    their parameters are addressed as ``effect_name.field``.
+    Attributes:
+        fluid: the working fluid.
+        pump: the syringe pump.
+        tube: each syringe's hose.
+        orifice: the orifice between the hoses and the tank.
+        tank: the tank.
+        nozzle: the nozzle into the robot.
+        check_valve: the check valve.
+        valve: the 3-way directional valve.
+        robot: the growing robot.
+        pid: the forward drive's pressure PID.
+        motor: the inverse drive's stepper.
+        effects: the physical effects added to the published model (`growjax.model.effects`); their parameters
+            are addressed as ``effect_name.field``.
     """
 
     fluid: Fluid
@@ -89,9 +104,18 @@ ALIASES = {
 
 
 def reference(drive: str = "forward", growth_law: str = "reference") -> Parameters:
-    """The shipped Simscape model's parameters for the ``forward`` (ideal torque) or ``inverse`` (stepper) drive.
+    """The shipped Simscape model's parameters.
 
-    ``growth_law="lockhart"`` swaps the published velocity term for Lockhart's law (see :mod:`growjax.model.robot`).
+    Args:
+        drive: ``"forward"`` (ideal torque) or ``"inverse"`` (stepper).
+        growth_law: ``"reference"``, or ``"lockhart"``: Lockhart's law in place of the published velocity term
+            (see `growjax.model.robot`).
+
+    Returns:
+        The parameters.
+
+    Raises:
+        ValueError: for an unknown drive or growth law.
     """
     if drive not in DRIVES:
         raise ValueError(f"drive must be one of {DRIVES}, got {drive!r}")
@@ -127,7 +151,7 @@ def _blocks(params: Parameters):
 
 
 def parameter_names(params: Parameters) -> list[str]:
-    """Qualified names ``block.field`` of every numeric parameter (effects as ``effect_name.field``)."""
+    """Qualified names ``block.field`` of every numeric parameter of ``params`` (effects as ``effect_name.field``)."""
     names = []
     for block_name, block in _blocks(params).items():
         for f in dataclasses.fields(block):
@@ -137,7 +161,18 @@ def parameter_names(params: Parameters) -> list[str]:
 
 
 def resolve_name(params: Parameters, name: str) -> str:
-    """Qualified name for ``name`` (alias, bare field or ``block.field``); ValueError if unknown or ambiguous."""
+    """The qualified name of a parameter.
+
+    Args:
+        params: the parameters (their effects add names).
+        name: an alias (`ALIASES`), a bare field name or ``block.field``.
+
+    Returns:
+        ``block.field``.
+
+    Raises:
+        ValueError: for an unknown or ambiguous name.
+    """
     name = ALIASES.get(name, name)
     names = parameter_names(params)
     if name in names:
@@ -150,14 +185,25 @@ def resolve_name(params: Parameters, name: str) -> str:
     raise ValueError(f"unknown parameter {name!r}; known: {sorted(ALIASES)} or block.field from {names}")
 
 
-def get(params: Parameters, name: str):
-    """Value of the parameter ``name``."""
+def get(params: Parameters, name: str) -> Any:
+    """The value of a parameter (``name`` as `resolve_name` takes it); ValueError for an unknown name."""
     block, field = resolve_name(params, name).split(".")
     return getattr(_blocks(params)[block], field)
 
 
-def replace(params: Parameters, **values) -> Parameters:
-    """A copy of ``params`` with the named parameters replaced (names as in :func:`resolve_name`)."""
+def replace(params: Parameters, **values: Any) -> Parameters:
+    """A copy of ``params`` with the named parameters replaced.
+
+    Args:
+        params: the parameters.
+        **values: {name: value}, names as `resolve_name` takes them, values SI (numbers or arrays).
+
+    Returns:
+        The copy.
+
+    Raises:
+        ValueError: for an unknown or ambiguous name.
+    """
     by_block: dict[str, dict] = {}
     for name, value in values.items():
         block, field = resolve_name(params, name).split(".")
@@ -167,8 +213,8 @@ def replace(params: Parameters, **values) -> Parameters:
     return dataclasses.replace(params, effects=effects, **updates)
 
 
-def with_effects(params: Parameters, *effects) -> Parameters:
-    """``params`` with the given effects added (or replaced, by catalogue name)."""
+def with_effects(params: Parameters, *effects: eqx.Module) -> Parameters:
+    """``params`` with the given effects (`growjax.model.effects`) added, or replaced by catalogue name."""
     names = {e.name for e in effects}
     kept = tuple(e for e in params.effects if e.name not in names)
     return dataclasses.replace(params, effects=kept + tuple(effects))
@@ -206,7 +252,7 @@ _RANGES = {
 }
 
 
-def physical_ranges(params: Parameters) -> dict:
+def physical_ranges(params: Parameters) -> dict[str, tuple[float, float, str]]:
     """{qualified name: (low, high, unit)}: the physical range of each parameter that has one (effects included)."""
     ranges = dict(_RANGES)
     for e in params.effects:
@@ -215,11 +261,19 @@ def physical_ranges(params: Parameters) -> dict:
     return ranges
 
 
-def admissible_rows(base: Parameters, names, values) -> np.ndarray:
-    """Which rows of ``values`` (n, d) for the parameters ``names`` are finite and in their physical ranges.
+def admissible_rows(base: Parameters, names: Sequence[str], values: Float[ArrayLike, "n d"]) -> Bool[np.ndarray, " n"]:
+    """Which rows of parameter values are finite and in their physical ranges, in one pass over the rows.
 
-    Vectorised over rows (a batch is checked in one pass, not one :func:`validate` per row); the
-    parameters not in ``names`` are validated once, and a problem there raises ValueError.
+    Args:
+        base: the parameters the rows replace fields of.
+        names: the d parameters' names.
+        values: (n, d) their values, SI.
+
+    Returns:
+        (n,) bool, the admissible rows.
+
+    Raises:
+        ValueError: naming a parameter not in ``names`` that is not admissible (checked once).
     """
     values = np.atleast_2d(np.asarray(values, float))
     names = [resolve_name(base, n) for n in names]
@@ -240,9 +294,14 @@ def admissible_rows(base: Parameters, names, values) -> np.ndarray:
 
 
 def validate(params: Parameters) -> None:
-    """Raise ValueError naming the first parameter that is non-finite or outside its physical range.
+    """Check that every parameter is finite and inside its physical range, on concrete (possibly batched) values,
+    never inside ``jit``.
 
-    Works on concrete (possibly batched) values, never inside ``jit``.
+    Args:
+        params: the parameters.
+
+    Raises:
+        ValueError: naming the first parameter that is non-finite or outside its physical range.
     """
     ranges = physical_ranges(params)
     for q in parameter_names(params):

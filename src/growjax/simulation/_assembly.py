@@ -1,7 +1,7 @@
 """What both assemblies share: the state layout, the scaled field, and every law between the network and the
 state rates that does not depend on how the hydraulic network is resolved.
 
-An assembly (:mod:`growjax.simulation.fast`, :mod:`growjax.simulation.reference`) owns only its network's states and its
+An assembly (`growjax.simulation.fast`, `growjax.simulation.reference`) owns only its network's states and its
 solver; the drive (PID and ideal torque, or the stepper), the robot's length, the effects' view of the rod and
 of the instant, the constants of the valve and rod laws and the masking of failed states are written here once.
 All quantities SI.
@@ -9,11 +9,14 @@ All quantities SI.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
 
-from growjax.model import effects as fx
+import growjax.model.effects as fx
 from growjax.model.effects import Instant, Rod
 from growjax.model.hydraulics import ValveNetwork, valve_network
 from growjax.model.motor import (
@@ -23,20 +26,23 @@ from growjax.model.motor import (
     pid_output,
     winding_voltages,
 )
-from growjax.model.pump import syringe_load_force
+from growjax.model.params import Parameters
+from growjax.model.pump import SyringePump, syringe_load_force
 from growjax.model.robot import RodBalance, rod_balance
+from growjax.model.signals import Inputs
+from growjax.simulation.config import Config
 
 OUTPUTS = ("length", "pressure", "robot_flow", "syringe_displacement", "robot_pressure")
 
 
-def layout(params, drive: str, forward: tuple, inverse: tuple) -> tuple[tuple, tuple]:
+def layout(params: Parameters, drive: str, forward: tuple, inverse: tuple) -> tuple[tuple, tuple]:
     """(state names, scales) for ``drive``: the assembly's base ``(names, scales)`` pair, effect states last."""
     names, scales = forward if drive == "forward" else inverse
     extra = tuple(f"{e.name}.{s}" for e in params.effects for s in e.state_names)
     return names + extra, scales + fx.state_scales(params.effects, drive)
 
 
-def vector_fields(forward_rates, inverse_rates, layout_of):
+def vector_fields(forward_rates: Callable, inverse_rates: Callable, layout_of: Callable) -> tuple[Callable, Callable]:
     """(rates, vector_field) of an assembly from its per-drive rate functions.
 
     ``rates(t, y, params, inputs, config, prep)`` → (unscaled rates, outputs) for ``config.drive``;
@@ -56,7 +62,9 @@ def vector_fields(forward_rates, inverse_rates, layout_of):
     return rates, vector_field
 
 
-def scaled_initial_state(params, drive: str, base: list, scales) -> jax.Array:
+def scaled_initial_state(
+    params: Parameters, drive: str, base: list, scales: Float[ArrayLike, " n"]
+) -> Float[Array, " n"]:
     """The scaled state at t0 from the assembly's base states (SI) and the effects' own; ``scales`` (n,)."""
     y = jnp.concatenate([jnp.stack(base), fx.initial_states(params.effects, params, drive)])
     return y / jnp.asarray(scales)
@@ -65,7 +73,7 @@ def scaled_initial_state(params, drive: str, base: list, scales) -> jax.Array:
 # -- constants of the hot laws ---------------------------------------------------------------------------
 
 
-def valves_and_rod(params, config) -> tuple[ValveNetwork, RodBalance]:
+def valves_and_rod(params: Parameters, config: Config) -> tuple[ValveNetwork, RodBalance]:
     """The constants of the valve network and of the rod balance under ``config``'s regularisation widths; the
     check valve cracks at the robot's yield pressure unless it has a cracking pressure of its own."""
     robot = params.robot
@@ -79,17 +87,27 @@ def valves_and_rod(params, config) -> tuple[ValveNetwork, RodBalance]:
 # -- the robot as the effects see it ----------------------------------------------------------------------
 
 
-def robot_length(params, displacement, effect_states):
+def robot_length(
+    params: Parameters, displacement: Float[ArrayLike, ""], effect_states: Float[Array, " K"]
+) -> Float[Array, ""]:
     """Robot length (m): initial length plus the displacement the volume makes, less the effects' offset."""
     return params.robot.initial_length + displacement - fx.length_offset(params.effects, effect_states)
 
 
-def catheter_length(inputs, t):
+def catheter_length(inputs: Inputs, t: Float[ArrayLike, ""]) -> Float[Array, ""]:
     """Catheter length in contact at ``t`` (m), never negative."""
     return jnp.maximum(inputs.catheter_length(t), 0.0)
 
 
-def effect_force(params, effect_states, rod: RodBalance, t, pressure, length, catheter):
+def effect_force(
+    params: Parameters,
+    effect_states: Float[Array, " K"],
+    rod: RodBalance,
+    t: Float[ArrayLike, ""],
+    pressure: Float[ArrayLike, ""],
+    length: Float[ArrayLike, ""],
+    catheter: Float[ArrayLike, ""],
+) -> Callable[[Float[ArrayLike, ""]], Float[Array, ""]]:
     """``v → F`` (N): the effects' force opposing growth at robot velocity v (m/s), sensed pressure ``pressure``."""
 
     def force(velocity):
@@ -107,7 +125,19 @@ def effect_force(params, effect_states, rod: RodBalance, t, pressure, length, ca
     return force
 
 
-def state_rates(params, effect_states, base: list, *, t, pressure, robot_pressure, robot_flow, area, length, drive):
+def state_rates(
+    params: Parameters,
+    effect_states: Float[Array, " K"],
+    base: list,
+    *,
+    t: Float[ArrayLike, ""],
+    pressure: Float[ArrayLike, ""],
+    robot_pressure: Float[ArrayLike, ""],
+    robot_flow: Float[ArrayLike, ""],
+    area: Float[ArrayLike, ""],
+    length: Float[ArrayLike, ""],
+    drive: Float[ArrayLike, ""],
+) -> Float[Array, " n"]:
     """The unscaled rates: the assembly's ``base`` rates, then the effects' states' at this instant (SI)."""
     instant = Instant(
         t=t,
@@ -124,7 +154,15 @@ def state_rates(params, effect_states, base: list, *, t, pressure, robot_pressur
 # -- the drives ---------------------------------------------------------------------------------------------
 
 
-def pid_drive(params, inputs, t, sensed, z_integral, z_filter, effect_states):
+def pid_drive(
+    params: Parameters,
+    inputs: Inputs,
+    t: Float[ArrayLike, ""],
+    sensed: Float[ArrayLike, ""],
+    z_integral: Float[ArrayLike, ""],
+    z_filter: Float[ArrayLike, ""],
+    effect_states: Float[Array, " K"],
+) -> tuple[Float[Array, ""], Float[Array, ""], Float[Array, ""], Float[Array, ""]]:
     """The forward drive: PID on the sensed pressure (Pa) → (commanded force N, applied force N, ż_I, ż_D)."""
     pump = params.pump
     u, dz_i, dz_d = pid_output(params.pid, inputs.pressure_demand(t) - sensed, z_integral, z_filter)
@@ -132,12 +170,25 @@ def pid_drive(params, inputs, t, sensed, z_integral, z_filter, effect_states):
     return commanded, fx.applied_drive(params.effects, effect_states, commanded), dz_i, dz_d
 
 
-def platform_of_rotor(pump, angle, omega):
+def platform_of_rotor(
+    pump: SyringePump, angle: Float[ArrayLike, ""], omega: Float[ArrayLike, ""]
+) -> tuple[Float[Array, ""], Float[Array, ""]]:
     """(platform displacement m, velocity m/s) of the stepper's rotor angle (rad) and speed (rad/s)."""
     return angle / pump.screw_ratio, omega / pump.screw_ratio
 
 
-def stepper(params, inputs, t, angle, omega, i_a, i_b, syringe_pressure, effect_states, stop_width):
+def stepper(
+    params: Parameters,
+    inputs: Inputs,
+    t: Float[ArrayLike, ""],
+    angle: Float[ArrayLike, ""],
+    omega: Float[ArrayLike, ""],
+    i_a: Float[ArrayLike, ""],
+    i_b: Float[ArrayLike, ""],
+    syringe_pressure: Float[ArrayLike, ""],
+    effect_states: Float[Array, " K"],
+    stop_width: float,
+) -> tuple[Float[Array, ""], Float[Array, ""], Float[Array, ""], Float[Array, ""]]:
     """The inverse drive: the stepper turning a screw per syringe → (torque N·m, dω/dt, di_A/dt, di_B/dt).
 
     ``syringe_pressure`` (Pa) at the syringe outlets; each motor drives one screw and one syringe, the
@@ -158,7 +209,12 @@ def stepper(params, inputs, t, angle, omega, i_a, i_b, syringe_pressure, effect_
 # -- outputs of a solve ---------------------------------------------------------------------------------------
 
 
-def outputs_where_finite(outputs, ts, states, fallback) -> tuple[dict, jax.Array]:
+def outputs_where_finite(
+    outputs: Callable,
+    ts: Float[Array, " T"],
+    states: Float[Array, "T n"],
+    fallback: Float[Array, " n"],
+) -> tuple[dict[str, Float[Array, " T"]], Float[Array, "T n"]]:
     """(``{output: (T,)}``, the states evaluated (T, n)) of ``outputs(t, y) → dict`` at the saved states (T, n); a
     state that is not finite (a failed run) is evaluated at ``fallback`` (n,) instead and its outputs are NaN."""
     finite = jnp.all(jnp.isfinite(states), axis=1)

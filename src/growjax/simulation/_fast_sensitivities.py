@@ -1,5 +1,5 @@
 """The fast configuration's forward sensitivities: the problem a solve along directions in (params, inputs) sets
-its integrator (:func:`growjax.simulation.rosenbrock.integrate`), with the field's derivative either in forward mode or by
+its integrator (`growjax.simulation.rosenbrock.integrate`), with the field's derivative either in forward mode or by
 central differences (``Config.tangents``).
 
 θ is one member's (params, inputs, prepared constants); a direction d has the structure of (params, inputs) with
@@ -9,19 +9,22 @@ a leading axis p. The callbacks take the scaled state y (n,), its sensitivities 
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jaxtyping import Array, Bool, Float, PyTree
 
+import growjax.simulation._assembly as assembly
+import growjax.simulation.fast as fm
 from growjax.model.params import Parameters
 from growjax.model.robot import pressure_limit
-from growjax.simulation import _assembly as assembly
-from growjax.simulation import fast as fm
+from growjax.model.signals import Inputs
 from growjax.simulation.config import Config
 
 
-def relative_size(theta, direction, typical):
+def relative_size(theta: PyTree, direction: PyTree, typical: PyTree) -> Float[Array, ""]:
     """How large a direction is relative to the values it perturbs: max |d|/|θ| over the leaves (–). Where θ = 0
     the leaf's ``typical`` size stands in (an effect parameter: the top of its physical range; a leak of
     3e-13 m³/(s·Pa) absent at 0 and moved along d = 1 must be shifted by ε·1e-12, not by ε), and where that is
@@ -44,7 +47,7 @@ def relative_size(theta, direction, typical):
     return jnp.max(jnp.stack(ratios)) if ratios else jnp.asarray(0.0)
 
 
-def typical_sizes(params: Parameters):
+def typical_sizes(params: Parameters) -> Parameters:
     """``params`` with each effect's parameters set to the top of their physical ranges (their typical size)."""
     effects = tuple(
         dataclasses.replace(e, **{f: max(abs(lo), abs(hi)) for f, (lo, hi) in e.ranges.items()}) for e in params.effects
@@ -52,7 +55,7 @@ def typical_sizes(params: Parameters):
     return dataclasses.replace(params, effects=effects)
 
 
-def moved_by(theta, direction, step):
+def moved_by(theta: PyTree, direction: PyTree, step: Float[Array, ""]) -> PyTree:
     """θ + step·d, leaf by leaf (leaves that are not floating point are left alone)."""
 
     def shift(x, d):
@@ -63,7 +66,9 @@ def moved_by(theta, direction, step):
     return jax.tree_util.tree_map(shift, theta, direction)
 
 
-def member(params, inputs, config: Config, jump_ts, step_ts):
+def member(
+    params: Parameters, inputs: Inputs, config: Config, jump_ts: Float[Array, " J"], step_ts: Float[Array, " K"]
+) -> tuple[tuple, Float[Array, " n"], Float[Array, " J+K"], Bool[Array, " J+K"]]:
     """One member's solver inputs: (θ = (params, inputs, prepared constants), scaled initial state, sorted
     breaks, jump flags)."""
     theta = (params, inputs, fm.prepare(params, config))
@@ -73,8 +78,8 @@ def member(params, inputs, config: Config, jump_ts, step_ts):
     return theta, fm.initial_state(params, config), times[order], is_jump[order]
 
 
-def callbacks(config: Config):
-    """(field, outputs, event) of the scaled state, each ``(t, y, θ)`` with θ from :func:`member`."""
+def callbacks(config: Config) -> tuple[Callable, Callable, Callable | None]:
+    """(field, outputs, event) of the scaled state, each ``(t, y, θ)`` with θ from `member`."""
 
     def field(t, y, th):
         p, i, pr = th
@@ -97,31 +102,46 @@ def callbacks(config: Config):
 
 
 def forward_mode_tangents(params: Parameters, config: Config) -> bool:
-    """Whether the sensitivities' field is taken in forward mode, else by central differences (``config.tangents``;
-    decided when a solve is traced). ``jax.jvp`` evaluates the primal field, and its inner Newton solve, once for
-    all p directions where differences evaluate it 1 + 2p times; but its many small operations are launched one
-    by one unless the solver's loop is compiled whole (``config.small_loops``, :mod:`growjax.simulation.xla_flags`). ``"auto"`` takes forward mode
-    where the loop is compiled whole (``config.small_loops``) or the rod balance is solved by Newton in every evaluation (the Lockhart law)
-    (``python benchmarks/simulate.py --tangents``, 3 parameters: Lockhart 31 ms against 60 ms by differences with
-    small loops, 88 against 115 ms without; published law 17 against 24 ms with, but 62 against 41 ms without)."""
+    """Whether the sensitivities' field is taken in forward mode, else by central differences.
+
+    ``jax.jvp`` evaluates the primal field, and its inner Newton solve, once for all p directions where
+    differences evaluate it 1 + 2p times; but its many small operations are launched one by one unless the
+    solver's loop is compiled whole (``config.small_loops``, `growjax.simulation.xla_flags`). ``"auto"`` takes
+    forward mode where the loop is compiled whole or the rod balance is solved by Newton in every evaluation (the
+    Lockhart law); ``python benchmarks/simulate.py --tangents`` measures both.
+
+    Args:
+        params: the parameters (their growth law and effects decide the rod solve).
+        config: the configuration (``config.tangents``, ``config.small_loops``).
+
+    Returns:
+        True for forward mode; decided when a solve is traced.
+    """
     if config.tangents == "auto":
         return bool(config.small_loops) or fm.rod_solve(params) == "newton"
     return config.tangents == "forward"
 
 
-def sensitivities(params, inputs, config: Config, jump_ts, step_ts, directions):
-    """One member's sensitivity problem along ``directions`` (see :func:`_integrate`): (θ_s, sizes |d|/|θ| (p,),
-    S0 (p, n)), θ_s for the callbacks of :func:`sensitivity_callbacks`."""
+def sensitivities(
+    params: Parameters,
+    inputs: Inputs,
+    config: Config,
+    jump_ts: Float[Array, " J"],
+    step_ts: Float[Array, " K"],
+    directions: tuple[Parameters, Inputs],
+) -> tuple[tuple, Float[Array, " p"], Float[Array, "p n"]]:
+    """One member's sensitivity problem along ``directions`` (see `_integrate`): (θ_s, sizes |d|/|θ| (p,),
+    S0 (p, n)), θ_s for the callbacks of `sensitivity_callbacks`."""
     build = _forward_sensitivities if forward_mode_tangents(params, config) else _difference_sensitivities
     return build(params, inputs, config, jump_ts, step_ts, directions)
 
 
-def sensitivity_callbacks(params: Parameters, config: Config):
+def sensitivity_callbacks(params: Parameters, config: Config) -> tuple[Callable, Callable]:
     """(tangent field ``(t, y, S, θ_s) → (f, S')``, output tangents ``(t, y, S, θ_s) → {output: (p,)}``)."""
     return (_forward_callbacks if forward_mode_tangents(params, config) else _difference_callbacks)(config)
 
 
-def difference_step(size):
+def difference_step(size: Float[Array, " p"]) -> Float[Array, " p"]:
     """Step ε along each direction (p,) that moves the parameters by (machine ε)^⅓ of themselves (0 where |d| = 0)."""
     return jnp.where(size > 0, jnp.finfo(jnp.result_type(float)).eps ** (1 / 3) / jnp.where(size > 0, size, 1.0), 0.0)
 
@@ -129,7 +149,7 @@ def difference_step(size):
 def _difference_sensitivities(params, inputs, config: Config, jump_ts, step_ts, directions):
     """One member's sensitivity problem along ``directions`` = (parameter tangents, input tangents), each leaf
     with a leading axis p: (θ_s = (θ, θ moved by ±εd (2p, …), ±ε (2p,), 1/2ε (p,)), sizes |d|/|θ| (p,),
-    S0 (p, n)), for :func:`_difference_callbacks`."""
+    S0 (p, n)), for `_difference_callbacks`."""
     d_params, d_inputs = directions
     theta = member(params, inputs, config, jump_ts, step_ts)[0]
     typical = (typical_sizes(params), inputs)
@@ -165,7 +185,7 @@ def _central(quotient, values):
 
 
 def _difference_callbacks(config: Config):
-    """(tangent field, output tangents) over θ_s from :func:`_difference_sensitivities`: central difference
+    """(tangent field, output tangents) over θ_s from `_difference_sensitivities`: central difference
     quotients of the primal field and outputs along every direction, in one batched evaluation."""
     field, outputs, _ = callbacks(config)
 
@@ -189,7 +209,7 @@ def _difference_callbacks(config: Config):
 def _forward_sensitivities(params, inputs, config: Config, jump_ts, step_ts, directions):
     """One member's sensitivity problem along ``directions`` = (parameter tangents, input tangents), each leaf
     with a leading axis p: (θ_s = (θ, dθ: the tangents of θ's floating-point leaves (p, …)), sizes |d|/|θ| (p,),
-    S0 (p, n)), for :func:`_forward_callbacks`."""
+    S0 (p, n)), for `_forward_callbacks`."""
     d_params, d_inputs = directions
     theta = member(params, inputs, config, jump_ts, step_ts)[0]
     typical = (typical_sizes(params), inputs)
@@ -211,7 +231,7 @@ def _forward_sensitivities(params, inputs, config: Config, jump_ts, step_ts, dir
 
 
 def _forward_callbacks(config: Config):
-    """(tangent field, output tangents) over θ_s from :func:`_forward_sensitivities`: forward-mode derivatives of the
+    """(tangent field, output tangents) over θ_s from `_forward_sensitivities`: forward-mode derivatives of the
     primal field and outputs along every direction, the primal (and its inner Newton solve) evaluated once."""
     field, outputs, _ = callbacks(config)
 

@@ -1,8 +1,8 @@
-"""The fast configuration's solve: its Rosenbrock integration (:mod:`growjax.simulation.rosenbrock`), one member or a batch
+"""The fast configuration's solve: its Rosenbrock integration (`growjax.simulation.rosenbrock`), one member or a batch
 stepped together, its outputs on the save grid, and its derivatives.
 
 Forward mode (``jax.jvp``, ``jax.jacfwd``) integrates the sensitivities along the tangents with the state
-(:mod:`growjax.simulation._fast_sensitivities`). The integrator's loop has no static length, so it cannot be reversed; under
+(`growjax.simulation._fast_sensitivities`). The integrator's loop has no static length, so it cannot be reversed; under
 ``Config(adjoint="reverse")`` the derivative rule instead builds the forward-mode Jacobian in every floating-point
 leaf of (params, inputs) that carries a tangent (one merged sensitivity solve) and contracts it with the
 tangents: a linear map JAX transposes, so ``jax.grad`` gives Jᵀ·cotangent.
@@ -17,22 +17,30 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, ArrayLike, Float
 
+import growjax.simulation._assembly as assembly
+import growjax.simulation._fast_sensitivities as fs
+import growjax.simulation.fast as fm
 from growjax.model.params import Parameters
 from growjax.model.robot import pressure_limit
-from growjax.simulation import _assembly as assembly
-from growjax.simulation import _fast_sensitivities as fs
-from growjax.simulation import fast as fm
+from growjax.model.signals import Inputs
 from growjax.simulation.config import Config
 from growjax.simulation.rosenbrock import evaluate, integrate, spread
-from growjax.simulation.trajectory import finish
+from growjax.simulation.trajectory import Trajectory, finish
 
 # Loosest of rtol and this bounds the sensitivities' error control (see _integrate).
 SENSITIVITY_TOL_FLOOR = 1e-6
 
 
 class Run(eqx.Module):
-    """The differentiable part of a solve: outputs on the save grid (field → (T,)), the final state (n,) and time (s)."""
+    """The differentiable part of a solve.
+
+    Attributes:
+        outputs: {field: (T,)} on the save grid, SI.
+        final_state: (n,) the scaled state at ``t_final``.
+        t_final: the end of the solve, s.
+    """
 
     outputs: dict
     final_state: jax.Array
@@ -48,7 +56,7 @@ def _primal(run, ts, y0, theta, outputs):
 
 
 def _tangent_run(run, ts, saved, block, th, output_tangents):
-    """Tangent :class:`Run` (outputs field → (p, T)) of one member from its state block on ts (T, 1 + p, n)."""
+    """Tangent `Run` (outputs field → (p, T)) of one member from its state block on ts (T, 1 + p, n)."""
     d_values = jax.vmap(output_tangents, in_axes=(0, 0, 0, None), out_axes=1)(ts, saved, block[:, 1:], th)
     # A tangent solve that stopped early (step budget) has no sensitivities past its end: NaN, never frozen.
     reached = (ts <= run.t_final) | (run.status == 1)
@@ -57,8 +65,8 @@ def _tangent_run(run, ts, saved, block, th, output_tangents):
 
 
 def _sensitivity_run(params, config: Config, y0, theta_s, size, s0, tangent_field, **kw):
-    """The state and its sensitivities integrated together (:func:`growjax.simulation.rosenbrock.integrate`; ``kw``: breaks,
-    jumps, batched), θ_s from :func:`sensitivities`, with twice the step budget of a plain solve. With
+    """The state and its sensitivities integrated together (`growjax.simulation.rosenbrock.integrate`; ``kw``: breaks,
+    jumps, batched), θ_s from `sensitivities`, with twice the step budget of a plain solve. With
     forward-mode tangents the state's Jacobian is taken in forward mode too: the field's ``jvp`` is compiled
     anyway, and under the Lockhart law each difference column would repeat the rod balance's Newton solve
     (one Jacobian in 3 parameters on the public experiment, small loops: 16 ms against 18 ms)."""
@@ -139,7 +147,7 @@ def _integrate(params, inputs, config: Config, ts, jump_ts, step_ts, directions=
 
     ``directions`` = (parameter tangents, input tangents), each leaf with a leading axis p: the
     sensitivities along them are integrated with the state, under its error control. Their field
-    (``config.tangents``, :func:`forward_mode_tangents`) is either the vector field's ``jax.jvp`` along
+    (``config.tangents``, `forward_mode_tangents`) is either the vector field's ``jax.jvp`` along
     each direction, the primal evaluated once, or its central difference quotient (as CVODES does by
     default), (f(y + εS, θ + εd) − f(y − εS, θ − εd))/2ε, with ε fixed per direction so that the
     parameters move by (machine ε)^⅓ of themselves, one batched evaluation of the primal field for
@@ -180,7 +188,7 @@ def _integrate(params, inputs, config: Config, ts, jump_ts, step_ts, directions=
 @functools.lru_cache(maxsize=16)
 def _plain_solver(config: Config):
     """``(params, inputs, ts, jump_ts, step_ts) → (Run, status, steps)``; under ``vmap`` the members are
-    stepped together in one loop (:func:`_integrate_batch`) instead of a vmapped loop per member."""
+    stepped together in one loop (`_integrate_batch`) instead of a vmapped loop per member."""
 
     def plain(params, inputs, ts, jump_ts, step_ts):
         primal, _, status, n_steps = _integrate(params, inputs, config, ts, jump_ts, step_ts)
@@ -242,7 +250,7 @@ def _run(params, inputs, config: Config, ts, jump_ts, step_ts):
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(2,))
 def _run_forward(params, inputs, config: Config, ts, jump_ts, step_ts):
-    """:func:`_run` whose derivative is the sensitivity solve along the tangents (forward mode only)."""
+    """`_run` whose derivative is the sensitivity solve along the tangents (forward mode only)."""
     return _plain_solver(config)(params, inputs, ts, jump_ts, step_ts)
 
 
@@ -273,7 +281,7 @@ def _run_forward_jvp(config, primals, tangents):
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(2,))
 def _run_reverse(params, inputs, config: Config, ts, jump_ts, step_ts):
-    """:func:`_run` whose derivative is the Jacobian in the leaves that carry tangents, contracted with them
+    """`_run` whose derivative is the Jacobian in the leaves that carry tangents, contracted with them
     (forward and reverse mode)."""
     return _plain_solver(config)(params, inputs, ts, jump_ts, step_ts)
 
@@ -320,11 +328,18 @@ def _run_reverse_jvp(config, primals, tangents):
 _run_reverse.defjvp(_run_reverse_jvp, symbolic_zeros=True)
 
 
-def solve(params: Parameters, inputs, config: Config, ts, jump_ts, step_ts):
-    """Integrate the fast configuration and return a :class:`growjax.simulation.trajectory.Trajectory` on ``ts``.
+def solve(
+    params: Parameters,
+    inputs: Inputs,
+    config: Config,
+    ts: Float[Array, " T"],
+    jump_ts: Float[Array, " J"],
+    step_ts: Float[Array, " K"],
+) -> Trajectory:
+    """Integrate the fast configuration and return a `growjax.simulation.trajectory.Trajectory` on ``ts``.
 
     Differentiable in ``params`` and ``inputs``: the sensitivities are integrated with the state under the same
-    error control (:func:`growjax.simulation.rosenbrock.integrate`), and a batch of directions is one solve. With
+    error control (`growjax.simulation.rosenbrock.integrate`), and a batch of directions is one solve. With
     ``config.adjoint == "forward"`` along the tangents themselves (forward mode only); with ``"reverse"`` as the
     Jacobian in every leaf that carries a tangent, contracted with them (forward mode and ``jax.grad``).
     """
@@ -332,16 +347,31 @@ def solve(params: Parameters, inputs, config: Config, ts, jump_ts, step_ts):
     return _trajectory(params, inputs, config, ts, run, status, n_steps)
 
 
-def solve_from(params: Parameters, inputs, config: Config, ts, jump_ts, step_ts, start):
-    """:func:`solve` from a scaled state over a window that may be traced, ``start`` = (t_start s, t_end s, state
+def solve_from(
+    params: Parameters,
+    inputs: Inputs,
+    config: Config,
+    ts: Float[Array, " T"],
+    jump_ts: Float[Array, " J"],
+    step_ts: Float[Array, " K"],
+    start: tuple[Float[ArrayLike, ""], Float[ArrayLike, ""], Float[Array, " n"]],
+) -> Trajectory:
+    """`solve` from a scaled state over a window that may be traced, ``start`` = (t_start s, t_end s, state
     (n,)); under ``vmap`` a loop per member. Forward mode only (through the integrator's loop)."""
     run, _, status, n_steps = _integrate(params, inputs, config, ts, jump_ts, step_ts, start=start)
     return _trajectory(params, inputs, config, ts, run, status, n_steps)
 
 
-def solve_members(params: Parameters, inputs, config: Config, ts, jump_ts, step_ts):
-    """:func:`solve` for a batch of parameter sets (every leaf of ``params`` with a leading axis B; inputs, ``ts``
-    and breaks shared): a :class:`growjax.simulation.trajectory.Trajectory` with a leading axis B.
+def solve_members(
+    params: Parameters,
+    inputs: Inputs,
+    config: Config,
+    ts: Float[Array, " T"],
+    jump_ts: Float[Array, " J"],
+    step_ts: Float[Array, " K"],
+) -> Trajectory:
+    """`solve` for a batch of parameter sets (every leaf of ``params`` with a leading axis B; inputs, ``ts``
+    and breaks shared): a `growjax.simulation.trajectory.Trajectory` with a leading axis B.
 
     The members are stepped together in one loop, as under ``jax.vmap(solve)``, but the one-member solve is
     never traced (``custom_vmap`` traces it to learn its output shapes: 0.46 s of the 500-set sweep's
@@ -352,7 +382,7 @@ def solve_members(params: Parameters, inputs, config: Config, ts, jump_ts, step_
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(2,))
 def _members(params, inputs, config: Config, ts, jump_ts, step_ts):
-    """The batched solve of :func:`solve_members`; its derivative rule refuses (no error-controlled tangents here)."""
+    """The batched solve of `solve_members`; its derivative rule refuses (no error-controlled tangents here)."""
     size = jax.tree_util.tree_leaves(params)[0].shape[0]
     inputs_b, ts_b, jump_b, step_b = jax.tree_util.tree_map(
         lambda x: jnp.broadcast_to(x, (size,) + jnp.shape(x)), (inputs, ts, jump_ts, step_ts)
@@ -371,7 +401,7 @@ def _members_jvp(config, primals, tangents):
 
 
 def _trajectory(params, inputs, config: Config, ts, run: Run, status, n_steps):
-    """The :class:`growjax.simulation.trajectory.Trajectory` of a primal :class:`Run` on ``ts``."""
+    """The `growjax.simulation.trajectory.Trajectory` of a primal `Run` on ``ts``."""
     demand = jax.vmap(inputs.pressure_demand)(ts)
     return finish(
         ts,
@@ -386,12 +416,20 @@ def _trajectory(params, inputs, config: Config, ts, run: Run, status, n_steps):
     )
 
 
-def solve_with_sensitivities(params: Parameters, inputs, config: Config, ts, jump_ts, step_ts, directions):
-    """(:class:`growjax.simulation.trajectory.Trajectory` on ``ts``, tangent outputs {field: (p, T)}) from one solve that
+def solve_with_sensitivities(
+    params: Parameters,
+    inputs: Inputs,
+    config: Config,
+    ts: Float[Array, " T"],
+    jump_ts: Float[Array, " J"],
+    step_ts: Float[Array, " K"],
+    directions: tuple[Parameters, Inputs],
+) -> tuple[Trajectory, dict[str, Float[Array, "p T"]]]:
+    """(`growjax.simulation.trajectory.Trajectory` on ``ts``, tangent outputs {field: (p, T)}) from one solve that
     integrates the state with its sensitivities along ``directions`` = (parameter tangents, input tangents),
-    each leaf with a leading axis p (:func:`_integrate`).
+    each leaf with a leading axis p (`_integrate`).
 
-    Cheaper by one plain solve than ``jax.jvp`` through :func:`solve`, whose primal comes from a plain solve so
+    Cheaper by one plain solve than ``jax.jvp`` through `solve`, whose primal comes from a plain solve so
     that it never depends on the tangents (``jax.linearize`` needs that); here the primal is the sensitivity
     solve's own, whose steps the tangents' error control also sets (they differ within the tolerance). For
     fixed directions (a Jacobian), where that dependence is harmless. Tangents past a stop are NaN.

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Any
 
 import numpy as np
 
@@ -136,8 +137,8 @@ class Config:
             return self
         return dataclasses.replace(self, small_loops=small_loops, quick_compile=quick)
 
-    def replace(self, **changes) -> Config:
-        """A copy with the given fields changed."""
+    def replace(self, **changes: Any) -> Config:
+        """A copy with the given fields (``changes``: {field: value}) changed; validated as a new `Config`."""
         return dataclasses.replace(self, **changes)
 
 

@@ -1,24 +1,24 @@
 """The fast configuration: the same components with the lines lumped, solved by an L-stable Rosenbrock method.
 
-Three reductions of the reference assembly (:mod:`growjax.simulation.reference`), each of a mode far
+Three reductions of the reference assembly (`growjax.simulation.reference`), each of a mode far
 faster than anything the robot's length shows:
 
 * the hoses, orifice, tank and node P form one chamber: their series drops equalise in
   < 15 µs; the pump sees the series drop of the lines at its flow
-  (:func:`growjax.model.hydraulics.line_pressure_drop`), and the sensor reads the chamber;
+  (`growjax.model.hydraulics.line_pressure_drop`), and the sensor reads the chamber;
 * the forward drive's platform is massless (its mode is 8 ns): its velocity balances the drive
   against the screws, the line drop and the syringes' end stop, in closed form
-  (:func:`growjax.model.pump.platform_velocity`); the lines' drop is taken at its laminar slope;
+  (`growjax.model.pump.platform_velocity`); the lines' drop is taken at its laminar slope;
 * the state of the chamber is the liquid volume it stores, not its pressure. The pressure
   follows from the exact stored-volume law of the liquid–air mixture
-  (:func:`growjax.model.fluid.pressure_at_stored_fraction`), so the volume balance is a linear
+  (`growjax.model.fluid.pressure_at_stored_fraction`), so the volume balance is a linear
   invariant of the ODE, which a Rosenbrock method keeps to rounding error through every
   pulse edge.
 
-Everything else, the rod and valve balance (:func:`growjax.model.robot.inflow`), the motor, the
-PID and every added effect (:mod:`growjax.model.effects`), is the same code as the reference's.
+Everything else, the rod and valve balance (`growjax.model.robot.inflow`), the motor, the
+PID and every added effect (`growjax.model.effects`), is the same code as the reference's.
 The remaining stiffness (the opened bypass, ~1e5 s⁻¹; the stepper rotor, ~3e5 s⁻¹) is
-damped by the L-stable ROS34PW2 method (:mod:`growjax.simulation.rosenbrock`) with the exact Jacobian,
+damped by the L-stable ROS34PW2 method (`growjax.simulation.rosenbrock`) with the exact Jacobian,
 at steps set by the slow dynamics, with input edges declared to the step-size controller.
 """
 
@@ -27,9 +27,11 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
 
-from growjax.model import effects as fx
-from growjax.model import hydraulics as hy
+import growjax.model.effects as fx
+import growjax.model.hydraulics as hy
+import growjax.simulation._assembly as assembly
 from growjax.model.fluid import (
     StorageLaw,
     pressure_at_stored_fraction,
@@ -40,7 +42,6 @@ from growjax.model.hydraulics import ValveNetwork
 from growjax.model.params import Parameters
 from growjax.model.pump import platform_velocity
 from growjax.model.robot import INFLOW_MAX_ITERATIONS, RodBalance, inflow
-from growjax.simulation import _assembly as assembly
 from growjax.simulation.config import Config
 
 __all__ = [
@@ -89,11 +90,11 @@ class Prepared(eqx.Module):
     line_resistance: jax.Array  # Pa·s/m³
     newton: jax.Array | None  # bool: a velocity-dependent force is present (None: decided statically)
     inflow_iterations: int = eqx.field(static=True)
-    share_values: bool = eqx.field(static=True, default=False)  # set for large batches: :func:`_computed_once`
+    share_values: bool = eqx.field(static=True, default=False)  # set for large batches: `_computed_once`
 
 
 def prepare(params: Parameters, config: Config) -> Prepared:
-    """The :class:`Prepared` constants of ``params`` under ``config``."""
+    """The `Prepared` constants of ``params`` under ``config``."""
     valves, rod = assembly.valves_and_rod(params, config)
     # The published law's velocity term is ~1e-10 of the rod forces: one fixed-point pass is exact, also while
     # every velocity-dependent effect is at zero (decided at run time: a superset model's candidates switched off,
@@ -119,19 +120,37 @@ def rod_solve(params: Parameters) -> str:
 # -- the lumped chamber ----------------------------------------------------------------------------------
 
 
-def lines_volume(params: Parameters, wall_strain):
-    """Volume of the lumped chamber, m³: the hoses at wall strain δ (m) and the tank."""
+def lines_volume(params: Parameters, wall_strain: Float[ArrayLike, "*b"]) -> Float[Array, "*b"]:
+    """Volume of the lumped chamber, m³: the hoses at wall strain δ (``wall_strain``, m) and the tank."""
     return hy.strained_volume(params.tube, wall_strain, params.pump.n_syringes) + params.tank.volume
 
 
-def stored_volume(params: Parameters, pressure, wall_strain):
-    """Liquid volume in the lumped chamber beyond its unstrained volume at gauge 0, m³ (pressure in Pa)."""
+def stored_volume(
+    params: Parameters, pressure: Float[ArrayLike, "*b"], wall_strain: Float[ArrayLike, "*b"]
+) -> Float[Array, "*b"]:
+    """Liquid volume in the lumped chamber beyond its unstrained volume at gauge 0, m³, at gauge ``pressure`` (Pa)
+    and wall strain ``wall_strain`` (m)."""
     volume = lines_volume(params, wall_strain)
     return volume * (1.0 + stored_volume_fraction(params.fluid, pressure)) - lines_volume(params, 0.0)
 
 
-def line_pressure(params: Parameters, stored, wall_strain, storage: StorageLaw | None = None):
-    """Gauge pressure of the lumped chamber, Pa, holding ``stored`` m³ (inverse of :func:`stored_volume`)."""
+def line_pressure(
+    params: Parameters,
+    stored: Float[ArrayLike, "*b"],
+    wall_strain: Float[ArrayLike, "*b"],
+    storage: StorageLaw | None = None,
+) -> Float[Array, "*b"]:
+    """Gauge pressure of the lumped chamber, Pa, the inverse of `stored_volume`.
+
+    Args:
+        params: the parameters.
+        stored: the liquid volume stored, m³.
+        wall_strain: the hoses' wall strain, m.
+        storage: the fluid's storage law (default: computed from ``params.fluid``).
+
+    Returns:
+        The gauge pressure, Pa.
+    """
     volume = lines_volume(params, wall_strain)
     law = storage if storage is not None else storage_law(params.fluid)
     return pressure_at_stored_fraction(law, (stored + lines_volume(params, 0.0)) / volume - 1.0)
@@ -165,9 +184,9 @@ def _robot_side(params, inputs, prep, t, pressure, displacement, effect_states):
     return q, p_r, length
 
 
-def line_resistance(params: Parameters):
+def line_resistance(params: Parameters) -> Float[Array, ""]:
     """Resistance of the lines from the syringes to the chamber, Pa·s/m³: the slope of
-    :func:`growjax.model.hydraulics.line_pressure_drop` at zero flow and gauge 0. The drop it gives,
+    `growjax.model.hydraulics.line_pressure_drop` at zero flow and gauge 0. The drop it gives,
     n² A_s² R ≈ 35 N·s/m against the screws' 1.2e5 N·s/m, changes the platform speed by < 3e-4,
     so its turbulent part and its pressure dependence are left out of the fast configuration."""
 
@@ -279,17 +298,11 @@ def _inverse_rates(t, y, params, inputs, config, prep):
 rates, vector_field = assembly.vector_fields(_forward_rates, _inverse_rates, lambda p, d: layout(p, d))
 
 
-def pressure_of(params: Parameters, config: Config, ys, storage: StorageLaw | None = None):
-    """Chamber pressure (Pa) of a scaled state."""
+def pressure_of(
+    params: Parameters, config: Config, ys: Float[Array, " n"], storage: StorageLaw | None = None
+) -> Float[Array, ""]:
+    """Chamber pressure (Pa) of a scaled state ``ys`` (n,) (the layout of ``config.drive``); ``storage`` as in
+    `line_pressure`."""
     scales = layout(params, config.drive)[1]
     wall_index = 3 if config.drive == "forward" else 6
     return line_pressure(params, ys[0] * scales[0], ys[wall_index] * scales[wall_index], storage)
-
-
-def __getattr__(name):
-    """The solve's entry points, defined in :mod:`growjax.simulation._fast_solve`, by their names here."""
-    if name in ("solve", "solve_members", "solve_with_sensitivities", "Run"):
-        from growjax.simulation import _fast_solve
-
-        return getattr(_fast_solve, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

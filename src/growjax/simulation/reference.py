@@ -4,30 +4,33 @@ Topology: drive → lead screws → platform → 2 syringes → 2 hoses →
 junction → orifice → tank → nozzle → node P (sensor) → check valve ∥ 3-way bypass →
 robot. The hoses and the tank are chambers with their own pressures; the platform has its
 1 g mass. Node pressures between resistances are algebraic and eliminated in
-:func:`network` by two scalar root solves (hose–orifice–tank series flow, and the massless
+`network` by two scalar root solves (hose–orifice–tank series flow, and the massless
 rod coupled to the valve network through the nozzle). Solved by Kvaerno5 with tight
 tolerances; slow but as close to the published model as growjax gets, it is what the fast
-configuration (:mod:`growjax.simulation.fast`) is measured against. diffrax is imported where a solve is traced:
+configuration (`growjax.simulation.fast`) is measured against. diffrax is imported where a solve is traced:
 the fast configuration's users do not pay its import.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING, NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float, Int
 
-from growjax.model import effects as fx
-from growjax.model import hydraulics as hy
+import growjax.model.effects as fx
+import growjax.model.hydraulics as hy
+import growjax.simulation._assembly as assembly
 from growjax.model.params import Parameters
 from growjax.model.pump import platform_force
 from growjax.model.robot import RodBalance, pressure_limit, rod_pressure
+from growjax.model.signals import Inputs
 from growjax.model.smooth import bracketed_root
-from growjax.simulation import _assembly as assembly
 from growjax.simulation.config import Config
-from growjax.simulation.trajectory import finish
+from growjax.simulation.trajectory import Trajectory, finish
 
 __all__ = [
     "FORWARD_SCALES",
@@ -100,24 +103,40 @@ class Prepared(eqx.Module):
 
 
 def prepare(params: Parameters, config: Config) -> Prepared:
-    """The :class:`Prepared` constants of ``params`` under ``config``."""
+    """The `Prepared` constants of ``params`` under ``config``."""
     valves, rod = assembly.valves_and_rod(params, config)
     return Prepared(valves=valves, rod=rod)
 
 
 def network(
     params: Parameters,
-    inputs,
+    inputs: Inputs,
     config: Config,
     prep: Prepared,
-    t,
-    v_platform,
-    p_tube,
-    p_tank,
-    displacement,
-    effect_states,
+    t: Float[ArrayLike, ""],
+    v_platform: Float[ArrayLike, ""],
+    p_tube: Float[ArrayLike, ""],
+    p_tank: Float[ArrayLike, ""],
+    displacement: Float[ArrayLike, ""],
+    effect_states: Float[Array, " K"],
 ) -> Network:
-    """Solve the resistive network for flows and node pressures given the chamber pressures and motions."""
+    """Solve the resistive network for flows and node pressures given the chamber pressures and motions.
+
+    Args:
+        params: the parameters, effects applied.
+        inputs: the input signals.
+        config: the configuration.
+        prep: the `Prepared` constants.
+        t: the time, s.
+        v_platform: the platform's velocity, m/s.
+        p_tube: the hoses' gauge pressure, Pa.
+        p_tank: the tank's gauge pressure, Pa.
+        displacement: the robot's displacement from its initial length, m.
+        effect_states: (K,) the effects' states.
+
+    Returns:
+        The `Network`'s flows (m³/s), pressures (Pa), velocity (m/s) and length (m).
+    """
     fl, pump = params.fluid, params.pump
     n = pump.n_syringes
 
@@ -234,15 +253,20 @@ def initial_state(params: Parameters, config: Config) -> jax.Array:
     return assembly.scaled_initial_state(params, config.drive, base, layout(params, config.drive)[1])
 
 
-def outputs(t, ys, params, inputs, config, prep) -> dict:
-    """The outputs (:data:`growjax.simulation._assembly.OUTPUTS`, SI) of a scaled state."""
+def outputs(
+    t: Float[ArrayLike, ""], ys: Float[Array, " n"], params: Parameters, inputs: Inputs, config: Config, prep: Prepared
+) -> dict[str, Float[Array, ""]]:
+    """The outputs ({name: value}, SI: length, pressure, robot_flow, syringe_displacement, robot_pressure) of a
+    scaled state ``ys`` (n,) at time ``t`` (s)."""
     scales = jnp.asarray(layout(params, config.drive)[1])
     net, x_p = rates(t, ys * scales, params, inputs, config, prep)[1]
     values = (net.length, net.sensor_pressure, net.robot_flow, x_p, net.robot_pressure)
     return dict(zip(assembly.OUTPUTS, values))
 
 
-def pressure_limit_event(pressure, limit) -> diffrax.Event:
+def pressure_limit_event(
+    pressure: Callable[[Float[Array, ""], Float[Array, " n"]], Float[Array, ""]], limit: Float[ArrayLike, ""]
+) -> diffrax.Event:
     """The event that stops a run where the sensed pressure crosses ``limit`` (Pa).
 
     ``pressure(t, y)`` is the configuration's sensed pressure (Pa) of its state. The crossing is
@@ -261,14 +285,14 @@ def pressure_limit_event(pressure, limit) -> diffrax.Event:
     )
 
 
-def save_at(ts) -> diffrax.SaveAt:
-    """What the reference saves: the state at ``ts`` and the final time and state."""
+def save_at(ts: Float[Array, " T"]) -> diffrax.SaveAt:
+    """What the reference saves: the state at ``ts`` (s) and the final time and state."""
     import diffrax
 
     return diffrax.SaveAt(subs=[diffrax.SubSaveAt(ts=ts), diffrax.SubSaveAt(t1=True)])
 
 
-def solver_status(sol):
+def solver_status(sol: diffrax.Solution) -> Int[Array, "*B"]:
     """A diffrax solution's result as an integrator status: 0 reached t1, 1 stopped by the event, 2 failed."""
     import diffrax
 
@@ -277,11 +301,29 @@ def solver_status(sol):
     )
 
 
-def solve(params: Parameters, inputs, config: Config, ts, jump_ts, step_ts, start=None):
-    """Integrate the reference configuration and return a :class:`growjax.simulation.trajectory.Trajectory` on ``ts``.
+def solve(
+    params: Parameters,
+    inputs: Inputs,
+    config: Config,
+    ts: Float[Array, " T"],
+    jump_ts: Float[Array, " J"],
+    step_ts: Float[Array, " K"],
+    start: tuple[Float[ArrayLike, ""], Float[ArrayLike, ""], Float[Array, " n"]] | None = None,
+) -> Trajectory:
+    """Integrate the reference configuration.
 
-    ``start`` = (t_start s, t_end s, scaled state (n,)), each may be traced: the window and the initial state in
-    place of ``config``'s.
+    Args:
+        params: the parameters, effects applied.
+        inputs: the input signals.
+        config: the configuration, resolved.
+        ts: (T,) the save grid, s.
+        jump_ts: (J,) the inputs' jump times, s, padded beyond t1.
+        step_ts: (K,) their slope-break times, s, padded beyond t1.
+        start: (t_start s, t_end s, scaled state (n,)), each may be traced: the window and the initial state in
+            place of ``config``'s.
+
+    Returns:
+        The `growjax.Trajectory` on ``ts``.
     """
     import diffrax
 

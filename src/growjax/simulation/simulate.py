@@ -3,18 +3,19 @@
 from __future__ import annotations
 
 import weakref
+from collections.abc import Callable
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, ArrayLike, Float
+from jaxtyping import Array, ArrayLike, Float, PyTree
 
-from growjax.model import effects as fx
+import growjax.model.effects as fx
+import growjax.simulation._fast_solve as _fast_solve
+import growjax.simulation.reference as reference_model
 from growjax.model.params import Parameters
 from growjax.model.signals import Inputs
-from growjax.simulation import _fast_solve
-from growjax.simulation import reference as reference_model
 from growjax.simulation.config import Config
 from growjax.simulation.trajectory import Trajectory
 
@@ -39,11 +40,17 @@ def _traced(tree) -> bool:
     return any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(tree))
 
 
-def as_arrays(tree):
+def as_arrays(tree: PyTree) -> PyTree:
     """Python numbers in a pytree as float arrays, so ``jit`` traces them instead of recompiling per value.
 
     NumPy scalars, not JAX arrays: making a device array per leaf costs ~0.1 ms each, more than a simulation's step
     loop.
+
+    Args:
+        tree: any pytree (parameters, inputs).
+
+    Returns:
+        The pytree, its Python floats and ints (not bools) as float64 NumPy scalars.
     """
 
     def convert(x):
@@ -63,11 +70,21 @@ def _padded(times, t1: float) -> jax.Array:
 
 
 def input_breaks(inputs: Inputs, config: Config) -> Breaks:
-    """(jump times, slope-break times) of ``inputs`` inside the window, padded: what the solvers step onto.
+    """The discontinuities of the inputs inside the simulated window: what the solvers step onto.
 
-    Needs concrete inputs; under a trace, compute it outside and pass it to :func:`simulate`. Remembered per
+    Needs concrete inputs; under a trace, compute it outside and pass it to `simulate`. Remembered per
     inputs object (~2 ms of Python each time, a tenth of a simulation) while it lives, when its leaves are
     immutable (JAX arrays, numbers, empty or read-only NumPy arrays; others could change in place).
+
+    Args:
+        inputs: the input signals.
+        config: the configuration (its window [t0, t1]).
+
+    Returns:
+        (jump times (J,), slope-break times (K,)), s, each padded beyond t1 to a multiple of 32.
+
+    Raises:
+        ValueError: where the inputs are traced.
     """
     window = (float(config.t0), float(config.t1))
     hit = _BREAKS.get(id(inputs))
@@ -102,13 +119,20 @@ def _immutable(leaf) -> bool:
     return isinstance(leaf, (jax.Array, float, int, np.generic))
 
 
-def sample_times(times, config: Config):
-    """``times`` (s, sorted) clipped into the simulated window [t0, t1]: a save grid at the samples themselves.
+def sample_times(times: Float[ArrayLike, " T"], config: Config) -> Float[Array, " T"]:
+    """Sample times clipped into the simulated window [t0, t1]: a save grid at the samples themselves.
 
     Fits and scores save the solution where the data were taken instead of interpolating the default
     10 ms grid linearly: that grid starts at t0, so it falls between samples taken at whole hundredths,
     and a straight line between its points misses the length where a pulse edge bends it. Samples
     outside the window land on its ends.
+
+    Args:
+        times: (T,) sorted sample times, s.
+        config: the configuration (its window).
+
+    Returns:
+        (T,) the save grid, s.
     """
     return jnp.clip(jnp.asarray(times, float), config.t0, config.t1)
 
@@ -120,14 +144,26 @@ def simulate(
     ts: Float[ArrayLike, " T"] | None = None,
     breaks: Breaks | None = None,
 ) -> Trajectory:
-    """Simulate the robot: (parameters, inputs, configuration) → :class:`growjax.Trajectory`.
+    """Simulate the robot.
 
     Pure and usable under ``jax.jit``, ``jax.vmap``, ``jax.grad`` and ``jax.jvp`` with respect to
-    any leaf of ``params`` (effects included). ``config.fidelity`` picks the configuration:
-    ``"fast"`` (default; :mod:`growjax.simulation.fast`) or ``"reference"`` (:mod:`growjax.simulation.reference`).
-    ``ts`` (s, sorted, within [t0, t1]) is the save grid, default ``config.save_grid()``.
-    ``breaks`` = (jump times, slope-break times) of the inputs, found from ``inputs`` when they
-    are concrete (:func:`input_breaks`). A failed solve is reported in ``status``, never raised.
+    any leaf of ``params`` (effects included). A failed solve is reported in ``status``, never raised.
+
+    Args:
+        params: the parameters, SI.
+        inputs: the input signals.
+        config: the configuration; ``config.fidelity`` picks ``"fast"`` (default; `growjax.simulation.fast`) or
+            ``"reference"`` (`growjax.simulation.reference`).
+        ts: (T,) the save grid, s, sorted, within [t0, t1]; default ``config.save_grid()``.
+        breaks: (jump times, slope-break times) of the inputs, s (`input_breaks`); found from ``inputs`` when
+            they are concrete.
+
+    Returns:
+        The `growjax.Trajectory` on ``ts``.
+
+    Raises:
+        ValueError: for a save grid that is not 1-D, finite, sorted and within [t0, t1], or traced inputs
+            without ``breaks``.
     """
     return _solve(*_arguments(params, inputs, config, ts, breaks))
 
@@ -139,12 +175,20 @@ def simulate_members(
     ts: Float[ArrayLike, " T"] | None = None,
     breaks: Breaks | None = None,
 ) -> Trajectory:
-    """:func:`simulate` for a batch of parameter sets: every leaf of ``params`` with a leading axis B (e.g. made by
-    ``jax.vmap`` of :func:`growjax.replace`), the inputs, ``ts`` and ``breaks`` shared. → a
-    :class:`growjax.Trajectory` whose fields have a leading axis B.
+    """`simulate` for a batch of parameter sets, the inputs, ``ts`` and ``breaks`` shared.
 
     Equal to ``jax.vmap(simulate, in_axes=(0, None))``, and quicker to compile in the fast configuration (its
     one-member program is never traced). Not differentiable: differentiate ``jax.vmap(simulate)``.
+
+    Args:
+        params: the parameters, every leaf with a leading axis B (e.g. made by ``jax.vmap`` of `growjax.replace`).
+        inputs: the input signals.
+        config: the configuration.
+        ts: (T,) the save grid, s (as in `simulate`).
+        breaks: the inputs' breaks (as in `simulate`).
+
+    Returns:
+        A `growjax.Trajectory` whose fields have a leading axis B.
     """
     return _solve_members(*_arguments(params, inputs, config, ts, breaks))
 
@@ -158,11 +202,23 @@ def simulate_from(
     ts: Float[ArrayLike, " T"],
     breaks: Breaks,
 ) -> Trajectory:
-    """:func:`simulate` from a scaled state ``state`` (the configuration's layout, as ``Trajectory.final_state``)
-    over ``window`` = (t_start, t_end) s in place of ``config``'s [t0, t1] and its state at rest: a plant stepped
-    tick by tick. The state and window may be traced (``breaks`` must then be given: (jump times, slope-break
-    times), each padded beyond t_end); ``ts`` (s) within the window. Under ``vmap`` each member is its own loop.
-    Forward-mode differentiable through the integrator (not in the state or window).
+    """`simulate` from a given state over a given window, in place of ``config``'s [t0, t1] and its state at
+    rest: a plant stepped tick by tick.
+
+    Under ``vmap`` each member is its own loop. Forward-mode differentiable through the integrator (not in the
+    state or window).
+
+    Args:
+        params: the parameters, SI.
+        inputs: the input signals.
+        config: the configuration.
+        state: (n,) the scaled state in the configuration's layout (as ``Trajectory.final_state``); may be traced.
+        window: (t_start, t_end), s; may be traced.
+        ts: (T,) the save grid, s, within the window.
+        breaks: (jump times, slope-break times) of the inputs, s, each padded beyond t_end (`input_breaks`).
+
+    Returns:
+        The `growjax.Trajectory` on ``ts``.
     """
     jump_ts, step_ts = breaks
     config = config.resolved()
@@ -217,11 +273,31 @@ def _solve_members(params, inputs, config: Config, ts, jump_ts, step_ts) -> Traj
     )
 
 
-def length_jacobian(params_of, w, inputs, config: Config, ts, breaks=None) -> tuple[Trajectory, jax.Array]:
-    """(trajectory, ∂length/∂w (T, p)) of the fast configuration at ``params_of(w)``, w (p,), on the save grid
-    ``ts`` (s): one solve carries the p sensitivities and gives both (`forward_sensitivities`, compiled here),
-    where ``jax.jacfwd`` of `simulate` adds a plain solve for the primal. ``params_of``: w → Parameters
-    (traceable; hashable, the compiled program is kept per function). ``breaks`` as in `simulate`.
+def length_jacobian(
+    params_of: Callable[[Float[Array, " p"]], Parameters],
+    w: Float[ArrayLike, " p"],
+    inputs: Inputs,
+    config: Config,
+    ts: Float[ArrayLike, " T"],
+    breaks: Breaks | None = None,
+) -> tuple[Trajectory, Float[Array, "T p"]]:
+    """The fast configuration's trajectory and the length's Jacobian in w, from one solve that carries the p
+    sensitivities (`forward_sensitivities`, compiled here), where ``jax.jacfwd`` of `simulate` adds a plain
+    solve for the primal.
+
+    Args:
+        params_of: w → Parameters, traceable and hashable (the compiled program is kept per function).
+        w: (p,) the point.
+        inputs: the input signals.
+        config: the fast configuration.
+        ts: (T,) the save grid, s.
+        breaks: the inputs' breaks (as in `simulate`).
+
+    Returns:
+        (the trajectory at ``params_of(w)`` on ``ts``, ∂length/∂w (T, p) in m per unit of w).
+
+    Raises:
+        ValueError: for the reference configuration or a bad save grid.
     """
     if config.fidelity != "fast":
         raise ValueError("length_jacobian runs the fast configuration; use jax.jacfwd of simulate for the reference")
@@ -240,7 +316,14 @@ def _length_jacobian(params_of, w, inputs, config: Config, ts, jump_ts, step_ts)
     return traj, tangents["length"].T
 
 
-def forward_sensitivities(params_of, w, inputs, config: Config, ts, breaks) -> tuple[Trajectory, dict]:
+def forward_sensitivities(
+    params_of: Callable[[Float[Array, " p"]], Parameters],
+    w: Float[Array, " p"],
+    inputs: Inputs,
+    config: Config,
+    ts: Float[ArrayLike, " n"],
+    breaks: Breaks,
+) -> tuple[Trajectory, dict[str, Float[Array, "p n"]]]:
     """The fast configuration's trajectory at ``params_of(w)`` and its sensitivities to w, from one solve that
     integrates the state with its tangents (one plain solve cheaper than ``jax.jvp`` through `simulate`).
 

@@ -1,13 +1,13 @@
 """What a simulation returns, and how a solver's raw output becomes it (written once for both configurations).
 
 No diffrax here: the fast configuration runs without importing it (the reference's diffrax glue is in
-:mod:`growjax.simulation.reference`)."""
+`growjax.simulation.reference`)."""
 
 from __future__ import annotations
 
 import equinox as eqx
 import jax.numpy as jnp
-from jaxtyping import Array, Float, Int
+from jaxtyping import Array, ArrayLike, Float, Int
 
 __all__ = ["OK", "PRESSURE_LIMIT", "SOLVER_FAILED", "STATUS_NAMES", "Trajectory", "finish", "status_name"]
 
@@ -20,24 +20,29 @@ SOLVER_FAILED = 2
 STATUS_NAMES = {OK: "ok", PRESSURE_LIMIT: "pressure_limit", SOLVER_FAILED: "solver_failed"}
 
 
-def status_name(code) -> str:
-    """Human-readable status of a trajectory."""
+def status_name(code: int | Int[ArrayLike, ""]) -> str:
+    """The name of a trajectory's status code (`STATUS_NAMES`), ``"unknown(code)"`` for another."""
     return STATUS_NAMES.get(int(code), f"unknown({int(code)})")
 
 
 class Trajectory(eqx.Module):
     """Simulated outputs on the save grid (arrays of shape (T,), NaN after a stop) and run status; a batch
-    (:func:`growjax.simulate_members`, ``jax.vmap``) adds leading axes ``*B`` to every field.
+    (`growjax.simulate_members`, ``jax.vmap``) adds leading axes ``*B`` to every field.
 
     Attributes:
-        time: s.  length: robot length, m.  pressure: sensed pressure P before the check valve, Pa.
-        robot_flow: m³/s into the robot.  syringe_displacement: platform travel, m.
-        robot_pressure: Pa inside the robot.  pressure_demand: Pa (forward drive).
+        time: the save grid, s.
+        length: robot length, m.
+        pressure: sensed pressure P before the check valve, Pa.
+        robot_flow: flow into the robot, m³/s.
+        syringe_displacement: platform travel, m.
+        robot_pressure: pressure inside the robot, Pa.
+        pressure_demand: the forward drive's demand, Pa.
         status: 0 ok, 1 pressure limit crossed (the run stopped there unless configured not to),
             2 solver failure (non-finite state, step budget, NaN parameters).
-        limit_time: s at which the pressure limit was first crossed (NaN if never).
-        t_final: s where the integration ended.  n_steps: accepted solver steps.
-        final_state: the solver's state at ``t_final`` (layout per configuration, see its ``STATES``).
+        limit_time: when the pressure limit was first crossed, s (NaN if never).
+        t_final: where the integration ended, s.
+        n_steps: accepted solver steps.
+        final_state: (n,) the solver's scaled state at ``t_final`` (layout per configuration, see its ``STATES``).
     """
 
     time: Float[Array, "*B T"]
@@ -55,13 +60,36 @@ class Trajectory(eqx.Module):
 
 
 def finish(
-    ts, outputs: dict, limit, demand, stop_at_limit: bool, *, t_final, status, n_steps, final_state
+    ts: Float[Array, " T"],
+    outputs: dict[str, Float[Array, " T"]],
+    limit: Float[ArrayLike, ""],
+    demand: Float[Array, " T"],
+    stop_at_limit: bool,
+    *,
+    t_final: Float[Array, ""],
+    status: Int[Array, ""],
+    n_steps: Int[Array, ""],
+    final_state: Float[Array, " n"],
 ) -> Trajectory:
-    """A :class:`Trajectory` from the outputs on ``ts`` (field → (T,) array) and the integrator's end.
+    """A `Trajectory` from a solver's outputs and end.
 
-    ``status`` is the integrator's: 0 reached t1, 1 stopped by the pressure-limit event, 2 failed.
     Samples after ``t_final`` are NaN. The pressure limit is flagged at the event (when it stopped
     the run) or at the first save time above it (when it did not).
+
+    Args:
+        ts: (T,) the save grid, s.
+        outputs: {field: (T,)} on ``ts``, SI (``length``, ``pressure``, ``robot_flow``, ``syringe_displacement``,
+            ``robot_pressure``).
+        limit: the pressure limit, Pa.
+        demand: (T,) the pressure demand, Pa.
+        stop_at_limit: whether the pressure limit stops a run.
+        t_final: the integrator's end, s.
+        status: the integrator's: 0 reached t1, 1 stopped by the pressure-limit event, 2 failed.
+        n_steps: accepted steps.
+        final_state: (n,) the scaled state at ``t_final``.
+
+    Returns:
+        The trajectory.
     """
     event = status == 1
     after = ts > t_final + 1e-12

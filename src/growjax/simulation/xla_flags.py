@@ -4,7 +4,7 @@ quick compile the sweep's program takes.
 **Small loops.** XLA:CPU runs a compiled program as a sequence of operations, each launched on its own (a few µs),
 except a ``while`` loop whose operations it can all emit as one kernel and whose data fit under a size limit
 (``xla_cpu_small_while_loop_byte_threshold``, 1 kB by default): that loop runs as one compiled function.
-With the limit raised, the solver's loop (:mod:`growjax.simulation.rosenbrock`) qualifies when its linear solve is
+With the limit raised, the solver's loop (`growjax.simulation.rosenbrock`) qualifies when its linear solve is
 written in elementwise operations instead of a LAPACK call, which it is while this option is in
 ``XLA_FLAGS``. Measured on a 2-core CPU (``benchmarks/simulate.py``, README "Benchmarks"): a 10 s simulation
 10–11 ms instead of 15.5–17 ms, a forward-mode gradient in 3 parameters 24–33 ms instead of 41–47 ms; but a
@@ -17,16 +17,16 @@ long runs of the base model (many likelihood gradients), before JAX starts its b
 
 or ``growjax.simulation.xla_flags.apply()`` first thing in a script.
 
-**Quick compile** (:data:`QUICK_COMPILE`): XLA:CPU's older fusion emitters (``xla_cpu_use_fusion_emitters``
+**Quick compile** (`QUICK_COMPILE`): XLA:CPU's older fusion emitters (``xla_cpu_use_fusion_emitters``
 off) compile a program 15–30 % faster, and the code they emit runs slower: a single 10 s simulation 22 ms
 instead of 14 ms (``benchmarks/simulate.py``), the 500-set sweep 5–7 % longer. A sweep of up to
 ``growjax.sweep.QUICK_COMPILE_ROWS`` sets, which compiles once and runs once, takes them
-(:func:`compile_quickly`, its program only); so do the ``growjax simulate`` and ``growjax fit`` processes
-(:func:`apply_quick_compile`) and the test suite, made of compiles (``tests/conftest.py``). Everything else
+(`compile_quickly`, its program only); so do the ``growjax simulate`` and ``growjax fit`` processes
+(`apply_quick_compile`) and the test suite, made of compiles (``tests/conftest.py``). Everything else
 keeps XLA's default. They round differently, so an adaptive step can move: the fast configuration's 10 s run
 of the published pulse differs by up to 0.3 µm in length (2 s: 9 nm), at nearly every sample. The choice is
-therefore :attr:`growjax.Config.quick_compile`, made explicit by :meth:`growjax.Config.resolved`
-(:func:`quick_compile_in_force`), and compiled programs are keyed on it.
+therefore `growjax.Config.quick_compile`, made explicit by `growjax.Config.resolved`
+(`quick_compile_in_force`), and compiled programs are keyed on it.
 """
 
 from __future__ import annotations
@@ -37,6 +37,11 @@ import os
 import re
 import subprocess
 import sys
+from collections.abc import Iterator
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import jax
 
 __all__ = [
     "FULL_BACKEND",
@@ -104,10 +109,17 @@ def applied() -> bool:
     return found is not None and int(found.group(1)) >= 10**8
 
 
-def compile_quickly(lowered, quick: bool = True):
-    """``lowered.compile()`` under :data:`QUICK_COMPILE` (``quick``) or XLA's default emitters (not ``quick``),
-    whatever the process's flags (a plain compile where they give that already); XLA's default where this
-    jaxlib lacks the option."""
+def compile_quickly(lowered: jax.stages.Lowered, quick: bool = True) -> jax.stages.Compiled:
+    """``lowered.compile()`` under `QUICK_COMPILE` or XLA's default emitters, whatever the process's flags (a plain
+    compile where they give that already).
+
+    Args:
+        lowered: the lowered program (``jax.jit(f).lower(...)``).
+        quick: `QUICK_COMPILE` if True, else XLA's default emitters.
+
+    Returns:
+        The compiled program; under XLA's default where this jaxlib lacks the option.
+    """
     ((name, value),) = QUICK_COMPILE.items()
     if bool(quick) == quick_compile_applied():
         return lowered.compile()
@@ -123,9 +135,9 @@ _COMPILING: contextvars.ContextVar = contextvars.ContextVar("growjax_quick_compi
 
 
 @contextlib.contextmanager
-def compiling(quick: bool):
-    """Within it, the program being traced is compiled by :func:`compile_quickly` with ``quick``, not under the
-    process's flags (what :func:`quick_compile_in_force` answers)."""
+def compiling(quick: bool) -> Iterator[None]:
+    """A context within which the program being traced is compiled by `compile_quickly` with ``quick``, not under
+    the process's flags (what `quick_compile_in_force` answers)."""
     token = _COMPILING.set(bool(quick))
     try:
         yield
@@ -134,22 +146,22 @@ def compiling(quick: bool):
 
 
 def quick_compile_applied() -> bool:
-    """Whether ``XLA_FLAGS`` sets :data:`QUICK_COMPILE` for every program of this process."""
+    """Whether ``XLA_FLAGS`` sets `QUICK_COMPILE` for every program of this process."""
     ((name, value),) = QUICK_COMPILE.items()
     return f"--{name}={str(value).lower()}" in os.environ.get("XLA_FLAGS", "")
 
 
 def quick_compile_in_force() -> bool:
-    """Whether the program traced now is compiled with :data:`QUICK_COMPILE`: the choice of the
-    :func:`compiling` block around it, else the process's (:func:`quick_compile_applied`)."""
+    """Whether the program traced now is compiled with `QUICK_COMPILE`: the choice of the
+    `compiling` block around it, else the process's (`quick_compile_applied`)."""
     chosen = _COMPILING.get()
     return quick_compile_applied() if chosen is None else chosen
 
 
 def quick_compile_flags(flags: str) -> str:
-    """``flags`` (an ``XLA_FLAGS`` string) with :data:`QUICK_COMPILE` for every program of a process, unless it
+    """``flags`` (an ``XLA_FLAGS`` string) with `QUICK_COMPILE` for every program of a process, unless it
     already sets that option. Only for a jaxlib known to have it: XLA aborts the process on an unknown flag
-    (check with :func:`quick_compile_known` in another process)."""
+    (check with `quick_compile_known` in another process)."""
     ((name, value),) = QUICK_COMPILE.items()
     if name in flags:
         return flags
@@ -157,8 +169,8 @@ def quick_compile_flags(flags: str) -> str:
 
 
 def quick_compile_known() -> bool:
-    """Whether this environment's jaxlib takes :data:`QUICK_COMPILE`: a release series it was verified in
-    (:data:`QUICK_COMPILE_VERIFIED`), else asked of a new interpreter (~1 s)."""
+    """Whether this environment's jaxlib takes `QUICK_COMPILE`: a release series it was verified in
+    (`QUICK_COMPILE_VERIFIED`), else asked of a new interpreter (~1 s)."""
     import jaxlib
 
     if jaxlib.__version__.startswith(QUICK_COMPILE_VERIFIED):
@@ -172,7 +184,7 @@ def quick_compile_known() -> bool:
 
 
 def apply_quick_compile() -> bool:
-    """:data:`QUICK_COMPILE` for every program of this process, if JAX's backend has not started, this jaxlib has
+    """`QUICK_COMPILE` for every program of this process, if JAX's backend has not started, this jaxlib has
     the option and ``XLA_FLAGS`` does not set it; whether it is in force."""
     ((name, _),) = QUICK_COMPILE.items()
     flags = os.environ.get("XLA_FLAGS", "")

@@ -6,6 +6,7 @@ import contextlib
 import signal
 import sys
 import threading
+from collections.abc import Iterator
 
 __all__ = ["SIGNALS", "Stopper"]
 
@@ -15,22 +16,29 @@ SIGNALS = (signal.SIGINT, signal.SIGTERM)
 class Stopper:
     """Within ``with Stopper() as stop:``, SIGINT and SIGTERM set ``stop.signal`` (the loop checks it after each
     chunk); a second signal raises ``KeyboardInterrupt`` at once, or, inside ``stop.writing()``, right after the
-    write. Handlers are installed only in the main thread (elsewhere signals keep Python's behaviour)."""
+    write. Handlers are installed only in the main thread (elsewhere signals keep Python's behaviour).
 
-    def __init__(self, announce: bool = True):
+    Args:
+        announce: whether the first signal writes a line on ``sys.stderr``.
+
+    Attributes:
+        signal: the first signal received, or None.
+    """
+
+    def __init__(self, announce: bool = True) -> None:
         self.signal: int | None = None
         self.announce = announce
         self._writing = False
         self._now = False
         self._previous: dict = {}
 
-    def __enter__(self):
+    def __enter__(self) -> Stopper:
         if threading.current_thread() is threading.main_thread():
             for s in SIGNALS:
                 self._previous[s] = signal.signal(s, self._handle)
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> bool:
         for s, handler in self._previous.items():
             signal.signal(s, handler)
         self._previous.clear()
@@ -53,7 +61,7 @@ class Stopper:
         raise KeyboardInterrupt
 
     @contextlib.contextmanager
-    def writing(self):
+    def writing(self) -> Iterator[None]:
         """A block that a second signal does not cut (a chunk being written to disk)."""
         self._writing = True
         try:

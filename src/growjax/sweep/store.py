@@ -3,7 +3,7 @@
 Layout of the group (a folder): ``values`` (n, d) parameter values, SI, written whole when the store is made;
 ``rmse`` (n,) m, ``final_length`` (n,) m and ``status`` (n,) codes, chunked as the sweep is (one chunk file per
 array and sweep chunk). ``status`` is written after the other two: a status chunk on disk marks its chunk done
-(its fill value, :data:`NOT_RUN`, marks rows not yet run). Every chunk file is written to a temporary file and
+(its fill value, `NOT_RUN`, marks rows not yet run). Every chunk file is written to a temporary file and
 renamed into place (zarr's local store), so a stop never leaves a half-written chunk. The group's attributes
 hold the sweep's definition (design, ranges, seed, n, configuration, chunk rows) and fingerprints of the base
 parameters, inputs, measured data and window, so that a resume can refuse what belongs to another sweep.
@@ -16,9 +16,16 @@ import hashlib
 import json
 import re
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import jax
 import numpy as np
+from jaxtyping import Bool, Float, Int, PyTree
+
+if TYPE_CHECKING:
+    import zarr
+
+    from growjax.simulation.config import Config
 
 __all__ = [
     "ARRAYS",
@@ -46,7 +53,7 @@ class StoreError(ValueError):
     """A store that is missing, corrupt or of another sweep (one line naming the problem)."""
 
 
-def fingerprint(tree) -> str:
+def fingerprint(tree: PyTree) -> str:
     """SHA-256 of a pytree's structure and leaves (dtype, shape, bytes); stable across processes."""
     leaves, treedef = jax.tree_util.tree_flatten(tree)
     digest = hashlib.sha256(re.sub(r" at 0x[0-9a-fA-F]+", "", str(treedef)).encode())
@@ -58,14 +65,26 @@ def fingerprint(tree) -> str:
     return digest.hexdigest()
 
 
-def config_record(config) -> dict:
-    """A :class:`growjax.Config` as a JSON-ready dict (rebuilt by ``Config(**record)``)."""
+def config_record(config: Config) -> dict[str, Any]:
+    """A `growjax.Config` as a JSON-ready dict (rebuilt by ``Config(**record)``)."""
     return dataclasses.asdict(config)
 
 
-def create(path, definition: dict, values: np.ndarray, chunk: int):
-    """A new store at ``path`` for ``values`` (n, d) in chunks of ``chunk`` rows; :class:`StoreError` where
-    ``path`` exists and is not empty."""
+def create(path: str | Path, definition: dict[str, Any], values: Float[np.ndarray, "n d"], chunk: int) -> zarr.Group:
+    """A new store.
+
+    Args:
+        path: its folder, new or empty.
+        definition: the sweep's definition (JSON-ready), kept in the group's attributes.
+        values: (n, d) the parameter values, SI, written whole.
+        chunk: the rows per chunk.
+
+    Returns:
+        The zarr group.
+
+    Raises:
+        StoreError: where ``path`` exists and is not empty.
+    """
     import zarr
 
     path = Path(path)
@@ -92,8 +111,19 @@ def create(path, definition: dict, values: np.ndarray, chunk: int):
     return group
 
 
-def open_store(path, mode: str = "r"):
-    """(the zarr group at ``path``, its definition); :class:`StoreError` where it is missing or corrupt."""
+def open_store(path: str | Path, mode: str = "r") -> tuple[zarr.Group, dict[str, Any]]:
+    """Open a store.
+
+    Args:
+        path: its folder.
+        mode: zarr's mode (``"r"`` to read, ``"r+"`` to resume).
+
+    Returns:
+        (the zarr group, the sweep's definition).
+
+    Raises:
+        StoreError: where it is missing, corrupt or of another format or version.
+    """
     import zarr
 
     path = Path(path)
@@ -124,8 +154,8 @@ def open_store(path, mode: str = "r"):
     return group, definition
 
 
-def read(group, name: str) -> np.ndarray:
-    """One array of the store, whole; :class:`StoreError` where a chunk cannot be read."""
+def read(group: zarr.Group, name: str) -> np.ndarray:
+    """One array of the store (one of `ARRAYS`), whole; `StoreError` where a chunk cannot be read."""
     try:
         return np.asarray(group[name][...])
     except Exception as err:
@@ -134,22 +164,30 @@ def read(group, name: str) -> np.ndarray:
         ) from None
 
 
-def write_chunk(group, c: int, chunk: int, rmse, final, status) -> None:
-    """The rows of chunk ``c``: ``rmse`` and ``final_length`` first, then ``status``, which marks it done."""
+def write_chunk(
+    group: zarr.Group,
+    c: int,
+    chunk: int,
+    rmse: Float[np.ndarray, " r"],
+    final: Float[np.ndarray, " r"],
+    status: Int[np.ndarray, " r"],
+) -> None:
+    """Write the r ≤ ``chunk`` rows of chunk ``c``: ``rmse`` (m) and ``final`` length (m) first, then ``status``,
+    which marks it done."""
     rows = slice(c * chunk, c * chunk + len(status))
     group["rmse"][rows] = rmse
     group["final_length"][rows] = final
     group["status"][rows] = status
 
 
-def done_chunks(status: np.ndarray, chunk: int) -> np.ndarray:
+def done_chunks(status: Int[np.ndarray, " n"], chunk: int) -> Bool[np.ndarray, " n_chunks"]:
     """(n_chunks,) bool: chunks whose rows all have a status."""
     n_chunks = -(-status.size // chunk)
     padded = np.concatenate([status, np.zeros(n_chunks * chunk - status.size, status.dtype)])
     return np.all(padded.reshape(n_chunks, chunk) != NOT_RUN, axis=1)
 
 
-def differences(recorded: dict, wanted: dict) -> list[str]:
+def differences(recorded: dict[str, Any], wanted: dict[str, Any]) -> list[str]:
     """Keys whose values differ between two definitions (compared as JSON)."""
     return [k for k in wanted if json.dumps(recorded.get(k), sort_keys=True) != json.dumps(wanted[k], sort_keys=True)]
 

@@ -20,17 +20,14 @@ with J at its start and is rejected unless ``h γ ‖J₁ − J₀‖∞ ≤ 1``
 on the primal solution, and the tangents it carries are stable and consistent. The end's J is the
 next step's start's, so the check costs nothing extra.
 
-In a batch (``batched``: a sweep) four choices differ, each measured a gain there (the first three a loss
-in a single run; the fourth has no single-run form): the Jacobian and ∂f/∂t are taken in forward mode (the
-primal once, then one tangent per state and for time) instead of by forward differences; the stages are a loop (one copy of the field
-in the compiled program: a shorter compile); f, ∂f/∂t and J at t0 come from an opening attempt of
-zero length, the loop's first, instead of a second copy of that code before the loop; and W⁻¹ and the
-variation check are written with the batch axis last, in elementwise operations (``custom_vmap`` rules;
-for 250 6 × 6 matrices in a loop, measured: an inverse ~70 µs against LAPACK's ~120 µs, a product ~12 µs
-against a batched ``dot``'s ~45 µs; 500-set sweep 1.04 → 0.83 s). A run may also
-interpolate its save times inside the loop (``save_ts``, used by batches) instead of recording every
-step: a sweep member then carries (T, n) values, not the (max_steps, n) records whose per-member writes
-and memory cost a 500-set sweep a fifth of its time.
+In a batch (``batched``: a sweep) four choices differ, each faster there (``benchmarks/sweep.py``): the
+Jacobian and ∂f/∂t are taken in forward mode (the primal once, then one tangent per state and for time)
+instead of by forward differences; the stages are a loop (one copy of the field in the compiled program: a
+shorter compile); f, ∂f/∂t and J at t0 come from an opening attempt of zero length, the loop's first, instead
+of a second copy of that code before the loop; and W⁻¹ and the variation check are written with the batch axis
+last, in elementwise operations (``custom_vmap`` rules). A run may also interpolate its save times inside the
+loop (``save_ts``, used by batches) instead of recording every step: a sweep member then carries (T, n) values,
+not (max_steps, n) step records.
 
 Other choices: steps land on every declared input break (a jump is approached from the left and
 left from the right, one ulp either side; a slope break is landed on); the accepted steps are
@@ -39,10 +36,10 @@ the loop; a stop event (the pressure limit) is located by bisection on that inte
 Derivatives: forward mode (``jax.jvp``, ``jax.jacfwd``) through the loop; reverse mode is not
 supported (the loop's length is not static).
 
-Layout: `_method` (the tableau as data, one step's stage solves), `_slopes` (F, ∂F/∂t and J at a
-point), `_linear` (W⁻¹ and the variation check, one run or a batch), `_step_control` (landing on
-breaks, error norm, step size), `_saving` (step records, interpolant, save times), `_events` (the stop
-event's location) and `_integrator` (`integrate`, the loop that composes them).
+Layout: ``_method`` (the tableau as data, one step's stage solves), ``_slopes`` (F, ∂F/∂t and J at a point),
+``_linear`` (W⁻¹ and the variation check, one run or a batch), ``_step_control`` (landing on breaks, error
+norm, step size), ``_saving`` (step records, interpolant, save times), ``_events`` (the stop event's location)
+and ``_integrator`` (`integrate`, the loop that composes them).
 """
 
 from growjax.simulation.rosenbrock._integrator import EVENT, FAILED, OK, Result, integrate

@@ -2,13 +2,22 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import jax
 import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Bool, Float
 
 from growjax.simulation.rosenbrock._saving import Steps, hermite
 
 
-def locate_event(event, steps: Steps, occurred, y_final, iterations: int = 60):
+def locate_event(
+    event: Callable[[Float[Array, ""], Float[Array, " n"]], Float[Array, ""]],
+    steps: Steps,
+    occurred: Bool[ArrayLike, ""],
+    y_final: Float[Array, "B n"],
+    iterations: int = 60,
+) -> tuple[Float[Array, ""], Float[Array, "B n"]]:
     """(time s, state block (B, n)) where ``event(t, y)`` (decreasing through zero) has its root inside the last
     recorded step, by bisection on its cubic Hermite interpolant of the state (row 0); where not ``occurred``, that
     step's end and ``y_final``."""

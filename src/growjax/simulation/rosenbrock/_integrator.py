@@ -1,4 +1,4 @@
-"""The driver: :func:`integrate` steps a Rosenbrock method from t0 to t1, one run or a batch in one loop, composing
+"""The driver: `integrate` steps a Rosenbrock method from t0 to t1, one run or a batch in one loop, composing
 its stage solves (`_method`), the field's slopes (`_slopes`), W⁻¹ and the variation check
 (`_linear`), step control (`_step_control`), saving (`_saving`) and the stop event (`_events`).
 """
@@ -8,7 +8,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 from collections.abc import Callable
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -25,7 +25,7 @@ OK, EVENT, FAILED = 0, 1, 2
 
 
 class Result(NamedTuple):
-    """What :func:`integrate` returns. ``status``: 0 reached t1, 1 the event stopped it, 2 failed.
+    """What `integrate` returns. ``status``: 0 reached t1, 1 the event stopped it, 2 failed.
 
     ``y_final``: (B, n) the state block at ``t_final``.  ``saved``: (T, B, n) the dense solution at ``save_ts``
     (None without them; then ``steps`` holds every accepted step, else only the last).
@@ -59,7 +59,7 @@ class _Carry(NamedTuple):
 
 @dataclasses.dataclass(frozen=True)
 class _Setup:
-    """What every attempt of one :func:`integrate` call shares (its arguments of the same names)."""
+    """What every attempt of one `integrate` call shares (its arguments of the same names)."""
 
     block: Callable  # (t, z, args) → the block field (B, n)
     slopes: Callable  # (t, z, args, t_left=None) → (F, ∂F/∂t, J, F_left): slopes.block_slopes
@@ -93,7 +93,7 @@ def integrate(
     t0: float,
     t1: float,
     *,
-    args=None,
+    args: Any = None,
     breaks: jax.Array,
     jumps: jax.Array,
     rtol: float,
@@ -112,74 +112,87 @@ def integrate(
     save_ts: jax.Array | None = None,
     small_loops: bool = False,
 ) -> Result:
-    """Integrate y' = f(t, y) from t0 to t1 (y: flat (n,) array of states scaled to O(1)), and optionally
-    its forward sensitivities S' = ∂f/∂y S + ∂f/∂θ d (one row per direction d) under the same error control.
+    """Integrate y' = f(t, y) from t0 to t1 (s), and optionally its forward sensitivities S' = ∂f/∂y S + ∂f/∂θ d
+    (one row per direction d) under the same error control.
+
+    The state block is (1 + p, n): row 0 the state, rows 1… the sensitivities, every row sharing W = I − hγJ, J
+    the state's Jacobian (the block-diagonal W a W-method allows). The error norm is the largest of the rows'
+    weighted RMS norms, so a sensitivity the step cannot follow (a stiff mode switched on inside it) rejects it.
 
     Args:
-        field: f(t, y, args) → (n,).
+        field: f(t, y, args) → (n,), y a flat (n,) array of states scaled to O(1).
+        y0: (n,) the state at t0.
+        t0: the start, s.
+        t1: the end, s.
         args: the field's parameters (a pytree), passed to every callback.
-        breaks: sorted, distinct times (s) the steps land on (input jumps and slope breaks); any beyond t1 are ignored.
-        jumps: bool flags, same shape: a jump (approached from the left, left from the right).
-        rtol, atol: error control on the scaled states (weighted RMS norm).
+        breaks: sorted, distinct times (s) the steps land on (input jumps and slope breaks); any beyond t1 ignored.
+        jumps: bool flags, the shape of ``breaks``: a jump (approached from the left, left from the right).
+        rtol: relative tolerance on the scaled states (weighted RMS norm).
+        atol: absolute tolerance on the scaled states.
         max_steps: budget of accepted steps (the size of the recorded dense solution).
         tangent_field: ``(t, y, S, args) → (f(t, y), S')`` with S of shape (p, n); None: no sensitivities.
-        s0: (p, n) sensitivities at t0.  s_atol: (p,) absolute tolerance of each sensitivity row;
-            s_rtol: their relative tolerance (default ``rtol``).
-        forward_jacobian: with ``tangent_field``, the state's Jacobian in forward mode instead of by forward
-            differences (:func:`growjax.simulation.rosenbrock._slopes.jacobian`).
+        s0: (p, n) sensitivities at t0.
+        s_atol: (p,) absolute tolerance of each sensitivity row.
+        s_rtol: their relative tolerance (default ``rtol``).
+        forward_jacobian: with ``tangent_field``, the state's Jacobian in forward mode, not by forward differences.
+        dt0: the first step, s.
+        dtmax: the largest step, s.
         event: ``g(t, y, args)``, decreasing through zero where the run must stop (e.g. 1 − p/p_limit).
+        tableau: the Rosenbrock method.
         batched: ``y0``, ``args``, ``breaks``, ``jumps`` (and ``s0``, ``s_atol``) carry a leading batch axis B
-            of independent problems, stepped together: one loop while any member runs, each member's
-            attempt a no-op once it has stopped, its steps written in place. (``jax.vmap`` of the
-            unbatched loop would instead select between the old and new step records of every member
-            at every attempt: O(B · max_steps) per attempt.) Every output gains the leading axis.
-        save_ts: sorted times (T,) s (with ``batched``, (B, T)) at which to return the solution
-            (``Result.saved``), interpolated in the loop as each step is taken, so that no step record is
-            kept (only the last step, for the event). A step then covers at most ``SAVE_WINDOW`` of them
-            (binding only where they lie closer than about dtmax / (SAVE_WINDOW − 1)); times beyond the end get its
-            state.
-        small_loops: a single run writes W⁻¹ in elementwise operations (`growjax.simulation.rosenbrock._linear.inverse`)
-            instead of a LAPACK call, so that XLA:CPU can compile its whole loop into one kernel
-            (`growjax.simulation.xla_flags`).
+            of independent problems, stepped together in one loop while any member runs (each member's attempt a
+            no-op once it has stopped, its steps written in place). Every output gains the leading axis.
+        save_ts: (T,) sorted times, s ((B, T) with ``batched``), at which to return the solution (``Result.saved``),
+            interpolated as each step is taken, so that no step record is kept (only the last step, for the
+            event). A step then covers at most ``SAVE_WINDOW`` of them (binding only where they lie closer than
+            about dtmax / (SAVE_WINDOW − 1)); times beyond the end get its state.
+        small_loops: a single run writes W⁻¹ in elementwise operations (`inverse`) instead of a LAPACK call, so
+            that XLA:CPU can compile its whole loop into one kernel (`growjax.simulation.xla_flags`).
 
-    The state block is (1 + p, n): row 0 the state, rows 1… the sensitivities. Every row shares
-    W = I − hγJ, J the state's Jacobian (the block-diagonal W a W-method allows). The error norm
-    is the largest of the rows' weighted RMS norms, so a sensitivity that the step cannot follow
-    (a stiff mode switched on inside it) rejects the step.
+    Returns:
+        The `Result`.
     """
     y0 = jnp.asarray(y0)
-    dtype = y0.dtype
-    s = _Setup(
-        functools.partial(slopes.block, field, tangent_field),
-        functools.partial(
+    settings = dict(rtol=rtol, atol=atol, s_rtol=s_rtol, max_steps=max_steps, dt0=dt0, dtmax=dtmax, event=event)
+    flags = dict(forward_jacobian=forward_jacobian, tableau=tableau, batched=batched, small_loops=small_loops)
+    s = _setup(field, tangent_field, y0.dtype, t0, t1, saving=save_ts is not None, **flags, **settings)
+    if not batched:
+        return _run_one(s, y0, args, breaks, jumps, s0, s_atol, save_ts)
+    return _run_batch(s, y0, args, breaks, jumps, s0, s_atol, save_ts)
+
+
+def _setup(field, tangent_field, dtype, t0, t1, *, forward_jacobian, tableau, batched, **settings) -> _Setup:
+    """The `_Setup` of one `integrate` call (``settings``: its fields of the same names)."""
+    return _Setup(
+        block=functools.partial(slopes.block, field, tangent_field),
+        slopes=functools.partial(
             slopes.block_slopes, field, tangent_field, batched=batched, forward_jacobian=forward_jacobian
         ),
-        tableau.coefficients(dtype),
-        jnp.asarray(t0, dtype),
-        jnp.asarray(t1, dtype),
-        rtol,
-        atol,
-        s_rtol,
-        tangent_field is not None,
-        max_steps,
-        dt0,
-        dtmax,
-        event,
-        batched,
-        save_ts is not None,
-        small_loops,
-        dtype,
+        coef=tableau.coefficients(dtype),
+        t_start=jnp.asarray(t0, dtype),
+        t_end=jnp.asarray(t1, dtype),
+        sensitivities=tangent_field is not None,
+        batched=batched,
+        dtype=dtype,
+        **settings,
     )
-    if not batched:
-        prob = (*_problem(s, y0, breaks, jumps, s0, s_atol), saving.padded(save_ts, dtype), args)
-        final = jax.lax.while_loop(
-            lambda c: c.status < 0, functools.partial(_attempt, s, prob), _init(s, prob[0], args, prob[3], prob[5])
-        )
-        return _finish(s, prob, final)
+
+
+def _run_one(s: _Setup, y0, args, breaks, jumps, s0, s_atol, save_ts) -> Result:
+    """One run's loop of attempts, and its result."""
+    prob = (*_problem(s, y0, breaks, jumps, s0, s_atol), saving.padded(save_ts, s.dtype), args)
+    final = jax.lax.while_loop(
+        lambda c: c.status < 0, functools.partial(_attempt, s, prob), _init(s, prob[0], args, prob[3], prob[5])
+    )
+    return _finish(s, prob, final)
+
+
+def _run_batch(s: _Setup, y0, args, breaks, jumps, s0, s_atol, save_ts) -> Result:
+    """A batch's one loop of attempts while any member runs, and the members' results."""
     probs = jax.vmap(functools.partial(_problem, s))(y0, breaks, jumps, s0, s_atol)
     probs = (
         *probs,
-        None if save_ts is None else jax.vmap(functools.partial(saving.padded, dtype=dtype))(save_ts),
+        None if save_ts is None else jax.vmap(functools.partial(saving.padded, dtype=s.dtype))(save_ts),
         args,
     )
     carry0 = jax.vmap(functools.partial(_init, s))(probs[0], args, probs[3], probs[5])
@@ -329,7 +342,7 @@ def _outcome(s: _Setup, carry: _Carry, args, live, accept, taken, t_next, y1, h_
 
 
 def _finish(s: _Setup, prob, final: _Carry) -> Result:
-    """One member's :class:`Result` from its last carry: the event located inside its last step, the save times
+    """One member's `Result` from its last carry: the event located inside its last step, the save times
     after that step given its end state."""
     t_final, y_final = final.t, final.y
     if s.event is not None:

@@ -10,11 +10,12 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, Float
 
 
 @dataclasses.dataclass(frozen=True)
@@ -42,7 +43,7 @@ class RosenbrockTableau:
         """γ_i = γ + Σ_j γ_ij, the weights of the time derivative."""
         return self.gamma_diag + self.gamma.sum(axis=1)
 
-    def coefficients(self, dtype) -> Coefficients:
+    def coefficients(self, dtype: jnp.dtype) -> Coefficients:
         """The coefficients a step uses, as arrays of ``dtype``."""
         return Coefficients(
             jnp.asarray(self.alpha, dtype),
@@ -91,7 +92,19 @@ def _ros34pw2() -> RosenbrockTableau:
 ROS34PW2 = _ros34pw2()
 
 
-def step(coef: Coefficients, block: Callable, t, y, f0, f_t, jac, w_inv, h, args, looped: bool):
+def step(
+    coef: Coefficients,
+    block: Callable,
+    t: Float[Array, ""],
+    y: Float[Array, "B n"],
+    f0: Float[Array, "B n"],
+    f_t: Float[Array, "B n"],
+    jac: Float[Array, "n n"],
+    w_inv: Float[Array, "n n"],
+    h: Float[Array, ""],
+    args: Any,
+    looped: bool,
+) -> tuple[Float[Array, "B n"], Float[Array, "B n"]]:
     """(y1, error estimate) of one step of size ``h`` s from (t, y), both shaped as the block y (B, n).
 
     ``block(t, z, args)`` is the block field; ``f0`` (B, n) its value at (t⁺, y), ``f_t`` (B, n) its time

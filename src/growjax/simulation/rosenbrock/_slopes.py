@@ -1,5 +1,5 @@
 """The field a step needs at one point: the block field F (state and sensitivities), ∂F/∂t and the state's
-Jacobian J, all held constant under differentiation except F (a W-method: see :mod:`growjax.simulation.rosenbrock`).
+Jacobian J, all held constant under differentiation except F (a W-method: see `growjax.simulation.rosenbrock`).
 
 The state block z is (1 + p, n): row 0 the state, rows 1… its sensitivities (p = 0 without them).
 """
@@ -8,12 +8,16 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable
+from typing import Any
 
 import jax
 import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
 
 
-def block(field: Callable, tangent_field: Callable | None, t, z, args):
+def block(
+    field: Callable, tangent_field: Callable | None, t: Float[ArrayLike, ""], z: Float[Array, "1+p n"], args: Any
+) -> Float[Array, "1+p n"]:
     """The block field at (t, z) (1 + p, n): ``field(t, y, args)`` (n,) alone, or with the sensitivities' slopes
     from ``tangent_field(t, y, S, args)`` → (f, S')."""
     if tangent_field is None:
@@ -22,7 +26,9 @@ def block(field: Callable, tangent_field: Callable | None, t, z, args):
     return jnp.concatenate([f[None], ds])
 
 
-def jacobian(field, t, y, f0, forward: bool = False):
+def jacobian(
+    field: Callable, t: Float[ArrayLike, ""], y: Float[Array, " n"], f0: Float[Array, " n"], forward: bool = False
+) -> Float[Array, "n n"]:
     """J = ∂f/∂y at (t, y), held constant under differentiation: by forward differences from f0 = f(t, y),
     or in forward mode (``forward``: one ``jax.jvp`` per column, the primal evaluated once).
 
@@ -41,13 +47,15 @@ def jacobian(field, t, y, f0, forward: bool = False):
     return jax.lax.stop_gradient((cols - f0[:, None]) / dy[None, :])
 
 
-def forward_slopes(field, t, y, t_left=None):
+def forward_slopes(
+    field: Callable, t: Float[ArrayLike, ""], y: Float[Array, " n"], t_left: Float[ArrayLike, ""] | None = None
+) -> tuple[Float[Array, "1 n"], Float[Array, "1 n"], Float[Array, "n n"], Float[Array, "1 n"]]:
     """(F, ∂F/∂t, J, F_left) of a plain run's field at (t, y) in forward mode: one ``jax.jvp`` along each state
     direction and along time, the primal evaluated once; F_left = F(t_left, y) (default F). ∂F/∂t is the
     derivative of the input's piece that starts at t. Shapes as the state block: (1, n), (1, n), (n, n), (1, n).
 
-    Used for batches: there it costs less than the difference columns (500-set sweep 1.35 → 1.06 s), in a
-    single run more (a 10 s simulation 18.5 → 28 ms, with the stage loop), at a longer compile (+1.6–2.1 s for the sweep).
+    Used for batches, where it costs less than the difference columns; in a single run it costs more, and it
+    compiles longer (``benchmarks/simulate.py``).
     """
     t, y = jax.lax.stop_gradient((t, y))
     units = jnp.eye(y.shape[0] + 1, dtype=y.dtype)
@@ -57,24 +65,32 @@ def forward_slopes(field, t, y, t_left=None):
     return f[None], f_t[None], jac, f_left[None]
 
 
-def jacobian_steps(y):
+def jacobian_steps(y: Float[Array, " n"]) -> Float[Array, " n"]:
     """Forward-difference steps of the Jacobian's columns: √ε · max(|y|, 1)."""
     return jnp.sqrt(jnp.finfo(y.dtype).eps) * jnp.maximum(jnp.abs(jax.lax.stop_gradient(y)), 1.0)
 
 
-def time_step(t):
+def time_step(t: Float[ArrayLike, ""]) -> Float[Array, ""]:
     """Forward-difference step of ∂F/∂t, s: √ε · max(|t|, 1)."""
     return jnp.sqrt(jnp.finfo(jnp.result_type(t)).eps) * jnp.maximum(jnp.abs(t), 1.0)
 
 
 def block_slopes(
-    field: Callable, tangent_field: Callable | None, t, z, args, t_left=None, *, batched: bool, forward_jacobian: bool
-):
+    field: Callable,
+    tangent_field: Callable | None,
+    t: Float[ArrayLike, ""],
+    z: Float[Array, "1+p n"],
+    args: Any,
+    t_left: Float[ArrayLike, ""] | None = None,
+    *,
+    batched: bool,
+    forward_jacobian: bool,
+) -> tuple[Float[Array, "1+p n"], Float[Array, "1+p n"], Float[Array, "n n"], Float[Array, "1+p n"]]:
     """(F, ∂F/∂t, J, F_left) at (t, z): the block field (1 + p, n), its time derivative (forward difference,
     (1 + p, n)), the state's Jacobian (n, n) and the block field at ``t_left`` (default t). The block's evaluations
     are one vmapped call (each copy of the field in the program costs compile time), F_left apart in one run.
-    A batch (``batched``) without sensitivities takes them in forward mode instead (:func:`forward_slopes`);
-    ``forward_jacobian``: with sensitivities, J in forward mode (:func:`jacobian`)."""
+    A batch (``batched``) without sensitivities takes them in forward mode instead (`forward_slopes`);
+    ``forward_jacobian``: with sensitivities, J in forward mode (`jacobian`)."""
     if tangent_field is None and batched:
         return forward_slopes(lambda t, y: field(t, y, args), t, z[0], t_left)
     n = z.shape[-1]

@@ -8,9 +8,16 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Bool, Float
 
 
-def land(t, h, t_end, t_break, is_jump):
+def land(
+    t: Float[Array, ""],
+    h: Float[Array, ""],
+    t_end: Float[ArrayLike, ""],
+    t_break: Float[Array, ""],
+    is_jump: Bool[Array, ""],
+) -> tuple[Float[Array, ""], Float[Array, ""], Bool[Array, ""], Bool[Array, ""]]:
     """Where a step of proposed size ``h`` s from ``t`` s ends, with the next break at ``t_break`` s (a jump if
     ``is_jump``) and the run's end at ``t_end`` s. Returns (t_next, t_after, on_break, is_jump): the step's end,
     the time the next step starts from (one ulp past a jump landed on, else t_next), whether it lands on the break
@@ -25,7 +32,13 @@ def land(t, h, t_end, t_break, is_jump):
     return t_next, t_after, on_break, is_jump
 
 
-def error_norm(err, y, y1, tol_abs, tol_rel):
+def error_norm(
+    err: Float[Array, "B n"],
+    y: Float[Array, "B n"],
+    y1: Float[Array, "B n"],
+    tol_abs: Float[ArrayLike, "B 1"],
+    tol_rel: Float[ArrayLike, "B 1"],
+) -> Float[Array, ""]:
     """The step's error norm: the largest of the block's rows' weighted RMS norms of ``err`` (B, n), weights
     ``tol_abs + tol_rel · max(|y|, |y1|)`` (tolerances (B, 1)); accepted at ≤ 1."""
     scale = tol_abs + tol_rel * jnp.maximum(jnp.abs(y), jnp.abs(y1))
@@ -33,8 +46,19 @@ def error_norm(err, y, y1, tol_abs, tol_rel):
 
 
 def next_size(
-    h, err_norm, *, err_prev, order: int, accept, rejected_last, variation, finite, shortened, h_proposed, dtmax
-):
+    h: Float[Array, ""],
+    err_norm: Float[Array, ""],
+    *,
+    err_prev: Float[Array, ""],
+    order: int,
+    accept: Bool[Array, ""],
+    rejected_last: Bool[Array, ""],
+    variation: Float[Array, ""],
+    finite: Bool[Array, ""],
+    shortened: Bool[Array, ""],
+    h_proposed: Float[Array, ""],
+    dtmax: float,
+) -> Float[Array, ""]:
     """The size (s) of the next attempt after one of size ``h`` s with error norm ``err_norm``.
 
     PI control (Gustafsson; gains 0.6/k, 0.2/k for a method of order k, measured best here) on ``err_prev``, the
