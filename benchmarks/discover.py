@@ -33,6 +33,7 @@ from growjax.calibration import Likelihood
 from growjax.calibration import tolerance as tl
 from growjax.data import experiment as ex
 from growjax.data import synthetic as sy
+from growjax.data.sets import ExperimentSet
 from growjax.discover import _candidates as gd_fits
 from growjax.model import effects as fx
 from growjax.model import params as gp
@@ -73,16 +74,13 @@ def one_run(effect, magnitude, seed, t_end, profile=False, discrepancy="matern32
     exp = sy.make_experiment(effect, magnitude, seed=seed, t_end=t_end)
     cfg = gj.Config(t1=t_end)
     inputs = ex.to_inputs(exp, "forward", gj.reference(), cfg.t0, cfg.t1)
-    keep = exp.time >= cfg.t0
     timer = Profile() if profile else None
     if timer is not None:
         gd_fits._linearised = timer
     start = time.perf_counter()
     try:
         res = gd.discover(
-            exp.time[keep],
-            exp["robot_length_m"][keep],
-            inputs,
+            ExperimentSet.single(exp, inputs=inputs),
             config=cfg,
             likelihood=Likelihood(discrepancy=discrepancy, tolerances=tolerances),
         )

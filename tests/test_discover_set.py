@@ -13,7 +13,6 @@ import growjax as gj
 from growjax import cli
 from growjax import discover as gd
 from growjax.calibration import likelihood_ratio as lrt
-from growjax.data import experiment as ex
 from growjax.data import sets as xs
 
 DISCOVERY_SET = Path(str(files("growjax.data") / "datasets" / "discovery_set"))
@@ -39,15 +38,15 @@ def test_the_threshold_is_the_single_rule_for_one_robot_and_holds_its_rate_for_s
 def test_bad_input_is_refused_before_any_fit():
     exps = xs.read([DISCOVERY_SET / "set.toml"])
     with pytest.raises(ValueError, match="unknown effect 'folding'"):
-        gd.discover_set(exps, candidates=["retraction_folding", "folding"])
+        gd.discover(exps, candidates=["retraction_folding", "folding"])
     with pytest.raises(ValueError, match="named twice"):
-        gd.discover_set(exps, candidates=["fluid_leak", "fluid_leak"])
+        gd.discover(exps, candidates=["fluid_leak", "fluid_leak"])
     with pytest.raises(ValueError, match="effect_scope"):
-        gd.discover_set(exps, candidates=["fluid_leak"], effect_scope="membrane")
+        gd.discover(exps, candidates=["fluid_leak"], effect_scope="membrane")
     with pytest.raises(ValueError, match="false_positive_rate"):
-        gd.discover_set(exps, candidates=["fluid_leak"], false_positive_rate=1.5)
+        gd.discover(exps, candidates=["fluid_leak"], false_positive_rate=1.5)
     with pytest.raises(ValueError, match="unknown parameter 'Q'"):
-        gd.discover_set(exps, candidates=["fluid_leak"], base_free=["Q@robot"])
+        gd.discover(exps, candidates=["fluid_leak"], base_free=["Q@robot"])
 
 
 def test_the_command_line_refuses_a_bad_set_or_effect_with_exit_2_and_one_line(tmp_path, capsys):
@@ -70,14 +69,13 @@ def test_the_command_line_refuses_a_bad_set_or_effect_with_exit_2_and_one_line(t
 def folding_set():
     exps = xs.read([DISCOVERY_SET / "set.toml"])
     truth = json.loads((DISCOVERY_SET / "pulse_slow.json").read_text())
-    return exps, truth, gd.discover_set(exps, config=CONFIG, candidates=CANDIDATES)
+    return exps, truth, gd.discover(exps, config=CONFIG, candidates=CANDIDATES)
 
 
 @pytest.mark.slow
 def test_the_set_names_a_folding_that_no_experiment_alone_can(folding_set):
     """A small retraction folding hidden by the reference configuration in three short runs of one robot: each run
-    alone leaves it under the threshold, by the set's procedure and by single-experiment discovery (which names
-    nothing); the set's joint fits name it, their 2ΔlogL above every run's, its size's
+    alone (single-experiment discovery) leaves it under the threshold and names nothing; the set's joint fits name it, their 2ΔlogL above every run's, its size's
     90 % interval covering the truth, and no structure left in any run's residuals."""
     exps, truth, together = folding_set
     assert together.effect == "retraction_folding", gd.set_summary_text(together)
@@ -85,14 +83,10 @@ def test_the_set_names_a_folding_that_no_experiment_alone_can(folding_set):
     lo, hi = together.parameters[label]["interval_90"]
     assert lo <= truth["magnitude"] <= hi
     lr_set = together.evidence[0]["retraction_folding"]["lr_statistic"]
-    for run in exps.runs:
-        alone = gd.discover_set(xs.ExperimentSet((run,)), config=CONFIG, candidates=CANDIDATES)
-        assert alone.effect != "retraction_folding", (run.name, gd.set_summary_text(alone))
+    for run in exps.runs:  # a set of one takes single-experiment discovery
+        alone = gd.discover(xs.ExperimentSet((run,)), config=CONFIG, candidates=CANDIDATES, workers=1)
+        assert alone.effect == "none", (run.name, gd.summary_text(alone))
         assert alone.evidence[0]["retraction_folding"]["lr_statistic"] < min(alone.threshold, lr_set)
-        inputs = ex.to_inputs(run.experiment, "forward", run.base(), CONFIG.t0, CONFIG.t1)
-        single = gd.discover(run.times, run.length, inputs, config=CONFIG, candidates=CANDIDATES, workers=1)
-        assert single.effect == "none", (run.name, gd.summary_text(single))  # single discovery: nothing named
-        assert single.evidence[0]["retraction_folding"]["lr_statistic"] < lr_set
     assert not together.misfit_after["structured"]
     assert all(r["rmse_after_m"] < 1.2 * truth["noise_sd"]["robot_length_m"] for r in together.runs)
     assert not together.confounded_with and together.fits == 1 + len(CANDIDATES)
@@ -106,7 +100,7 @@ def test_no_effect_is_named_on_a_clean_set_on_a_rig_off_its_nominal_values():
     exps = xs.ExperimentSet(
         tuple(xs.Run(r.name, r.experiment.window(CONFIG.t1 + 1e-9), robot=r.robot, rig=r.rig) for r in runs)
     )  # the length alone, 3 s: the folding set's programs serve it
-    res = gd.discover_set(exps, config=CONFIG, candidates=CANDIDATES)
+    res = gd.discover(exps, config=CONFIG, candidates=CANDIDATES)
     assert res.effect == "none", gd.set_summary_text(res)
     assert not any(s["clears_threshold"] for s in res.evidence[0].values())
     assert not res.effects and not res.confounded_with
