@@ -10,9 +10,11 @@ import pytest
 from scipy import stats
 
 import growjax as gj
+from growjax import calibration as cal
 from growjax import cli
 from growjax import discover as gd
 from growjax.calibration import likelihood_ratio as lrt
+from growjax.data import experiment as ex
 from growjax.data import sets as xs
 
 DISCOVERY_SET = Path(str(files("growjax.data") / "datasets" / "discovery_set"))
@@ -104,3 +106,62 @@ def test_no_effect_is_named_on_a_clean_set_on_a_rig_off_its_nominal_values():
     assert res.effect == "none", gd.set_summary_text(res)
     assert not any(s["clears_threshold"] for s in res.evidence[0].values())
     assert not res.effects and not res.confounded_with
+
+
+# -- less trapped air than nominal: a signed effect found below zero, by one record and by two ----------------
+
+LESS_AIR = -0.003  # the trapped-air effect's extra air fraction: α 0.005 → 0.002
+AIR_CANDIDATES = ("trapped_air", "active_channel_force")
+
+
+def _less_air(amplitude: float, seed: int, fidelity: str) -> xs.Run:
+    """A 2 s run made by the ``fidelity`` configuration under a pulse train of ``amplitude`` Pa (catheter 4 mm) with
+    less air than nominal (`LESS_AIR`), its length with 0.2 mm of seeded noise, as a run with the inputs it ran."""
+    inputs = gj.Inputs(catheter_length=gj.Constant(0.004), pressure_demand=gj.PulseTrain(amplitude=amplitude))
+    made = gj.with_effects(gj.reference(), gj.effects.TrappedAir(extra_fraction=LESS_AIR))
+    times = np.round(np.arange(1, 201) * 0.01, 10)
+    traj = gj.simulate(made, inputs, gj.Config(fidelity=fidelity, t1=2.0), ts=times)
+    noisy = np.asarray(traj.length) + np.random.default_rng(seed).normal(0.0, 2e-4, times.size)
+    return xs.Run(f"pulse {amplitude / 1e3:.0f} kPa", ex.from_arrays(times, noisy), inputs=inputs)
+
+
+def _names_less_air(res) -> list[float]:
+    """The estimates of the extra air fraction (one per copy) of a discovery that names trapped air below zero with
+    every 90 % interval covering the truth."""
+    text = gd.summary_text(res) if isinstance(res, gd.DiscoveryResult) else gd.set_summary_text(res)
+    assert res.effect == "trapped_air", text
+    sizes = {k: p for k, p in res.parameters.items() if k.startswith("trapped_air.extra_fraction")}
+    assert sizes, text
+    for p in sizes.values():
+        lo, hi = p["interval_90"]
+        assert p["estimate"] < 0.0 and lo <= LESS_AIR <= hi, text
+    return [p["estimate"] for p in sizes.values()]
+
+
+@pytest.mark.slow
+def test_less_trapped_air_than_nominal_is_named_below_zero_from_one_reference_made_record_and_from_two():
+    """Records made by the reference configuration with less air than nominal: single-experiment discovery (a set
+    of one) and the set's joint fits (two records, one robot) agree, each naming trapped air with a negative
+    extra fraction whose 90 % interval covers the truth."""
+    runs = (_less_air(150e3, 1, "reference"), _less_air(100e3, 2, "reference"))
+    one = gd.discover(xs.ExperimentSet(runs[:1]), config=gj.Config(t1=2.0), candidates=AIR_CANDIDATES, workers=1)
+    assert isinstance(one, gd.DiscoveryResult)
+    two = gd.discover(xs.ExperimentSet(runs), config=gj.Config(t1=2.0), candidates=AIR_CANDIDATES)
+    assert isinstance(two, gd.SetDiscoveryResult)
+    _names_less_air(one)
+    _names_less_air(two)
+
+
+def test_less_trapped_air_than_nominal_is_named_below_zero_by_a_set_of_one_and_by_a_set_of_two():
+    """The cheap companion: records made by the fast configuration, trapped air the one candidate, independent noise
+    and the rig taken as known. A set of one (the single-experiment path) and a set of two (the joint fits, whose
+    trapped air moves in a linear coordinate over its signed range) both name it below zero, covering the truth."""
+    runs = (_less_air(150e3, 1, "fast"), _less_air(100e3, 2, "fast"))
+    options = dict(
+        config=gj.Config(t1=2.0),
+        candidates=("trapped_air",),
+        likelihood=cal.Likelihood(discrepancy="none", tolerances={}),
+    )
+    (alone,) = _names_less_air(gd.discover(xs.ExperimentSet(runs[:1]), multistart=False, workers=1, **options))
+    (both,) = _names_less_air(gd.discover(xs.ExperimentSet(runs), scout=0, **options))
+    assert both == pytest.approx(alone, abs=0.001)
