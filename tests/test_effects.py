@@ -25,6 +25,7 @@ from conftest import REPO
 import growjax as gj
 from growjax.data import experiment as ex
 from growjax.data import synthetic as sy
+from growjax.data.synthetic import solve as synthetic_solve
 from growjax.model import effects as fx
 
 sys.path.insert(0, str(REPO / "data"))
@@ -394,7 +395,7 @@ def test_make_experiment_noise_seeds_cache_and_format(monkeypatch, tmp_path, tra
         calls.append(config)
         return gj.simulate(params, model_inputs, config.replace(fidelity="fast", rtol=None, atol=None), ts=ts)
 
-    monkeypatch.setattr(sy, "_simulate", fake)
+    monkeypatch.setattr(synthetic_solve, "reference_solve", fake)
     sy.clear_cache()
     kw = {"inputs": "synthetic", "t_end": T1}
     a = sy.make_experiment("active_channel_force", None, seed=1, **kw)

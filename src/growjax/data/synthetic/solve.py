@@ -14,7 +14,7 @@ from growjax.model.effects import Effect
 from .hidden import hidden_effect_parameters, magnitude_field, make_effect
 from .inputs import resolve_inputs
 
-__all__ = ["CACHE_SIZE", "clear_cache", "noise_free"]
+__all__ = ["CACHE_SIZE", "clear_cache", "noise_free", "reference_solve"]
 
 _CACHE: collections.OrderedDict = collections.OrderedDict()
 CACHE_SIZE = 64
@@ -40,7 +40,7 @@ def _effect_spec(effect, magnitude):
     return instance, effect, float(getattr(instance, magnitude_field(instance)))
 
 
-def _simulate(params, model_inputs, config: gj.Config, ts) -> gj.Trajectory:
+def reference_solve(params, model_inputs, config: gj.Config, ts) -> gj.Trajectory:
     """The one solve of the generator (``config`` is always the reference configuration)."""
     assert config.fidelity == "reference"
     return gj.simulate(params, model_inputs, config, ts=ts)
@@ -84,7 +84,7 @@ def noise_free(
     params = hidden_effect_parameters(instance, base_params, superset=superset)
     config = gj.Config(fidelity="reference", drive=drive, t1=float(time[-1]), rtol=rtol, atol=rtol)
     ts = np.concatenate([[config.t0], time]) if time[0] > config.t0 else time
-    traj = _simulate(params, model_inputs, config, ts)
+    traj = reference_solve(params, model_inputs, config, ts)
     status = int(traj.status)
     if status != gj.OK:
         raise RuntimeError(
