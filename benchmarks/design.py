@@ -41,7 +41,7 @@ the nominal rig with fresh white length noise under the design and under the pub
 to ``growjax.discover.discover`` (``--candidates``, default the whole catalogue); reported: how often discovery
 names the true effect (for the clean data: "none") under each input, beside each input's predicted min T.
 ``--with-first`` also reads each seed's designed experiment together with the first experiment made again on the
-same robot (the published pulse train over the shipped record, fresh noise): ``growjax.discover.discover_set``
+same robot (the published pulse train over the shipped record, fresh noise): ``growjax.discover.discover`` of the set
 over the two, one Y for the robot (``--design-from`` the pair's results file ``--truths retraction_folding
 trapped_air none --inputs design --with-first``).
 
@@ -290,9 +290,10 @@ def discriminate(args, known, exp, base) -> dict:
     """The model-discrimination check of ``--discriminate A B`` (see the module docstring)."""
     import growjax as gj
     from growjax import design as gd
+    from growjax.data import experiment as ex
     from growjax.data import synthetic as syn
     from growjax.data.sets import ExperimentSet
-    from growjax.discover import discover, discover_set
+    from growjax.discover import discover
 
     a, b = args.discriminate
     space = gd.DesignSpace(
@@ -333,12 +334,9 @@ def discriminate(args, known, exp, base) -> dict:
                 traj = gj.simulate(params, inp, maker, ts=np.concatenate([[maker.t0], times]))
                 length = np.asarray(traj.length)[1:] + rng.normal(0.0, float(known.hyper.noise), times.size)
                 found = discover(
-                    times,
-                    length,
-                    inp,
-                    base=known.base,
+                    ExperimentSet.single(ex.from_arrays(times, length), defaults=known.base, inputs=inp),
                     config=gj.Config(t1=args.duration),
-                    base_names=base_names,
+                    base_free=base_names,
                     candidates=args.candidates,
                 )
                 row[label] = {
@@ -351,7 +349,7 @@ def discriminate(args, known, exp, base) -> dict:
                         first_run(params, exp, base, maker, rng, float(known.hyper.noise)),
                         designed_run(params, space, x, exp, base, maker, rng, float(known.hyper.noise)),
                     )
-                    both = discover_set(
+                    both = discover(
                         ExperimentSet(runs), config=gj.Config(t1=float(exp.time[-1])), candidates=args.candidates
                     )
                     row["design with the first"] = {
@@ -476,7 +474,7 @@ def main():
         action="store_true",
         help="with --discriminate: also read each designed experiment together with the first one made "
         "again on the same robot (the published pulse train, fresh noise): discovery over the set "
-        "of the two (growjax.discover.discover_set, one Y for the robot)",
+        "of the two (growjax.discover.discover of the set, one Y for the robot)",
     )
     ap.add_argument(
         "--out",

@@ -31,6 +31,7 @@ from growjax.calibration import Likelihood
 from growjax.calibration import tolerance as tl
 from growjax.data import experiment as ex
 from growjax.data import synthetic as sy
+from growjax.data.sets import ExperimentSet
 from growjax.model import effects as fx
 from growjax.model import params as gp
 
@@ -43,12 +44,9 @@ def one_run(effect, magnitude, seed, t_end, discrepancy="matern32", tolerances=N
     exp = sy.make_experiment(effect, magnitude, seed=seed, t_end=t_end)
     cfg = gj.Config(t1=t_end)
     inputs = ex.to_inputs(exp, "forward", gj.reference(), cfg.t0, cfg.t1)
-    keep = exp.time >= cfg.t0
     start = time.perf_counter()
     res = gd.discover(
-        exp.time[keep],
-        exp["robot_length_m"][keep],
-        inputs,
+        ExperimentSet.single(exp, inputs=inputs),
         config=cfg,
         likelihood=Likelihood(discrepancy=discrepancy, tolerances=tolerances),
     )

@@ -24,6 +24,8 @@ import numpy as np
 import growjax as gj
 from growjax import discover as gd
 from growjax.calibration import Likelihood
+from growjax.data import experiment as ex
+from growjax.data.sets import ExperimentSet
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "benchmarks"))
@@ -87,7 +89,8 @@ def main():
     for label, data in sets:
         row = {"data": label}
         for kind in ("matern32", "none") if args.compare else ("matern32",):
-            res = gd.discover(t[keep], data, inputs, config=config, likelihood=Likelihood(discrepancy=kind))
+            one = ExperimentSet.single(ex.from_arrays(t[keep], data), inputs=inputs)
+            res = gd.discover(one, config=config, likelihood=Likelihood(discrepancy=kind))
             row[kind] = {
                 "effect": res.effect,
                 "effects": res.effects,

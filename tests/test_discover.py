@@ -7,7 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from conftest import REPO, ar1_noise, smooth_perturbation
+from conftest import REPO, ar1_noise, one_experiment, smooth_perturbation
 
 import growjax as gj
 from growjax import calibration as cal
@@ -65,6 +65,21 @@ def test_candidate_parameters_are_named_with_units_and_ranges():
         gd.candidate_parameter("gremlins")
 
 
+def test_discover_takes_an_experiment_set_and_refuses_bad_input_before_any_fit():
+    t = np.round(np.arange(1, 101) * 0.01, 10)
+    with pytest.raises(TypeError, match="ExperimentSet"):
+        gd.discover(t)
+    one = one_experiment(t, 0.01 + 0.01 * t)
+    with pytest.raises(ValueError, match="unknown effect 'folding'"):
+        gd.discover(one, candidates=["retraction_folding", "folding"])
+    with pytest.raises(ValueError, match="named twice"):
+        gd.discover(one, candidates=["fluid_leak", "fluid_leak"])
+    with pytest.raises(ValueError, match="configuration on the inverse drive"):
+        gd.discover(one, config=gj.Config(drive="inverse"), candidates=["fluid_leak"])
+    with pytest.raises(ValueError, match="no samples"):
+        gd.discover(one_experiment(t + 5.0, 0.01 + 0.01 * t), config=gj.Config(t1=2.0), candidates=["fluid_leak"])
+
+
 def _example(name):
     """A reference-made experiment (10 s, noise 0.2 mm, the shipped synthetic inputs) and its truth."""
     from growjax.data import synthetic as sy
@@ -83,7 +98,7 @@ def test_discover_on_reference_made_examples(name):
     cfg = gj.Config(t1=10.0)
     inputs = ex.to_inputs(exp, "forward", gj.reference(), cfg.t0, cfg.t1)
     keep = exp.time >= cfg.t0
-    res = gd.discover(exp.time[keep], exp["robot_length_m"][keep], inputs, config=cfg)
+    res = gd.discover(one_experiment(exp.time[keep], exp["robot_length_m"][keep], inputs), config=cfg)
     if name == "clean":
         assert res.effect == "none", gd.summary_text(res)
     elif truth.get("in_catalogue"):
@@ -111,9 +126,7 @@ def test_a_hidden_lag_is_fitted_in_its_own_basin_and_no_other_effect_is_claimed(
     inputs = ex.to_inputs(exp, "forward", gj.reference(), cfg.t0, cfg.t1)
     keep = exp.time >= cfg.t0
     res = gd.discover(
-        exp.time[keep],
-        exp["robot_length_m"][keep],
-        inputs,
+        one_experiment(exp.time[keep], exp["robot_length_m"][keep], inputs),
         config=cfg,
         candidates=("actuation_lag", "trapped_air", "fluid_leak"),
     )
@@ -139,11 +152,13 @@ def test_a_base_shift_the_fast_models_own_error_explains_is_no_confounding():
     cfg = gj.Config(t1=10.0)
     inputs = ex.to_inputs(exp, "forward", gj.reference(), cfg.t0, cfg.t1)
     keep = exp.time >= cfg.t0
-    res = gd.discover(exp.time[keep], exp["robot_length_m"][keep], inputs, config=cfg)
+    res = gd.discover(one_experiment(exp.time[keep], exp["robot_length_m"][keep], inputs), config=cfg)
     assert res.effect == "none" and not res.confounded_with, gd.summary_text(res)
     assert 2.0 < res.trade_allowance < 50.0
     exact = cal.Likelihood(model_error=0.0)
-    strict = gd.discover(exp.time[keep], exp["robot_length_m"][keep], inputs, config=cfg, likelihood=exact)
+    strict = gd.discover(
+        one_experiment(exp.time[keep], exp["robot_length_m"][keep], inputs), config=cfg, likelihood=exact
+    )
     assert strict.effect == "confounded" and strict.trade_allowance == 0.0, gd.summary_text(strict)
     for name in strict.confounded_with:  # with -s: what the base-held fits gave the confounded candidates
         s = strict.evidence[0][name]
@@ -175,7 +190,7 @@ def _small_example(name):
 def _shipped(name, **kw):
     """Discovery on a shipped example (:func:`_small_example`) with the small candidates, and its truth."""
     times, length, inputs, cfg = _small_example(name)
-    res = gd.discover(times, length, inputs, config=cfg, candidates=SMALL_CANDIDATES, **kw)
+    res = gd.discover(one_experiment(times, length, inputs), config=cfg, candidates=SMALL_CANDIDATES, **kw)
     return res, json.loads((SHIPPED / f"{name}.json").read_text())
 
 
@@ -262,6 +277,6 @@ def test_discovery_leaves_a_small_smooth_discrepancy_to_the_discrepancy_term(per
     t, length, inputs, cfg = _small_example("clean")
     rng = np.random.default_rng(5)  # one data set: the family-wise false-positive rate is 5 %, see the benchmark
     extra = smooth_perturbation(rng, t, 1e-4, 0.8) if perturbation == "smooth" else ar1_noise(rng, t, 2e-4, 0.2)
-    res = gd.discover(t, length + extra, inputs, config=cfg, candidates=SMALL_CANDIDATES)
+    res = gd.discover(one_experiment(t, length + extra, inputs), config=cfg, candidates=SMALL_CANDIDATES)
     assert res.effect == "none" and not res.confounded_with, gd.summary_text(res)
     assert json.dumps(res.report(), default=float)  # the report stays serialisable with the discrepancy's fields

@@ -25,6 +25,7 @@ from conftest import REPO
 import growjax as gj
 from growjax.data import experiment as ex
 from growjax.data import synthetic as sy
+from growjax.data.synthetic import solve as synthetic_solve
 from growjax.model import effects as fx
 
 sys.path.insert(0, str(REPO / "data"))
@@ -76,7 +77,7 @@ def traces(inputs):
 # -- (a) zero means absent ----------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("name", list(sy.ALL_EFFECTS))
+@pytest.mark.parametrize("name", list(sy.known_effects()))
 def test_an_effect_at_zero_contributes_nothing(name):
     """Each hook of an effect at its default (zero) parameters contributes exactly nothing, at random instants."""
     effect = sy.effect_class(name)()
@@ -293,11 +294,11 @@ def test_fast_agrees_with_a_live_reference_run(traces, inputs, name):
 
 # -- differentiability ----------------------------------------------------------------------------------------
 
-ALL_CLASSES = tuple(sy.ALL_EFFECTS.values())  # the superset's effects, in its order
+ALL_CLASSES = tuple(sy.known_effects().values())  # the superset's effects, in its order
 # The default run's model: a force, a flow and an effect with a state of its own (the whole superset compiles
 # for ~40 s more: the slow test below takes every effect through it).
 FEW = ("active_channel_force", "fluid_leak", "retraction_folding")
-FEW_CLASSES = tuple(sy.ALL_EFFECTS[n] for n in FEW)
+FEW_CLASSES = tuple(sy.known_effects()[n] for n in FEW)
 
 
 @eqx.filter_jit
@@ -342,7 +343,7 @@ def test_the_effect_parameter_is_a_differentiable_leaf(inputs, name):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", list(sy.ALL_EFFECTS))
+@pytest.mark.parametrize("name", list(sy.known_effects()))
 def test_every_effect_parameter_is_a_differentiable_leaf_of_the_superset(inputs, name):
     """The same for every effect, through the superset model (SI sizes from 3e-18 to 350)."""
     _leaf_against_differences(inputs, name, ALL_CLASSES)
@@ -371,12 +372,14 @@ def test_the_derivative_at_an_absent_effect_is_finite_and_right(inputs, name):
 
 
 def test_moderate_magnitudes_lie_inside_the_ranges_and_out_of_range_is_refused():
-    for name, cls in sy.ALL_EFFECTS.items():
+    for name, cls in sy.known_effects().items():
         effect = sy.make_effect(name)
         lo, hi = cls.ranges[_field(name)]
         assert lo <= getattr(effect, _field(name)) == sy.moderate_magnitude(name) <= hi
         with pytest.raises(ValueError, match="outside"):
             sy.make_effect(name, 2 * hi + 1.0)
+    for cls in fx.CATALOGUE.values():  # what discovery reports and a discriminating design sizes
+        assert cls.moderate > 0.0 and len(cls.separated_by) > 20, cls.name
     assert not set(sy.OUTSIDE) & set(fx.CATALOGUE)
     with pytest.raises(ValueError, match="unknown effect"):
         sy.make_effect("gravity")
@@ -392,7 +395,7 @@ def test_make_experiment_noise_seeds_cache_and_format(monkeypatch, tmp_path, tra
         calls.append(config)
         return gj.simulate(params, model_inputs, config.replace(fidelity="fast", rtol=None, atol=None), ts=ts)
 
-    monkeypatch.setattr(sy, "_simulate", fake)
+    monkeypatch.setattr(synthetic_solve, "reference_solve", fake)
     sy.clear_cache()
     kw = {"inputs": "synthetic", "t_end": T1}
     a = sy.make_experiment("active_channel_force", None, seed=1, **kw)

@@ -308,7 +308,7 @@ def test_discovery_reads_a_rig_parameter_off_within_reason_as_no_effect(referenc
     from growjax import discover as gd
 
     t, data, inputs, config = _rig_off(reference)
-    res = gd.discover(t, data, inputs, config=config, candidates=candidates)
+    res = gd.discover(one_experiment(t, data, inputs), config=config, candidates=candidates)
     assert res.effect == "none" and not res.confounded_with, gd.summary_text(res)
 
 
@@ -320,9 +320,13 @@ def test_discovery_misreads_a_rig_parameter_off_when_the_rig_is_taken_as_known(r
 
     t, data, inputs, config = _rig_off(reference)
     rig_known = cal.Likelihood(tolerances={})
-    known = gd.discover(t, data, inputs, config=config, likelihood=rig_known, candidates=RIG_OFF_CANDIDATES)
+    known = gd.discover(
+        one_experiment(t, data, inputs), config=config, likelihood=rig_known, candidates=RIG_OFF_CANDIDATES
+    )
     assert known.effect != "none", gd.summary_text(known)
-    alone = gd.discover(t, data, inputs, config=config, likelihood=rig_known, candidates=("active_channel_force",))
+    alone = gd.discover(
+        one_experiment(t, data, inputs), config=config, likelihood=rig_known, candidates=("active_channel_force",)
+    )
     assert alone.effect == "active_channel_force", gd.summary_text(alone)  # the default test's one candidate
 
 

@@ -100,18 +100,19 @@ def _run_set(args, data) -> dict:
 
 
 def _discover(args, exp, base, config):
-    """The discovery on one experiment's scored samples (`growjax.discover.discover`)."""
+    """The discovery on one experiment's scored samples (`growjax.discover.discover` of its set of one)."""
     from growjax import discover as gd
-    from growjax.data import experiment as ex
+    from growjax.data.sets import ExperimentSet
 
-    inputs = ex.to_inputs(exp, args.drive, base, config.t0, config.t1)
-    t0, t1 = options.scored_window(args, config)
-    keep = (exp.time >= t0) & (exp.time <= t1)
+    one = ExperimentSet.single(
+        exp,
+        drive=args.drive,
+        window=options.scored_window(args, config),
+        sensors=("length",),
+        defaults=base,
+    )
     return gd.discover(
-        exp.time[keep],
-        exp["robot_length_m"][keep],
-        inputs,
-        base=base,
+        one,
         config=config,
         candidates=args.candidates or None,
         progress=not args.quiet,
@@ -121,10 +122,10 @@ def _discover(args, exp, base, config):
 
 
 def _discover_set(args, exps, config):
-    """The discovery on a set, by its joint fits (`growjax.discover.discover_set`)."""
+    """The discovery on a set, by its joint fits (`growjax.discover.discover`)."""
     from growjax import discover as gd
 
-    return gd.discover_set(
+    return gd.discover(
         exps,
         config=config,
         candidates=args.candidates or None,

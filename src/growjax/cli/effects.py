@@ -18,7 +18,6 @@ def add_arguments(parser) -> None:
 
 def run(args) -> dict:
     """The catalogue, one row per effect."""
-    from growjax.discover import SEPARATING
     from growjax.model.effects import CATALOGUE
 
     rows = []
@@ -31,7 +30,7 @@ def run(args) -> dict:
                 "unit": cls.units.get(field, ""),
                 "range": [lo, hi],
                 "description": cls.description,
-                "separated_by": SEPARATING.get(name, ""),
+                "separated_by": cls.separated_by,
             }
         )
     return {"command": NAME, "effects": rows}

@@ -148,12 +148,21 @@ def unused_columns_note(args, exp) -> None:
 def published_demand_note(args, exp, drive: str, named: bool) -> None:
     """A note where a user's file on the forward drive has no demand column: the published pulse train is
     simulated (``named``: a shipped or named public data set, recorded under that pulse: no note)."""
-    if drive == "forward" and "pressure_demand_Pa" not in exp and not named:
+    if drive == "forward" and "pressure_demand_Pa" not in exp and not named and not _made_under_the_pulse(exp):
         notice(
             args,
             f"{exp.source} has no pressure_demand_Pa column: the demand is taken as the published 0/150 kPa "
             "pulse train",
         )
+
+
+def _made_under_the_pulse(exp) -> bool:
+    """Whether the file's JSON sidecar (the same name, ``.json``) records it was made under the published pulse."""
+    sidecar = Path(exp.source).with_suffix(".json") if exp.source else None
+    try:
+        return str(json.loads(sidecar.read_text()).get("inputs", "")).startswith("published pulse")
+    except (AttributeError, OSError, ValueError):
+        return False
 
 
 def in_window(args, exp, data: Path):

@@ -21,7 +21,7 @@ exactly the non-centrality of the discovery's statistic: the difference of the t
 coordinate each parameter is moved in (a column scaling of J); B's parameter moves linearly, by a tenth of its
 range's top per unit, as in the discovery. Its limits: the refit is linearised (a large effect, or one whose
 rival must move far to imitate it, is rejected more surely than T says), and the true effect's size is assumed
-(its moderate magnitude, `growjax.data.synthetic.moderate_magnitude`, unless given).
+(its class's ``moderate`` size, `growjax.model.effects.Effect`, unless given).
 """
 
 from __future__ import annotations
@@ -37,7 +37,6 @@ from jaxtyping import Array, ArrayLike, Float
 import growjax.design.constraints as dcon
 import growjax.design.sensitivity as sensitivity
 from growjax.calibration import discrepancy as dc
-from growjax.data import synthetic as syn
 from growjax.design.knowledge import Knowledge
 from growjax.design.space import DesignSpace, demand_at_knots
 from growjax.model import effects as fx
@@ -79,7 +78,7 @@ def checked_pair(
 
     Args:
         effects: two distinct catalogue names (`rivals`).
-        sizes: each effect's size, SI, inside its physical range; None: their moderate magnitudes.
+        sizes: each effect's size, SI, inside its physical range; None: their classes' ``moderate`` sizes.
         drive: the drive whose input is designed: the forward drive's demand alone.
 
     Returns:
@@ -92,12 +91,12 @@ def checked_pair(
         raise ValueError("--discriminate designs the forward drive's demand: drop --next-drive inverse")
     effects = rivals(effects)
     if sizes is None:
-        return effects, tuple(syn.moderate_magnitude(e) for e in effects)
+        return effects, tuple(float(fx.CATALOGUE[e].moderate) for e in effects)
     sizes = tuple(float(v) for v in sizes)
     if len(sizes) != 2:
         raise ValueError(f"--size takes one size per effect of --discriminate (two), got {len(sizes)}")
     for effect, size in zip(effects, sizes):
-        syn.make_effect(effect, size)  # ValueError outside its physical range
+        fx.CATALOGUE[effect].at(size)  # ValueError outside its physical range
     return effects, sizes
 
 
@@ -245,10 +244,10 @@ def make(
     SI: each effect's size, as the truth and as the rival's starting point (default their moderate magnitudes);
     ``config`` as `growjax.design.make`."""
     effects, sizes = checked_pair(effects, sizes)
-    made = [syn.make_effect(e, v) for e, v in zip(effects, sizes)]
-    fields = tuple(f"{e}.{syn.magnitude_field(e)}" for e in effects)
-    scales = [0.1 * fx.CATALOGUE[e].ranges[syn.magnitude_field(e)][1] for e in effects]
-    base = gp.with_effects(knowledge.base, *(type(m)() for m in made))
+    classes = [fx.CATALOGUE[e] for e in effects]
+    fields = tuple(f"{e}.{cls.magnitude_field()}" for e, cls in zip(effects, classes))
+    scales = [0.1 * cls.ranges[cls.magnitude_field()][1] for cls in classes]
+    base = gp.with_effects(knowledge.base, *(cls() for cls in classes))
     p, q = len(knowledge.names), len(knowledge.rig)
     prior = np.zeros((p + 2 + q,) * 2)
     prior[:p, :p] = knowledge.covariance

@@ -1,6 +1,7 @@
 """Missing physics: where model and measurement disagree, which catalogue effect explains it, and how sure.
 
-The workflow (:func:`discover`), on a measured length L(t):
+The workflow (`discover`), on the measured length L(t) of a set of one experiment (a larger set is discovered by its
+joint fits: ``_set``'s procedure, one round):
 
 1. **Base fit.** The base model's free parameters (default the yield pressure Y) are fitted by
    least squares, in the *superset* model that carries every candidate effect at zero (which is
@@ -62,7 +63,8 @@ neither 2ΔlogL by ``LR_RESOLUTION`` (σ estimated from the data's second differ
 (`growjax.calibration.levenberg_marquardt`).
 
 The package: the candidate problem and its fits (``_candidates``, ``_fitting``), scoring (``_scoring``), the
-decision (``_decision``), the report (``_report``) and the workflow that runs them (``_workflow``).
+decision (``_decision``), the report (``_report``), the workflow that runs them on one experiment (``_workflow``), the
+set's joint fits (``_set``) and the entry that takes a set to one or the other (``_entry``).
 """
 
 from growjax.model import effects as fx
@@ -80,7 +82,7 @@ from ._candidates import (
     linearised,
     make_candidates,
 )
-from ._decision import SEPARATING
+from ._entry import discover
 from ._fitting import LR_RESOLUTION, Fitter
 from ._report import PHASES, DiscoveryResult, locate, phases, summary_text
 from ._scoring import (
@@ -94,8 +96,7 @@ from ._scoring import (
     score_candidate,
     score_round,
 )
-from ._set import SetDiscoveryResult, discover_set, set_summary_text
-from ._workflow import discover
+from ._set import SetDiscoveryResult, set_summary_text
 
 __all__ = [
     "BASE_START_FACTORS",
@@ -105,7 +106,6 @@ __all__ = [
     "MATERIAL_MISFIT",
     "PHASES",
     "PINNED_FACTOR",
-    "SEPARATING",
     "START_FRACTIONS",
     "STRUCTURE_THRESHOLD",
     "Z90",
@@ -117,7 +117,6 @@ __all__ = [
     "SetDiscoveryResult",
     "candidate_parameter",
     "discover",
-    "discover_set",
     "fit_model",
     "fx",
     "is_pinned",

@@ -3,16 +3,13 @@ one is added, and the final answer."""
 
 from __future__ import annotations
 
-SEPARATING = {
-    "active_channel_force": "the robot pressure during retraction, or a load cell on the active channel",
-    "catheter_friction": "runs at two catheter insertion depths (the friction scales with the catheter length)",
-    "lumen_friction": "growth in free air against growth in a duct phantom (the friction scales with the length)",
-    "actuation_lag": "the syringe displacement or the line pressure at a step of the demand",
-    "fluid_leak": "the pressure decay with the robot held at a fixed length",
-    "trapped_air": "the line pressure at a step of the demand (its rise time scales with the compliance)",
-    "growth_rate_limit": "growth at two pressure amplitudes (the cap shows as a speed that no longer rises)",
-    "retraction_folding": "the length after a full retraction cycle, or the volume returned against the length lost",
-}
+from growjax.model import effects as fx
+
+
+def separated_by(name: str) -> str:
+    """The measurement that tells the catalogue effect ``name`` from its neighbours (its class's ``separated_by``)."""
+    cls = fx.CATALOGUE.get(name)
+    return cls.separated_by if cls is not None else ""
 
 
 def confounded_with_base(scores: dict) -> dict:
@@ -27,7 +24,7 @@ def confounded_with_base(scores: dict) -> dict:
                 "correlation": c,
                 "lr_statistic": s["lr_statistic"],
                 "lr_statistic_base_held": s["lr_statistic_base_held"],
-                "separate_by": SEPARATING.get(name, ""),
+                "separate_by": separated_by(name),
             }
     return out
 
@@ -56,7 +53,7 @@ def choose(scores: dict, threshold: float, confounded: dict) -> str | None:
                 "correlation": None,
                 "lr_statistic": scores[name]["lr_statistic"],
                 "lr_statistic_base_held": scores[name]["lr_statistic_base_held"],
-                "separate_by": SEPARATING.get(name, ""),
+                "separate_by": separated_by(name),
             },
         )
         confounded[name]["rival_effects"] = others

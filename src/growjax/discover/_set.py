@@ -17,7 +17,7 @@ from growjax.model import effects as fx
 from growjax.simulation.config import Config
 
 from ._candidates import START_FRACTIONS, candidate_parameter
-from ._decision import SEPARATING, choose, confounded_with_base, final_effect
+from ._decision import choose, confounded_with_base, final_effect, separated_by
 from ._report import _unit, confounded_lines
 from ._scoring import MATERIAL_MISFIT, Scorer, is_pinned, noise_from_differences
 
@@ -26,7 +26,7 @@ EFFECT_START = START_FRACTIONS[1]  # an effect's joint fit starts at this fracti
 
 @dataclasses.dataclass
 class SetDiscoveryResult:
-    """What :func:`discover_set` found (see :meth:`report` for the JSON form). ``parameters``: the final model's
+    """What `growjax.discover.discover` found on a set of several experiments (see `report` for the JSON form). ``parameters``: the final model's
     {label: {"estimate", "interval_90", "unit"}}, a label ``NAME@KEY`` per robot (or per the scope's key);
     ``evidence``: one round, {candidate: its score}; ``misfit_before``/``misfit_after``: per run the misfit test
     (as :meth:`growjax.discover.Scorer.misfit`), with ``structured``/``material`` of the set (any run)."""
@@ -65,7 +65,8 @@ def discover_set(
     max_steps: int = 100,
 ) -> SetDiscoveryResult:
     """Which catalogue effect the runs of ``experiments`` need beyond the base model, each effect's parameter one
-    value per robot (``effect_scope``: or one per rig, per run, or one for all).
+    value per robot (``effect_scope``: or one per rig, per run, or one for all): `growjax.discover.discover` of a
+    set of several experiments.
 
     The procedure, one round (at most one effect is added):
 
@@ -157,7 +158,7 @@ def discover_set(
         confounded_with=confounded,
         misfit_before=misfit_before,
         misfit_after=misfit_after,
-        separating_measurement={n: SEPARATING.get(n, "") for n in confounded},
+        separating_measurement={n: separated_by(n) for n in confounded},
         log_likelihood_base=base.log_likelihood,
         runs=runs,
         fits=1 + len(fits),

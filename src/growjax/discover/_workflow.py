@@ -18,13 +18,13 @@ from growjax.model import params as gp
 from growjax.simulation.config import Config
 
 from ._candidates import CandidateFit, _held_start, candidate_parameter, make_candidates
-from ._decision import SEPARATING, choose, confounded_with_base, final_effect
+from ._decision import choose, confounded_with_base, final_effect, separated_by
 from ._fitting import Fitter, _cores
 from ._report import DiscoveryResult, _unit, locate
 from ._scoring import MATERIAL_MISFIT, Scorer, noise_from_differences, score_round, shared_intervals
 
 
-def discover(
+def discover_one(
     times: Float[ArrayLike, " m"],
     length: Float[ArrayLike, " m"],
     inputs,
@@ -110,7 +110,7 @@ def discover(
         },
         misfit_before=misfit_before,
         misfit_after=misfit_after,
-        separating_measurement={n: SEPARATING.get(n, "") for n in confounded},
+        separating_measurement={n: separated_by(n) for n in confounded},
         wall_s=time.perf_counter() - start,
         trade_allowance=allowance,
         fits=fitter.fits,

@@ -18,15 +18,19 @@ relies on that monotonicity to have one root. An effect whose rod force depends 
 says so (``velocity_dependent``): the fast configuration then solves the rod balance by Newton
 iterations instead of one fixed-point pass.
 
+Each effect class also carries what the workflows need of it: ``moderate``, a size of its first parameter that
+moves the length clearly beyond the rig's noise (synthetic data, the rival sizes of a discriminating design), and
+``separated_by``, the measurement that tells it from its neighbours (the discovery's report, ``growjax effects``).
+
 The catalogue (`CATALOGUE`, name → class): ``active_channel_force``, ``fluid_leak``,
 ``actuation_lag``, ``trapped_air``, ``catheter_friction``, ``lumen_friction``,
-``growth_rate_limit``, ``retraction_folding``. `register` adds an effect of your own.
+``growth_rate_limit``, ``retraction_folding``. `register` adds an effect of your own: one class is all it takes.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+import math
 from typing import ClassVar
 
 import equinox as eqx
@@ -34,6 +38,18 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from growjax.model.effect_totals import (
+    applied_drive,
+    apply_all,
+    chamber_outflow,
+    initial_states,
+    length_offset,
+    rates,
+    rod_force,
+    split_states,
+    state_scales,
+    state_size,
+)
 from growjax.model.params import Parameters
 from growjax.model.robot import LOCKHART_PRESSURE_SCALE, lockhart_pressure
 from growjax.model.smooth import smooth_ramp
@@ -42,6 +58,7 @@ __all__ = [
     "CATALOGUE",
     "FRICTION_VELOCITY",
     "RAMP_VELOCITY",
+    "BUILT_IN",
     "ActiveChannelForce",
     "ActuationLag",
     "CatheterFriction",
@@ -65,6 +82,7 @@ __all__ = [
     "split_states",
     "state_scales",
     "state_size",
+    "unregister",
 ]
 
 FRICTION_VELOCITY = 1e-4  # m/s: velocity over which a friction force turns from one sign to the other
@@ -125,6 +143,9 @@ class Effect(eqx.Module):
         description: one line (a class attribute).
         units: {field: unit} of the parameter fields (a class attribute).
         ranges: {field: (low, high)} physical range of each parameter field, SI (a class attribute).
+        moderate: a size of the first field, SI, inside its range, that moves the length clearly beyond the
+            rig's 0.2 mm noise within 3 s of the published pulse (a class attribute).
+        separated_by: the measurement that tells the effect from its neighbours (a class attribute).
         state_names: the effect's own states (a class attribute); their typical magnitudes from `state_scales`.
         velocity_dependent: whether `rod_force` depends on the robot velocity (a class attribute).
     """
@@ -133,11 +154,34 @@ class Effect(eqx.Module):
     description: ClassVar[str] = ""
     units: ClassVar[dict] = {}
     ranges: ClassVar[dict] = {}
+    moderate: ClassVar[float] = 0.0
+    separated_by: ClassVar[str] = ""
     state_names: ClassVar[tuple] = ()
     velocity_dependent: ClassVar[bool] = False  # does rod_force depend on the robot velocity?
 
-    def state_scales(self, drive: str) -> tuple[float, ...]:
-        """Typical magnitude of each state (for error control), in its SI unit, under ``drive``."""
+    @classmethod
+    def magnitude_field(cls) -> str:
+        """The field a single size sets (the first): what `at` and ``moderate`` refer to."""
+        return dataclasses.fields(cls)[0].name
+
+    @classmethod
+    def at(cls, magnitude: float | None = None) -> Effect:
+        """The effect with its `magnitude_field` at ``magnitude`` (SI; None: ``moderate``), the others at default.
+
+        Raises:
+            ValueError: the magnitude is outside the field's physical range.
+        """
+        field = cls.magnitude_field()
+        value = float(cls.moderate if magnitude is None else magnitude)
+        lo, hi = cls.ranges[field]
+        if not (math.isfinite(value) and lo <= value <= hi):
+            raise ValueError(
+                f"{cls.name}.{field} = {value} {cls.units.get(field, '')} is outside its range [{lo}, {hi}]"
+            )
+        return cls(**{field: value})
+
+    def state_scales(self, drive: str) -> tuple:
+        """Typical magnitude of each state (for error control), in its SI unit."""
         return ()
 
     def present(self) -> jax.Array:
@@ -189,6 +233,8 @@ class ActiveChannelForce(Effect):
     description: ClassVar[str] = "constant axial force of the active channel pulling the robot back"
     units: ClassVar[dict] = {"force": "N"}
     ranges: ClassVar[dict] = {"force": (0.0, 0.5)}
+    moderate: ClassVar[float] = 0.01  # N: 2.5 mm shorter at 3 s
+    separated_by: ClassVar[str] = "the robot pressure during retraction, or a load cell on the active channel"
     force: float = 0.0
 
     def rod_force(self, rod: Rod, state: Float[Array, " m"]) -> Float[Array, "*b"]:
@@ -207,6 +253,8 @@ class FluidLeak(Effect):
     description: ClassVar[str] = "leak q = G·p from the pressurised chamber to ambient"
     units: ClassVar[dict] = {"conductance": "m^3/(s*Pa)"}
     ranges: ClassVar[dict] = {"conductance": (0.0, 1e-12)}
+    moderate: ClassVar[float] = 3e-13  # m³/(s·Pa): 0.75 mm at 3 s, 1.1 mm³/s lost at 150 kPa
+    separated_by: ClassVar[str] = "the pressure decay with the robot held at a fixed length"
     conductance: float = 0.0
 
     def chamber_outflow(
@@ -227,6 +275,8 @@ class ActuationLag(Effect):
     description: ClassVar[str] = "first-order lag between the commanded and the applied screw torque"
     units: ClassVar[dict] = {"time_constant": "s"}
     ranges: ClassVar[dict] = {"time_constant": (0.0, 0.5)}
+    moderate: ClassVar[float] = 0.015  # s
+    separated_by: ClassVar[str] = "the syringe displacement or the line pressure at a step of the demand"
     state_names: ClassVar[tuple] = ("applied_drive",)
     time_constant: float = 0.0
 
@@ -256,6 +306,8 @@ class TrappedAir(Effect):
     description: ClassVar[str] = "an entrained-air fraction different from the base model's"
     units: ClassVar[dict] = {"extra_fraction": "-"}
     ranges: ClassVar[dict] = {"extra_fraction": (-0.005, 0.05)}
+    moderate: ClassVar[float] = 0.005  # –: α 0.005 → 0.010
+    separated_by: ClassVar[str] = "the line pressure at a step of the demand (its rise time scales with the compliance)"
     extra_fraction: float = 0.0
 
     def apply(self, params: Parameters) -> Parameters:
@@ -285,6 +337,8 @@ class CatheterFriction(Effect):
     description: ClassVar[str] = "catheter-membrane friction μ·P·2π r_i·L_c resisting the motion (paper eq. 4)"
     units: ClassVar[dict] = {"coefficient": "-"}
     ranges: ClassVar[dict] = {"coefficient": (0.0, 0.1)}
+    moderate: ClassVar[float] = 0.02  # –
+    separated_by: ClassVar[str] = "runs at two catheter insertion depths (the friction scales with the catheter length)"
     velocity_dependent: ClassVar[bool] = True
     coefficient: float = 0.0
 
@@ -309,6 +363,10 @@ class LumenFriction(Effect):
     description: ClassVar[str] = "duct-wall friction c·L on the everted length, opposing the tip's motion"
     units: ClassVar[dict] = {"force_per_length": "N/m"}
     ranges: ClassVar[dict] = {"force_per_length": (0.0, 10.0)}
+    moderate: ClassVar[float] = 1.0  # N/m
+    separated_by: ClassVar[str] = (
+        "growth in free air against growth in a duct phantom (the friction scales with the length)"
+    )
     velocity_dependent: ClassVar[bool] = True
     force_per_length: float = 0.0
 
@@ -332,6 +390,8 @@ class GrowthRateLimit(Effect):
     description: ClassVar[str] = "membrane-limited growth: extra pressure p_ref·(κ·v)^4 to grow at speed v"
     units: ClassVar[dict] = {"inverse_speed": "s/m"}
     ranges: ClassVar[dict] = {"inverse_speed": (0.0, 2000.0)}
+    moderate: ClassVar[float] = 350.0  # s/m
+    separated_by: ClassVar[str] = "growth at two pressure amplitudes (the cap shows as a speed that no longer rises)"
     velocity_dependent: ClassVar[bool] = True
     reference_pressure: ClassVar[float] = LOCKHART_PRESSURE_SCALE  # Pa: p_ref
     exponent: ClassVar[float] = 4.0  # m = 1/n_L
@@ -357,6 +417,10 @@ class RetractionFolding(Effect):
     description: ClassVar[str] = "a fraction f of the retracting robot folds inside instead of shortening it"
     units: ClassVar[dict] = {"folding_fraction": "-"}
     ranges: ClassVar[dict] = {"folding_fraction": (0.0, 1.0)}
+    moderate: ClassVar[float] = 0.3  # –
+    separated_by: ClassVar[str] = (
+        "the length after a full retraction cycle, or the volume returned against the length lost"
+    )
     state_names: ClassVar[tuple] = ("folded_length",)
     folding_fraction: float = 0.0
 
@@ -373,36 +437,35 @@ class RetractionFolding(Effect):
         return -state[0]  # length = L0 + ξ − offset = L0 + ξ + F
 
 
-CATALOGUE = {
-    cls.name: cls
-    for cls in (
-        ActiveChannelForce,
-        FluidLeak,
-        ActuationLag,
-        TrappedAir,
-        CatheterFriction,
-        LumenFriction,
-        GrowthRateLimit,
-        RetractionFolding,
-    )
-}
+BUILT_IN = (
+    ActiveChannelForce,
+    FluidLeak,
+    ActuationLag,
+    TrappedAir,
+    CatheterFriction,
+    LumenFriction,
+    GrowthRateLimit,
+    RetractionFolding,
+)
+"""The package's own effects, in the catalogue's order."""
+
+CATALOGUE = {cls.name: cls for cls in BUILT_IN}
+"""Name → class of every effect discovery tests: `BUILT_IN` and those added by `register`."""
 
 
 def register(cls: type[Effect]) -> type[Effect]:
-    """Add an `Effect` subclass to `CATALOGUE`, so that `growjax.discover.discover` tests it; usable as a class
-    decorator.
+    """Add an `Effect` subclass to `CATALOGUE`: discovery tests it, synthetic data and discriminating designs take it.
 
-    Args:
-        cls: the effect's class: a ``name`` not already in the catalogue, a one-line ``description``, and exactly
-            one parameter field with its unit (``units``) and physical range (``ranges``), the range including 0
-            (absent).
+    The class needs a ``name`` not already in the catalogue, a one-line ``description``, exactly one parameter
+    field with its unit (``units``) and physical range (``ranges``, including 0: absent), a nonzero ``moderate``
+    size inside that range and a ``separated_by`` text. Usable as a class decorator.
 
     Returns:
         The class.
 
     Raises:
-        TypeError: for anything but an `Effect` subclass.
-        ValueError: naming what the class lacks.
+        TypeError: not an `Effect` subclass.
+        ValueError: a declaration missing or out of range, naming it.
     """
     if not (isinstance(cls, type) and issubclass(cls, Effect)):
         raise TypeError(f"register expects an Effect subclass, got {cls!r}")
@@ -411,86 +474,25 @@ def register(cls: type[Effect]) -> type[Effect]:
     if len(cls.ranges) != 1:
         raise ValueError(f"{cls.name}: discover fits one parameter per effect; ranges has {len(cls.ranges)}")
     ((field, (low, high)),) = cls.ranges.items()
-    if field not in cls.units or not low <= 0.0 <= high:
-        raise ValueError(f"{cls.name}.{field}: needs a unit in `units` and a range that includes 0")
+    if field != cls.magnitude_field() or field not in cls.units or not low <= 0.0 <= high:
+        raise ValueError(
+            f"{cls.name}.{field}: needs to be its first field, a unit in `units` and a range that includes 0"
+        )
+    if not (cls.moderate != 0.0 and low <= cls.moderate <= high):
+        raise ValueError(f"{cls.name}: needs a nonzero `moderate` size inside [{low}, {high}], got {cls.moderate}")
+    if not cls.separated_by:
+        raise ValueError(f"{cls.name}: needs `separated_by`, the measurement that tells it from its neighbours")
     CATALOGUE[cls.name] = cls
     return cls
 
 
-# -- what the assemblies call: the sum over a tuple of effects -------------------------------------------
+def unregister(name: str) -> type[Effect]:
+    """Take the effect ``name`` added by `register` out of `CATALOGUE`; returns its class.
 
-
-def split_states(effects: Sequence[Effect], states: Float[Array, " K"]) -> list[Float[Array, " m"]]:
-    """The state vector of all effects (K,), split into one array per effect."""
-    out, k = [], 0
-    for e in effects:
-        m = len(e.state_names)
-        out.append(states[k : k + m])
-        k += m
-    return out
-
-
-def state_size(effects: Sequence[Effect]) -> int:
-    """K, the number of the effects' states."""
-    return sum(len(e.state_names) for e in effects)
-
-
-def state_scales(effects: Sequence[Effect], drive: str) -> tuple[float, ...]:
-    """The typical magnitude of each of the effects' states under ``drive``, in order."""
-    return tuple(s for e in effects for s in e.state_scales(drive))
-
-
-def initial_states(effects: Sequence[Effect], params: Parameters, drive: str) -> Float[Array, " K"]:
-    """The effects' states at t0."""
-    parts = [jnp.asarray(e.initial_state(params, drive), float) for e in effects if e.state_names]
-    return jnp.concatenate(parts) if parts else jnp.zeros(0)
-
-
-def apply_all(params: Parameters) -> Parameters:
-    """The parameters with every effect's parameter change applied."""
-    for e in params.effects:
-        params = e.apply(params)
-    return params
-
-
-def rod_force(effects: Sequence[Effect], states: Float[Array, " K"], rod: Rod) -> Float[Array, "*b"]:
-    """The effects' total force opposing growth, N."""
-    total = jnp.zeros_like(rod.pressure)
-    for e, s in zip(effects, split_states(effects, states)):
-        total = total + e.rod_force(rod, s)
-    return total
-
-
-def chamber_outflow(
-    effects: Sequence[Effect], states: Float[Array, " K"], t: Float[ArrayLike, ""], pressure: Float[Array, "*b"]
-) -> Float[Array, "*b"]:
-    """The effects' total flow out of the chamber at gauge ``pressure`` (Pa), m³/s."""
-    total = jnp.zeros_like(pressure)
-    for e, s in zip(effects, split_states(effects, states)):
-        total = total + e.chamber_outflow(t, pressure, s)
-    return total
-
-
-def applied_drive(
-    effects: Sequence[Effect], states: Float[Array, " K"], commanded: Float[Array, "*b"]
-) -> Float[Array, "*b"]:
-    """The drive applied (N or N·m) given the commanded one, through every effect in order."""
-    for e, s in zip(effects, split_states(effects, states)):
-        commanded = e.drive(commanded, s)
-    return commanded
-
-
-def length_offset(effects: Sequence[Effect], states: Float[Array, " K"]) -> Float[Array, ""]:
-    """The effects' total everted length not produced by the volume in the robot, m."""
-    total = jnp.asarray(0.0)
-    for e, s in zip(effects, split_states(effects, states)):
-        total = total + e.length_offset(s)
-    return total
-
-
-def rates(effects: Sequence[Effect], states: Float[Array, " K"], instant: Instant) -> Float[Array, " K"]:
-    """The time derivatives of the effects' states."""
-    parts = [
-        jnp.asarray(e.rates(instant, s), float) for e, s in zip(effects, split_states(effects, states)) if e.state_names
-    ]
-    return jnp.concatenate(parts) if parts else jnp.zeros(0)
+    Raises:
+        ValueError: ``name`` is not in the catalogue, or is one of the package's own effects.
+    """
+    own = {cls.name for cls in BUILT_IN}
+    if name not in CATALOGUE or name in own:
+        raise ValueError(f"{name!r} is not a registered effect; registered: {sorted(set(CATALOGUE) - own)}")
+    return CATALOGUE.pop(name)
