@@ -176,3 +176,21 @@ def objective_differences(evaluate, x, step=1e-3):
         e[k] = step
         out.append((float(evaluate(x + e)) - float(evaluate(x - e))) / (2 * step))
     return out
+
+
+# ``GROWJAX_TEST_CPU=FILE``: each test's CPU seconds (setup, call and teardown, of the worker's process, its JAX
+# threads included) appended to FILE, one "worker nodeid seconds" line each. Unlike wall time, CPU time does not
+# grow with the machine's load: the sum over a worker's tests is what that worker needs of one core.
+_CPU_LOG = os.environ.get("GROWJAX_TEST_CPU")
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item, nextitem):
+    import time
+
+    start = time.process_time()
+    yield
+    if _CPU_LOG:
+        worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
+        with open(_CPU_LOG, "a") as log:
+            log.write(f"{worker} {item.nodeid} {time.process_time() - start:.2f}\n")
