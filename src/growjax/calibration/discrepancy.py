@@ -11,10 +11,10 @@ the fixed rig parameters held at their nominal values: bⱼ ~ N(0, uⱼ²) is pa
 (its tolerance uⱼ) and gⱼ(t) = ∂L/∂ln ψⱼ the length's sensitivity to it.
 
 A Matérn-3/2 process is the output of a two-state linear SDE and the noise of a one-state one, so this
-covariance is that of a linear Gaussian state-space model: a Kalman filter (:func:`kalman_filter`, a ``lax.scan``) gives the exact likelihood
-in O(n) for any (also irregular) sampling, the whitened residuals for Gauss–Newton, forecasts and
-draws. The tolerance terms are static states of the same filter (for the total log-likelihood, a q × q
-correction after the three-state filter instead).
+covariance is that of a linear Gaussian state-space model: a Kalman filter (:func:`kalman_filter`, a ``lax.scan``) gives
+the exact likelihood in O(n) for any (also irregular) sampling, the whitened residuals for Gauss–Newton, forecasts and
+draws. The tolerance terms are static states of the same filter (for the total log-likelihood, a q × q correction after
+the three-state filter instead).
 
 Shapes: ``times`` (n,) s, sorted; residuals (n,) or (n, k) m (k columns share one filter: a residual and its
 Jacobian's columns are whitened together); ``sensitivity`` (n, q) m, or None.
@@ -68,17 +68,26 @@ class Hyper(eqx.Module):
         }
 
 
+def matern_transition(dt, amplitude, time_scale):
+    """(A (2, 2), Q (2, 2), stationary covariance (2, 2)) of a Matérn-3/2 process's state (δ, δ') over ``dt``
+    s: amplitude ``amplitude`` (δ's unit), time scale ``time_scale`` (s). The exact discretisation of its
+    two-state linear SDE (Hartikainen & Särkkä 2010): δ(t + dt) = A (δ, δ')(t) + N(0, Q)."""
+    lam = jnp.sqrt(3.0) / time_scale
+    a2 = jnp.asarray(amplitude, float) ** 2
+    stationary = jnp.diag(jnp.stack([a2, lam**2 * a2]))
+    e = jnp.exp(-lam * dt)
+    trans = e * jnp.array([[1.0 + lam * dt, dt], [-(lam**2) * dt, 1.0 - lam * dt]])
+    return trans, stationary - trans @ stationary @ trans.T, stationary
+
+
 def _transition(dt, hyper: Hyper):
     """(A (3, 3), Q (3, 3), stationary covariance (3, 3)) of the state (δ, δ', ε) over dt (s): the Matérn-3/2
     pair and the noise's Ornstein–Uhlenbeck state (for τ = 0 it forgets itself at every sample)."""
-    lam = jnp.sqrt(3.0) / hyper.time_scale
-    a2 = hyper.amplitude**2
+    smooth, _, pair = matern_transition(dt, hyper.amplitude, hyper.time_scale)
     s2 = hyper.noise**2
-    stationary = jnp.diag(jnp.stack([a2, lam**2 * a2, s2]))
-    e = jnp.exp(-lam * dt)
+    stationary = jax.scipy.linalg.block_diag(pair, s2[None, None])
     tau = hyper.noise_time
     rho = jnp.where(tau > 0, jnp.exp(-dt / jnp.where(tau > 0, tau, 1.0)), 0.0)
-    smooth = e * jnp.array([[1.0 + lam * dt, dt], [-(lam**2) * dt, 1.0 - lam * dt]])
     trans = jax.scipy.linalg.block_diag(smooth, rho[None, None])
     return trans, stationary - trans @ stationary @ trans.T, stationary
 

@@ -14,6 +14,7 @@ TANGENTS = ("auto", "forward", "differences")
 # Default tolerances (on states scaled to O(1)) per fidelity.
 _DEFAULT_RTOL = {"fast": 1e-4, "reference": 1e-6}
 _DEFAULT_MAX_STEPS = {"fast": 8_000, "reference": 200_000}
+_DEFAULT_FIRST_STEP = 1e-5  # s
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -28,6 +29,10 @@ class Config:
         save_dt: spacing of the default save grid, s.
         rtol, atol: step-size control on the scaled states (None: 1e-4 fast, 1e-6 reference).
         max_steps: solver step budget (None: 8 000 fast, 200 000 reference).
+        first_step: (fast only) size of the solver's first attempted step, s (None: 10 µs). A model stepped
+            sample by sample (a plant, a filter) sets it near its sample interval: each window then opens at
+            that size instead of growing to it from 10 µs (a 10 ms window of the published pulse: about 6
+            steps → 2); the step-size control shrinks it where the window needs less.
         stop_at_pressure_limit: stop the run (status 1) when the sensed pressure crosses the membrane
             limit; otherwise the crossing is only flagged (``limit_time``) and the run goes on.
         velocity_eps: regularisation of |v|^n at v = 0, m/s.
@@ -44,14 +49,14 @@ class Config:
             where the solver's loop is compiled whole, ``small_loops``, or under the Lockhart law;
             differences otherwise). Both agree to ~1e-5 relative; only the speed differs.
         small_loops: (fast only) the integrator writes its linear solve in elementwise operations so that
-            XLA:CPU can compile its loop into one kernel (:mod:`growjax.simulation.xla_flags`); the rounding differs from
-            LAPACK's. None: whether ``XLA_FLAGS`` sets the small-loop limit, read by :meth:`resolved` where a
+            XLA:CPU can compile its loop into one kernel (:mod:`growjax.simulation.xla_flags`); the rounding differs
+            from LAPACK's. None: whether ``XLA_FLAGS`` sets the small-loop limit, read by :meth:`resolved` where a
             simulation starts (outside any trace), so the compiled program is keyed on the value in force.
         quick_compile: whether programs are compiled with XLA:CPU's older emitters
-            (:data:`growjax.simulation.xla_flags.QUICK_COMPILE`): quicker compiles, slower runs, other rounding (a 10 s run
-            moves by up to 0.3 µm). A program under ``jax.jit`` takes the process's setting (``XLA_FLAGS``, fixed
-            when JAX starts: :func:`growjax.simulation.xla_flags.apply_quick_compile`); a sweep compiles its own and takes
-            either. None: the setting in force (a sweep: quick up to ``growjax.sweep.QUICK_COMPILE_ROWS`` sets),
+            (:data:`growjax.simulation.xla_flags.QUICK_COMPILE`): quicker compiles, slower runs, other rounding (a 10 s
+            run moves by up to 0.3 µm). A program under ``jax.jit`` takes the process's setting (``XLA_FLAGS``, fixed
+            when JAX starts: :func:`growjax.simulation.xla_flags.apply_quick_compile`); a sweep compiles its own and
+            takes either. None: the setting in force (a sweep: quick up to ``growjax.sweep.QUICK_COMPILE_ROWS`` sets),
             read by :meth:`resolved`; a value the program cannot take raises ``ValueError`` there.
 
     A field that does not apply to the chosen fidelity must keep its default (``ValueError`` otherwise).
@@ -65,6 +70,7 @@ class Config:
     rtol: float | None = None
     atol: float | None = None
     max_steps: int | None = None
+    first_step: float | None = None
     stop_at_pressure_limit: bool = True
     velocity_eps: float = 1e-6
     stop_width: float = 1e-6
@@ -96,6 +102,8 @@ class Config:
                     f"{name} applies to the {_other(self.fidelity)!r} fidelity only; with fidelity="
                     f"{self.fidelity!r} leave it at its default {default!r}"
                 )
+        if self.first_step is not None and not (math.isfinite(self.first_step) and self.first_step > 0):
+            raise ValueError(f"first_step must be a positive time (s), got {self.first_step}")
         for name in ("rtol", "atol"):
             v = getattr(self, name)
             if v is not None and not 0 < v < 1:
@@ -106,6 +114,11 @@ class Config:
         """(rtol, atol) in use."""
         rtol = self.rtol if self.rtol is not None else _DEFAULT_RTOL[self.fidelity]
         return rtol, self.atol if self.atol is not None else rtol
+
+    @property
+    def initial_step(self) -> float:
+        """Size of the fast solver's first attempted step, s."""
+        return self.first_step if self.first_step is not None else _DEFAULT_FIRST_STEP
 
     @property
     def step_budget(self) -> int:
@@ -139,7 +152,7 @@ class Config:
 
 
 # Fields that apply to one fidelity only: with the other they must keep their defaults.
-_FIDELITY_FIELDS = {"fast": ("tangents", "small_loops"), "reference": ("flow_width",)}
+_FIDELITY_FIELDS = {"fast": ("tangents", "small_loops", "first_step"), "reference": ("flow_width",)}
 _DEFAULTS = {f.name: f.default for f in dataclasses.fields(Config)}
 
 

@@ -30,7 +30,8 @@ def _traced(tree) -> bool:
 def as_arrays(tree):
     """Python numbers in a pytree as float arrays, so ``jit`` traces them instead of recompiling per value.
 
-    NumPy scalars, not JAX arrays: making a device array per leaf costs ~0.1 ms each, more than a simulation's step loop.
+    NumPy scalars, not JAX arrays: making a device array per leaf costs ~0.1 ms each, more than a simulation's step
+    loop.
     """
 
     def convert(x):
@@ -149,7 +150,9 @@ def simulate_from(
     over ``window`` = (t_start, t_end) s in place of ``config``'s [t0, t1] and its state at rest: a plant stepped
     tick by tick. The state and window may be traced (``breaks`` must then be given: (jump times, slope-break
     times), each padded beyond t_end); ``ts`` (s) within the window. Under ``vmap`` each member is its own loop.
-    Forward-mode differentiable through the integrator (not in the state or window).
+    Forward-mode differentiable through the integrator's loop, in the parameters, the inputs and the state (the
+    tangents of its W-method, whose Jacobian is held over each step: the exact derivative of the discrete map);
+    not in the window. ``config.first_step`` near the window's length spares the climb from a 10 µs first step.
     """
     jump_ts, step_ts = breaks
     config = config.resolved()
@@ -206,9 +209,10 @@ def _solve_members(params, inputs, config: Config, ts, jump_ts, step_ts) -> Traj
 
 def length_jacobian(params_of, w, inputs, config: Config, ts, breaks=None) -> tuple[Trajectory, jax.Array]:
     """(trajectory, ∂length/∂w (T, p)) of the fast configuration at ``params_of(w)``, w (p,), on the save grid
-    ``ts`` (s): one solve carries the p sensitivities and gives both (:func:`growjax.simulation._fast_solve.solve_with_sensitivities`),
-    where ``jax.jacfwd`` of :func:`simulate` adds a plain solve for the primal. ``params_of``: w → Parameters
-    (traceable; hashable, the compiled program is kept per function). ``breaks`` as in :func:`simulate`.
+    ``ts`` (s): one solve carries the p sensitivities and gives both
+    (:func:`growjax.simulation._fast_solve.solve_with_sensitivities`), where ``jax.jacfwd`` of :func:`simulate` adds a
+    plain solve for the primal. ``params_of``: w → Parameters (traceable; hashable, the compiled program is kept per
+    function). ``breaks`` as in :func:`simulate`.
     """
     if config.fidelity != "fast":
         raise ValueError("length_jacobian runs the fast configuration; use jax.jacfwd of simulate for the reference")
