@@ -1,0 +1,280 @@
+"""``growjax track DATA --sensors pressure,syringe``: the robot's length, pressure and estimated parameters over
+time with 90 % bands, from the rig's own sensors (:mod:`growjax.track`).
+
+Writes ``track.csv`` (``time_s``, each quantity with its band: ``robot_length_m``, ``robot_length_lower_m``,
+``robot_length_upper_m``, ``pressure_Pa``, ..., ``Y_Pa``, ...; ``measured_robot_length_m`` where DATA holds a
+length the filter did not read) and ``track.png`` under ``--out``. Causal (the filter) by default; ``--smooth``
+for the whole record.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+
+NAME = "track"
+HELP = "the length, pressure and parameters over time with 90 % bands, from the rig's own sensors"
+METHODS = ("extended", "unscented")
+
+
+def _pairs(items, flag: str) -> dict:
+    """``NAME=VALUE`` strings → {name: float}; ValueError naming a bad one."""
+    out = {}
+    for text in items:
+        if "=" not in text:
+            raise ValueError(f"{flag} expects NAME=VALUE, got {text!r}")
+        name, value = (s.strip() for s in text.split("=", 1))
+        try:
+            out[name] = float(value)
+        except ValueError:
+            raise ValueError(f"{flag} {name}: {value!r} is not a number") from None
+    return out
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The command's own options (the data, drive, parameters, window, seed and output are shared)."""
+    parser.add_argument(
+        "--sensors",
+        default="pressure,syringe",
+        help="the sensors read, comma-separated: pressure, syringe, flow, catheter, length (their columns: "
+        "pressure_Pa, syringe_displacement_m, robot_flow_m3_s, catheter_length_m, robot_length_m)",
+    )
+    parser.add_argument(
+        "--noise",
+        default="",
+        metavar="SENSOR=SD,...",
+        help="noise sd per sensor, SI (default: pressure 500 Pa, syringe 5e-6 m, flow 1e-9 m³/s, catheter and "
+        "length 2e-4 m)",
+    )
+    parser.add_argument(
+        "--estimate",
+        default="Y",
+        metavar="NAMES",
+        help="parameters estimated as random walks, comma-separated ('' for none)",
+    )
+    parser.add_argument(
+        "--prior-sd",
+        action="append",
+        default=[],
+        metavar="NAME=SD",
+        help="an estimated parameter's prior sd (relative; in its unit where it is 0) (repeat; default 0.1)",
+    )
+    parser.add_argument(
+        "--walk",
+        action="append",
+        default=[],
+        metavar="NAME=SD",
+        help="an estimated parameter's random walk, sd per √s (relative) (repeat; default 0.01)",
+    )
+    parser.add_argument(
+        "--tolerance",
+        action="append",
+        default=[],
+        metavar="NAME=REL",
+        help="relative sd of a rig parameter held at its value (repeat; on top of the default budget of "
+        "`growjax params`; 'none' drops the budget)",
+    )
+    parser.add_argument(
+        "--discrepancy",
+        type=float,
+        nargs=2,
+        default=None,
+        metavar=("AMPLITUDE_M", "TIME_S"),
+        help="the length discrepancy a fit found: Matérn-3/2 amplitude (m) and time scale (s) (default: none)",
+    )
+    parser.add_argument(
+        "--estimate-demand",
+        action="store_true",
+        help="the pressure demand (forward) or step count (inverse) was not recorded: estimate it as a random "
+        "walk (default: off; the data's demand, or the published pulse)",
+    )
+    parser.add_argument(
+        "--demand-walk",
+        type=float,
+        default=None,
+        metavar="SD",
+        help="the estimated demand's random walk, SI per √s (default 3e5 Pa/√s, 30 steps/√s)",
+    )
+    parser.add_argument("--method", choices=METHODS, default="extended", help="the filter")
+    parser.add_argument("--smooth", action="store_true", help="the whole record's estimate, not the causal one")
+
+
+def model_of(args, params):
+    """The state-space model the options describe (``params``: the nominal parameters)."""
+    import growjax as gj
+    from growjax import track as tk
+    from growjax.calibration import tolerance as tl
+    from growjax.track import sensors as ts
+
+    if getattr(args, "fidelity", "fast") != "fast":
+        raise ValueError("track steps the fast configuration (--fidelity fast)")
+    chosen = ts.sensors(args.sensors, ts.parse_noise(args.noise))
+    estimate = [n.strip() for n in args.estimate.split(",") if n.strip()]
+    tolerance_texts = [t.strip() for t in args.tolerance]
+    budget = tolerance_texts != ["none"]
+    tolerances = dict(tl.parse(t) for t in tolerance_texts) if budget else {}
+    discrepancy = None if args.discrepancy is None else tk.Discrepancy(*args.discrepancy)
+    inputs = ()
+    if args.estimate_demand:
+        field = "pressure_demand" if args.drive == "forward" else "steps"
+        inputs = (tk.InputState(field, walk=args.demand_walk),)
+    if any(s.output == "catheter_length" for s in chosen):
+        inputs += (tk.InputState("catheter_length"),)
+    config = gj.Config(drive=args.drive, rtol=getattr(args, "rtol", None))
+    return tk.state_space(
+        params,
+        drive=args.drive,
+        sensors=chosen,
+        estimate=estimate,
+        prior_sd=_pairs(args.prior_sd, "--prior-sd"),
+        walk=_pairs(args.walk, "--walk"),
+        tolerances=tolerances,
+        budget=budget,
+        discrepancy=discrepancy,
+        inputs=inputs,
+        sample_interval=0.01,
+        config=config,
+    )
+
+
+def _load(args):
+    """(data path, experiment windowed to --t-end, parameters, their origin)."""
+    import growjax as gj
+    from growjax.cli import data_path, parse_param, recorded_parameters
+    from growjax.data import experiment as ex
+
+    data = data_path(args.data, getattr(args, "data_dir", None))
+    exp = ex.read(data, catheter=getattr(args, "catheter", True)).window(args.t_end)
+    params = gj.reference(args.drive)
+    recorded = recorded_parameters(data)
+    fixed = dict(parse_param(p) for p in args.param)
+    if recorded or fixed:
+        params = gj.replace(params, **{**recorded, **fixed})
+    gj.validate(params)
+    return data, exp, params, {"recorded_beside_data": recorded, "fixed": fixed}
+
+
+def run(args: argparse.Namespace) -> dict:
+    """Track DATA; write ``track.csv`` and ``track.png`` under ``--out``; the JSON summary."""
+    from growjax import track as tk
+    from growjax.track.figure import track_figure
+
+    data, exp, params, origin = _load(args)
+    model = model_of(args, params)
+    method = tk.Unscented() if args.method == "unscented" else tk.ExtendedKalman()
+    if exp.time.size < 2:
+        raise ValueError(f"{data} has fewer than two samples up to --t-end {args.t_end} s")
+    clock = time.perf_counter()
+    result = tk.track(exp, model, method=method, smooth=args.smooth)
+    wall = time.perf_counter() - clock
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    scored = "robot_length_m" in exp and "robot_length_m" not in result.sensors
+    extra = {"measured_robot_length_m": np.asarray(exp["robot_length_m"])} if scored else {}
+    result.write_csv(out / "track.csv", extra)
+    summary = _summary(args, data, exp, model, result, origin, wall)
+    if scored:
+        summary["score"] = result.score(exp["robot_length_m"])
+    measured = {c: exp[c] for c in ("robot_length_m", "pressure_Pa") if c in exp}
+    compare = None
+    if args.estimate_demand and args.drive == "forward":
+        compare = _demand_to_compare(exp, model)
+    summary["csv"] = str(out / "track.csv")
+    summary["figure"] = str(
+        track_figure(result, out / "track.png", measured=measured, compare=compare, title=_title(data, result))
+    )
+    return summary
+
+
+def _demand_to_compare(exp, model):
+    """(label, time, demand) to draw beside an estimated demand: the data's own, else the published pulse train."""
+    import jax
+
+    import growjax as gj
+
+    if "pressure_demand_Pa" in exp:
+        return "recorded demand", exp.time, exp["pressure_demand_Pa"]
+    return "published pulse train", exp.time, np.asarray(jax.vmap(gj.published_pulse())(exp.time))
+
+
+def _title(data, result) -> str:
+    kind = "smoothed" if result.smoothed else "filtered"
+    return f"{Path(str(data)).name}: {', '.join(result.sensors)} ({result.method}, {kind})"
+
+
+def _summary(args, data, exp, model, result, origin, wall) -> dict:
+    """The JSON summary's body: what was read, the final estimates with their bands, the filter's consistency."""
+    from growjax.track.result import asked, parameter_quantity
+
+    final = {}
+    for p in asked(model):
+        q = parameter_quantity(model.params, p.name)
+        est, lo, hi = result.band(q.column)
+        final[p.name] = {"estimate": float(est[-1]), "lower_90": float(lo[-1]), "upper_90": float(hi[-1])}
+    n = model.model_size
+    rig = {
+        p.name: {"relative_error": float(result.mean[-1, n + i]), "sd": float(np.sqrt(result.cov[-1, n + i, n + i]))}
+        for i, p in enumerate(model.parameters)
+        if p.tolerance
+    }
+    est, lo, hi = result.band("robot_length_m")
+    steps = result.step_seconds[1:] if result.step_seconds.size > 1 else result.step_seconds
+    return {
+        "command": NAME,
+        "data": str(data),
+        "drive": args.drive,
+        "parameters": origin,
+        "sensors": {s.column: s.noise for s in model.sensors},
+        "method": result.method,
+        "smoothed": result.smoothed,
+        "samples": int(result.time.size),
+        "t_end_s": float(result.time[-1]),
+        "final_length_m": {"estimate": float(est[-1]), "lower_90": float(lo[-1]), "upper_90": float(hi[-1])},
+        "estimated": final,
+        "rig": rig,
+        "consistency": result.consistency(),
+        "log_likelihood": result.log_likelihood,
+        "step_ms_median": 1e3 * float(np.median(steps)),
+        "first_step_s": float(result.step_seconds[0]),
+        "wall_s": wall,
+    }
+
+
+def summary_lines(summary: dict) -> list[str]:
+    """The human summary (mm, kPa)."""
+    s = summary
+    kind = "smoothed over the whole record" if s["smoothed"] else "filtered (causal)"
+    fl = s["final_length_m"]
+    lines = [
+        f"track: {Path(s['data']).name}, {s['drive']} drive, sensors {', '.join(s['sensors'])}; {s['method']}, {kind}",
+        f"  {s['samples']} samples to {s['t_end_s']:g} s; final length {1e3 * fl['estimate']:.2f} mm "
+        f"[{1e3 * fl['lower_90']:.2f}, {1e3 * fl['upper_90']:.2f}] (90 %)",
+    ]
+    for name, e in s["estimated"].items():
+        unit, scale = ("kPa", 1e-3) if name.endswith("yield_pressure") else ("", 1.0)
+        lines.append(
+            f"  {name} {scale * e['estimate']:.4g} [{scale * e['lower_90']:.4g}, {scale * e['upper_90']:.4g}] {unit}"
+        )
+    if s.get("score"):
+        sc = s["score"]
+        lines.append(
+            f"  against the measured length (not read): RMSE {1e3 * sc['rmse_m']:.3f} mm, band covers "
+            f"{100 * sc['coverage_90']:.0f} % of {sc['samples']} samples"
+        )
+    c = s["consistency"]
+    if c["nis_per_reading"] is not None:
+        lines.append(
+            f"  innovations: NIS {c['nis_per_reading']:.2f} per reading (1 if honest), "
+            f"{100 * c['nis_inside_90']:.0f} % inside their 90 % interval"
+        )
+    lines.append(
+        f"  step {s['step_ms_median']:.2f} ms (median) after {s['first_step_s']:.1f} s compiling; {s['wall_s']:.1f} s"
+    )
+    lines.append(f"  wrote {s['csv']}, {s['figure']}")
+    return lines
+
+
+__all__ = ["HELP", "METHODS", "NAME", "add_arguments", "model_of", "run", "summary_lines"]

@@ -1,0 +1,108 @@
+"""A whole record tracked: the filter stepped over every sample (causal), optionally smoothed (the whole record),
+and the quantities read from the beliefs with their bands.
+
+The filter starts at rest at the configuration's start t0 (or one sample interval before the first sample, if
+that is earlier) and steps to each sample in turn, reading the chosen sensors' columns (NaN where a sample is
+missing). The inputs it knows are those of the experiment (:func:`growjax.data.experiment.to_inputs`: the
+catheter's length, the pressure demand or the published pulse, the stepper's demand); an estimated input
+replaces its known one.
+"""
+
+from __future__ import annotations
+
+import time
+
+import jax
+import numpy as np
+
+from growjax.data.experiment import Experiment, to_inputs
+from growjax.track import smoother
+from growjax.track.filter import Filter, compiled
+from growjax.track.model import StateSpace
+from growjax.track.result import TrackResult, quantities, report
+from growjax.track.sensors import measurements
+
+
+def start_time(model: StateSpace, times) -> float:
+    """When the filter starts at rest (s): the configuration's t0, or one sample interval before the first sample
+    where that is earlier."""
+    t = np.asarray(times, float)
+    spacing = float(t[1] - t[0]) if t.size > 1 else float(model.config.initial_step)
+    return min(float(model.config.t0), float(t[0]) - spacing)
+
+
+def track(
+    experiment: Experiment,
+    model: StateSpace,
+    *,
+    method=None,
+    smooth: bool = False,
+    t_end: float | None = None,
+    inputs=None,
+) -> TrackResult:
+    """Track ``experiment`` with ``model``'s sensors.
+
+    Args:
+        experiment: the record: the chosen sensors' columns and the inputs' (``catheter_length_m``, ...).
+        model: the state-space model (:func:`growjax.track.state_space`).
+        method: the filter (default :class:`growjax.track.ExtendedKalman`).
+        smooth: the whole record's estimate (Rauch–Tung–Striebel), not the causal one.
+        t_end: the last sample used, s (default: the record's end).
+        inputs: the known inputs (``growjax.Inputs``); default from the experiment.
+
+    Returns:
+        :class:`growjax.track.TrackResult`.
+
+    Raises:
+        ValueError: a chosen sensor's column missing, fewer than two samples.
+        RuntimeError: the solver failed inside an interval (named by its time).
+    """
+    if t_end is not None:
+        experiment = experiment.window(t_end)
+    times = np.asarray(experiment.time, float)
+    if times.size < 2:
+        raise ValueError("a record to track needs at least two samples")
+    readings = measurements(experiment, model.sensors)
+    t0 = start_time(model, times)
+    if inputs is None:
+        inputs = to_inputs(experiment, model.config.drive, model.params, t0, float(times[-1]))
+    breaks = model.breaks(inputs, t0, float(times[-1]))
+    run = Filter(model, method)
+    belief = run.start(t0)
+    records, beliefs, seconds = [], [], np.zeros(times.size)
+    for k, (t, y) in enumerate(zip(times, readings)):
+        clock = time.perf_counter()
+        belief, step = jax.block_until_ready(run.step(belief, t, y, inputs, breaks))
+        seconds[k] = time.perf_counter() - clock
+        if int(step.status) != 0:
+            raise RuntimeError(
+                f"the solver failed between {float(times[k - 1]) if k else t0:.3f} s and {float(t):.3f} s "
+                f"(a step budget of {model.config.step_budget} per interval: raise config.max_steps)"
+            )
+        records.append(step)
+        beliefs.append(belief)
+    stack = lambda xs: np.stack([np.asarray(x) for x in xs])  # noqa: E731
+    means, covs = stack([b.mean for b in beliefs]), stack([b.cov for b in beliefs])
+    if smooth:
+        pred_m = stack([s.predicted_mean for s in records[1:]] + [records[-1].predicted_mean])
+        pred_p = stack([s.predicted_cov for s in records[1:]] + [records[-1].predicted_cov])
+        cross = stack([s.cross for s in records[1:]] + [records[-1].cross])
+        means, covs = (np.asarray(a) for a in smoother.smooth(means, covs, pred_m, pred_p, cross))
+    return TrackResult(
+        time=times,
+        quantities=quantities(model),
+        columns=report(model, *compiled(model, run.method).linearised(times, means, covs, inputs)),
+        mean=means,
+        cov=covs,
+        state_names=model.state_names(),
+        sensors=tuple(s.column for s in model.sensors),
+        nis=stack([s.nis for s in records]),
+        dof=stack([np.sum(s.observed) for s in records]),
+        log_likelihood=float(sum(float(s.log_likelihood) for s in records)),
+        method=run.method.name,
+        smoothed=smooth,
+        step_seconds=seconds,
+    )
+
+
+__all__ = ["start_time", "track"]
