@@ -986,7 +986,14 @@ COMMANDS = {
     "params": params_command,
     "effects": effects_command,
     "design": design_command,
+    "track": lambda args: _track_run(args),
 }
+
+
+def _track_run(args) -> dict:
+    from growjax.cli import track as track_command
+
+    return track_command.run(args)
 
 
 def _write_json(summary: dict, where: str | None):

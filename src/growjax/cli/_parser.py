@@ -540,6 +540,13 @@ def build_parser():
     _quiet(des)
     _likelihood(des)
 
+    from growjax.cli import track as track_command
+
+    trk = sub.add_parser(track_command.NAME, formatter_class=fmt, help=track_command.HELP)
+    _shared(trk, track_command.NAME)
+    _quiet(trk)
+    track_command.add_arguments(trk)
+
     par = sub.add_parser(
         "params", formatter_class=fmt, help="list the parameters: names, symbols, defaults, units, physical ranges"
     )

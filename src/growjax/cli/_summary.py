@@ -332,7 +332,14 @@ SUMMARIES = {
     "params": _params,
     "effects": _effects,
     "design": _design,
+    "track": lambda s, name: _track_lines(s),
 }  # command → its lines (summary, data name)
+
+
+def _track_lines(s: dict) -> list[str]:
+    from growjax.cli import track as track_command
+
+    return track_command.summary_lines(s)
 
 
 def summary_lines(s: dict) -> list[str]:
