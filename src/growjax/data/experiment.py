@@ -2,9 +2,10 @@
 
 CSV format (UTF-8 text): a ``time_s`` column (strictly increasing), a ``catheter_length_m`` column (input;
 required unless the experiment had no catheter in contact: ``catheter=False``) and any of
-``robot_length_m`` (measured), ``pressure_Pa`` (measured), ``pressure_demand_Pa`` (input, forward
-drive), ``desired_length_m`` (input, inverse drive). The lab's MATLAB ``timeseries`` files are read
-with mat-io.
+``robot_length_m`` (measured), ``pressure_Pa`` (measured), ``syringe_displacement_m`` (measured: the
+syringes' travel from full, by the motor's encoder or the stepper's step count), ``robot_flow_m3_s``
+(measured: the flow into the robot at its inlet), ``pressure_demand_Pa`` (input, forward drive),
+``desired_length_m`` (input, inverse drive). The lab's MATLAB ``timeseries`` files are read with mat-io.
 """
 
 from __future__ import annotations
@@ -21,9 +22,19 @@ from growjax.model.motor import step_schedule
 from growjax.model.params import Parameters
 from growjax.model.signals import Constant, Inputs, Sampled, StepSchedule, published_pulse
 
-COLUMNS = ("robot_length_m", "pressure_Pa", "catheter_length_m", "pressure_demand_Pa", "desired_length_m")
-LENGTH_COLUMNS = ("robot_length_m", "catheter_length_m", "desired_length_m")
+COLUMNS = (
+    "robot_length_m",
+    "pressure_Pa",
+    "syringe_displacement_m",
+    "robot_flow_m3_s",
+    "catheter_length_m",
+    "pressure_demand_Pa",
+    "desired_length_m",
+)
+LENGTH_COLUMNS = ("robot_length_m", "catheter_length_m", "desired_length_m")  # never negative
+DISPLACEMENT_COLUMNS = ("syringe_displacement_m",)  # a length that may dip below zero (noise about the full stop)
 MAX_PLAUSIBLE_LENGTH_M = 2.0  # a robot or catheter longer than this is almost surely in millimetres
+MAX_PLAUSIBLE_FLOW_M3_S = 1e-2  # a flow above this (10 L/s) is almost surely in mm³/s or µL/s
 MIN_SAMPLE_SPACING_S = 1e-9  # s: samples closer than this are one instant read twice
 
 
@@ -76,14 +87,18 @@ def validate_series(time, series: dict, source: str = "") -> None:
         bad = ~np.isfinite(values)
         if np.any(bad):
             raise ExperimentError(f"column {name}{where} contains NaN or infinite values (at t = {time[bad][0]} s)")
-        if name in LENGTH_COLUMNS:
-            if np.any(values < 0):
-                raise ExperimentError(f"column {name}{where} has negative lengths (at t = {time[values < 0][0]} s)")
-            if np.max(values) > MAX_PLAUSIBLE_LENGTH_M:
-                raise ExperimentError(
-                    f"column {name}{where} reaches {np.max(values):g} m: lengths look like millimetres; "
-                    "give them in metres (divide by 1000)"
-                )
+        if name in LENGTH_COLUMNS and np.any(values < 0):
+            raise ExperimentError(f"column {name}{where} has negative lengths (at t = {time[values < 0][0]} s)")
+        if name in LENGTH_COLUMNS + DISPLACEMENT_COLUMNS and np.max(np.abs(values)) > MAX_PLAUSIBLE_LENGTH_M:
+            raise ExperimentError(
+                f"column {name}{where} reaches {np.max(np.abs(values)):g} m: lengths look like millimetres; "
+                "give them in metres (divide by 1000)"
+            )
+        if name == "robot_flow_m3_s" and np.max(np.abs(values)) > MAX_PLAUSIBLE_FLOW_M3_S:
+            raise ExperimentError(
+                f"column {name}{where} reaches {np.max(np.abs(values)):g} m³/s: flows look like mm³/s or µL/s; "
+                "give them in m³/s (divide by 1e9)"
+            )
 
 
 def read_csv(path, catheter: bool = True) -> Experiment:
