@@ -6,8 +6,9 @@ with the **reference** configuration (:mod:`growjax.simulation.reference`; never
 discovery run on the fast configuration is not fitted to its own solver), adds seeded Gaussian
 noise to the length (and the pressure), and returns a :class:`SyntheticExperiment`: a
 :class:`growjax.data.experiment.Experiment` in the CSV format of :mod:`growjax.data.experiment`
-(``time_s``, ``robot_length_m``, ``pressure_Pa``, ``catheter_length_m`` and, where needed,
-``pressure_demand_Pa`` or ``desired_length_m``), with the truth in ``metadata`` for a JSON sidecar
+(``time_s``, ``robot_length_m``, ``pressure_Pa``, ``catheter_length_m``, where asked the pump's own
+``syringe_displacement_m`` and ``robot_flow_m3_s``, and, where needed, ``pressure_demand_Pa`` or
+``desired_length_m``), with the truth in ``metadata`` for a JSON sidecar
 (:meth:`SyntheticExperiment.write`).
 
 The noise-free reference solve is the expensive part (a 10 s run is tens of seconds, plus about a
@@ -335,7 +336,8 @@ def noise_free(
 ) -> dict:
     """The noise-free reference solve behind :func:`make_experiment` (cached; same arguments).
 
-    Returns {"time": (T,) s, "length": m, "pressure": Pa, "columns": input columns, "inputs": description,
+    Returns {"time": (T,) s, "length": m, "pressure": Pa, "syringe_displacement": m, "robot_flow": m³/s,
+    "columns": input columns, "inputs": description,
     "effect": Effect or None, "name", "magnitude", "status"}. Raises RuntimeError if the reference
     solver fails or the run crosses the membrane pressure limit.
     """
@@ -371,6 +373,8 @@ def noise_free(
         "time": time,
         "length": np.asarray(traj.length)[offset:],
         "pressure": np.asarray(traj.pressure)[offset:],
+        "syringe_displacement": np.asarray(traj.syringe_displacement)[offset:],
+        "robot_flow": np.asarray(traj.robot_flow)[offset:],
         "columns": cols,
         "inputs": description,
         "effect": instance,
@@ -431,6 +435,8 @@ def make_experiment(
     seed: int,
     noise_m: float = NOISE_LENGTH_M,
     noise_pressure_Pa: float | None = NOISE_PRESSURE_PA,
+    noise_syringe_m: float | None = None,
+    noise_flow_m3_s: float | None = None,
     drive: str = "forward",
     inputs="public",
     t_end: float = 10.0,
@@ -449,6 +455,10 @@ def make_experiment(
         noise_m: standard deviation of the Gaussian noise on the length, m (0.2 mm: the rig's).
         noise_pressure_Pa: standard deviation on the pressure, Pa; None leaves out the ``pressure_Pa``
             column (the public experiment has none).
+        noise_syringe_m: standard deviation on the syringe displacement, m (a stepper's step count or an
+            encoder: 5 µm); None (default) leaves out the ``syringe_displacement_m`` column.
+        noise_flow_m3_s: standard deviation on the robot's inlet flow, m³/s; None (default) leaves out the
+            ``robot_flow_m3_s`` column.
         drive: ``"forward"`` or ``"inverse"``.
         inputs: ``"public"``, ``"synthetic"`` or a :class:`growjax.Inputs` (see the module docstring,
             including the fallback when the public experiment is absent).
@@ -461,7 +471,8 @@ def make_experiment(
 
     Returns:
         :class:`SyntheticExperiment`: columns ``robot_length_m`` (noisy), ``pressure_Pa`` (noisy, unless
-        ``noise_pressure_Pa`` is None), the inputs ``catheter_length_m`` and, where the published pulse is
+        ``noise_pressure_Pa`` is None), ``syringe_displacement_m`` and ``robot_flow_m3_s`` (noisy, where their
+        noise is given), the inputs ``catheter_length_m`` and, where the published pulse is
         not the demand, ``pressure_demand_Pa`` (forward) or ``desired_length_m`` (inverse), so that
         :func:`growjax.data.experiment.to_inputs` of it gives back the inputs; ``metadata`` holds the truth.
     """
@@ -472,9 +483,14 @@ def make_experiment(
     time = clean["time"]
     series = {"robot_length_m": clean["length"] + rng.normal(0.0, noise_m, time.size)}
     noise = {"robot_length_m": noise_m}
-    if noise_pressure_Pa is not None:
-        series["pressure_Pa"] = clean["pressure"] + rng.normal(0.0, noise_pressure_Pa, time.size)
-        noise["pressure_Pa"] = noise_pressure_Pa
+    for column, output, sd in (
+        ("pressure_Pa", "pressure", noise_pressure_Pa),
+        ("syringe_displacement_m", "syringe_displacement", noise_syringe_m),
+        ("robot_flow_m3_s", "robot_flow", noise_flow_m3_s),
+    ):
+        if sd is not None:  # drawn in this order after the length's
+            series[column] = clean[output] + rng.normal(0.0, sd, time.size)
+            noise[column] = sd
     series.update(clean["columns"])
     ex.validate_series(time, series, "synthetic experiment")
     instance, name = clean["effect"], clean["name"]
