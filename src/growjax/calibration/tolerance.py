@@ -75,6 +75,15 @@ def budget(base: gp.Parameters, overrides: dict | None = None, free=(), use_defa
     return out
 
 
+def rig_draws(n: int, base: gp.Parameters, tolerances: dict, seed: int = 0) -> dict:
+    """Draws of the rig within its tolerances as {qualified name: (n,) array}: each toleranced parameter ψ·exp(u z),
+    z ~ N(0, 1) independent (seeded), u its relative standard uncertainty in ``tolerances`` {name: u} (aliases
+    allowed, zeros dropped). {} for no tolerances."""
+    tol = budget(base, tolerances, use_default=False)
+    rng = np.random.default_rng([seed, 1])  # a stream apart from a posterior's draws
+    return {k: float(gp.get(base, k)) * np.exp(u * rng.standard_normal(n)) for k, u in tol.items()}
+
+
 def sensitivity(length_of, base: gp.Parameters, tol: dict, reference=None, central: bool = False) -> np.ndarray:
     """g (n, q): the length's change, m, per unit ln ψ of each toleranced parameter of ``tol`` {name: u}: the secant
     from ψ to ψ·e^u (the effect of an error the size of the tolerance), or with ``central`` from ψ·e^(−u/2) to

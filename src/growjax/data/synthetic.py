@@ -517,6 +517,93 @@ def make_experiment(
     return SyntheticExperiment(time, series, f"{label}, seed {seed}", meta)
 
 
+def drifting_experiment(
+    parameter: str,
+    change: float,
+    *,
+    seed: int,
+    t_end: float = 10.0,
+    segment: float = 0.25,
+    base=None,
+    inputs="synthetic",
+    noise: dict | None = None,
+    dt: float = 0.01,
+    rtol: float = 1e-6,
+) -> SyntheticExperiment:
+    """A synthetic experiment whose ``parameter`` drifts: ψ(t) = ψ₀ (1 + ``change`` · t/``t_end``), held over each
+    ``segment`` s (a staircase; the value at the segment's middle), simulated by the reference configuration from
+    segment to segment (:func:`growjax.simulation.simulate.simulate_from`), forward drive.
+
+    Args:
+        parameter: its name (``Y``, ``robot.yield_pressure``, ...).
+        change: its relative change over the record (0.1: +10 %).
+        seed: seed of the noise, drawn per column in the order of ``noise``.
+        t_end, dt, inputs, base, rtol: as :func:`make_experiment`.
+        segment: how long each value is held, s.
+        noise: {column: sd} of the noisy columns (default: 0.2 mm on the length, 500 Pa on the pressure, 5 µm on
+            the syringe displacement).
+
+    Returns:
+        :class:`SyntheticExperiment`, its ``metadata`` holding the drift (``parameter``, ``values`` (T,) at the
+        samples) and the noise-free length (``noise_free_length_m``).
+
+    Raises:
+        RuntimeError: the reference solver failed in a segment.
+    """
+    from growjax.model import params as gp
+    from growjax.simulation import reference
+    from growjax.simulation.simulate import input_breaks, simulate_from
+
+    base = gj.reference("forward") if base is None else base
+    name = gp.resolve_name(base, parameter)
+    noise = {"robot_length_m": NOISE_LENGTH_M, "pressure_Pa": NOISE_PRESSURE_PA, "syringe_displacement_m": 5e-6} | (
+        noise or {}
+    )
+    model_inputs, time, cols, description = resolve_inputs(inputs, "forward", base, t_end, dt)
+    config = gj.Config(fidelity="reference", t1=float(time[-1]), rtol=rtol, atol=rtol, stop_at_pressure_limit=False)
+    breaks = input_breaks(model_inputs, config)
+    nominal = float(gj.get(base, name))
+    edges = np.unique(np.concatenate([np.arange(config.t0, time[-1], segment), [time[-1]]]))
+    state = reference.initial_state(fx.apply_all(base), config)
+    out = {k: np.full(time.size, np.nan) for k in ("length", "pressure", "syringe_displacement", "robot_flow")}
+    values = np.full(time.size, np.nan)
+    for ta, tb in zip(edges[:-1], edges[1:]):
+        value = nominal * (1.0 + change * 0.5 * (ta + tb) / t_end)
+        rows = np.flatnonzero((time > ta) & (time <= tb))
+        ts = np.concatenate([time[rows], [tb]]) if rows.size == 0 or time[rows[-1]] < tb else time[rows]
+        traj = simulate_from(gj.replace(base, **{name: value}), model_inputs, config, state, (ta, tb), ts, breaks)
+        if int(traj.status) == gj.SOLVER_FAILED:
+            raise RuntimeError(f"the reference solve failed between {ta:.3f} s and {tb:.3f} s")
+        state = traj.final_state
+        for k in out:
+            out[k][rows] = np.asarray(getattr(traj, k))[: rows.size]
+        values[rows] = value
+    rng = np.random.default_rng(seed)
+    output = {
+        "robot_length_m": "length",
+        "pressure_Pa": "pressure",
+        "syringe_displacement_m": "syringe_displacement",
+        "robot_flow_m3_s": "robot_flow",
+    }
+    series = {c: out[output[c]] + rng.normal(0.0, sd, time.size) for c, sd in noise.items()}
+    series.update(cols)
+    ex.validate_series(time, series, "synthetic experiment")
+    meta = {
+        "effect": None,
+        "drift": {"parameter": name, "change": change, "segment_s": segment, "values": values.tolist()},
+        "noise_free_length_m": out["length"].tolist(),
+        "noise_sd": noise,
+        "seed": int(seed),
+        "drive": "forward",
+        "t_end_s": float(time[-1]),
+        "inputs": description,
+        "base_parameters": _base_overrides(base, "forward"),
+        "solver": {"fidelity": "reference", "rtol": rtol, "atol": rtol},
+        "generator": "growjax.data.synthetic.drifting_experiment",
+    }
+    return SyntheticExperiment(time, series, f"synthetic: {name} drifting by {change:+.0%}, seed {seed}", meta)
+
+
 def read_truth(csv_path) -> dict:
     """The metadata written beside a synthetic experiment's CSV (its ``.json``)."""
     return json.loads(Path(csv_path).with_suffix(".json").read_text())
@@ -530,6 +617,7 @@ __all__ = [
     "OscillatingForce",
     "SyntheticExperiment",
     "clear_cache",
+    "drifting_experiment",
     "effect_class",
     "hidden_effect_parameters",
     "magnitude_field",
