@@ -111,7 +111,7 @@ def model_of(args, params):
 
     if getattr(args, "fidelity", "fast") != "fast":
         raise ValueError("track steps the fast configuration (--fidelity fast)")
-    chosen = ts.sensors(args.sensors, ts.parse_noise(args.noise))
+    chosen = ts.sensor_set(args.sensors, ts.parse_noise(args.noise))
     estimate = [n.strip() for n in args.estimate.split(",") if n.strip()]
     tolerance_texts = [t.strip() for t in args.tolerance]
     budget = tolerance_texts != ["none"]

@@ -25,7 +25,7 @@ from growjax.track.model import StateSpace, state_space
 from growjax.track.noise import Discrepancy, InputState, StateParameter
 from growjax.track.result import TrackResult
 from growjax.track.run import track
-from growjax.track.sensors import PUMP_SENSORS, SENSORS, Sensor, sensor, sensors
+from growjax.track.sensors import PUMP_SENSORS, SENSORS, Sensor, sensor, sensor_set
 from growjax.track.smoother import smooth
 from growjax.track.unscented import Unscented
 
@@ -44,7 +44,7 @@ __all__ = [
     "TrackResult",
     "Unscented",
     "sensor",
-    "sensors",
+    "sensor_set",
     "smooth",
     "state_space",
     "track",

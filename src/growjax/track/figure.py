@@ -27,6 +27,20 @@ def _axis(column: str) -> tuple[float, str]:
     return 1.0, column
 
 
+def _limits(est, lo, hi, seen=()) -> tuple[float, float]:
+    """The axis: the band and what was measured, the band no more than twice the estimate's own range beyond it (a
+    quantity no sensor reads can carry a band far wider than anything physical, its linearisation held by no data)."""
+    span = max(float(np.ptp(est)), 1e-12)
+    low = max(float(np.min(lo)), float(np.min(est)) - 2 * span)
+    high = min(float(np.max(hi)), float(np.max(est)) + 2 * span)
+    for values in seen:
+        finite = np.asarray(values)[np.isfinite(values)]
+        if finite.size:
+            low, high = min(low, float(finite.min())), max(high, float(finite.max()))
+    pad = 0.05 * (high - low)
+    return low - pad, high + pad
+
+
 def track_figure(
     result: TrackResult,
     path,
@@ -66,6 +80,8 @@ def track_figure(
             name, t, v = compare
             ax.plot(t, scale * np.asarray(v), color="C3", lw=1.0, ls="--", label=name)
         ax.set_ylabel(label)
+        seen = [scale * np.asarray(measured[column])] if column in measured else []
+        ax.set_ylim(*_limits(scale * est, scale * lo, scale * hi, seen))
         ax.legend(loc="best", fontsize=7)
     axes[-1, 0].set_xlabel("time (s)")
     if title:

@@ -1,8 +1,8 @@
 """A whole record tracked: the filter stepped over every sample (causal), optionally smoothed (the whole record),
 and the quantities read from the beliefs with their bands.
 
-The filter starts at rest at the configuration's start t0 (or one sample interval before the first sample, if
-that is earlier) and steps to each sample in turn, reading the chosen sensors' columns (NaN where a sample is
+The filter starts at rest at the configuration's start t0 (or at the first sample, if that is earlier), as a
+simulation does, and steps to each sample in turn, reading the chosen sensors' columns (NaN where a sample is
 missing). The inputs it knows are those of the experiment (:func:`growjax.data.experiment.to_inputs`: the
 catheter's length, the pressure demand or the published pulse, the stepper's demand); an estimated input
 replaces its known one.
@@ -24,11 +24,9 @@ from growjax.track.sensors import measurements
 
 
 def start_time(model: StateSpace, times) -> float:
-    """When the filter starts at rest (s): the configuration's t0, or one sample interval before the first sample
-    where that is earlier."""
-    t = np.asarray(times, float)
-    spacing = float(t[1] - t[0]) if t.size > 1 else float(model.config.initial_step)
-    return min(float(model.config.t0), float(t[0]) - spacing)
+    """When the filter starts at rest (s): the configuration's t0 (as a simulation does), or the first sample where
+    that is earlier. A first sample at the start is read without a prediction before it."""
+    return min(float(model.config.t0), float(np.asarray(times, float)[0]))
 
 
 def track(

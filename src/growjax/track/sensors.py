@@ -71,7 +71,7 @@ def sensor(name: str, noise: float | None = None) -> Sensor:
     return chosen if noise is None else chosen.with_noise(noise)
 
 
-def sensors(names, noise: dict | None = None) -> tuple[Sensor, ...]:
+def sensor_set(names, noise: dict | None = None) -> tuple[Sensor, ...]:
     """Sensors in the order of :data:`SENSORS` from ``names`` (a comma-separated string or names), each with the
     noise ``noise[name]`` (column or short name) where given.
 
@@ -124,4 +124,4 @@ def parse_noise(text: str | None) -> dict:
     return out
 
 
-__all__ = ["PUMP_SENSORS", "SENSORS", "Sensor", "measurements", "parse_noise", "sensor", "sensors"]
+__all__ = ["PUMP_SENSORS", "SENSORS", "Sensor", "measurements", "parse_noise", "sensor", "sensor_set"]
