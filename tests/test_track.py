@@ -82,6 +82,11 @@ def test_the_pump_columns_are_read_with_their_units_checked(tmp_path):
     ex.write_csv(path, t, {"catheter_length_m": t, "robot_flow_m3_s": [0.0, 40.0, 41.0]})
     with pytest.raises(ex.ExperimentError, match="mm³/s"):
         ex.read(path)
+    ex.write_csv(path, t, {"catheter_length_m": t, "robot_length_m": [0.01, np.nan, np.nan]})  # read once
+    with pytest.raises(ex.ExperimentError, match="NaN"):
+        ex.read(path)
+    sparse = ex.read(path, sparse=ex.MEASURED_COLUMNS)
+    assert sparse["robot_length_m"][0] == 0.01 and np.all(np.isnan(sparse["robot_length_m"][1:]))
 
 
 def test_a_missing_sensor_column_is_named(model):

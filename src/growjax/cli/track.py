@@ -147,7 +147,7 @@ def _load(args):
     from growjax.data import experiment as ex
 
     data = data_path(args.data, getattr(args, "data_dir", None))
-    exp = ex.read(data, catheter=getattr(args, "catheter", True)).window(args.t_end)
+    exp = ex.read(data, catheter=getattr(args, "catheter", True), sparse=ex.MEASURED_COLUMNS).window(args.t_end)
     params = gj.reference(args.drive)
     recorded = recorded_parameters(data)
     fixed = dict(parse_param(p) for p in args.param)

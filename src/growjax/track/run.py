@@ -15,7 +15,7 @@ import time
 import jax
 import numpy as np
 
-from growjax.data.experiment import Experiment, to_inputs
+from growjax.data.experiment import Experiment, informative_samples, to_inputs
 from growjax.track import smoother
 from growjax.track.filter import Filter, compiled
 from growjax.track.model import StateSpace
@@ -27,6 +27,23 @@ def start_time(model: StateSpace, times) -> float:
     """When the filter starts at rest (s): the configuration's t0 (as a simulation does), or the first sample where
     that is earlier. A first sample at the start is read without a prediction before it."""
     return min(float(model.config.t0), float(np.asarray(times, float)[0]))
+
+
+def read(experiment: Experiment, model: StateSpace) -> np.ndarray:
+    """The readings (T, m) the filter takes from ``experiment``: the chosen sensors' columns, NaN where missing. With
+    a discrepancy in the model, a length digitised at keyframes and interpolated between them is read at its
+    keyframes only (:func:`growjax.data.experiment.informative_samples`, as calibration reads it): its
+    interpolated samples repeat them, and the discrepancy's correlation would count each many times."""
+    readings = measurements(experiment, model.sensors)
+    if model.discrepancy is not None:
+        for j, s in enumerate(model.sensors):
+            if s.output == "length":
+                values = readings[:, j]
+                finite = np.isfinite(values)
+                keep = np.zeros(values.size, bool)
+                keep[finite] = informative_samples(values[finite])
+                readings[:, j] = np.where(keep, values, np.nan)
+    return readings
 
 
 def track(
@@ -60,7 +77,7 @@ def track(
     times = np.asarray(experiment.time, float)
     if times.size < 2:
         raise ValueError("a record to track needs at least two samples")
-    readings = measurements(experiment, model.sensors)
+    readings = read(experiment, model)
     t0 = start_time(model, times)
     if inputs is None:
         inputs = to_inputs(experiment, model.config.drive, model.params, t0, float(times[-1]))
@@ -103,4 +120,4 @@ def track(
     )
 
 
-__all__ = ["start_time", "track"]
+__all__ = ["read", "start_time", "track"]
