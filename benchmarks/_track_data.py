@@ -24,6 +24,7 @@ import growjax as gj
 from growjax.calibration import tolerance as tl
 from growjax.data import experiment as ex
 from growjax.data import synthetic as sy
+from growjax.data.drifting import drifting_experiment
 
 NOISE = {"robot_length_m": 2e-4, "pressure_Pa": 500.0, "syringe_displacement_m": 5e-6, "robot_flow_m3_s": 1e-9}
 SEED = 20261201
@@ -93,7 +94,7 @@ def make_drift_records(folder: Path, n: int, t_end: float, log=print) -> list[Pa
         path = folder / f"drift{i}.csv"
         if not path.exists():
             clock = time.perf_counter()
-            exp = sy.drifting_experiment(
+            exp = drifting_experiment(
                 "Y",
                 DRIFT,
                 seed=SEED + 100 + i,

@@ -24,6 +24,7 @@ from pathlib import Path
 import growjax as gj
 from growjax.calibration import tolerance as tl
 from growjax.data import synthetic as sy
+from growjax.data.drifting import drifting_experiment
 
 HERE = Path(__file__).resolve().parent
 OUT = HERE.parent / "src" / "growjax" / "data" / "datasets" / "track"  # package resources
@@ -70,7 +71,7 @@ def make_rigs() -> list[Path]:
 
 
 def make_drift() -> Path:
-    exp = sy.drifting_experiment("Y", 0.1, seed=SEED + 10, t_end=T_END, noise=NOISE, inputs="synthetic")
+    exp = drifting_experiment("Y", 0.1, seed=SEED + 10, t_end=T_END, noise=NOISE, inputs="synthetic")
     path = write(exp, "drift", {"rig": {}})
     print(path, flush=True)
     return path

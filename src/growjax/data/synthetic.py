@@ -417,7 +417,8 @@ class SyntheticExperiment(ex.Experiment):
         return path
 
 
-def _base_overrides(base, drive: str) -> dict:
+def base_overrides(base, drive: str) -> dict:
+    """The parameters of ``base`` that differ from ``growjax.reference(drive)``: {qualified name: value}."""
     if base is None:
         return {}
     ref = gj.as_dict(gj.reference(drive))
@@ -426,6 +427,22 @@ def _base_overrides(base, drive: str) -> dict:
     if base.robot.growth_law != "reference":
         out["robot.growth_law"] = base.robot.growth_law
     return out
+
+
+MEASURED_OUTPUTS = {
+    "robot_length_m": "length",
+    "pressure_Pa": "pressure",
+    "syringe_displacement_m": "syringe_displacement",
+    "robot_flow_m3_s": "robot_flow",
+}  # a measured column: the output of a noise-free solve it reads
+
+
+def noisy(clean: dict, noise: dict, rng) -> dict:
+    """The measured columns {column: (T,)} of a noise-free solve ``clean`` (:func:`noise_free`'s outputs), each plus
+    Gaussian noise of sd ``noise[column]`` drawn from ``rng`` in the order of ``noise``."""
+    return {
+        c: clean[MEASURED_OUTPUTS[c]] + rng.normal(0.0, sd, clean[MEASURED_OUTPUTS[c]].size) for c, sd in noise.items()
+    }
 
 
 def make_experiment(
@@ -479,19 +496,10 @@ def make_experiment(
     clean = noise_free(
         effect, magnitude, drive=drive, inputs=inputs, t_end=t_end, base=base, dt=dt, rtol=rtol, superset=superset
     )
-    rng = np.random.default_rng(seed)
     time = clean["time"]
-    series = {"robot_length_m": clean["length"] + rng.normal(0.0, noise_m, time.size)}
-    noise = {"robot_length_m": noise_m}
-    for column, output, sd in (
-        ("pressure_Pa", "pressure", noise_pressure_Pa),
-        ("syringe_displacement_m", "syringe_displacement", noise_syringe_m),
-        ("robot_flow_m3_s", "robot_flow", noise_flow_m3_s),
-    ):
-        if sd is not None:  # drawn in this order after the length's
-            series[column] = clean[output] + rng.normal(0.0, sd, time.size)
-            noise[column] = sd
-    series.update(clean["columns"])
+    noise = {"robot_length_m": noise_m, "pressure_Pa": noise_pressure_Pa, "syringe_displacement_m": noise_syringe_m}
+    noise = {c: sd for c, sd in {**noise, "robot_flow_m3_s": noise_flow_m3_s}.items() if sd is not None}
+    series = {**noisy(clean, noise, np.random.default_rng(seed)), **clean["columns"]}
     ex.validate_series(time, series, "synthetic experiment")
     instance, name = clean["effect"], clean["name"]
     meta = {
@@ -509,99 +517,12 @@ def make_experiment(
         "drive": drive,
         "t_end_s": float(time[-1]),
         "inputs": clean["inputs"],
-        "base_parameters": _base_overrides(base, drive),
+        "base_parameters": base_overrides(base, drive),
         "solver": {"fidelity": "reference", "rtol": rtol, "atol": rtol, "superset": superset},
         "generator": "growjax.data.synthetic.make_experiment",
     }
     label = f"synthetic: {name or 'clean'}" + ("" if name is None else f" {meta['parameter']}={clean['magnitude']:g}")
     return SyntheticExperiment(time, series, f"{label}, seed {seed}", meta)
-
-
-def drifting_experiment(
-    parameter: str,
-    change: float,
-    *,
-    seed: int,
-    t_end: float = 10.0,
-    segment: float = 0.25,
-    base=None,
-    inputs="synthetic",
-    noise: dict | None = None,
-    dt: float = 0.01,
-    rtol: float = 1e-6,
-) -> SyntheticExperiment:
-    """A synthetic experiment whose ``parameter`` drifts: ψ(t) = ψ₀ (1 + ``change`` · t/``t_end``), held over each
-    ``segment`` s (a staircase; the value at the segment's middle), simulated by the reference configuration from
-    segment to segment (:func:`growjax.simulation.simulate.simulate_from`), forward drive.
-
-    Args:
-        parameter: its name (``Y``, ``robot.yield_pressure``, ...).
-        change: its relative change over the record (0.1: +10 %).
-        seed: seed of the noise, drawn per column in the order of ``noise``.
-        t_end, dt, inputs, base, rtol: as :func:`make_experiment`.
-        segment: how long each value is held, s.
-        noise: {column: sd} of the noisy columns (default: 0.2 mm on the length, 500 Pa on the pressure, 5 µm on
-            the syringe displacement).
-
-    Returns:
-        :class:`SyntheticExperiment`, its ``metadata`` holding the drift (``parameter``, ``values`` (T,) at the
-        samples) and the noise-free length (``noise_free_length_m``).
-
-    Raises:
-        RuntimeError: the reference solver failed in a segment.
-    """
-    from growjax.model import params as gp
-    from growjax.simulation import reference
-    from growjax.simulation.simulate import input_breaks, simulate_from
-
-    base = gj.reference("forward") if base is None else base
-    name = gp.resolve_name(base, parameter)
-    noise = {"robot_length_m": NOISE_LENGTH_M, "pressure_Pa": NOISE_PRESSURE_PA, "syringe_displacement_m": 5e-6} | (
-        noise or {}
-    )
-    model_inputs, time, cols, description = resolve_inputs(inputs, "forward", base, t_end, dt)
-    config = gj.Config(fidelity="reference", t1=float(time[-1]), rtol=rtol, atol=rtol, stop_at_pressure_limit=False)
-    breaks = input_breaks(model_inputs, config)
-    nominal = float(gj.get(base, name))
-    edges = np.unique(np.concatenate([np.arange(config.t0, time[-1], segment), [time[-1]]]))
-    state = reference.initial_state(fx.apply_all(base), config)
-    out = {k: np.full(time.size, np.nan) for k in ("length", "pressure", "syringe_displacement", "robot_flow")}
-    values = np.full(time.size, np.nan)
-    for ta, tb in zip(edges[:-1], edges[1:]):
-        value = nominal * (1.0 + change * 0.5 * (ta + tb) / t_end)
-        rows = np.flatnonzero((time > ta) & (time <= tb))
-        ts = np.concatenate([time[rows], [tb]]) if rows.size == 0 or time[rows[-1]] < tb else time[rows]
-        traj = simulate_from(gj.replace(base, **{name: value}), model_inputs, config, state, (ta, tb), ts, breaks)
-        if int(traj.status) == gj.SOLVER_FAILED:
-            raise RuntimeError(f"the reference solve failed between {ta:.3f} s and {tb:.3f} s")
-        state = traj.final_state
-        for k in out:
-            out[k][rows] = np.asarray(getattr(traj, k))[: rows.size]
-        values[rows] = value
-    rng = np.random.default_rng(seed)
-    output = {
-        "robot_length_m": "length",
-        "pressure_Pa": "pressure",
-        "syringe_displacement_m": "syringe_displacement",
-        "robot_flow_m3_s": "robot_flow",
-    }
-    series = {c: out[output[c]] + rng.normal(0.0, sd, time.size) for c, sd in noise.items()}
-    series.update(cols)
-    ex.validate_series(time, series, "synthetic experiment")
-    meta = {
-        "effect": None,
-        "drift": {"parameter": name, "change": change, "segment_s": segment, "values": values.tolist()},
-        "noise_free_length_m": out["length"].tolist(),
-        "noise_sd": noise,
-        "seed": int(seed),
-        "drive": "forward",
-        "t_end_s": float(time[-1]),
-        "inputs": description,
-        "base_parameters": _base_overrides(base, "forward"),
-        "solver": {"fidelity": "reference", "rtol": rtol, "atol": rtol},
-        "generator": "growjax.data.synthetic.drifting_experiment",
-    }
-    return SyntheticExperiment(time, series, f"synthetic: {name} drifting by {change:+.0%}, seed {seed}", meta)
 
 
 def read_truth(csv_path) -> dict:
@@ -611,19 +532,21 @@ def read_truth(csv_path) -> dict:
 
 __all__ = [
     "ALL_EFFECTS",
+    "MEASURED_OUTPUTS",
     "MODERATE",
     "OUTSIDE",
     "HoseCompliance",
     "OscillatingForce",
     "SyntheticExperiment",
+    "base_overrides",
     "clear_cache",
-    "drifting_experiment",
     "effect_class",
     "hidden_effect_parameters",
     "magnitude_field",
     "make_effect",
     "make_experiment",
     "moderate_magnitude",
+    "noisy",
     "noise_free",
     "read_truth",
     "resolve_inputs",
