@@ -225,7 +225,7 @@ class StateSpace(eqx.Module):
         (y0, _), dy = _value_and_jacfwd(lambda w: (rest(w), None), jnp.zeros(k))
         levels = jnp.asarray([i.prior_mean / i.scale for i in self.inputs], float)
         mean = jnp.concatenate([y0, jnp.zeros(k), levels, jnp.zeros(m)])
-        p_w = jnp.diag(jnp.asarray([p.prior_sd**2 for p in self.parameters], float))
+        p_w = jnp.diag(jnp.asarray(tn.parameter_prior(self.parameters)))
         p_u = jnp.diag(jnp.asarray([(i.prior_sd / i.scale) ** 2 for i in self.inputs], float))
         cov = jnp.zeros((self.size, self.size))
         cov = cov.at[:n, :n].set(dy @ p_w @ dy.T).at[:n, n : n + k].set(dy @ p_w).at[n : n + k, :n].set(p_w @ dy.T)

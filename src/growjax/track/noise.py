@@ -14,8 +14,8 @@ Three kinds of state join the model's own:
   (:func:`growjax.calibration.discrepancy.matern_transition`); the length the sensors and the band see is the
   model's plus δ.
 
-Every state is carried in a coordinate of order one: parameters in their own (log or linear), inputs and the
-discrepancy divided by a fixed scale.
+Every state is carried in a coordinate of order one: a parameter as ln(ψ/ψ₀), or as (ψ − ψ₀) in units of its prior
+sd where ψ₀ is 0 (an effect switched off); inputs and the discrepancy divided by a fixed scale.
 """
 
 from __future__ import annotations
@@ -49,9 +49,9 @@ class StateParameter:
 
     Attributes:
         name: its qualified name (``robot.yield_pressure``).
-        prior_sd: sd of its coordinate at the start (relative for ``log``, else in its unit).
-        walk: sd of its coordinate's random-walk increments per √s (0: static).
-        log: the coordinate is ln(ψ/ψ₀) (ψ positive) rather than ψ − ψ₀.
+        prior_sd: sd of ψ at the start: relative for ``log``, else in its unit.
+        walk: sd of ψ's random-walk increments per √s, as ``prior_sd`` (0: static).
+        log: the coordinate is ln(ψ/ψ₀) (ψ positive) rather than (ψ − ψ₀)/prior_sd.
         tolerance: a rig parameter known to its tolerance (reported in the summary), not one asked for.
     """
 
@@ -67,9 +67,15 @@ class StateParameter:
         if not (math.isfinite(self.walk) and self.walk >= 0):
             raise ValueError(f"the random walk of {self.name} must be a non-negative number, got {self.walk}")
 
+    @property
+    def scale(self) -> float:
+        """Units of ψ per unit of a linear coordinate (its prior sd, so that the coordinate is of order one); 1 for
+        a log coordinate."""
+        return 1.0 if self.log or self.prior_sd == 0 else self.prior_sd
+
     def value(self, nominal, coordinate):
-        """ψ (its unit) at ``coordinate`` about ``nominal`` ψ₀."""
-        return nominal * jnp.exp(coordinate) if self.log else nominal + coordinate
+        """ψ (its unit) at ``coordinate`` about ``nominal`` ψ₀: ψ₀·e^c, or ψ₀ + c·scale."""
+        return nominal * jnp.exp(coordinate) if self.log else nominal + coordinate * self.scale
 
 
 @dataclasses.dataclass(frozen=True)
@@ -176,8 +182,13 @@ def estimated_parameter(
 
 def parameter_noise(parameters: tuple, dt) -> jnp.ndarray:
     """Variances (k,) of the parameters' coordinates' increments over ``dt`` s."""
-    walks = np.array([p.walk for p in parameters], float)
+    walks = np.array([p.walk / p.scale for p in parameters], float)
     return jnp.asarray(walks**2) * dt
+
+
+def parameter_prior(parameters: tuple) -> np.ndarray:
+    """Variances (k,) of the parameters' coordinates at the start."""
+    return np.array([(p.prior_sd / p.scale) ** 2 for p in parameters], float)
 
 
 def input_noise(inputs: tuple, dt) -> jnp.ndarray:
@@ -197,5 +208,6 @@ __all__ = [
     "estimated_parameter",
     "input_noise",
     "parameter_noise",
+    "parameter_prior",
     "rig_parameters",
 ]
