@@ -60,7 +60,7 @@ REPORTED_OUTPUTS = ("length", "pressure", "syringe_displacement", "robot_flow")
 
 def unit_suffix(unit: str) -> str:
     """A unit as a column suffix: ``Pa`` → ``Pa``, ``m^3/(s·Pa)`` → ``m3_s_Pa``, ``-`` → none."""
-    text = unit.replace("^", "").replace("·", "_").replace("/", "_").replace("(", "").replace(")", "")
+    text = unit.replace("^", "").replace("·", "_").replace("*", "_").replace("/", "_").replace("(", "").replace(")", "")
     return "_".join(p for p in text.replace(" ", "_").split("_") if p and p != "-")
 
 

@@ -17,6 +17,7 @@ import numpy as np
 
 from growjax.data.experiment import Experiment, informative_samples, to_inputs
 from growjax.track import smoother
+from growjax.track.belief import Belief, Step
 from growjax.track.filter import Filter, compiled
 from growjax.track.model import StateSpace
 from growjax.track.result import TrackResult, quantities, report
@@ -72,6 +73,26 @@ def track(
         ValueError: a chosen sensor's column missing, fewer than two samples.
         RuntimeError: the solver failed inside an interval (named by its time).
     """
+    times, readings, t0, inputs, breaks = prepare(experiment, model, t_end, inputs)
+    run = Filter(model, method)
+    belief = run.start(t0)
+    records, beliefs, seconds = [], [], np.zeros(times.size)
+    for k, (t, y) in enumerate(zip(times, readings)):
+        clock = time.perf_counter()
+        belief, step = checked_step(run, belief, t, y, inputs, breaks, float(times[k - 1]) if k else t0)
+        seconds[k] = time.perf_counter() - clock
+        records.append(step)
+        beliefs.append(belief)
+    return assemble(model, run.method, times, beliefs, records, inputs, smooth=smooth, seconds=seconds)
+
+
+def prepare(experiment: Experiment, model: StateSpace, t_end: float | None = None, inputs=None):
+    """(sample times (T,) s, readings (T, m) SI, the start t0 s, the known inputs, their breaks) of a record to
+    track: what :func:`track` steps over.
+
+    Raises:
+        ValueError: a chosen sensor's column missing, fewer than two samples.
+    """
     if t_end is not None:
         experiment = experiment.window(t_end)
     times = np.asarray(experiment.time, float)
@@ -81,21 +102,27 @@ def track(
     t0 = start_time(model, times)
     if inputs is None:
         inputs = to_inputs(experiment, model.config.drive, model.params, t0, float(times[-1]))
-    breaks = model.breaks(inputs, t0, float(times[-1]))
-    run = Filter(model, method)
-    belief = run.start(t0)
-    records, beliefs, seconds = [], [], np.zeros(times.size)
-    for k, (t, y) in enumerate(zip(times, readings)):
-        clock = time.perf_counter()
-        belief, step = jax.block_until_ready(run.step(belief, t, y, inputs, breaks))
-        seconds[k] = time.perf_counter() - clock
-        if int(step.status) != 0:
-            raise RuntimeError(
-                f"the solver failed between {float(times[k - 1]) if k else t0:.3f} s and {float(t):.3f} s "
-                f"(a step budget of {model.config.step_budget} per interval: raise config.max_steps)"
-            )
-        records.append(step)
-        beliefs.append(belief)
+    return times, readings, t0, inputs, model.breaks(inputs, t0, float(times[-1]))
+
+
+def checked_step(run: Filter, belief: Belief, t, y, inputs, breaks, previous: float) -> tuple[Belief, Step]:
+    """``run.step`` to time ``t`` s, waited for.
+
+    Raises:
+        RuntimeError: the solver failed in the interval from ``previous`` s.
+    """
+    belief, step = jax.block_until_ready(run.step(belief, t, y, inputs, breaks))
+    if int(step.status) != 0:
+        raise RuntimeError(
+            f"the solver failed between {previous:.3f} s and {float(t):.3f} s "
+            f"(a step budget of {run.model.config.step_budget} per interval: raise config.max_steps)"
+        )
+    return belief, step
+
+
+def assemble(model: StateSpace, method, times, beliefs, records, inputs, *, smooth: bool, seconds) -> TrackResult:
+    """The :class:`growjax.track.TrackResult` of the ``beliefs`` after each sample at ``times`` (T,) s and the
+    steps' ``records`` (:class:`growjax.track.Step`), smoothed where asked; ``seconds`` (T,) each step's wall time."""
     stack = lambda xs: np.stack([np.asarray(x) for x in xs])  # noqa: E731
     means, covs = stack([b.mean for b in beliefs]), stack([b.cov for b in beliefs])
     if smooth:
@@ -104,9 +131,9 @@ def track(
         cross = stack([s.cross for s in records[1:]] + [records[-1].cross])
         means, covs = (np.asarray(a) for a in smoother.smooth(means, covs, pred_m, pred_p, cross))
     return TrackResult(
-        time=times,
+        time=np.asarray(times, float),
         quantities=quantities(model),
-        columns=report(model, *compiled(model, run.method).linearised(times, means, covs, inputs)),
+        columns=report(model, *compiled(model, method).linearised(times, means, covs, inputs)),
         mean=means,
         cov=covs,
         state_names=model.state_names(),
@@ -114,10 +141,10 @@ def track(
         nis=stack([s.nis for s in records]),
         dof=stack([np.sum(s.observed) for s in records]),
         log_likelihood=float(sum(float(s.log_likelihood) for s in records)),
-        method=run.method.name,
+        method=method.name,
         smoothed=smooth,
-        step_seconds=seconds,
+        step_seconds=np.asarray(seconds, float),
     )
 
 
-__all__ = ["read", "start_time", "track"]
+__all__ = ["assemble", "checked_step", "prepare", "read", "start_time", "track"]
