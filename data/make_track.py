@@ -12,7 +12,9 @@ that no command takes it as the parameters), the noise-free length (``noise_free
 seed:
 
 * ``rig0`` … ``rig2``: rigs drawn from the default tolerance budget (:mod:`growjax.calibration.tolerance`);
-* ``drift``: the nominal rig with Y rising by 10 % over the 3 s (held over 0.25 s segments).
+* ``drift``: the nominal rig with Y rising by 10 % over the 3 s (held over 0.25 s segments);
+* ``leak``, ``tip``: 3 s on a drawn rig, a leak opening (conductance 2e-13 m³/(s·Pa)) or a tip load (0.3 N of
+  ``active_channel_force``) appearing at a time drawn in 1.2–2.4 s (the sidecar's ``"switch"``).
 """
 
 from __future__ import annotations
@@ -21,10 +23,13 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
+
 import growjax as gj
 from growjax.calibration import tolerance as tl
 from growjax.data import synthetic as sy
-from growjax.data.drifting import drifting_experiment
+from growjax.data.drifting import drifting_experiment, switching_experiment
+from growjax.model import effects as fx
 
 HERE = Path(__file__).resolve().parent
 OUT = HERE.parent / "src" / "growjax" / "data" / "datasets" / "track"  # package resources
@@ -77,10 +82,31 @@ def make_drift() -> Path:
     return path
 
 
+CHANGES = {
+    "leak": (fx.FluidLeak(), {"fluid_leak.conductance": 2e-13}),
+    "tip": (fx.ActiveChannelForce(), {"active_channel_force.force": 0.3}),
+}
+CHANGE_T_END = T_END
+
+
+def make_changes() -> list[Path]:
+    paths = []
+    for i, (name, (effect, values)) in enumerate(CHANGES.items()):
+        rig = rig_values(1, SEED + 20 + i)[0]
+        base = gj.with_effects(gj.replace(gj.reference("forward"), **rig), effect)
+        at = float(np.round(np.random.default_rng(SEED + 30 + i).uniform(1.2, 2.4), 3))
+        exp = switching_experiment(values, at, seed=SEED + 40 + i, t_end=CHANGE_T_END, base=base, noise=NOISE)
+        paths.append(write(exp, name, {"rig": rig}))
+        print(paths[-1], flush=True)
+    return paths
+
+
 if __name__ == "__main__":
     OUT.mkdir(parents=True, exist_ok=True)
-    which = set(sys.argv[1:]) or {"rigs", "drift"}
+    which = set(sys.argv[1:]) or {"rigs", "drift", "changes"}
     if "rigs" in which:
         make_rigs()
     if "drift" in which:
         make_drift()
+    if "changes" in which:
+        make_changes()

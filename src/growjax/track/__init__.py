@@ -15,10 +15,13 @@ What is here, in the order a tracker uses it:
 * :func:`smooth` — the Rauch–Tung–Striebel smoother over a filtered record.
 * :func:`track` — a whole record tracked (causal, or smoothed), read into :class:`TrackResult`: the length,
   pressure, parameters and inputs with 90 % bands, their CSV and the score against a measured length.
+* :func:`watch` — a record watched for a sudden change (a CUSUM on the innovations), each change flagged with its
+  time and named among the catalogue's effects by a bank of filters: :class:`Watch`, :class:`Change`.
 * :func:`track_figure` — its figure.
 """
 
 from growjax.track.belief import Belief, Step
+from growjax.track.change import CANDIDATES, Candidate, Change, Cusum, Watch, watch, watch_model
 from growjax.track.extended import ExtendedKalman
 from growjax.track.filter import Filter
 from growjax.track.model import StateSpace, state_space
@@ -30,9 +33,13 @@ from growjax.track.smoother import smooth
 from growjax.track.unscented import Unscented
 
 __all__ = [
+    "CANDIDATES",
     "PUMP_SENSORS",
     "SENSORS",
     "Belief",
+    "Candidate",
+    "Change",
+    "Cusum",
     "Discrepancy",
     "ExtendedKalman",
     "Filter",
@@ -43,9 +50,12 @@ __all__ = [
     "Step",
     "TrackResult",
     "Unscented",
+    "Watch",
     "sensor",
     "sensor_set",
     "smooth",
     "state_space",
     "track",
+    "watch",
+    "watch_model",
 ]
