@@ -100,6 +100,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--method", choices=METHODS, default="extended", help="the filter")
     parser.add_argument("--smooth", action="store_true", help="the whole record's estimate, not the causal one")
+    parser.add_argument(
+        "--watch",
+        action="store_true",
+        help="watch the innovations for a sudden change (a CUSUM) and name it among the catalogue's effects (leak, "
+        "tip load, fold, trapped air); the changes go in the summary, change_statistic and change_flag in the CSV "
+        "(causal only)",
+    )
+    parser.add_argument(
+        "--watch-threshold",
+        type=float,
+        default=None,
+        metavar="H",
+        help="the CUSUM's threshold, in sd of the innovations (default 15)",
+    )
 
 
 def model_of(args, params):
@@ -167,15 +181,27 @@ def run(args: argparse.Namespace) -> dict:
     method = tk.Unscented() if args.method == "unscented" else tk.ExtendedKalman()
     if exp.time.size < 2:
         raise ValueError(f"{data} has fewer than two samples up to --t-end {args.t_end} s")
+    if args.watch and args.smooth:
+        raise ValueError("--watch is causal: drop --smooth")
     clock = time.perf_counter()
-    result = tk.track(exp, model, method=method, smooth=args.smooth)
+    watched = None
+    if args.watch:
+        cusum = tk.Cusum() if args.watch_threshold is None else tk.Cusum(threshold=args.watch_threshold)
+        watched = tk.watch(exp, model, method=method, cusum=cusum)
+        result, model = watched.track, watched.model
+    else:
+        result = tk.track(exp, model, method=method, smooth=args.smooth)
     wall = time.perf_counter() - clock
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     scored = "robot_length_m" in exp and "robot_length_m" not in result.sensors
     extra = {"measured_robot_length_m": np.asarray(exp["robot_length_m"])} if scored else {}
+    if watched is not None:
+        extra.update(change_statistic=watched.statistic, change_flag=watched.flags())
     result.write_csv(out / "track.csv", extra)
     summary = _summary(args, data, exp, model, result, origin, wall)
+    if watched is not None:
+        summary["changes"] = watched.summary()
     if scored:
         summary["score"] = result.score(exp["robot_length_m"])
     measured = {c: exp[c] for c in ("robot_length_m", "pressure_Pa") if c in exp}
@@ -270,6 +296,13 @@ def summary_lines(summary: dict) -> list[str]:
             f"  innovations: NIS {c['nis_per_reading']:.2f} per reading (1 if honest), "
             f"{100 * c['nis_inside_90']:.0f} % inside their 90 % interval"
         )
+    for c in s.get("changes", ()):
+        lines.append(
+            f"  change flagged at {c['flagged_s']:.2f} s (from {c['onset_s']:.2f} s, on {c['sensor']}): "
+            f"{c['effect']}, {c['parameter']} {c['estimate']:.3g} ± {c['sd']:.2g}"
+        )
+    if "changes" in s and not s["changes"]:
+        lines.append("  no change flagged")
     lines.append(
         f"  step {s['step_ms_median']:.2f} ms (median) after {s['first_step_s']:.1f} s compiling; {s['wall_s']:.1f} s"
     )
