@@ -5,16 +5,18 @@ What is here, in the order a design uses it:
 * :func:`linearize` — the state-space model (A, B, C, D) of pressure demand → length (forward drive) or
   step command → length (stepper) about an operating point, from exact JAX Jacobians of the fast
   configuration's vector field, as a python-control ``StateSpace`` (``sys.A`` … work with ``scipy.signal``).
-* :func:`optimize_profile` — the pressure-demand profile (piecewise linear on fixed knots) that makes the
-  robot follow a desired length, by least squares with forward-mode Jacobians through :func:`growjax.simulation.simulate`
-  (all knots in one merged sensitivity solve), inside the demand box [0, p_max]. For the stepper drive
-  (integer commands) an open-loop step schedule is found on the model without gradients: :func:`optimize_steps`
-  searches the lead of a schedule read off the target, :func:`plan_steps` replays the steps the tuned
-  closed-loop step controller issues on the model.
+* :func:`optimize_profile` — the pressure-demand profile (piecewise linear on fixed knots) that makes the robot
+  follow a desired length, by least squares with forward-mode Jacobians through :func:`growjax.simulation.simulate`
+  (all knots in one merged sensitivity solve), inside the demand box [0, p_max]. For the stepper drive (integer
+  commands) an open-loop step schedule is found on the model without gradients: :func:`optimize_steps` searches the
+  lead of a schedule read off the target, :func:`plan_steps` replays the steps the tuned closed-loop step controller
+  issues on the model.
 * :func:`run_closed_loop` — a sampled-data length controller around either configuration of the plant:
   :class:`LengthPID` (forward drive, outer loop over the pressure PID, with the optimised profile as
   feed-forward), :class:`StepController` (stepper: back-and-forth steps on the length error) and
   :class:`MPC` (forward drive; nonlinear least squares on the fast model from the current state).
+* :func:`run_on_estimate` — output feedback: the length PID on an estimate of the length from the pump's sensors
+  alone (any :class:`LengthEstimator`; ``growjax.track.Filter`` is one).
 * :func:`tune_pid` — gains by gradient descent on the closed-loop tracking cost, optionally averaged over
   parameter draws (robust design: a posterior's, :func:`parameter_draws`, and the rig's within its
   tolerances, :func:`rig_draws`).
@@ -36,6 +38,7 @@ from growjax.control.controllers import (
     score,
 )
 from growjax.control.design import design
+from growjax.control.estimated import PUMP_NOISE, EstimatedLoop, LengthEstimator, run_on_estimate
 from growjax.control.linearise import linearize, operating_point
 from growjax.control.plant import (
     Plant,
@@ -89,8 +92,11 @@ __all__ = [
     "DEFAULT_LOG_GAINS",
     "MPC",
     "PRESSURE_MARGIN",
+    "PUMP_NOISE",
     "ClosedLoopResult",
+    "EstimatedLoop",
     "KnotProfile",
+    "LengthEstimator",
     "LengthPID",
     "Limits",
     "Plant",
@@ -109,6 +115,7 @@ __all__ = [
     "pid_cost_fn",
     "pid_loop",
     "plan_steps",
+    "run_on_estimate",
     "plant_params",
     "ramp_with_pauses",
     "rig_draws",

@@ -53,6 +53,26 @@ class Filter:
         readings = jnp.asarray(np.asarray(readings, float))
         return self._programs.step(belief, jnp.asarray(time, float), readings, inputs, breaks)
 
+    @property
+    def columns(self) -> tuple[str, ...]:
+        """The columns of the readings a step takes, in order."""
+        return tuple(s.column for s in self.model.sensors)
+
+    def update(self, belief: Belief, time, readings, inputs: Inputs) -> tuple[Belief, float, float]:
+        """A step to ``time`` s under ``inputs`` (their breaks found here), and the robot's length there: (the
+        belief, the length's estimate m, its sd m). What output feedback calls once per tick
+        (``growjax.control.LengthEstimator``).
+
+        Raises:
+            RuntimeError: the solver failed in the interval.
+        """
+        breaks = self.model.breaks(inputs, float(belief.time), float(time))
+        belief, step = self.step(belief, time, readings, inputs, breaks)
+        if int(step.status) != 0:
+            raise RuntimeError(f"the solver failed in the interval to {float(time):.3f} s")
+        mean, sd = self._programs.length(belief, inputs)
+        return belief, float(mean), float(sd)
+
     def traces(self) -> int:
         """How many times this filter's step has been traced (compiled) in this process (for all filters of an
         equal model and method)."""
@@ -67,6 +87,12 @@ class Programs:
         self.start = jax.jit(functools.partial(method.start, model))
         self.step = jax.jit(self._step)
         self.linearised = jax.jit(functools.partial(linearised_values, model))
+        self.length = jax.jit(self._length)
+
+    def _length(self, belief, inputs):
+        """(the length's mean m, its sd m) at ``belief``, linearised."""
+        value, grad = jax.value_and_grad(lambda x: self.model.outputs(x, belief.time, inputs)["length"])(belief.mean)
+        return value, jnp.sqrt(grad @ belief.cov @ grad)
 
     def _step(self, belief, time, readings, inputs, breaks):
         self.traces += 1  # runs while tracing only
