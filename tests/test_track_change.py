@@ -80,3 +80,17 @@ def test_the_watch_model_carries_the_candidates_absent(model):
         tk.watch_model(tk.state_space(gj.with_effects(gj.reference("forward"), gj.effects.FluidLeak(1e-13))))
     with pytest.raises(ValueError, match="scale of the candidate"):
         tk.Candidate("leak", gj.effects.FluidLeak(), "fluid_leak.conductance", 0.0)
+
+
+def test_the_track_command_reports_the_change(tmp_path, leak):
+    from growjax.cli import main
+
+    out, summary = tmp_path / "out", tmp_path / "s.json"
+    assert main(["track", str(TRACK / "leak.csv"), "--watch", "--out", str(out), "--json", str(summary)]) == 0
+    changes = json.loads(summary.read_text())["changes"]
+    assert [c["effect"] for c in changes] == ["leak"]
+    assert changes[0]["flagged_s"] == pytest.approx(leak[0].changes[0].flagged_s)
+    table = np.genfromtxt(out / "track.csv", delimiter=",", names=True)
+    assert table["change_flag"].sum() == 1 and table["change_flag"][table["time_s"] < changes[0]["onset_s"]].sum() == 0
+    assert "fluid_leakconductance_m3_s_Pa" in table.dtype.names  # the leak's estimate and band (genfromtxt drops '.')
+    assert main(["track", str(TRACK / "leak.csv"), "--watch", "--smooth", "--out", str(out)]) == 2
