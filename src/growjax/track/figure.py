@@ -37,7 +37,7 @@ def _limits(est, lo, hi, seen=()) -> tuple[float, float]:
         finite = np.asarray(values)[np.isfinite(values)]
         if finite.size:
             low, high = min(low, float(finite.min())), max(high, float(finite.max()))
-    pad = 0.05 * (high - low)
+    pad = 0.05 * (high - low) if high > low else max(abs(high), 1e-12)  # a quantity held exactly: an axis about it
     return low - pad, high + pad
 
 
