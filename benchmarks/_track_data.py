@@ -9,6 +9,10 @@ inputs (catheter 0.004 + 0.004 t m, the published 0/150 kPa pulse), with Gaussia
   stroke is 0.3 m (the published pulse grows it by about 0.2 m in a minute; the rig's own stroke is 0.08 m) and a
   catheter held at 0.06 m after 14 s.
 
+* ``leak<i>``, ``tip<i>``: a rig drawn likewise, 10 s, a leak of 2e-13 m³/(s·Pa) opening or a tip load of 0.3 N
+  (``active_channel_force``) appearing at a time drawn in 2–8 s (the sidecar's ``"switch"``);
+* ``clean<i>``: a rig drawn likewise, 60 s on the drift records' robot and inputs, nothing changing.
+
 Each record's JSON sidecar holds its rig (``"rig"``) and its noise-free length (``"noise_free_length_m"``).
 """
 
@@ -24,7 +28,8 @@ import growjax as gj
 from growjax.calibration import tolerance as tl
 from growjax.data import experiment as ex
 from growjax.data import synthetic as sy
-from growjax.data.drifting import drifting_experiment
+from growjax.data.drifting import drifting_experiment, switching_experiment
+from growjax.model import effects as fx
 
 NOISE = {"robot_length_m": 2e-4, "pressure_Pa": 500.0, "syringe_displacement_m": 5e-6, "robot_flow_m3_s": 1e-9}
 SEED = 20261201
@@ -99,6 +104,56 @@ def make_drift_records(folder: Path, n: int, t_end: float, log=print) -> list[Pa
                 DRIFT,
                 seed=SEED + 100 + i,
                 t_end=t_end,
+                base=drift_base(rig),
+                inputs=drift_inputs(t_end),
+                noise=NOISE,
+            )
+            _write(exp, path, {"rig": rig})
+            log(f"made {path.name} ({time.perf_counter() - clock:.0f} s)")
+        paths.append(path)
+    return paths
+
+
+CHANGES = {
+    "leak": (fx.FluidLeak(), "fluid_leak.conductance", 2e-13),
+    "tip": (fx.ActiveChannelForce(), "active_channel_force.force", 0.3),
+}
+CHANGE_WINDOW_S = (2.0, 8.0)
+
+
+def make_change_records(folder: Path, kind: str, n: int, t_end: float, log=print) -> list[Path]:
+    """The ``leak<i>`` or ``tip<i>`` records (``kind``) in ``folder`` (those already there are kept)."""
+    effect, name, value = CHANGES[kind]
+    offset = 1000 * (1 + list(CHANGES).index(kind))
+    paths = []
+    for i, rig in enumerate(rigs(n, seed=SEED + offset)):
+        path = folder / f"{kind}{i}.csv"
+        if not path.exists():
+            clock = time.perf_counter()
+            at = float(np.round(np.random.default_rng(SEED + offset + i).uniform(*CHANGE_WINDOW_S), 3))
+            base = gj.with_effects(gj.replace(gj.reference("forward"), **rig), effect)
+            exp = switching_experiment(
+                {name: value}, at, seed=SEED + offset + 100 + i, t_end=t_end, base=base, noise=NOISE
+            )
+            _write(exp, path, {"rig": rig})
+            log(f"made {path.name} ({time.perf_counter() - clock:.0f} s)")
+        paths.append(path)
+    return paths
+
+
+def make_clean_records(folder: Path, n: int, t_end: float, log=print) -> list[Path]:
+    """The ``clean<i>`` records in ``folder`` (those already there are kept)."""
+    paths = []
+    for i, rig in enumerate(rigs(n, seed=SEED + 3000)):
+        path = folder / f"clean{i}.csv"
+        if not path.exists():
+            clock = time.perf_counter()
+            exp = drifting_experiment(
+                "Y",
+                0.0,
+                seed=SEED + 3100 + i,
+                t_end=t_end,
+                segment=t_end,
                 base=drift_base(rig),
                 inputs=drift_inputs(t_end),
                 noise=NOISE,
