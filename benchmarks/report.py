@@ -43,7 +43,9 @@ on the machine that writes the page is kept as it was.
 | `benchmarks/mixed_set.py` | a forward experiment with the pressure recorded and a stepper experiment of one robot, alone and jointly |
 | `benchmarks/population.py` | populations of eight robots on one drawn rig: coverage of the population's median and spread, and of a held-out robot's predictive band |
 | `benchmarks/discover_discrepancy.py` | discovery's answer on data with a discrepancy but no catalogue effect |
-| `benchmarks/design.py` | the designed experiment: the criterion against random admissible inputs and the published pulse train, and replications on drawn rigs, predicted sd against realised; `design_discrimination`: `--discriminate A B --duration 3 --knot-spacing 0.1 --random 16 --replications 10` (discovery's verdicts under the discrimination design and the published pulse train, on data from each effect and on clean data); `design_discrimination_pair`: the same with `--candidates retraction_folding trapped_air --inputs design --random 16 --starts 1 --iterations 10` (discovery choosing between the two rivals, under the design); `design_discrimination_pair_held`: `--design-from` that file `--truths retraction_folding --hold-base` (the same design's data, discovery holding Y at the first experiment's estimate); `design_discrimination_pair_first`: `--design-from` that file `--truths retraction_folding none --with-first` (each seed's designed experiment read together with the first one made again on the same robot: `growjax.discover.discover` of the two, one Y); `design_discrimination_pair_first_air`: the same with `--truths trapped_air`; `design_discrimination_catalogue_first`: the same with every catalogue effect as a candidate (`--candidates` the eight), `--truths retraction_folding none --replications 2 --workers 2`; `design_lockhart`: `--growth-law lockhart --for Y phi_L n_L --random 64 --starts 2 --iterations 20` then `--design-from` it `--replications 20` (the design under Lockhart's law, its rate's and exponent's intervals against their prior box); `design_lockhart_20s`: the same law's design over 20 s by `growjax design --law lockhart --for Y phi_L n_L --duration 20`, then `--design-from` its `summary.json` `--duration 20 --replications 10 --inputs design --safety-draws 0`; `design_relinearised`: `--design-from design.json --relinearise` (the same replications, fitted with the rig relinearised); `design_landscape`: `--random 1000 --replications 0 --safety-draws 0` (the design against 1 000 random admissible inputs), then `--design-from` that file `--replications 20 --workers 2 --relinearise` (its replications and safety, the default fit); `design_landscape_tangents`: the same replications fitted with `--rig-tangents` (`growjax.calibration.fit.fit(rig_tangents=True)`); `design_stepper`: `--next-drive inverse --design-from` the `summary.json` of `growjax design src/growjax/data/datasets/synthetic_forward.csv --next-drive inverse --for Y` `--replications 20 --workers 2` (the stepper's designed schedule against the stepper driven by the recorded length); `design_stepper_discrepancy`: the same with `--discrepancy-in-data --safety-draws 0` (the replications' data also carry a fresh draw of the discrepancy the first fit found) |
+| `benchmarks/design.py` | the designed experiment: the criterion against random admissible inputs and the published pulse train, and replications on drawn rigs, predicted sd against realised; `design_discrimination`: `--discriminate A B --duration 3 --knot-spacing 0.1 --random 16 --replications 10` (discovery's verdicts under the discrimination design and the published pulse train, on data from each effect and on clean data); `design_discrimination_pair`: the same with `--candidates retraction_folding trapped_air --inputs design --random 16 --starts 1 --iterations 10` (discovery choosing between the two rivals, under the design); `design_discrimination_pair_held`: `--design-from` that file `--truths retraction_folding --hold-base` (the same design's data, discovery holding Y at the first experiment's estimate); `design_discrimination_pair_first`: `--design-from` that file `--truths retraction_folding none --with-first` (each seed's designed experiment read together with the first one made again on the same robot: `growjax.discover.discover_set` over the two, one Y); `design_discrimination_pair_first_air`: the same with `--truths trapped_air`; `design_discrimination_catalogue_first`: the same with every catalogue effect as a candidate (`--candidates` the eight), `--truths retraction_folding none --replications 2 --workers 2`; `design_lockhart`: `--growth-law lockhart --for Y phi_L n_L --random 64 --starts 2 --iterations 20` then `--design-from` it `--replications 20` (the design under Lockhart's law, its rate's and exponent's intervals against their prior box); `design_lockhart_20s`: the same law's design over 20 s by `growjax design --law lockhart --for Y phi_L n_L --duration 20`, then `--design-from` its `summary.json` `--duration 20 --replications 10 --inputs design --safety-draws 0`; `design_relinearised`: `--design-from design.json --relinearise` (the same replications, fitted with the rig relinearised); `design_landscape`: `--random 1000 --replications 0 --safety-draws 0` (the design against 1 000 random admissible inputs), then `--design-from` that file `--replications 20 --workers 2 --relinearise` (its replications and safety, the default fit); `design_landscape_tangents`: the same replications fitted with `--rig-tangents` (`growjax.calibration.fit.fit(rig_tangents=True)`); `design_stepper`: `--next-drive inverse --design-from` the `summary.json` of `growjax design src/growjax/data/datasets/synthetic_forward.csv --next-drive inverse --for Y` `--replications 20 --workers 2` (the stepper's designed schedule against the stepper driven by the recorded length); `design_stepper_discrepancy`: the same with `--discrepancy-in-data --safety-draws 0` (the replications' data also carry a fresh draw of the discrepancy the first fit found) |
+| `benchmarks/track.py` | the length from the pump's own sensors (pressure and syringe) on reference-made records of 20 rigs drawn from the tolerance budget, 10 s of the published pulse, and three 60 s records with Y rising by 10 %: length RMSE and the 90 % band's coverage, the innovations' NIS, the rig's NEES, the filter's step against `simulate_from`, a smoothed record; extended against unscented Kalman |
+| `benchmarks/track_libraries.py` | growjax's extended Kalman filter against dynamax's (and its iterated form) on the same model and record |
 | `benchmarks/least_squares.py` | growjax's Levenberg–Marquardt engine against optimistix's solvers on the fit's and the control profile's problems; `least_squares_linearize`: `--cases fit_Y --solvers lm_linearize --out benchmarks/results/least_squares_linearize.json` (optimistix linearising the model itself) |
 """
 
@@ -629,6 +631,62 @@ def rows_design_lockhart(r: dict) -> list[tuple[str, str, str]]:
     return out
 
 
+def rows_track(r: dict) -> list[tuple[str, str, str]]:
+    base = r["baseline"]["step_median_s"]
+    out = [("`simulate_from` over one 10 ms interval (baseline)", _ms(base), "nominal rig, no filter")]
+    for name, m in r["methods"].items():
+        s = m["summary"]
+        lo, hi = r["targets"]["coverage"]
+        out += [
+            (
+                f"{name}: length RMSE, mean / worst",
+                f"{1e3 * s['rmse_mean_m']:.3f} / {1e3 * s['rmse_worst_m']:.3f} mm",
+                f"≤ 0.5 mm on {s['rmse_met']} of {s['records']} rigs (target: all)",
+            ),
+            (
+                f"{name}: share of samples inside the 90 % band, mean (lowest rig)",
+                f"{s['coverage_mean']:.2f} ({s['coverage_min']:.2f})",
+                f"target {lo:g}–{hi:g}",
+            ),
+            (
+                f"{name}: NIS per reading; NEES of the rig's 6 errors at 10 s",
+                f"{s['nis_per_reading_mean']:.2f}; {s['nees_rig_mean']:.1f}",
+                "honest: 1; 6",
+            ),
+            (
+                f"{name}: step, median (90th percentile)",
+                f"{_ms(s['step_median_s'])} ({_ms(s['step_p90_s'])})",
+                f"{0.01 / s['step_median_s']:.0f}× real time; {s['step_median_s'] / base:.1f}× `simulate_from`; "
+                "target ≤ 1 ms",
+            ),
+            (f"{name}: a 10 s record tracked and smoothed", _s(m["smooth_10s_s"]), "target ≤ 5 s"),
+        ]
+        d = m.get("drift_summary")
+        if d:
+            out.append(
+                (
+                    f"{name}, Y +10 % over 60 s: length RMSE; band; Y's band",
+                    f"{1e3 * d['rmse_mean_m']:.3f} mm; {d['coverage_mean']:.2f}; {d['y_coverage_mean']:.2f}",
+                    f"{d['records']} records; shares of samples inside the 90 % bands",
+                )
+            )
+    out.append(
+        ("load average during the run", f"{r['load_average'][0]:.1f}", "a shared machine: times are upper bounds")
+    )
+    return out
+
+
+def rows_track_libraries(r: dict) -> list[tuple[str, str, str]]:
+    return [
+        (
+            name,
+            f"{1e3 * row['rmse_m']:.3f} mm, band {row['coverage_90']:.2f}",
+            f"first call {_s(row['first_s'])}, record {_s(row['record_s'])}",
+        )
+        for name, row in r["rows"].items()
+    ]
+
+
 EXTRACTORS = {
     "design": rows_design,
     "design_stepper": rows_design,
@@ -674,6 +732,8 @@ EXTRACTORS = {
     "sets_relinearised_singles": rows_sets,
     "sweep_resume": rows_sweep_resume,
     "mixed_set": rows_mixed_set,
+    "track": rows_track,
+    "track_libraries": rows_track_libraries,
 }
 
 

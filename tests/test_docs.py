@@ -22,7 +22,7 @@ def test_the_sites_tutorials_are_the_notebooks_folder():
     assert link.resolve() == NOTEBOOKS.resolve()
     assert not any(p.suffix == ".ipynb" for p in (REPO / "docs").rglob("*") if not p.is_relative_to(link))
     nav = re.findall(r"tutorials/(\w+\.ipynb)", (REPO / "mkdocs.yml").read_text())
-    assert sorted(nav) == sorted(p.name for p in NOTEBOOKS.glob("*.ipynb")) and len(nav) == 7
+    assert sorted(nav) == sorted(p.name for p in NOTEBOOKS.glob("*.ipynb")) and len(nav) == 8
 
 
 @pytest.mark.docs
@@ -51,6 +51,7 @@ def test_docs_build_strict_with_executed_tutorials(tmp_path):
         "results",
         "uncertainty",
         "design",
+        "tracking",
         "benchmarks",
         "api",
         "tutorials/simulate",
@@ -60,6 +61,7 @@ def test_docs_build_strict_with_executed_tutorials(tmp_path):
         "tutorials/control",
         "tutorials/sets",
         "tutorials/design",
+        "tutorials/track",
     ):
         assert (site / page / "index.html").is_file(), page
     assert sorted(p.name for p in (site / "tutorials").rglob("*") if p.is_file() and p.suffix != ".html") == sorted(

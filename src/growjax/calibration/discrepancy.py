@@ -65,6 +65,7 @@ __all__ = [
     "forecast",
     "kalman_filter",
     "kernel",
+    "matern_transition",
     "log_likelihood",
     "log_likelihood_runs",
     "log_prior",
@@ -76,17 +77,26 @@ __all__ = [
 _JITTER = 1e-24  # m², keeps an innovation variance positive where two samples coincide
 
 
+def matern_transition(dt, amplitude, time_scale):
+    """(A (2, 2), Q (2, 2), stationary covariance (2, 2)) of a Matérn-3/2 process's state (δ, δ') over ``dt``
+    s: amplitude ``amplitude`` (δ's unit), time scale ``time_scale`` (s). The exact discretisation of its
+    two-state linear SDE (Hartikainen & Särkkä 2010): δ(t + dt) = A (δ, δ')(t) + N(0, Q)."""
+    lam = jnp.sqrt(3.0) / time_scale
+    a2 = jnp.asarray(amplitude, float) ** 2
+    stationary = jnp.diag(jnp.stack([a2, lam**2 * a2]))
+    e = jnp.exp(-lam * dt)
+    trans = e * jnp.array([[1.0 + lam * dt, dt], [-(lam**2) * dt, 1.0 - lam * dt]])
+    return trans, stationary - trans @ stationary @ trans.T, stationary
+
+
 def _transition(dt, hyper: Hyper):
     """(A (3, 3), Q (3, 3), stationary covariance (3, 3)) of the state (δ, δ', ε) over dt (s): the Matérn-3/2
     pair and the noise's Ornstein–Uhlenbeck state (for τ = 0 it forgets itself at every sample)."""
-    lam = jnp.sqrt(3.0) / hyper.time_scale
-    a2 = hyper.amplitude**2
+    smooth, _, pair = matern_transition(dt, hyper.amplitude, hyper.time_scale)
     s2 = hyper.noise**2
-    stationary = jnp.diag(jnp.stack([a2, lam**2 * a2, s2]))
-    e = jnp.exp(-lam * dt)
+    stationary = jax.scipy.linalg.block_diag(pair, s2[None, None])
     tau = hyper.noise_time
     rho = jnp.where(tau > 0, jnp.exp(-dt / jnp.where(tau > 0, tau, 1.0)), 0.0)
-    smooth = e * jnp.array([[1.0 + lam * dt, dt], [-(lam**2) * dt, 1.0 - lam * dt]])
     trans = jax.scipy.linalg.block_diag(smooth, rho[None, None])
     return trans, stationary - trans @ stationary @ trans.T, stationary
 

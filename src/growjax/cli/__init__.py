@@ -31,11 +31,12 @@ from growjax.cli import (
     posterior,
     simulate,
     sweep,
+    track,
 )
 from growjax.cli.command import BAD_INPUT, OK, RUN_FAILED, RunFailed, Stopped
 
 # the commands, in the order `growjax --help` lists them
-COMMANDS = (simulate, sweep, fit, posterior, discover, control, design, params, effects)
+COMMANDS = (simulate, sweep, fit, posterior, discover, control, design, track, params, effects)
 
 
 def module_of(name: str):

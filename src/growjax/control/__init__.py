@@ -15,6 +15,8 @@ What is here, in the order a design uses it:
   `LengthPID` (forward drive, outer loop over the pressure PID, with the optimised profile as
   feed-forward), `StepController` (stepper: back-and-forth steps on the length error) and
   `MPC` (forward drive; nonlinear least squares on the fast model from the current state).
+* `run_on_estimate` — output feedback: the length PID on an estimate of the length from the pump's sensors
+  alone (any `LengthEstimator`; `growjax.track.Filter` is one).
 * `tune_pid` — gains by gradient descent on the closed-loop tracking cost, optionally averaged over
   parameter draws (robust design: a posterior's, `parameter_draws`, and the rig's within its
   tolerances, `growjax.calibration.tolerance.rig_draws`).
@@ -39,6 +41,7 @@ from growjax.control.controllers import (
     run_closed_loop,
     score,
 )
+from growjax.control.estimated import PUMP_NOISE, EstimatedLoop, LengthEstimator, run_on_estimate
 from growjax.control.linearise import linearize, operating_point
 from growjax.control.plant import (
     Plant,
@@ -77,7 +80,10 @@ from growjax.control.workflow import design_controller
 __all__ = [
     "DEFAULT_LOG_GAINS",
     "MPC",
+    "PUMP_NOISE",
     "ClosedLoopResult",
+    "EstimatedLoop",
+    "LengthEstimator",
     "LengthPID",
     "Plant",
     "ProfileResult",
@@ -94,6 +100,7 @@ __all__ = [
     "pid_cost_fn",
     "pid_loop",
     "plan_steps",
+    "run_on_estimate",
     "plant_params",
     "ramp_with_pauses",
     "rmse",

@@ -3,8 +3,9 @@
 CSV format (UTF-8 text): a ``time_s`` column (strictly increasing, from 0 s on), a ``catheter_length_m`` column
 (input; required unless the experiment had no catheter in contact: ``catheter=False``) and any of
 ``robot_length_m`` (measured), ``pressure_Pa`` (measured), ``pressure_demand_Pa`` (input, forward
-drive), ``desired_length_m`` (input, inverse drive), ``syringe_displacement_m`` and ``robot_flow_m3_s``
-(measured). A column whose name nearly spells a known one (another case, a near spelling, the same words in
+drive), ``desired_length_m`` (input, inverse drive), ``syringe_displacement_m`` (measured: the syringes'
+travel from full) and ``robot_flow_m3_s`` (measured: the flow into the robot at its inlet). A measured column
+read as sparse (``read(..., sparse=...)``) may have empty cells: samples its sensor did not take. A column whose name nearly spells a known one (another case, a near spelling, the same words in
 another order or unit) is an error naming both; any other column is not used (`Experiment.unused` names it).
 The lab's MATLAB ``timeseries`` files are read with mat-io.
 """
@@ -34,9 +35,12 @@ COLUMNS = (
     "syringe_displacement_m",
     "robot_flow_m3_s",
 )
-LENGTH_COLUMNS = ("robot_length_m", "catheter_length_m", "desired_length_m")
+LENGTH_COLUMNS = ("robot_length_m", "catheter_length_m", "desired_length_m")  # never negative
+DISPLACEMENT_COLUMNS = ("syringe_displacement_m",)  # a length that may dip below zero (noise about the full stop)
 PRESSURE_COLUMNS = ("pressure_Pa", "pressure_demand_Pa")
 MAX_PLAUSIBLE_LENGTH_M = 2.0  # a robot or catheter longer than this is almost surely in millimetres
+MAX_PLAUSIBLE_FLOW_M3_S = 1e-2  # a flow above this (10 L/s) is almost surely in mm³/s or µL/s
+MEASURED_COLUMNS = ("robot_length_m", "pressure_Pa", "syringe_displacement_m", "robot_flow_m3_s")
 MIN_PLAUSIBLE_PEAK_PRESSURE_PA = 1e3  # a pressure record peaking below this (the membrane yields at ~8 kPa): kPa
 NEAR_SPELLING = 0.85  # difflib's ratio from which a column name is a misspelling of a known one
 UNITS = ("m", "mm", "cm", "um", "pa", "kpa", "mpa", "hpa", "bar", "mbar", "psi", "s", "ms", "us", "m3", "l", "ml")
@@ -83,9 +87,10 @@ def from_arrays(time, robot_length_m, pressure_Pa=None, **series) -> Experiment:
     return Experiment(time, columns)
 
 
-def validate_series(time, series: dict, source: str = "") -> None:
+def validate_series(time, series: dict, source: str = "", sparse=()) -> None:
     """Raise `ExperimentError` for NaN, unsorted, duplicate or negative times, millimetre or negative lengths and
-    pressures in kPa."""
+    pressures in kPa. ``sparse``: measured columns whose samples may be missing (NaN: a sensor that reads
+    rarely); their values present are checked as every column's."""
     where = f" in {source}" if source else ""
     time = np.asarray(time, float)
     if time.ndim != 1 or time.size < 2:
@@ -111,23 +116,33 @@ def validate_series(time, series: dict, source: str = "") -> None:
         values = np.asarray(values, float)
         if values.shape != time.shape:
             raise ExperimentError(f"column {name}{where} has {values.size} values for {time.size} times")
-        bad = ~np.isfinite(values)
+        bad = np.isinf(values) if name in sparse else ~np.isfinite(values)
         if np.any(bad):
             raise ExperimentError(f"column {name}{where} contains NaN or infinite values (at t = {time[bad][0]} s)")
-        if name in LENGTH_COLUMNS:
-            if np.any(values < 0):
-                raise ExperimentError(f"column {name}{where} has negative lengths (at t = {time[values < 0][0]} s)")
-            if np.max(values) > MAX_PLAUSIBLE_LENGTH_M:
-                raise ExperimentError(
-                    f"column {name}{where} reaches {np.max(values):g} m: lengths look like millimetres; "
-                    "give them in metres (divide by 1000)"
-                )
-        peak = float(np.max(np.abs(values)))
-        if name in PRESSURE_COLUMNS and 0.0 < peak < MIN_PLAUSIBLE_PEAK_PRESSURE_PA:
-            raise ExperimentError(
-                f"column {name}{where} peaks at {peak:g} Pa: pressures look like kPa; give them in Pa (multiply "
-                "by 1000)"
-            )
+        _check_units(name, time[np.isfinite(values)], values[np.isfinite(values)], where)
+
+
+def _check_units(name: str, time, values, where: str) -> None:
+    """ExperimentError for a column's values (finite) that cannot be in its unit."""
+    if values.size == 0:
+        return
+    if name in LENGTH_COLUMNS and np.any(values < 0):
+        raise ExperimentError(f"column {name}{where} has negative lengths (at t = {time[values < 0][0]} s)")
+    if name in LENGTH_COLUMNS + DISPLACEMENT_COLUMNS and np.max(np.abs(values)) > MAX_PLAUSIBLE_LENGTH_M:
+        raise ExperimentError(
+            f"column {name}{where} reaches {np.max(np.abs(values)):g} m: lengths look like millimetres; "
+            "give them in metres (divide by 1000)"
+        )
+    if name == "robot_flow_m3_s" and np.max(np.abs(values)) > MAX_PLAUSIBLE_FLOW_M3_S:
+        raise ExperimentError(
+            f"column {name}{where} reaches {np.max(np.abs(values)):g} m³/s: flows look like mm³/s or µL/s; "
+            "give them in m³/s (divide by 1e9)"
+        )
+    peak = float(np.max(np.abs(values)))
+    if name in PRESSURE_COLUMNS and 0.0 < peak < MIN_PLAUSIBLE_PEAK_PRESSURE_PA:
+        raise ExperimentError(
+            f"column {name}{where} peaks at {peak:g} Pa: pressures look like kPa; give them in Pa (multiply by 1000)"
+        )
 
 
 def _words(name: str) -> tuple[frozenset, frozenset]:
@@ -181,13 +196,14 @@ def _unit_of(column: str) -> str:
     return "m³/s" if column.endswith("_m3_s") else column.rsplit("_", 1)[-1]
 
 
-def read_csv(path, catheter: bool = True) -> Experiment:
+def read_csv(path, catheter: bool = True, sparse=()) -> Experiment:
     """Read an experiment CSV (see the module docstring), its units checked.
 
     Args:
         path: the file.
         catheter: True, the file must have a ``catheter_length_m`` column; False, the experiment had no catheter
             in contact (its length is taken as zero) and the file must not have one.
+        sparse: measured columns whose empty cells are missing samples (NaN), not errors.
 
     Returns:
         The `Experiment`; its ``unused`` names the columns not read.
@@ -218,7 +234,7 @@ def read_csv(path, catheter: bool = True) -> Experiment:
         raise ExperimentError(f"{path} needs at least two rows of data")
     time = data[:, header.index("time_s")]
     series = {h: data[:, header.index(h)] for h in known}
-    validate_series(time, series, str(path))
+    validate_series(time, series, str(path), sparse)
     _check_catheter("catheter_length_m" in series, catheter, str(path), "catheter_length_m column")
     return Experiment(time, series, str(path), tuple(unused))
 
@@ -298,11 +314,12 @@ def read_mat_experiment(length_file, catheter_file=None) -> Experiment:
     return Experiment(t, series, str(length_file))
 
 
-def read(path, catheter: bool = True) -> Experiment:
+def read(path, catheter: bool = True, sparse=()) -> Experiment:
     """Read an experiment from a CSV, or from a folder holding kings_ts.mat and lin_c_ts.mat.
 
     ``catheter``: True, the experiment must give the catheter length (a ``catheter_length_m`` column, or
     lin_c_ts.mat in the folder); False, it had no catheter in contact (taken as zero) and must not give one.
+    ``sparse``: measured columns of a CSV whose empty cells are missing samples (NaN), not errors.
     """
     path = Path(path)
     if path.is_dir():
@@ -311,7 +328,7 @@ def read(path, catheter: bool = True) -> Experiment:
             raise ExperimentError(f"{path} has no {length_file.name} (the robot length)")
         _check_catheter(catheter_file.is_file(), catheter, str(path), catheter_file.name)
         return read_mat_experiment(length_file, catheter_file if catheter else None)
-    return read_csv(path, catheter)
+    return read_csv(path, catheter, sparse)
 
 
 def demand_steps(params: Parameters, desired_length, steps_per_metre: float | None = None):
@@ -398,6 +415,7 @@ def shared_experiment_dir() -> Path | None:
 
 __all__ = [
     "COLUMNS",
+    "MEASURED_COLUMNS",
     "Experiment",
     "ExperimentError",
     "demand_steps",

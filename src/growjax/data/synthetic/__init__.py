@@ -42,7 +42,16 @@ Example::
     exp.write("out/acf.csv")                                                 # CSV + out/acf.json
 """
 
-from .experiment import NOISE_LENGTH_M, NOISE_PRESSURE_PA, SyntheticExperiment, make_experiment, read_truth
+from .experiment import (
+    MEASURED_OUTPUTS,
+    NOISE_LENGTH_M,
+    NOISE_PRESSURE_PA,
+    SyntheticExperiment,
+    base_overrides,
+    make_experiment,
+    noisy,
+    read_truth,
+)
 from .hidden import (
     effect_class,
     hidden_effect_parameters,
@@ -56,6 +65,9 @@ from .outside import OUTSIDE, HoseCompliance, OscillatingForce
 from .solve import CACHE_SIZE, clear_cache, noise_free
 
 __all__ = [
+    "MEASURED_OUTPUTS",
+    "base_overrides",
+    "noisy",
     "CACHE_SIZE",
     "NOISE_LENGTH_M",
     "NOISE_PRESSURE_PA",

@@ -16,7 +16,16 @@ from growjax.model.effects import Effect
 from .hidden import magnitude_field
 from .solve import noise_free
 
-__all__ = ["NOISE_LENGTH_M", "NOISE_PRESSURE_PA", "SyntheticExperiment", "make_experiment", "read_truth"]
+__all__ = [
+    "MEASURED_OUTPUTS",
+    "NOISE_LENGTH_M",
+    "NOISE_PRESSURE_PA",
+    "SyntheticExperiment",
+    "base_overrides",
+    "make_experiment",
+    "noisy",
+    "read_truth",
+]
 
 NOISE_LENGTH_M = 2e-4
 NOISE_PRESSURE_PA = 500.0
@@ -47,7 +56,8 @@ class SyntheticExperiment(ex.Experiment):
         return path
 
 
-def _base_overrides(base, drive: str) -> dict:
+def base_overrides(base, drive: str) -> dict:
+    """The parameters of ``base`` that differ from ``growjax.reference(drive)``: {qualified name: value}."""
     if base is None:
         return {}
     ref = gj.as_dict(gj.reference(drive))
@@ -58,6 +68,22 @@ def _base_overrides(base, drive: str) -> dict:
     return out
 
 
+MEASURED_OUTPUTS = {
+    "robot_length_m": "length",
+    "pressure_Pa": "pressure",
+    "syringe_displacement_m": "syringe_displacement",
+    "robot_flow_m3_s": "robot_flow",
+}  # a measured column: the output of a noise-free solve it reads
+
+
+def noisy(clean: dict, noise: dict, rng) -> dict:
+    """The measured columns {column: (T,)} of a noise-free solve ``clean`` (`noise_free`'s outputs), each plus
+    Gaussian noise of sd ``noise[column]`` drawn from ``rng`` in the order of ``noise``."""
+    return {
+        c: clean[MEASURED_OUTPUTS[c]] + rng.normal(0.0, sd, clean[MEASURED_OUTPUTS[c]].size) for c, sd in noise.items()
+    }
+
+
 def make_experiment(
     effect: str | Effect | None = None,
     magnitude: float | None = None,
@@ -65,6 +91,8 @@ def make_experiment(
     seed: int,
     noise_m: float = NOISE_LENGTH_M,
     noise_pressure_Pa: float | None = NOISE_PRESSURE_PA,
+    noise_syringe_m: float | None = None,
+    noise_flow_m3_s: float | None = None,
     drive: str = "forward",
     inputs="public",
     t_end: float = 10.0,
@@ -83,6 +111,10 @@ def make_experiment(
         noise_m: standard deviation of the Gaussian noise on the length, m (0.2 mm: the rig's).
         noise_pressure_Pa: standard deviation on the pressure, Pa; None leaves out the ``pressure_Pa``
             column (the public experiment has none).
+        noise_syringe_m: standard deviation on the syringe displacement, m (a stepper's step count or an
+            encoder: 5 µm); None (default) leaves out the ``syringe_displacement_m`` column.
+        noise_flow_m3_s: standard deviation on the robot's inlet flow, m³/s; None (default) leaves out the
+            ``robot_flow_m3_s`` column.
         drive: ``"forward"`` or ``"inverse"``.
         inputs: ``"public"``, ``"synthetic"`` or a `growjax.Inputs` (see the module docstring,
             including the fallback when the public experiment is absent).
@@ -102,14 +134,10 @@ def make_experiment(
     clean = noise_free(
         effect, magnitude, drive=drive, inputs=inputs, t_end=t_end, base=base, dt=dt, rtol=rtol, superset=superset
     )
-    rng = np.random.default_rng(seed)
     time = clean["time"]
-    series = {"robot_length_m": clean["length"] + rng.normal(0.0, noise_m, time.size)}
-    noise = {"robot_length_m": noise_m}
-    if noise_pressure_Pa is not None:
-        series["pressure_Pa"] = clean["pressure"] + rng.normal(0.0, noise_pressure_Pa, time.size)
-        noise["pressure_Pa"] = noise_pressure_Pa
-    series.update(clean["columns"])
+    noise = {"robot_length_m": noise_m, "pressure_Pa": noise_pressure_Pa, "syringe_displacement_m": noise_syringe_m}
+    noise = {c: sd for c, sd in {**noise, "robot_flow_m3_s": noise_flow_m3_s}.items() if sd is not None}
+    series = {**noisy(clean, noise, np.random.default_rng(seed)), **clean["columns"]}
     ex.validate_series(time, series, "synthetic experiment")
     instance, name = clean["effect"], clean["name"]
     meta = {
@@ -127,7 +155,7 @@ def make_experiment(
         "drive": drive,
         "t_end_s": float(time[-1]),
         "inputs": clean["inputs"],
-        "base_parameters": _base_overrides(base, drive),
+        "base_parameters": base_overrides(base, drive),
         "solver": {"fidelity": "reference", "rtol": rtol, "atol": rtol, "superset": superset},
         "generator": "growjax.data.synthetic.make_experiment",
     }

@@ -96,6 +96,8 @@ def noise_free(
         "time": time,
         "length": np.asarray(traj.length)[offset:],
         "pressure": np.asarray(traj.pressure)[offset:],
+        "syringe_displacement": np.asarray(traj.syringe_displacement)[offset:],
+        "robot_flow": np.asarray(traj.robot_flow)[offset:],
         "columns": cols,
         "inputs": description,
         "effect": instance,
