@@ -51,8 +51,8 @@ OPTIONS = (
         "--sensors",
         item=options.one_of(*SENSORS),
         default=["length"],
-        metavar="length[,pressure]",
-        help="what the next experiment records (with the pressure: the table also shows the length alone)",
+        metavar="SENSOR[,...]",
+        help=options.SENSORS_HELP,
     ),
     option(
         "--criterion",

@@ -125,6 +125,12 @@ def option(*flags: str, **settings) -> tuple:
     return flags, settings
 
 
+SENSORS_HELP = (
+    "the sensors read, comma-separated (design: length, pressure, those the next experiment records, the table "
+    "also showing the length alone; track: pressure, syringe, flow, catheter, length, their columns on the data page)"
+)
+
+
 def listed(*flags: str, item=str, **settings) -> tuple:
     """One row of a list option: comma-separated values of type ``item``, the option repeatable."""
     return option(*flags, action=Listed, type=comma_list(item), **settings)
@@ -395,6 +401,7 @@ def likelihood_of(args):
 
 
 __all__ = [
+    "SENSORS_HELP",
     "CONFIG",
     "DATA_DIR",
     "DRIVE",

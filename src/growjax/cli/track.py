@@ -43,11 +43,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     options.shared(parser, NAME)
     options.quiet(parser)
     options.add(parser, (options.TOLERANCE,))
-    parser.add_argument(
-        "--sensors",
-        default="pressure,syringe",
-        help="the sensors read, comma-separated: pressure, syringe, flow, catheter, length (their columns: "
-        "pressure_Pa, syringe_displacement_m, robot_flow_m3_s, catheter_length_m, robot_length_m)",
+    options.add(
+        parser,
+        (
+            options.listed(
+                "--sensors",
+                default=["pressure", "syringe"],
+                metavar="SENSOR[,...]",
+                help=options.SENSORS_HELP,
+            ),
+        ),
     )
     parser.add_argument(
         "--noise",
@@ -67,14 +72,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="append",
         default=[],
         metavar="NAME=SD",
-        help="an estimated parameter's prior sd (relative; in its unit where it is 0) (repeat; default 0.1)",
+        help="an estimated parameter's prior sd (relative; in its unit where it is 0; repeat) (default: 0.1)",
     )
     parser.add_argument(
         "--walk",
         action="append",
         default=[],
         metavar="NAME=SD",
-        help="an estimated parameter's random walk, sd per √s (relative) (repeat; default 0.01)",
+        help="an estimated parameter's random walk, sd per √s (relative; repeat) (default: 0.01)",
     )
     parser.add_argument(
         "--discrepancy-size",
@@ -96,7 +101,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="SD",
         help="the estimated demand's random walk, SI per √s (default 3e5 Pa/√s, 30 steps/√s)",
     )
-    parser.add_argument("--method", choices=METHODS, default="extended", help="the filter")
+    parser.add_argument("--filter", choices=METHODS, default="extended", help="the filter (default: extended)")
     parser.add_argument("--smooth", action="store_true", help="the whole record's estimate, not the causal one")
     parser.add_argument(
         "--watch",
@@ -133,7 +138,7 @@ def model_of(args, params):
 
     if getattr(args, "fidelity", "fast") != "fast":
         raise ValueError("track steps the fast configuration (--fidelity fast)")
-    chosen = ts.sensor_set(args.sensors, ts.parse_noise(args.noise))
+    chosen = ts.sensor_set(",".join(args.sensors), ts.parse_noise(args.noise))
     estimate = [n.strip() for n in args.estimate.split(",") if n.strip()]
     tolerance_texts = [t.strip() for t in args.tolerance]
     budget = tolerance_texts != ["none"]
@@ -187,7 +192,7 @@ def run(args: argparse.Namespace) -> dict:
 
     data, exp, params, origin = _load(args)
     model = model_of(args, params)
-    method = tk.Unscented() if args.method == "unscented" else tk.ExtendedKalman()
+    method = tk.Unscented() if args.filter == "unscented" else tk.ExtendedKalman()
     if exp.time.size < 2:
         raise ValueError(f"{data} has fewer than two samples up to --t-end {args.t_end} s")
     if args.watch and args.smooth:

@@ -21,13 +21,13 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+import growjax.track.noise as tn
 from growjax.model import effects as fx
 from growjax.model import params as gp
 from growjax.model.signals import Constant, Inputs
 from growjax.simulation import fast as fm
 from growjax.simulation.config import Config
 from growjax.simulation.simulate import input_breaks, simulate_from
-from growjax.track import noise as tn
 from growjax.track.sensors import Sensor
 
 WINDOW_STEPS = 200  # step budget of one sample interval (a pulse edge inside one takes about a dozen)

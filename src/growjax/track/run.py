@@ -15,8 +15,8 @@ import time
 import jax
 import numpy as np
 
+import growjax.track.smoother as smoother
 from growjax.data.experiment import Experiment, informative_samples, to_inputs
-from growjax.track import smoother
 from growjax.track.belief import Belief, Step
 from growjax.track.filter import Filter, compiled
 from growjax.track.model import StateSpace
