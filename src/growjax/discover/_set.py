@@ -1,5 +1,34 @@
 """Discovery over an experiment set: each catalogue effect tested by the set's joint fit, its parameter one value
-per robot."""
+per robot.
+
+The procedure, one round (at most one effect is added):
+
+1. **Base fit.** `growjax.calibration.fit` of ``base_free`` (default one yield pressure per robot) under
+   ``likelihood`` (`growjax.calibration.Likelihood`: the rig's errors shared per rig and inferred under their
+   tolerances by default, each run with its own discrepancy). Its score is the set's total log-likelihood
+   (`growjax.calibration.FitResult.log_likelihood`): every run's under its discrepancy and noise at their mode,
+   the rig's errors marginalised.
+2. **Each candidate** (default the whole catalogue) is one more joint fit, one batched program over the runs:
+   the base parameters and the effect's parameter freed together, fitted from the best of the fit's
+   Latin-hypercube scout (``scout`` points, ``seed``; the effect's box a factor two either side of
+   `EFFECT_START` of its range's top, or, for an effect whose range also allows negative values (trapped air),
+   its physical range, fitted in a linear coordinate).
+3. **Score.** 2ΔlogL = 2 (logL_k − logL_base), floored at 0. The threshold: 2ΔlogL distributed as the mixture of
+   χ² over the effect's copies on their boundary (½χ²₀ + ½χ²₁ for one robot, `boundary_threshold`) at
+   ``false_positive_rate`` Bonferroni-divided over the candidates, as in `growjax.discover.discover`.
+4. **Confounding.** A candidate that clears the threshold while one of its copies correlates with a base
+   parameter beyond ``confounding_correlation`` in the joint covariance is ``confounded`` with that parameter,
+   unless its size is pinned (every copy's 90 % interval within a factor two of its estimate). Two candidates
+   that both clear it within the threshold of each other are both ``confounded`` (rivals), and neither is added.
+   (Single-experiment discovery's base-held fits and its allowance for the fitted configuration's own error are
+   not run.)
+5. **Verdict.** The best clean candidate is added. Each run's residuals get the misfit test of
+   `growjax.discover.Scorer` (the discrepancy's significance against white noise; ``material_misfit``,
+   m, its material amplitude; the rig at its fitted errors): the set is structured where any run is. The
+   verdict follows `growjax.discover.discover`'s: the effect where one was added and no structure
+   remains; ``"unexplained"`` where structure remains (or is material with none added); ``"confounded"``;
+   else ``"none"``.
+"""
 
 from __future__ import annotations
 
@@ -68,48 +97,13 @@ def discover_set(
     value per robot (``effect_scope``: or one per rig, per run, or one for all): `growjax.discover.discover` of a
     set of several experiments.
 
-    The procedure, one round (at most one effect is added):
+    The procedure is the module's docstring.
 
-    1. **Base fit.** `growjax.calibration.fit` of ``base_free`` (default one yield pressure per robot) under
-       ``likelihood`` (`growjax.calibration.Likelihood`: the rig's errors shared per rig and inferred under their
-       tolerances by default, each run with its own discrepancy). Its score is the set's total log-likelihood
-       (`growjax.calibration.FitResult.log_likelihood`): every run's under its discrepancy and noise at their mode,
-       the rig's errors marginalised.
-    2. **Each candidate** (default the whole catalogue) is one more joint fit, one batched program over the runs:
-       the base parameters and the effect's parameter freed together, fitted from the best of the fit's
-       Latin-hypercube scout (``scout`` points, ``seed``; the effect's box a factor two either side of
-       `EFFECT_START` of its range's top, or, for an effect whose range also allows negative values (trapped air),
-       its physical range, fitted in a linear coordinate).
-    3. **Score.** 2ΔlogL = 2 (logL_k − logL_base), floored at 0. The threshold: 2ΔlogL distributed as the mixture of
-       χ² over the effect's copies on their boundary (½χ²₀ + ½χ²₁ for one robot, :func:`boundary_threshold`) at
-       ``false_positive_rate`` Bonferroni-divided over the candidates, as in `growjax.discover.discover`.
-    4. **Confounding.** A candidate that clears the threshold while one of its copies correlates with a base
-       parameter beyond ``confounding_correlation`` in the joint covariance is ``confounded`` with that parameter,
-       unless its size is pinned (every copy's 90 % interval within a factor two of its estimate). Two candidates
-       that both clear it within the threshold of each other are both ``confounded`` (rivals), and neither is added.
-       (Single-experiment discovery's base-held fits and its allowance for the fitted configuration's own error are
-       not run.)
-    5. **Verdict.** The best clean candidate is added. Each run's residuals get the misfit test of
-       :class:`growjax.discover.Scorer` (the discrepancy's significance against white noise; ``material_misfit``,
-       m, its material amplitude; the rig at its fitted errors): the set is structured where any run is. The
-       verdict follows :func:`growjax.discover.discover`'s: the effect where one was added and no structure
-       remains; ``"unexplained"`` where structure remains (or is material with none added); ``"confounded"``;
-       else ``"none"``.
-
-    The effect's size (each copy's estimate, SI) and its 90 % interval are the joint fit's (from the
-    joint covariance: discrepancy, noise and the rig's errors included). ``config``: the simulation's settings (its
-    ``t1`` ends every run's window). ValueError for an unknown candidate or scope.
+    Sizes and intervals are the joint fit's; ``config``'s ``t1`` ends every run's window; ValueError for an unknown
+    candidate or scope.
     """
     started = time.perf_counter()
-    candidates = tuple(candidates) if candidates else tuple(fx.CATALOGUE)
-    for name in candidates:
-        candidate_parameter(name)  # an unknown effect is refused before any fit
-    if len(set(candidates)) != len(candidates):
-        raise ValueError(f"a candidate is named twice: {list(candidates)}")
-    if effect_scope not in SCOPES:
-        raise ValueError(f"effect_scope must be one of {SCOPES}, got {effect_scope!r}")
-    if not 0.0 < false_positive_rate < 1.0:
-        raise ValueError(f"false_positive_rate must lie in (0, 1), got {false_positive_rate}")
+    candidates = _checked(candidates, effect_scope, false_positive_rate)
     config = config if config is not None else Config()
     base_params = experiments.runs[0].base()
     base_scopes = [s if isinstance(s, Scope) else Scope.parse(s, base_params, default="robot") for s in base_free]
@@ -164,6 +158,21 @@ def discover_set(
         fits=1 + len(fits),
         wall_s=time.perf_counter() - started,
     )
+
+
+def _checked(candidates, effect_scope: str, false_positive_rate: float) -> tuple:
+    """The candidates (default the whole catalogue), after refusing an unknown or repeated one, a bad scope or
+    rate."""
+    candidates = tuple(candidates) if candidates else tuple(fx.CATALOGUE)
+    for name in candidates:
+        candidate_parameter(name)  # an unknown effect is refused before any fit
+    if len(set(candidates)) != len(candidates):
+        raise ValueError(f"a candidate is named twice: {list(candidates)}")
+    if effect_scope not in SCOPES:
+        raise ValueError(f"effect_scope must be one of {SCOPES}, got {effect_scope!r}")
+    if not 0.0 < false_positive_rate < 1.0:
+        raise ValueError(f"false_positive_rate must lie in (0, 1), got {false_positive_rate}")
+    return candidates
 
 
 def _score(

@@ -45,18 +45,11 @@ def discover_one(
 ) -> DiscoveryResult:
     """Find which catalogue effect the measured ``length`` (m) at ``times`` (s) needs beyond the base model.
 
-    ``inputs``: the experiment's :class:`growjax.Inputs`; ``base``: the base parameters (default the
-    published set of ``config.drive``), whose values are also the reference against which a base
-    parameter's shift counts as confounding; ``base_names``: base parameters refitted with every
-    candidate; ``multistart``: fit each new candidate from every start in ``START_FRACTIONS`` (False:
-    from the first only, a third of the fits); ``workers``: fits run at a time (default one per CPU core; each
-    fit is deterministic, so the result does not depend on it); ``likelihood``: the likelihood of every test
-    (`growjax.calibration.Likelihood`): its discrepancy (``"none"``: independent noise), its tolerances {parameter:
-    relative sd} (the rig's uncertainty, marginalised in every score; None: the default budget with the
-    discrepancy) and its ``model_error`` (the fitted configuration's length error against the reference, m;
-    None: the configuration's), allowed for in the confounding test; the rig is inferred in every score.
-    ``material_misfit`` (m): a smooth misfit below it is left to the discrepancy. See the module docstring for
-    the procedure and its thresholds.
+    ``inputs``: the experiment's `growjax.Inputs`; ``base``: the base parameters (default the published set of
+    ``config.drive``), also the reference of a confounding shift; ``base_names``: refitted with every candidate;
+    ``multistart``: every new candidate fitted from every start in ``START_FRACTIONS``; ``workers``: fits run at
+    a time (the result does not depend on it); ``likelihood``: of every test, the rig inferred in every score.
+    The module docstring gives the procedure and its thresholds; `growjax.discover.discover` the options.
     """
     discrepancy = likelihood.discrepancy
     start = time.perf_counter()
@@ -74,26 +67,16 @@ def discover_one(
     tol = likelihood.budget(base, base_names)
     first = _first_round(fitter, candidates, times, length, discrepancy, material_misfit, (base, inputs, config, tol))
     held_lr, held_trades = _held_round(fitter, first, candidates, threshold)
-    # 2ΔlogL the fitted configuration's own error (a slow drift, too small for the discrepancy to be estimated
-    # from) can buy through a candidate that trades with a base parameter
     allowance = first.scorer.allowance(first.base_fit.residual_m, model_error, MODEL_ERROR_TIME)
     misfit_before = first.scorer.misfit(first.base_fit.residual_m)
-    # Residuals at the start within what the discrepancy term takes (unstructured, or not material): an effect
-    # (or a confounding) needs the threshold cleared with the base refitted, never a trade with the base held.
     misfit_open = discrepancy == "none" or (misfit_before["structured"] and misfit_before["material"])
     held = {name: (h, h > threshold + allowance and held_trades[name] and misfit_open) for name, h in held_lr.items()}
     current, added, evidence, confounded = _rounds(
         fitter, first, candidates, held, threshold, confounding_correlation, max_effects, allowance
     )
     misfit_after = first.scorer.misfit(current.residual_m)
-    # The model's traces at the data's times: the length is the data plus the residual, the pressure comes with the fit.
     before_trace, after_trace = length + first.base_fit.residual_m, length + current.residual_m
-    units = {candidate_parameter(n)[0]: candidate_parameter(n)[1] for n in candidates}
-    intervals = shared_intervals(current, first.scorer, model_error)
-    parameters = {
-        n: {"estimate": v, "interval_90": intervals[n], "unit": units.get(n, _unit(n))}
-        for n, v in current.estimate.items()
-    }
+    parameters = _parameters(current, candidates, first.scorer, model_error)
     return DiscoveryResult(
         effect=final_effect(added, misfit_after, confounded),
         effects=added,
@@ -231,3 +214,13 @@ def _rounds(
         fitter.added_index.append(candidates.index(best))
         current = fits[best]
     return current, added, evidence, confounded
+
+
+def _parameters(current, candidates, scorer, model_error: float) -> dict:
+    """{name: {"estimate", "interval_90", "unit"}} of the final model's parameters."""
+    units = {candidate_parameter(n)[0]: candidate_parameter(n)[1] for n in candidates}
+    intervals = shared_intervals(current, scorer, model_error)
+    return {
+        n: {"estimate": v, "interval_90": intervals[n], "unit": units.get(n, _unit(n))}
+        for n, v in current.estimate.items()
+    }
