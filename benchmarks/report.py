@@ -181,7 +181,7 @@ def verdict(row: Row, env: dict) -> str:
         return "met"
     why = row.why
     if row.timed and loaded(env):
-        why += f"{'; ' if why else ''}machine shared (load {env['load_1min']:.1f} on {env['cpu_count']} cores)"
+        why += f"{'; ' if why else ''}{env['cpu_count']} cores shared with other work"
     return f"missed: {why}" if why else "missed"
 
 

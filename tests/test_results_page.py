@@ -115,7 +115,7 @@ def test_a_missed_time_target_on_a_shared_machine_says_so(report, tmp_path):
     _simulate(tmp_path, report.current_version(), wall_s=0.031, load=9.6)
     first = _table(report.render(tmp_path), "Simulation speed")[0]
     assert first[1] == "31.0 ms" and first[3].startswith("missed: above the target")
-    assert "load 9.6 on 2 cores" in first[3] and first[4].endswith("shared: load 9.6")
+    assert "2 cores shared with other work" in first[3] and first[4].endswith("shared: load 9.6")
 
 
 def test_a_results_file_absent_or_of_another_version_is_not_measured(report, tmp_path):
