@@ -93,7 +93,7 @@ def sweep(r: dict) -> list[Row]:
     worst = max((row["max_abs_length_difference_m"] for row in r.get("baseline_agreement", [])), default=None)
     if worst is not None:
         rows.append(
-            at_most("SciPy against growjax, largest length difference", worst, 1e-4, lambda v: f"{1e3 * v:.4f} mm")
+            at_most("SciPy against growjax, largest length difference", worst, 1e-4, lambda v: f"{1e3 * v:.2g} mm")
         )
     if n != 500:  # the targets are set for 500 sets
         rows = [replace(x, why=f"{x.why}; target set for 500 sets") if x.met is False else x for x in rows]
