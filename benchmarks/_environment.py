@@ -1,10 +1,15 @@
-"""The machine and versions a benchmark ran on, recorded in its results file (``"environment"``)."""
+"""The machine, versions and command a benchmark ran with, recorded in its results file (``"environment"``)."""
 
 from __future__ import annotations
 
 import datetime
 import os
 import platform
+import shlex
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
 
 
 def _cpu() -> str:
@@ -18,7 +23,16 @@ def _cpu() -> str:
     return platform.processor() or platform.machine()
 
 
+def _command() -> str:
+    """The command line that ran this process, with the script's path relative to the repository."""
+    script = Path(sys.argv[0]).resolve()
+    name = str(script.relative_to(REPO)) if script.is_relative_to(REPO) else sys.argv[0]
+    return shlex.join(["python", name, *sys.argv[1:]])
+
+
 def environment() -> dict:
+    """The date, CPU model and count, the one-minute load average (other work on the machine), the JAX device,
+    the versions of Python, jax and growjax, and the command line."""
     import jax
     import jaxlib
 
@@ -27,11 +41,15 @@ def environment() -> dict:
     return {
         "date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d"),
         "machine": f"{_cpu()}, {os.cpu_count()} cores",
+        "cpu_model": _cpu(),
+        "cpu_count": os.cpu_count(),
+        "load_1min": round(os.getloadavg()[0], 2) if hasattr(os, "getloadavg") else None,
         "device": str(jax.devices()[0].platform),
         "python": platform.python_version(),
         "jax": jax.__version__,
         "jaxlib": jaxlib.__version__,
         "growjax": growjax.__version__,
+        "command": _command(),
     }
 
 

@@ -9,7 +9,8 @@ tolerances propagated (``rig="fixed"``), and with the rig's secants instead of i
 (``rig_tangents=False``), relinearised and linearised once at nominal (``relinearise=False``), each run
 ``--repeat`` times (they alternate, so a drift of the machine's speed falls on all alike); the first run of each
 compiles. Printed: the median warm wall time of each, the default's ratio to independent noise (target ≤ 1.5), to
-the fixed rig, to the relinearised secants and to the once-linearised secants, and the first runs.
+the fixed rig, to the relinearised secants and to the once-linearised secants, and the first runs. The results file
+is written after each data set.
 """
 
 from __future__ import annotations
@@ -82,9 +83,9 @@ def main():
             f"linearisations), linearised once {row['once']['warm_s']:.2f} s",
             flush=True,
         )
-    path = Path(args.out)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps({"environment": environment(), **out}, indent=1))
+        path = Path(args.out)  # written after each data set: a run cut short keeps those done
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps({"environment": environment(), **out}, indent=1))
 
 
 if __name__ == "__main__":

@@ -12,7 +12,9 @@ out. Fitted jointly by the fast configuration (``Y@robot``, rig inferred), then 
 (NUTS, 4 × (500 + 500)). Targets: exp(μ) covers the true median 8 kPa and s the true 0.1 in 0.80–0.97 of the
 populations; the new robot's 90 % predictive band holds 0.80–0.97 of its points.
 Each population's record keeps the joint fit's linearised likelihood (``likelihood``: ln Ŷ of each robot, the rig's
-errors, their covariance), the input the population's NUTS samples, so samplers can be compared on it.
+errors, their covariance), the input the population's NUTS samples, so samplers can be compared on it; the whole
+record goes to ``--out`` with the suffix ``.full.json``, ``--out`` itself keeps the rest (small enough to keep in the
+repository).
 """
 
 from __future__ import annotations
@@ -158,6 +160,7 @@ def _kept(out: Path, partial: Path, args) -> list[dict]:
     """Populations of an earlier run with the same settings, from its results file and its partial file."""
     same = ("robots", "rtol", "chains", "warmup", "samples")
     rows = {}
+    out = full_path(out) if full_path(out).exists() else out
     if out.exists():
         earlier = json.loads(out.read_text())
         if any(earlier["arguments"][k] != getattr(args, k) for k in same):
@@ -241,11 +244,15 @@ def main():
 
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(
-        json.dumps(
-            {"environment": environment(), "arguments": vars(args), "summary": summary, "populations": rows}, indent=1
-        )
-    )
+    record = {"environment": environment(), "arguments": vars(args), "summary": summary, "populations": rows}
+    full_path(out).write_text(json.dumps(record, indent=1))
+    compact = [{k: v for k, v in r.items() if k != "likelihood"} for r in rows]
+    out.write_text(json.dumps({**record, "populations": compact}, indent=1))
+
+
+def full_path(out: Path) -> Path:
+    """Where the whole record goes, each population's linearised likelihood included (``--out`` holds the rest)."""
+    return out.with_suffix(".full.json")
 
 
 if __name__ == "__main__":

@@ -20,7 +20,7 @@ PATTERNS = {
 }
 # Generated from results files, or results files themselves, whose date says when the numbers were measured.
 DATED = {"docs/benchmarks.md", "docs/results.md"}
-DATED_FOLDERS = ("calibration/results/",)
+DATED_FOLDERS = ("calibration/results/", "benchmarks/results/")
 # Code, not history: pytest's fixture scope is called "session".
 ALLOWED = re.compile(r"scope=[\"']session[\"']")
 
