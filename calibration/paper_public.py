@@ -11,8 +11,7 @@ with the public data set's files (see the data page). Runs, each as its own ``gr
 
 - ``growjax simulate mammobot --param Y=7920.46``: the forward model at the published parameters;
 - ``growjax simulate mammobot --drive inverse --rtol 1e-5``: the stepper model with the shipped step controller;
-- ``growjax sweep mammobot --sobol``: the paper's 500-set Latin hypercube and the Sobol indices over its box;
-- ``growjax discover mammobot``: the catalogue of effects tested on the experiment, under the default likelihood.
+- ``growjax sweep mammobot --sobol``: the paper's 500-set Latin hypercube and the Sobol indices over its box.
 
 The membrane's safe pressure is the simulations' ``pressure_limit_Pa`` (``gj.pressure_limit``).
 """
@@ -39,9 +38,7 @@ RUNS = {
     "forward": ["simulate", "mammobot", "--param", f"Y={PUBLISHED_Y}"],
     "stepper": ["simulate", "mammobot", "--drive", "inverse", "--rtol", "1e-5"],
     "sweep": ["sweep", "mammobot", "--sobol"],
-    "discover": ["discover", "mammobot"],
 }
-DISCOVERY_KEYS = ("effect", "effects", "threshold", "rmse_before_m", "rmse_after_m", "misfit_after", "confounded_with")
 
 
 def data_dir(given: str | None) -> Path:
@@ -80,13 +77,10 @@ def run(name: str, args: list[str], folder: Path, tmp: Path) -> dict:
     }
 
 
-def record(runs: dict, measured_final_length_m: float) -> dict:
+def record(runs: dict) -> dict:
     """The page's figures from the commands' summaries."""
-    forward, stepper, sweep, discover = (runs[k]["summary"] for k in ("forward", "stepper", "sweep", "discover"))
-    first = discover["evidence"][0] if discover.get("evidence") else {}
-    largest = max(first, key=lambda k: first[k]["lr_statistic"]) if first else None
+    forward, stepper, sweep = (runs[k]["summary"] for k in ("forward", "stepper", "sweep"))
     return {
-        "measured_final_length_m": measured_final_length_m,
         "forward_rmse_m": forward["rmse_length_m"],
         "stepper_rmse_m": stepper["rmse_length_m"],
         "sweep_best": sweep["best"],
@@ -94,21 +88,11 @@ def record(runs: dict, measured_final_length_m: float) -> dict:
         "sweep_ranges": sweep["ranges"],
         "sobol": sweep["sobol"],
         "pressure_limit_Pa": forward["pressure_limit_Pa"],
-        "discover": {
-            **{k: discover.get(k) for k in DISCOVERY_KEYS},
-            "largest": None if largest is None else {"effect": largest, "lr_statistic": first[largest]["lr_statistic"]},
-        },
         "commands": {
             k: {"command": r["command"], "exit_status": r["exit_status"], "process_wall_s": r["process_wall_s"]}
             for k, r in runs.items()
         },
     }
-
-
-def final_length(folder: Path, t_end: float) -> float:
-    """The measured robot length at the end of the simulated window, m."""
-    exp = ex.read(folder)
-    return float(exp["robot_length_m"][exp.time <= t_end][-1])
 
 
 def main(argv=None):
@@ -126,7 +110,7 @@ def main(argv=None):
         "environment": environment(),
         "command": "python calibration/paper_public.py",
         "data": "mammobot",
-        **record(runs, final_length(folder, runs["forward"]["summary"]["t_end_s"])),
+        **record(runs),
     }
     out = Path(args.results)
     out.parent.mkdir(parents=True, exist_ok=True)
