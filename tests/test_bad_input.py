@@ -202,7 +202,7 @@ def files(tmp_path_factory) -> dict:
     bad("length_misspelt", header=full.replace("robot_length_m", "robot_lenght_m"))
     bad("catheter_upper_case", header=full.replace("catheter_length_m", "Catheter_Length_m"))
     bad("repeated_column", header=full.replace("catheter_length_m", "robot_length_m"))
-    bad("demand_only", header="time_s,operator_note,catheter_length_m,pressure_demand_Pa")
+    bad("demand_only", header="time_s,syringe_displacement_m,catheter_length_m,pressure_demand_Pa")
     f["late"] = _write(d / "late.csv", full, [(x + 20.0, *r[1:]) for x, r in zip(np.linspace(0, 2, 5), rows)])
     f["extra_column"] = _write(d / "extra_column.csv", full + ",temperature_C", [(*r, 21.5) for r in rows])
     f["short"] = _write(d / "short.csv", full, rows[:300])

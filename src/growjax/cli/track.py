@@ -99,7 +99,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=float,
         default=None,
         metavar="SD",
-        help="the estimated demand's random walk, SI per √s (default 3e5 Pa/√s, 30 steps/√s)",
+        help="the estimated demand's random walk, SI per √s (default: 3e5 Pa/√s, 30 steps/√s)",
     )
     parser.add_argument("--filter", choices=METHODS, default="extended", help="the filter (default: extended)")
     parser.add_argument("--smooth", action="store_true", help="the whole record's estimate, not the causal one")

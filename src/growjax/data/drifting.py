@@ -116,7 +116,9 @@ def drifting_experiment(
         "solver": {"fidelity": "reference", "rtol": rtol, "atol": rtol},
         "generator": "growjax.data.drifting.drifting_experiment",
     }
-    return sy.SyntheticExperiment(time, series, f"synthetic: {name} drifting by {change:+.0%}, seed {seed}", meta)
+    return sy.SyntheticExperiment(
+        time, series, f"synthetic: {name} drifting by {change:+.0%}, seed {seed}", metadata=meta
+    )
 
 
 def switching_experiment(
@@ -174,7 +176,7 @@ def switching_experiment(
         "solver": {"fidelity": "reference", "rtol": rtol, "atol": rtol},
         "generator": "growjax.data.drifting.switching_experiment",
     }
-    return sy.SyntheticExperiment(time, series, f"synthetic: {values} from {at:.2f} s, seed {seed}", meta)
+    return sy.SyntheticExperiment(time, series, f"synthetic: {values} from {at:.2f} s, seed {seed}", metadata=meta)
 
 
 __all__ = ["DEFAULT_NOISE", "drifting_experiment", "stepped", "switching_experiment"]

@@ -160,7 +160,7 @@ def make_experiment(
         "generator": "growjax.data.synthetic.make_experiment",
     }
     label = f"synthetic: {name or 'clean'}" + ("" if name is None else f" {meta['parameter']}={clean['magnitude']:g}")
-    return SyntheticExperiment(time, series, f"{label}, seed {seed}", meta)
+    return SyntheticExperiment(time, series, f"{label}, seed {seed}", metadata=meta)
 
 
 def read_truth(csv_path) -> dict:
