@@ -1,8 +1,11 @@
-"""The documentation site builds with ``mkdocs build --strict``, executing every tutorial in quick mode; its
-tutorials are the notebooks in the top-level ``notebooks/`` folder, kept there alone."""
+"""The documentation site builds with ``mkdocs build --strict`` from the tutorials' stored outputs, after every
+tutorial has been executed at its reduced sizes; its tutorials are the notebooks in the top-level ``notebooks/``
+folder, kept there alone."""
 
+import importlib.util
 import os
 import re
+import shutil
 import subprocess
 import sys
 import time
@@ -22,15 +25,39 @@ def test_the_sites_tutorials_are_the_notebooks_folder():
     assert link.resolve() == NOTEBOOKS.resolve()
     assert not any(p.suffix == ".ipynb" for p in (REPO / "docs").rglob("*") if not p.is_relative_to(link))
     nav = re.findall(r"tutorials/(\w+\.ipynb)", (REPO / "mkdocs.yml").read_text())
-    assert sorted(nav) == sorted(p.name for p in NOTEBOOKS.glob("*.ipynb")) and len(nav) == 8
+    assert sorted(nav) == sorted(p.name for p in NOTEBOOKS.glob("*.ipynb")) and len(nav) >= 7
+    assert sorted(nav) == sorted(f"{name}.ipynb" for name in _execute().sizes())  # each has its sizes
+
+
+def _execute():
+    """notebooks/execute.py, the script that executes the tutorials and stores their outputs."""
+    spec = importlib.util.spec_from_file_location("execute", NOTEBOOKS / "execute.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 @pytest.mark.docs
 def test_docs_build_strict_with_executed_tutorials(tmp_path):
+    """Every tutorial runs top to bottom at its reduced sizes (a copy; the stored one is not touched), then the site
+    builds strictly from the stored outputs."""
     pytest.importorskip("mkdocs")
     pytest.importorskip("mkdocs_jupyter")
     pytest.importorskip("mkdocstrings_handlers.python")
-    env = dict(os.environ, GROWJAX_QUICK="1", GROWJAX_DOCS_CACHE="false", NO_MKDOCS_2_WARNING="1")
+    pytest.importorskip("nbclient")
+    execute = _execute()
+    copy = tmp_path / "notebooks"
+    copy.mkdir()
+    shutil.copy(NOTEBOOKS / "sizes.toml", copy)
+    start = time.perf_counter()
+    from test_notebook import NOT_STORED
+
+    for name in (n for n in execute.sizes() if n not in NOT_STORED):
+        shutil.copy(NOTEBOOKS / f"{name}.ipynb", copy)
+        execute.execute(copy / f"{name}.ipynb", ci=True, timeout=900)  # a cell that raises fails the test
+        assert any((copy / "out" / "tutorials" / name).glob("*.png")), f"{name} saved no figure where it says"
+    executed = time.perf_counter() - start
+    env = dict(os.environ, NO_MKDOCS_2_WARNING="1")
     start = time.perf_counter()
     run = subprocess.run(
         [sys.executable, "-m", "mkdocs", "build", "--strict", "-d", str(tmp_path / "site")],
@@ -38,7 +65,7 @@ def test_docs_build_strict_with_executed_tutorials(tmp_path):
         env=env,
         capture_output=True,
         text=True,
-        timeout=1800,
+        timeout=600,
         check=False,
     )
     wall = time.perf_counter() - start
@@ -71,8 +98,8 @@ def test_docs_build_strict_with_executed_tutorials(tmp_path):
     unrendered = [name for name in _rendered_api_names() if name not in api]
     assert not unrendered, f"docs/api.md does not render {unrendered}"
     simulate = (site / "tutorials" / "simulate" / "index.html").read_text()
-    assert "length RMSE against the data" in simulate and "data:image/png" in simulate  # executed, with figures
-    print(f"mkdocs build --strict: {wall:.1f} s")
+    assert "length RMSE against the data" in simulate and "data:image/png" in simulate  # stored outputs, figures
+    print(f"tutorials executed at their reduced sizes: {executed:.0f} s; mkdocs build --strict: {wall:.1f} s")
 
 
 # -- the pages themselves: short, current, complete ---------------------------------------------------------------
