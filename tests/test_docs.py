@@ -88,13 +88,16 @@ def test_docs_build_strict_with_executed_tutorials(tmp_path):
         "tutorials/control",
         "tutorials/sets",
         "tutorials/design",
-        "tutorials/track",
     ):
         assert (site / page / "index.html").is_file(), page
     assert sorted(p.name for p in (site / "tutorials").rglob("*") if p.is_file() and p.suffix != ".html") == sorted(
         p.name for p in NOTEBOOKS.glob("*.ipynb")
     )  # the notebooks, not what running them may leave beside them
-    api = set(re.findall(r'id="([^"]+)"', (site / "api" / "index.html").read_text()))
+    api = {
+        i
+        for page in ("api", "api-tracking")
+        for i in re.findall(r'id="([^"]+)"', (site / page / "index.html").read_text())
+    }
     unrendered = [name for name in _rendered_api_names() if name not in api]
     assert not unrendered, f"docs/api.md does not render {unrendered}"
     simulate = (site / "tutorials" / "simulate" / "index.html").read_text()
@@ -224,7 +227,7 @@ def _public_modules():
 
 def _api_blocks() -> dict[str, list[str] | None]:
     """{identifier: the members it lists, or None for all of its public names} of docs/api.md's ``:::`` blocks."""
-    text = (DOCS / "api.md").read_text()
+    text = "".join(p.read_text() for p in sorted(DOCS.glob("api*.md")))
     blocks = {}
     for m in re.finditer(r"^::: (\S+)\n((?:    .*\n)*)", text, flags=re.MULTILINE):
         listed = re.search(r"members:\s*\[([^\]]*)\]", m.group(2))

@@ -115,7 +115,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=float,
         default=None,
         metavar="H",
-        help="the CUSUM's threshold, in sd of the innovations (default 15)",
+        help="the CUSUM's threshold, in sd of the innovations (default: 15)",
     )
 
 
