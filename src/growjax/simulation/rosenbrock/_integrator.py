@@ -21,7 +21,12 @@ from growjax.simulation.rosenbrock._events import locate_event
 from growjax.simulation.rosenbrock._method import ROS34PW2, RosenbrockTableau
 from growjax.simulation.rosenbrock._step_control import error_norm, land, next_size
 
-OK, EVENT, FAILED = 0, 1, 2
+OK = 0
+"""Status: the integration reached its end."""
+EVENT = 1
+"""Status: the stop event ended the integration."""
+FAILED = 2
+"""Status: the step budget ran out or a step failed."""
 
 
 class Result(NamedTuple):
