@@ -11,7 +11,6 @@ import pytest
 import growjax as gj
 from growjax import calibration as cal
 from growjax import control as gc
-from growjax import discover as gdisc
 from growjax import posterior as gpost
 from growjax.calibration import discrepancy as dc
 from growjax.simulation.simulate import simulate_from
@@ -29,7 +28,6 @@ ANNOTATED = [
     cal.fit,
     gpost.sample,
     gpost.forecast,
-    gdisc.discover,
     dc.log_likelihood,
     dc.whiten,
 ]

@@ -19,7 +19,7 @@ from growjax.cli import loader, options
 from growjax.cli.command import Process
 
 NAME = "track"
-HELP = "the length, pressure and parameters over time with 90 % bands, from the rig's own sensors"
+HELP = "the length, pressure and parameters over time with their bands, from the rig's own sensors"
 METHODS = ("extended", "unscented")
 PROCESS = Process()
 
