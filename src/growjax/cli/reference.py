@@ -73,28 +73,64 @@ def _table(parser, actions) -> list[str]:
     return rows
 
 
-def section(name: str, about: str, parser: argparse.ArgumentParser) -> list[str]:
-    """The page's section of the command ``name``: its usage, then its common and its rare options."""
+def _key(parser, action) -> tuple[str, str]:
+    """(invocation, meaning) of an option: what makes two commands' options the same one."""
+    return invocation(action), meaning_and_default(parser, action)[0]
+
+
+def shared_options(parsers: dict) -> dict:
+    """{(invocation, meaning): [command, ...]} of the options two or more commands take alike."""
+    taken: dict = {}
+    for name, parser in parsers.items():
+        for action in parser._actions:
+            if action.dest != "help":
+                taken.setdefault(_key(parser, action), []).append(name)
+    return {key: names for key, names in taken.items() if len(names) > 1}
+
+
+def _shared_table(shared: dict) -> list[str]:
+    rows = ["| option | meaning | commands |", "|---|---|---|"]
+    for (flag, meaning), names in shared.items():
+        rows.append(f"| `{flag}` | {_cell(meaning)} | {', '.join(names)} |")
+    return rows
+
+
+def section(name: str, about: str, parser: argparse.ArgumentParser, shared: dict | None = None) -> list[str]:
+    """The page's section of the command ``name``: its usage, its own options (common, then rare) and, for the
+    options of ``shared`` (`shared_options`), their defaults in this command."""
+    shared = shared or {}
     actions = [a for a in parser._actions if a.dest != "help"]
-    common = [a for a in actions if not options.is_rare(a)]
-    rare = [a for a in actions if options.is_rare(a)]
+    own = [a for a in actions if _key(parser, a) not in shared]
+    common = [a for a in own if not options.is_rare(a)]
+    rare = [a for a in own if options.is_rare(a)]
     lines = [f"## growjax {name}", "", about[0].upper() + about[1:] + ".", "", f"`{parser.usage}`", ""]
-    lines += _table(parser, common)
+    if common:
+        lines += _table(parser, common)
     if rare:
         lines += ["", "Rare options (`--help-all`):", ""] + _table(parser, rare)
+    also = [a for a in actions if _key(parser, a) in shared]
+    if also:
+        listed = ", ".join(
+            f"`{invocation(a)}`"
+            + (f" ({meaning_and_default(parser, a)[1]})" if meaning_and_default(parser, a)[1] else "")
+            for a in also
+        )
+        lines += ["", f"Shared options, with their defaults here: {_cell(listed)}."]
     return lines + [""]
 
 
 def page() -> str:
     """The whole page, Markdown."""
     parsers = options.subparsers(build_parser())
-    lines = [INTRO]
+    parsers = {c.NAME: parsers[c.NAME] for c in COMMANDS}
+    shared = shared_options(parsers)
+    lines = [INTRO, "## Options several commands share", ""] + _shared_table(shared) + [""]
     for command in COMMANDS:
-        lines += section(command.NAME, command.HELP, parsers[command.NAME])
+        lines += section(command.NAME, command.HELP, parsers[command.NAME], shared)
     return "\n".join(lines)
 
 
-__all__ = ["INTRO", "invocation", "meaning_and_default", "page", "section"]
+__all__ = ["INTRO", "invocation", "meaning_and_default", "page", "section", "shared_options"]
 
 
 if __name__ == "__main__":
