@@ -101,21 +101,9 @@ def drifting_experiment(
 
     out, values = stepped(base, model_inputs, time, edges, held, rtol)
     values = values[name]
-    series = {**sy.noisy(out, noise, np.random.default_rng(seed)), **cols}
-    ex.validate_series(time, series, "synthetic experiment")
-    meta = {
-        "effect": None,
-        "drift": {"parameter": name, "change": change, "segment_s": segment, "values": values.tolist()},
-        "noise_free_length_m": out["length"].tolist(),
-        "noise_sd": noise,
-        "seed": int(seed),
-        "drive": "forward",
-        "t_end_s": float(time[-1]),
-        "inputs": description,
-        "base_parameters": sy.base_overrides(base, "forward"),
-        "solver": {"fidelity": "reference", "rtol": rtol, "atol": rtol},
-        "generator": "growjax.data.drifting.drifting_experiment",
-    }
+    drift = {"parameter": name, "change": change, "segment_s": segment, "values": values.tolist()}
+    series, meta = _made(time, out, cols, noise, seed, description, base, rtol, drift=drift)
+    meta["generator"] = "growjax.data.drifting.drifting_experiment"
     return sy.SyntheticExperiment(
         time, series, f"synthetic: {name} drifting by {change:+.0%}, seed {seed}", metadata=meta
     )
@@ -161,11 +149,24 @@ def switching_experiment(
     out, _ = stepped(
         base, model_inputs, time, np.array([t0, at, time[-1]]), lambda ta, tb: before if ta < at else values, rtol
     )
+    series, meta = _made(
+        time, out, cols, noise, seed, description, base, rtol, switch={"values": values, "at_s": float(at)}
+    )
+    meta["generator"] = "growjax.data.drifting.switching_experiment"
+    return sy.SyntheticExperiment(time, series, f"synthetic: {values} from {at:.2f} s, seed {seed}", metadata=meta)
+
+
+__all__ = ["DEFAULT_NOISE", "drifting_experiment", "stepped", "switching_experiment"]
+
+
+def _made(time, out: dict, cols: dict, noise: dict, seed: int, description: str, base, rtol: float, **change):
+    """(the measured columns with seeded noise and the input columns, checked; the sidecar's metadata, the
+    ``change`` (drift or switch) under its own key) of a record made by `stepped`."""
     series = {**sy.noisy(out, noise, np.random.default_rng(seed)), **cols}
     ex.validate_series(time, series, "synthetic experiment")
     meta = {
         "effect": None,
-        "switch": {"values": values, "at_s": float(at)},
+        **change,
         "noise_free_length_m": out["length"].tolist(),
         "noise_sd": noise,
         "seed": int(seed),
@@ -174,9 +175,5 @@ def switching_experiment(
         "inputs": description,
         "base_parameters": sy.base_overrides(base, "forward"),
         "solver": {"fidelity": "reference", "rtol": rtol, "atol": rtol},
-        "generator": "growjax.data.drifting.switching_experiment",
     }
-    return sy.SyntheticExperiment(time, series, f"synthetic: {values} from {at:.2f} s, seed {seed}", metadata=meta)
-
-
-__all__ = ["DEFAULT_NOISE", "drifting_experiment", "stepped", "switching_experiment"]
+    return series, meta
