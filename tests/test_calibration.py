@@ -97,6 +97,17 @@ def _less_air(amplitude: float, seed: int, truth: float):
     return xs.Run(f"pulse {amplitude / 1e3:.0f} kPa", exp, sensors=("length", "pressure"), inputs=inputs)
 
 
+def test_a_signed_parameter_is_drawn_and_fitted_in_a_linear_coordinate():
+    """The trapped-air effect's extra air fraction may be negative: its range straddles zero and a scout draws it
+    linearly about its nominal value (the fits themselves: the slow test below, and `tests/test_discover_set.py`,
+    which names less air than nominal from one experiment and from two)."""
+    name = "trapped_air.extra_fraction"
+    base = gj.with_effects(gj.reference(), gj.effects.TrappedAir())
+    assert cal.default_range(base, name) == (-0.005, 0.05)
+    np.testing.assert_allclose(cal.sampling_box(base, [name], [0.0]), [[-0.1], [1.0]])
+
+
+@pytest.mark.slow  # a companion of the discovery test of less air than nominal: ~70 s of compiling
 def test_a_signed_parameter_is_fitted_below_its_nominal_value_alone_and_in_a_set():
     """The trapped-air effect's extra air fraction may be negative (less air than the base model's): it is fitted in
     a linear coordinate, not in ln θ, and on data made with less air than nominal its estimate is negative with a

@@ -13,6 +13,7 @@ import matplotlib
 matplotlib.use("Agg")
 
 import arviz_stats as azs
+import jax.numpy as jnp
 import matplotlib.pyplot as plt
 import numpy as np
 import pytest
@@ -99,6 +100,38 @@ def test_the_noise_is_recorded_in_mm_and_the_summary_json_keeps_si(small_posteri
     assert json_sigma["interval_90"][0] == pytest.approx(float(np.quantile(sigma, 0.05)), rel=1e-12)
 
 
+def test_the_posterior_model_marginalises_the_configurations_error_as_a_slow_drift():
+    """The likelihood NUTS samples with ``discrepancy="none"`` and the fast configuration's allowance is the Gaussian
+    whose covariance is the noise plus the drift's (`growjax.calibration.discrepancy.drift_columns`), as the fit's;
+    without the allowance it is independent noise. (The whole posterior run: the slow test below.)"""
+    from numpyro.infer.util import log_density
+    from scipy import stats
+
+    from growjax.calibration import FAST_MODEL_ERROR, MODEL_ERROR_TIME
+    from growjax.calibration import discrepancy as dc
+
+    times = np.arange(0.1, 10.0, 0.1)
+    mu = 2e-2 * times
+    y = mu + np.random.default_rng(4).normal(0.0, 5e-5, times.size)
+    prior = gpost.paper_priors()[0]
+    values = {"Y": 9000.0, "sigma": 7e-5}
+
+    def total(model_error):
+        residuals = gpost.Residuals("none", times, np.ones(times.size, bool), model_error=model_error)
+        model = lambda data: gpost.growth_model(  # noqa: E731
+            data, mean_length=lambda th: jnp.asarray(mu), priors=[prior], residuals=residuals
+        )
+        return float(log_density(model, (jnp.asarray(y),), {}, values)[0])
+
+    drift = dc.drift_columns(times, FAST_MODEL_ERROR, MODEL_ERROR_TIME)
+    dense = stats.multivariate_normal(mu, 7e-5**2 * np.eye(times.size) + drift @ drift.T).logpdf(y)
+    white = stats.norm(mu, 7e-5).logpdf(y).sum()
+    carried, bare = total(FAST_MODEL_ERROR), total(0.0)
+    assert carried - bare == pytest.approx(dense - white, rel=1e-8, abs=1e-6)  # the priors' terms cancel
+    assert abs(carried - bare) > 0.5  # the drift's term is there
+
+
+@pytest.mark.slow  # the end-to-end run of the model above: ~90 s of compiling
 def test_the_posterior_carries_the_fits_model_error_allowance_without_a_discrepancy():
     """``discrepancy="none"``: the posterior reads the configuration's error allowance from the likelihood's options
     as the fit does (`growjax.calibration.FAST_MODEL_ERROR` for the fast configuration) and marginalises it as the
@@ -108,8 +141,8 @@ def test_the_posterior_carries_the_fits_model_error_allowance_without_a_discrepa
     from growjax.calibration import discrepancy as dc
 
     prior = gpost.paper_priors()[0]
-    times = np.arange(0.04, 10.0, 0.04)
-    length = 2e-2 * times + np.random.default_rng(4).normal(0.0, 1e-4, times.size)
+    times = np.arange(0.1, 10.0, 0.1)
+    length = 2e-2 * times + np.random.default_rng(4).normal(0.0, 5e-5, times.size)
     config = gj.Config(t1=10.0)
     none = Likelihood(discrepancy="none", tolerances={})
     kw = dict(config=config, priors=[prior], chains=2, warmup=150, samples=300, seed=0, progress=False)
@@ -121,8 +154,8 @@ def test_the_posterior_carries_the_fits_model_error_allowance_without_a_discrepa
     assert bare.residuals is None and bare.summary["configuration_error_m"] == 0.0
     jac = -1e-6 * times  # dL/dY, m/Pa
     drift = dc.drift_columns(times, FAST_MODEL_ERROR, MODEL_ERROR_TIME)
-    noise = 1e-4**2 * np.eye(times.size)
-    widened = np.sqrt((jac @ jac / 1e-4**2) / (jac @ np.linalg.solve(noise + drift @ drift.T, jac)))
+    noise = 5e-5**2 * np.eye(times.size)
+    widened = np.sqrt((jac @ jac / 5e-5**2) / (jac @ np.linalg.solve(noise + drift @ drift.T, jac)))
     assert widened > 1.5  # the drift, not the noise, limits Y
     sd = lambda res: res.summary["parameters"]["Y"]["sd"]  # noqa: E731
     assert sd(carried) / sd(bare) == pytest.approx(widened, rel=0.15)

@@ -90,6 +90,7 @@ def test_sweep_equals_one_at_a_time_and_chunking_changes_nothing(setup):
     assert np.all(np.diff(whole.final_length[order]) < 0)
 
 
+@pytest.mark.slow  # the paper sweep below runs the shared path in the default suite, judged by its result
 def test_large_batches_compute_the_fields_shared_values_once_with_the_same_result(setup):
     """From ``SHARED_BATCH_MIN`` members per device the field passes its shared values through a dot
     (:func:`growjax.simulation.fast._computed_once`); the results equal those of small batches, which do not.
