@@ -15,10 +15,7 @@ REPO = Path(__file__).resolve().parents[1]
 NOTEBOOKS = REPO / "notebooks"
 TUTORIALS = sorted(NOTEBOOKS.glob("*.ipynb"))
 # Tutorials not yet stored executed, each with the reason; the documentation's test does not execute them either.
-NOT_STORED = {
-    "sets": "its population cell's joint fit does not return inside a Jupyter kernel (it does from the command line)",
-    "design": "its reduced-size run takes over 20 minutes on a 2-core machine",
-}
+NOT_STORED: dict[str, str] = {}
 MAX_BYTES = 1_500_000  # a stored notebook, its figures included
 
 

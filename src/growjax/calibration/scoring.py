@@ -239,25 +239,40 @@ def hyperparameter_spread(score: RunScore, raw, hyper, cov, b, rest, columns, p_
 
 @eqx.filter_jit
 def _hyper_scan(score: RunScore, r, jac, grid: dc.Hyper, b, rest, select, p_all: int):
-    """Per grid point: log weight, the Gauss–Newton shift of the set's z (P,), its covariance (P, P)."""
+    """Per grid point: log weight, the Gauss–Newton shift of the set's z (P,), its covariance (P, P).
+
+    The filter runs over the grid in one batch; the (S, S) solves run one grid point at a time (`jax.lax.map`),
+    each one eigendecomposition: XLA:CPU's batched LAPACK kernels wait on its thread pool for their batch's
+    parts, and two of them side by side on a 2-thread pool wait for each other for ever.
+    """
     cols, t = score.length_columns(r, jac, b)
     info_rest, grad_rest, rr_rest = rest
     select = jnp.asarray(select)
 
-    def one(h):
+    def whitened(h):
         v, s, _, _ = dc.kalman_filter(cols, t, h, hoist=False)
         w = v / jnp.sqrt(s)[:, None]
-        wr, wj = w[:, 0], w[:, 1:] @ select
+        return w[:, 0], w[:, 1:] @ select, -0.5 * jnp.sum(jnp.log(2.0 * jnp.pi * s)) + dc.log_prior(h)
+
+    def solved(point):
+        wr, wj, constant = point
         info = info_rest + wj.T @ wj
         grad = grad_rest + wj.T @ wr
-        c = jnp.linalg.pinv(info, hermitian=True)
-        step = -c @ grad
+        c, logdet = _pinv_logdet(info)
         cost = 0.5 * (rr_rest + wr @ wr) - 0.5 * grad @ c @ grad
-        logdet = jnp.linalg.slogdet(info)[1]  # the rig's prior normalisation is the same at every h
-        loglik = -cost - 0.5 * jnp.sum(jnp.log(2.0 * jnp.pi * s)) - 0.5 * logdet
-        return loglik + dc.log_prior(h), step[:p_all], c[:p_all, :p_all]
+        # the rig's prior normalisation is the same at every h
+        return constant - cost - 0.5 * logdet, (-c @ grad)[:p_all], c[:p_all, :p_all]
 
-    return jax.vmap(one)(grid)
+    return jax.lax.map(solved, jax.vmap(whitened)(grid))
+
+
+def _pinv_logdet(info):
+    """The pseudo-inverse of the symmetric ``info`` (S, S), as `jnp.linalg.pinv` with ``hermitian=True``
+    gives it, and log |det info|, from one eigendecomposition."""
+    w, v = jnp.linalg.eigh(info)
+    cutoff = 10.0 * info.shape[0] * jnp.finfo(info.dtype).eps * jnp.max(jnp.abs(w))
+    inverse = jnp.where(jnp.abs(w) > cutoff, 1.0 / w, 0.0)
+    return (v * inverse) @ v.T, jnp.sum(jnp.log(jnp.abs(w)))
 
 
 def _stacked(score: RunScore, w, r, jac, b):
