@@ -200,7 +200,7 @@ def track_public(r: dict) -> list[Row]:
             f"{sm['coverage_90_away_from_edges']:.2f} ({fl['coverage_90_away_from_edges']:.2f})",
         ),
         info(
-            "estimated demand's mean on / off the pulses, smoothed (published 150 / 0 kPa)",
-            f"{1e-3 * sm['on_mean_Pa']:.0f} / {1e-3 * sm['off_mean_Pa']:.0f} kPa",
+            "estimated demand's mean on the pulses (published 150 kPa) and its band's median width, smoothed",
+            f"{1e-3 * sm['on_mean_Pa']:.0f} kPa; {1e-3 * sm['band_width_median_Pa']:.0f} kPa",
         ),
     ]
