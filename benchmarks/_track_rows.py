@@ -13,7 +13,7 @@ def mm(x) -> str:
 
 
 def of(k: int, n: int) -> str:
-    return f"{k} of {n}"
+    return f"{int(k)} of {int(n)}"
 
 
 def sized(row: Row, n: int, wanted: int, what: str) -> Row:
@@ -129,7 +129,8 @@ def track_change(r: dict) -> list[Row]:
         if not c:
             continue
         n = c["seeds"]
-        late = f"median delay {c['delay_s_median']:.2f} s"
+        failed = c.get("failed") or []
+        late = f"the track failed on {', '.join(failed)}" if failed else f"median delay {c['delay_s_median']:.2f} s"
         rows.append(
             sized(
                 count_at_least(f"{label}: flagged within 0.5 s", c["flagged_within_0.5_s"], n, 0.9, late),
@@ -140,7 +141,12 @@ def track_change(r: dict) -> list[Row]:
         )
         rows.append(
             sized(
-                count_at_least(f"{label}: named right", c["named_right"], n, 0.8, "named otherwise"), n, SEEDS, "seeds"
+                count_at_least(
+                    f"{label}: named right", c["named_right"], n, 0.8, late if failed else "named otherwise"
+                ),
+                n,
+                SEEDS,
+                "seeds",
             )
         )
     clean = r.get("change", {}).get("clean")
