@@ -20,6 +20,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _rows as rw  # noqa: E402
 import _study_rows as st  # noqa: E402
+import _track_rows as tr  # noqa: E402
 from _rows import Row  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
@@ -128,6 +129,22 @@ TOPICS: list[tuple[str, str, list[Source]]] = [
         "Control",
         "Control designs made on the fast configuration, their tracking evaluated on the reference one.",
         [Source("control", _py("control"), rw.control)],
+    ),
+    (
+        "Tracking",
+        "`growjax.track` from the pump's pressure and syringe on records the reference configuration made on rigs "
+        "drawn from the default tolerance budget (0.5 kPa, 5 µm); change detection; output feedback on the reference "
+        "plant; the public experiment's unrecorded demand.",
+        [
+            Source("track", _py("track", "--methods", "extended"), tr.track),
+            Source("track_change", _py("track_change", "--feedback", "0"), tr.track_change),
+            Source(
+                "track_feedback",
+                _py("track_change", "--seeds", "0", "--clean", "0", "--out", "benchmarks/results/track_feedback.json"),
+                tr.track_feedback,
+            ),
+            Source("track_public", _py("track_public"), tr.track_public),
+        ],
     ),
     (
         "Populations",

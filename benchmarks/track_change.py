@@ -51,7 +51,14 @@ def model_for(base):
 def watch_record(path: Path, kind: str | None) -> dict:
     exp, meta = read_record(path)
     clock = time.perf_counter()
-    watched = tk.watch(exp, model_for(gj.reference("forward")))
+    try:
+        watched = tk.watch(exp, model_for(gj.reference("forward")))
+    except RuntimeError as err:  # the filter diverged and the solver failed: the record counts as missed
+        row = {"record": path.name, "failed": str(err), "changes": [], "max_statistic": float("nan")}
+        if kind is not None:
+            at = meta["switch"]["at_s"]
+            row.update(at_s=at, false_before=0, delay_s=None, flagged=False, named_right=False)
+        return row
     row = {"record": path.name, "changes": watched.summary(), "wall_s": time.perf_counter() - clock}
     row["max_statistic"] = float(watched.statistic.max())
     if kind is not None:
@@ -76,6 +83,7 @@ def change_study(folder: Path, seeds: int, clean: int, log) -> dict:
             "named_right": sum(r["named_right"] for r in rows),
             "false_flags_before": sum(r["false_before"] for r in rows),
             "seeds": len(rows),
+            "failed": [r["record"] for r in rows if "failed" in r],
             "delay_s_median": float(np.median([r["delay_s"] for r in rows if r["delay_s"] is not None] or [np.nan])),
             "rows": rows,
         }
@@ -84,7 +92,8 @@ def change_study(folder: Path, seeds: int, clean: int, log) -> dict:
         res["clean"] = {
             "records_flagged": sum(bool(r["changes"]) for r in rows),
             "records": len(rows),
-            "max_statistic": max(r["max_statistic"] for r in rows),
+            "failed": [r["record"] for r in rows if "failed" in r],
+            "max_statistic": max(r["max_statistic"] for r in rows if "failed" not in r),
             "threshold": tk.Cusum().threshold,
             "rows": rows,
         }
@@ -116,7 +125,12 @@ def feedback_study(n: int, t_end: float, log) -> dict:
         rig = gj.replace(nominal, **{k: float(v[i]) for k, v in draws.items()})
         plant = gc.Plant.make(rig, gj.Config(fidelity="reference", t1=t_end))
         clock = time.perf_counter()
-        est = gc.run_on_estimate(plant, pid, target, t_end, estimator, seed=i, lim=lim)
+        try:
+            est = gc.run_on_estimate(plant, pid, target, t_end, estimator, seed=i, lim=lim)
+        except RuntimeError as err:  # the estimator diverged: the rig counts as missed
+            rows.append({"rig": i, "failed": str(err)})
+            log(f"  rig {i}: failed: {err}")
+            continue
         wall = time.perf_counter() - clock
         measured = gc.run_closed_loop(plant, pid, target, t_end, lim)
         err = est.estimate - est.result.length
@@ -134,12 +148,14 @@ def feedback_study(n: int, t_end: float, log) -> dict:
             }
         )
         log(f"  rig {i}: RMSE {1e3 * est.result.rmse_m:.3f} mm (length read: {1e3 * measured.rmse_m:.3f} mm)")
+    done = [r for r in rows if "failed" not in r]
     return {
         "data": str(data),
         "t_end_s": t_end,
-        "rmse_m_max": max(r["rmse_m"] for r in rows),
-        "rmse_m_median": float(np.median([r["rmse_m"] for r in rows])),
-        "limit_crossed": any(r["limit_crossed"] for r in rows),
+        "failed": [r["rig"] for r in rows if "failed" in r],
+        "rmse_m_max": max(r["rmse_m"] for r in done) if done else None,
+        "rmse_m_median": float(np.median([r["rmse_m"] for r in done])) if done else None,
+        "limit_crossed": any(r["limit_crossed"] for r in done),
         "rows": rows,
     }
 

@@ -212,3 +212,22 @@ def test_an_unrecorded_demand_is_estimated_where_it_is_known():
     on, off = truth > 0, truth == 0
     assert np.median(est[on]) > 120e3 and np.median(est[off]) < 30e3
     assert np.mean((truth >= lo) & (truth <= hi)) > 0.7
+
+
+def test_a_steep_transition_carries_the_covariance_without_negative_variances():
+    from growjax.track.belief import square_root
+
+    rng = np.random.default_rng(3)
+    basis = np.linalg.qr(rng.standard_normal((4, 4)))[0]
+    values = np.array([-1e-21, 1e-20, 1e-6, 1.0])  # rounding's negative eigenvalue beside tiny ones
+    cov = np.zeros((5, 5))
+    cov[:4, :4] = (basis * values) @ basis.T  # the last coordinate has no variance (an effect absent)
+    root = np.asarray(square_root(cov))
+    np.testing.assert_allclose(root @ root.T, cov - values[0] * np.outer(*[np.append(basis[:, 0], 0)] * 2), atol=1e-15)
+    assert np.all(root[4] == 0.0)
+    jac = np.eye(5)
+    jac[:4, :4] += 1e14 * np.outer(basis[:, 0], basis[:, 0])  # a sharp switch's Jacobian along that direction
+    assert np.linalg.eigvalsh(jac @ cov @ jac.T).min() < -1.0  # carried directly: a negative variance
+    carried = (jac @ root) @ (jac @ root).T
+    assert np.linalg.eigvalsh(carried).min() >= -1e-12 * np.abs(carried).max()
+    assert np.all(carried[4] == 0.0)

@@ -57,6 +57,18 @@ def symmetric(p: Float[Array, "N N"]) -> Float[Array, "N N"]:
     return 0.5 * (p + p.T)
 
 
+def square_root(p: Float[Array, "N N"]) -> Float[Array, "N N"]:
+    """A factor r (N, N) of the positive semi-definite part of the covariance ``p``: r rᵀ is ``p`` with its
+    negative eigenvalues set to 0, and a coordinate with no variance keeps a zero row.
+
+    A transition's Jacobian F carries the covariance as (F r)(F r)ᵀ, positive semi-definite whatever F's size:
+    as F P Fᵀ it would multiply rounding's negative eigenvalues of P, which near a sharp switch of the model
+    (F up to 1e14) turn into negative variances."""
+    values, vectors = jnp.linalg.eigh(symmetric(p))
+    root = vectors * jnp.sqrt(jnp.maximum(values, 0.0))
+    return jnp.where(jnp.diag(p)[:, None] > 0.0, root, 0.0)
+
+
 class Update(eqx.Module):
     """The measurement update of a Gaussian filter: (posterior mean (N,), posterior covariance (N, N),
     whitened innovation (m,), its covariance S (m, m), NIS, log-likelihood nats)."""
@@ -113,4 +125,4 @@ def update(
     return Update(mean + gain @ v, symmetric(cov_post), v, s, nis, log_like)
 
 
-__all__ = ["Belief", "Step", "Update", "symmetric", "update"]
+__all__ = ["Belief", "Step", "Update", "square_root", "symmetric", "update"]

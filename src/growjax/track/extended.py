@@ -4,7 +4,8 @@ Prediction: the mean is integrated over the sample interval by the configuration
 covariance carried by the transition's Jacobian F = ∂x(t_b)/∂x(t_a), which ``jax.jacfwd`` takes through the
 solver: the tangents of its Rosenbrock W-method, whose Jacobian is held fixed over each step, are that same
 method applied to the variational equation, so F is the exact derivative of the discrete transition that
-the mean follows (one solve carries the state and its N tangents). P⁻ = F P Fᵀ + Q. The update linearises the
+the mean follows (one solve carries the state and its N tangents). P⁻ = F P Fᵀ + Q, formed as
+(F R)(F R)ᵀ + Q from a square root R of P (`growjax.track.belief.square_root`). The update linearises the
 sensors at the predicted mean (``jax.jacfwd`` of the measurement) and keeps P positive definite in Joseph's form.
 """
 
@@ -15,7 +16,7 @@ import dataclasses
 import jax
 import jax.numpy as jnp
 
-from growjax.track.belief import Belief, Step, symmetric, update
+from growjax.track.belief import Belief, Step, square_root, symmetric, update
 from growjax.track.model import StateSpace
 
 
@@ -34,7 +35,8 @@ class ExtendedKalman:
         """The belief at ``time`` (s) given the ``readings`` (m,) SI taken there (NaN: missing), over ``inputs``
         with their ``breaks``; and the step's record."""
         mean, jac, status = model.linearised_advance(belief.mean, inputs, belief.time, time, breaks)
-        cov = symmetric(jac @ belief.cov @ jac.T + model.process_noise(time - belief.time))
+        carried = jac @ square_root(belief.cov)
+        cov = symmetric(carried @ carried.T + model.process_noise(time - belief.time))
         sd = model.noise_sd()
         predicted, h = _measurement(model, mean, time, inputs)
         hw = h / sd[:, None]
