@@ -38,14 +38,28 @@ def _execute():
     return module
 
 
+# Tutorials whose reduced-size run is still long: executed with ``-m "docs and slow"`` (their stored outputs are
+# still checked by tests/test_notebook.py, and their workflow by its own tests).
+SLOW_TUTORIALS = {
+    "design": "its searches compile about 10 minutes of programs on 2 cores at any size (tests/test_design.py runs "
+    "the workflow)",
+}
+
+
 def _tutorials() -> list:
-    """Each tutorial sizes.toml lists, as a parameter; those not yet stored executed are skipped with the reason."""
+    """Each tutorial sizes.toml lists, as a parameter; those not yet stored executed are skipped with the reason,
+    the long ones marked slow."""
     from test_notebook import NOT_STORED
 
-    return [
-        pytest.param(name, marks=pytest.mark.skip(reason=NOT_STORED[name])) if name in NOT_STORED else name
-        for name in _execute().sizes()
-    ]
+    params = []
+    for name in _execute().sizes():
+        if name in NOT_STORED:
+            params.append(pytest.param(name, marks=pytest.mark.skip(reason=NOT_STORED[name])))
+        elif name in SLOW_TUTORIALS:
+            params.append(pytest.param(name, marks=pytest.mark.slow))
+        else:
+            params.append(name)
+    return params
 
 
 @pytest.mark.docs
