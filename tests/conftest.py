@@ -84,25 +84,35 @@ SHARED_PROGRAMS = {
 # file while the other is idle; the rest follow in xdist's order (most tests first).
 LONGEST_FIRST = (
     "fits_of_the_published_pulse",
-    "test_sweep.py",
+    "test_sweep.py",  # its command-line runs are subprocesses, beside its own compiles
     "test_model.py",
-    "test_discover.py",
-    "test_sets.py",
-    "test_control.py",
-    "test_effects.py",
-    "test_population.py",
-    "test_fidelity.py",
-    "test_xla_flags.py",
-    "test_cli.py",
-    "test_inference_data.py",
-    "test_growth_law.py",
-    "test_api.py",
     "test_design.py",
+    "test_discover.py",
+    "test_discover_set.py",
+    "test_sets.py",
+    "test_cli.py",
+    "test_control.py",
+    "test_resampling.py",
+    "test_effects.py",
     "test_install.py",
+    "test_population.py",
+    "test_track.py",
+    "test_track_change.py",
+    "test_bad_input.py",
+    "test_fidelity.py",
+    "test_growth_law.py",
+    "test_progress.py",
+    "test_api.py",
+    "test_cli_stops.py",
+    "test_inference_data.py",
+    "test_layering.py",
+    "test_xla_flags.py",
 )
 
 
 def pytest_xdist_make_scheduler(config, log):
+    if config.getoption("dist") != "loadfile":  # another mode asked for (the docs step's worksteal): xdist's own
+        return None
     from xdist.scheduler import LoadScopeScheduling
 
     class FilesSharingPrograms(LoadScopeScheduling):
