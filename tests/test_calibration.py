@@ -97,7 +97,7 @@ def _less_air(amplitude: float, seed: int, truth: float):
     return xs.Run(f"pulse {amplitude / 1e3:.0f} kPa", exp, sensors=("length", "pressure"), inputs=inputs)
 
 
-def test_a_signed_parameter_is_drawn_and_fitted_in_a_linear_coordinate():
+def test_a_signed_parameter_is_drawn_linearly_about_its_nominal_value():
     """The trapped-air effect's extra air fraction may be negative: its range straddles zero and a scout draws it
     linearly about its nominal value (the fits themselves: the slow test below, and `tests/test_discover_set.py`,
     which names less air than nominal from one experiment and from two)."""

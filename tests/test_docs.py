@@ -41,8 +41,8 @@ def _execute():
 # Tutorials whose reduced-size run is still long: executed with ``-m "docs and slow"`` (their stored outputs are
 # still checked by tests/test_notebook.py, and their workflow by its own tests).
 SLOW_TUTORIALS = {
-    "design": "its searches compile about 10 minutes of programs on 2 cores at any size (tests/test_design.py runs "
-    "the workflow)",
+    "design": "at its reduced sizes it needs about 700 s of CPU on an empty compilation cache, mostly compiling "
+    "its searches (tests/test_design.py runs the workflow)",
 }
 
 
