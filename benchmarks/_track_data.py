@@ -6,8 +6,8 @@ inputs (catheter 0.004 + 0.004 t m, the published 0/150 kPa pulse), with Gaussia
 
 * ``rig<i>``: a rig drawn from the default tolerance budget (``growjax.calibration.tolerance.rig_draws``), 10 s;
 * ``drift<i>``: a rig drawn likewise whose Y rises by 10 % over 60 s (held over 0.25 s segments), on a robot whose
-  stroke is 0.3 m (the published pulse grows it by about 0.2 m in a minute; the rig's own stroke is 0.08 m) and a
-  catheter held at 0.06 m after 14 s.
+  stroke is 0.5 m (the published pulse grows a rig of the budget by up to 0.3 m in a minute; the rig's own stroke is
+  0.08 m) and a catheter held at 0.06 m after 14 s.
 
 * ``leak<i>``, ``tip<i>``: a rig drawn likewise, 10 s, a leak of 2e-13 m³/(s·Pa) opening or a tip load of 0.3 N
   (``active_channel_force``) appearing at a time drawn in 2–8 s (the sidecar's ``"switch"``);
@@ -34,7 +34,7 @@ from growjax.model import effects as fx
 NOISE = {"robot_length_m": 2e-4, "pressure_Pa": 500.0, "syringe_displacement_m": 5e-6, "robot_flow_m3_s": 1e-9}
 SEED = 20261201
 DRIFT = 0.10  # Y's relative change over the drift record
-DRIFT_STROKE_M = 0.3
+DRIFT_STROKE_M = 0.5
 CATHETER_HOLD_M = 0.06
 
 
@@ -86,7 +86,7 @@ def drift_inputs(t_end: float):
 
 
 def drift_base(rig: dict):
-    """A drift record's rig: ``rig`` on the reference parameters, the robot's stroke (and stop) at 0.3 m."""
+    """A drift record's rig: ``rig`` on the reference parameters, the robot's stroke (and stop) at `DRIFT_STROKE_M`."""
     return gj.replace(
         gj.reference("forward"), **rig, **{"robot.stroke": DRIFT_STROKE_M, "robot.hard_stop_bound": DRIFT_STROKE_M}
     )

@@ -1,6 +1,7 @@
 """Shared fixtures. Compiled solvers are cached on disk across test processes (xdist workers, CLI subprocesses)."""
 
 import os
+import re
 from pathlib import Path
 
 from growjax.simulation import xla_flags
@@ -80,45 +81,64 @@ SHARED_PROGRAMS = {
 }
 
 
-# The longest scopes first (seconds of a cold run on a 2-core CPU, roughly), so that no worker is left with a long
-# file while the other is idle; the rest follow in xdist's order (most tests first).
+# The longest scopes first (seconds of CPU of a cold run on a 2-core CPU, roughly), so that no worker is left with a
+# long unit while the other is idle; the rest follow in xdist's order (most tests first). Each tutorial executed at
+# its reduced sizes (tests/test_docs.py, in a kernel of its own) is a unit of its own.
 LONGEST_FIRST = (
-    "fits_of_the_published_pulse",
-    "test_sweep.py",  # its command-line runs are subprocesses, beside its own compiles
-    "test_model.py",
-    "test_design.py",
+    "fits_of_the_published_pulse",  # 305 s
+    "tutorial track",  # 295 s
+    "tutorial sets",  # 291 s
+    "tutorial fit_posterior",  # 191 s
+    "test_model.py",  # 129 s
     "test_discover.py",
+    "test_design.py",
     "test_discover_set.py",
+    "tutorial control",  # 99 s
     "test_sets.py",
-    "test_cli.py",
+    "test_sweep.py",  # its command-line runs are subprocesses, beside its own compiles
+    "tutorial discover",  # 83 s
     "test_control.py",
     "test_resampling.py",
-    "test_effects.py",
-    "test_install.py",
+    "test_cli.py",
     "test_population.py",
-    "test_track.py",
-    "test_track_change.py",
-    "test_bad_input.py",
+    "test_effects.py",
     "test_fidelity.py",
-    "test_growth_law.py",
+    "test_track_change.py",
+    "test_track.py",
+    "docs build",  # 36 s
     "test_progress.py",
+    "tutorial sweep",
+    "test_install.py",
+    "test_growth_law.py",
     "test_api.py",
-    "test_cli_stops.py",
+    "tutorial simulate",
     "test_inference_data.py",
     "test_layering.py",
     "test_xla_flags.py",
+    "test_bad_input.py",
+    "test_cli_stops.py",
 )
 
 
+def _scope(nodeid: str) -> str:
+    """The unit a worker takes whole: a file, the published pulse's fits, or one tutorial or the docs build."""
+    file, _, test = nodeid.partition("::")
+    tutorial = re.fullmatch(r"test_tutorial_executes_at_reduced_sizes\[(\w+)\]", test)
+    if tutorial:
+        return f"tutorial {tutorial[1]}"
+    if test == "test_docs_build_strict":
+        return "docs build"
+    return SHARED_PROGRAMS.get(Path(file).name, file)
+
+
 def pytest_xdist_make_scheduler(config, log):
-    if config.getoption("dist") != "loadfile":  # another mode asked for (the docs step's worksteal): xdist's own
+    if config.getoption("dist") != "loadfile":  # another mode asked for: xdist's own
         return None
     from xdist.scheduler import LoadScopeScheduling
 
     class FilesSharingPrograms(LoadScopeScheduling):
         def _split_scope(self, nodeid):
-            file = nodeid.split("::", 1)[0]
-            return SHARED_PROGRAMS.get(Path(file).name, file)
+            return _scope(nodeid)
 
         def _assign_work_unit(self, node):
             if not getattr(self, "_longest_first", False):

@@ -9,6 +9,7 @@ file pays for one compile.
 import json
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 from conftest import DATASETS
@@ -231,3 +232,39 @@ def test_a_steep_transition_carries_the_covariance_without_negative_variances():
     carried = (jac @ root) @ (jac @ root).T
     assert np.linalg.eigvalsh(carried).min() >= -1e-12 * np.abs(carried).max()
     assert np.all(carried[4] == 0.0)
+
+
+# A state the filter reached at the end of a pulse's off phase (SI, the model's states then ln Y and the rig's six
+# toleranced parameters): the chamber just below the robot's pressure, the robot retracting through the bypass.
+RETRACTING = np.array(
+    [5.5623e-09, 6.1259e-04, 5.3183e-02, 1.1884e-08, 490.34, -5941.1]
+    + [1.7544e-01, -6.7920e-02, 1.3948e-02, 1.7180e-02, 1.3903e-01, 1.3438e-01, 1.5414e00]
+)
+
+
+def test_the_filters_model_retracts_smoothly_where_a_narrow_bypass_chatters(monkeypatch):
+    """Over each 10 ms interval of a retraction, the transition's derivative stays below 1e7 in the scaled state
+    (measured: 2e5 at most, 1e4 elsewhere on the pulse) with the bypass opening over `SWITCH_WIDTH`; over a band of
+    10 Pa the model chatters there and the derivative overflows (measured: up to 1e34), the extended filter's
+    covariance with it."""
+    from growjax.track import model as tm
+
+    inputs = gj.Inputs(
+        catheter_length=gj.Sampled(np.array([0.0, 100.0]), np.array([0.004, 0.404])),
+        pressure_demand=gj.published_pulse(),
+    )
+    starts = np.arange(9.30, 9.351, 0.005)  # the off phase ends at 9.36 s
+
+    def largest_derivative():
+        model = tk.state_space(gj.reference("forward"), sensors=ts.sensor_set("pressure,syringe"), estimate=("Y",))
+        n = model.model_size
+        x = jnp.asarray(np.concatenate([RETRACTING[:n] / np.asarray(model.scales()), RETRACTING[n:]]))
+        breaks = model.breaks(inputs, 9.0, 9.4)
+        step = jax.jit(lambda ta: model.linearised_advance(x, inputs, ta, ta + 0.01, breaks))
+        out = [step(jnp.asarray(ta)) for ta in starts]
+        assert all(int(status) == 0 for _, _, status in out)
+        return max(float(jnp.max(jnp.abs(jac))) for _, jac, _ in out)
+
+    assert largest_derivative() < 1e7
+    monkeypatch.setattr(tm, "SWITCH_WIDTH", 10.0)
+    assert largest_derivative() > 1e12
