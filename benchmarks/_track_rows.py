@@ -75,7 +75,7 @@ def rig_rows(m: dict, label: str) -> list[Row]:
                 f"{of(len(failed), n)} ({', '.join(failed)})",
                 "none",
                 False,
-                "the filter diverged after a sharp switch of the fast model between pulses (Jacobian up to 1e14)",
+                "the filter failed at a sharp switch of the fast model",
             ),
         )
     return rows

@@ -35,6 +35,7 @@ from growjax import track as tk
 from growjax.calibration import tolerance as tl
 from growjax.data import experiment as ex
 from growjax.data.datasets import default_data_path
+from growjax.model.limits import limits
 
 HERE = Path(__file__).resolve().parent
 from _environment import environment  # the script's folder is on the path
@@ -107,7 +108,7 @@ def designed_pid(target, t_end: float, log):
     """The length PID of the control benchmark: the feed-forward profile optimised and the gains tuned on the fast
     configuration at the nominal rig."""
     p = gc.plant_params("forward", target)
-    lim = gc.limits(p)
+    lim = limits(p)
     prof = gc.optimize_profile(p, target, t_end, knot_dt=0.2, iterations=20, lim=lim)
     pid0 = gc.LengthPID(jnp.asarray(gc.DEFAULT_LOG_GAINS), jnp.asarray(prof.knots), jnp.asarray(prof.demand))
     cost = gc.pid_cost_fn(p, target, t_end, pid0, None, lim)
