@@ -80,7 +80,8 @@ class Sampled(eqx.Module):
     Attributes:
         times: (N,) sample times, s, increasing.
         values: (N,) the samples.
-        spacing: the uniform grid's step, s; None: not uniform (found by search).
+        spacing: the uniform grid's step, s; None: not uniform (found by search), or two samples (one segment:
+            nothing to find, and no value of the step, which rounding varies, to key a compiled program on).
     """
 
     times: jax.Array
@@ -93,14 +94,15 @@ class Sampled(eqx.Module):
         Args:
             times: (N,) sample times, s, increasing.
             values: (N,) the samples.
-            spacing: the grid's step, s; None: detected (a uniform grid to 1e-9 relative), else searched.
+            spacing: the grid's step, s; None: detected (a uniform grid of three samples or more, to 1e-9
+                relative), else searched.
         """
         self.times = jnp.asarray(times, float)
         self.values = jnp.asarray(values, float)
         if spacing is None and not isinstance(times, jax.core.Tracer):
             t = np.asarray(times, float)
             d = np.diff(t)
-            if d.size and d[0] > 0 and np.allclose(d, d[0], rtol=1e-9, atol=0.0):
+            if d.size > 1 and d[0] > 0 and np.allclose(d, d[0], rtol=1e-9, atol=0.0):
                 spacing = float((t[-1] - t[0]) / (t.size - 1))
         self.spacing = spacing
 
