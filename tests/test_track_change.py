@@ -82,6 +82,36 @@ def test_the_watch_model_carries_the_candidates_absent(model):
         tk.Candidate("leak", gj.effects.FluidLeak(), "fluid_leak.conductance", 0.0)
 
 
+def test_a_hypothesis_under_which_the_solver_fails_is_not_named_and_does_not_stop_the_watch(monkeypatch):
+    """The naming bank runs each hypothesis from the onset; one whose trial fails in the solver (a candidate driven
+    out of its physical range: trapped air below none) gets evidence −∞ and is passed over; where every one fails,
+    the watch stops with the reason. No model is compiled: the steps are stand-ins."""
+    n = len(tk.CANDIDATES)
+    index = list(range(n))
+    start = ch.Belief(0.0, np.zeros(n), np.zeros((n, n)))
+    trial_ll = {"leak": -5.0, "tip load": -1.0, "fold": -9.0}  # per step; trapped air fails
+
+    class Step:
+        def __init__(self, ll):
+            self.log_likelihood = ll
+
+    def step(run, belief, t, y, inputs, breaks, previous):
+        opened = [c.name for c, i in zip(tk.CANDIDATES, index) if belief.cov[i, i] > 0]
+        if opened == ["trapped air"] or run == "all fail":
+            raise RuntimeError(f"the solver failed between {previous:.3f} s and {t:.3f} s")
+        return belief, Step(trial_ll.get(opened[0], -20.0) if opened else -20.0)
+
+    monkeypatch.setattr(ch, "checked_step", step)
+    times = np.arange(6) * 0.01
+    fields, path = ch.name_change(start, tk.CANDIDATES, index, ("run", times, times, None, None, 0, 5))
+    assert fields["effect"] == "tip load" and len(path) == 5
+    assert fields["evidence"]["trapped air"] == -np.inf and fields["evidence"]["tip load"] == -5.0
+    change = ch.Change(0.0, 0.01, 0.05, "pressure_Pa", **fields)
+    assert json.loads(json.dumps(change.as_dict()))["evidence"]["trapped air"] is None
+    with pytest.raises(RuntimeError, match="under every candidate"):
+        ch.name_change(start, tk.CANDIDATES, index, ("all fail", times, times, None, None, 0, 5))
+
+
 def test_the_track_command_reports_the_change(tmp_path, leak):
     from growjax.cli import main
 

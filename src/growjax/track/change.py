@@ -87,7 +87,8 @@ class Change:
         effect: the candidate named (`Candidate.name`).
         parameter: its parameter.
         estimate: the parameter's estimate when named (its unit), and ``sd`` its sd.
-        evidence: log-likelihood of the readings over the naming window under each hypothesis (nats):
+        evidence: log-likelihood of the readings over the naming window under each hypothesis (nats; −∞ where
+            the solver failed under it):
             {candidate name: value, "none": value}.
     """
 
@@ -102,7 +103,10 @@ class Change:
     evidence: dict
 
     def as_dict(self) -> dict:
-        return dataclasses.asdict(self)
+        """The fields as plain values (JSON's: a hypothesis under which the solver failed has evidence None)."""
+        out = dataclasses.asdict(self)
+        out["evidence"] = {k: v if np.isfinite(v) else None for k, v in self.evidence.items()}
+        return out
 
 
 @dataclasses.dataclass(frozen=True)
@@ -258,19 +262,36 @@ class Statistics:
 def name_change(start: Belief, candidates, index, run_args) -> tuple[dict, list]:
     """Run the bank from ``start`` (the belief at the onset) over the naming window; (the named candidate's fields
     of `Change`, its path [(belief, step)] over the window). A candidate whose estimate leaves its
-    parameter's physical range (a leak that pumps in, a tip that pulls) is named only where every one does."""
+    parameter's physical range (a leak that pumps in, a tip that pulls) is named only where every one does; one
+    under which the solver fails is not named (its evidence −∞).
+
+    Raises:
+        RuntimeError: the solver failed under every candidate.
+    """
     run, times, readings, inputs, breaks, onset, end = run_args
     evidence, paths = {}, {}
     for label, belief in [("none", start)] + [(c.name, opened(start, i)) for c, i in zip(candidates, index)]:
         path = []
-        for j in range(onset + 1, end + 1):
-            belief, step = checked_step(run, belief, times[j], readings[j], inputs, breaks, times[j - 1])
-            path.append((belief, step))
+        try:
+            for j in range(onset + 1, end + 1):
+                belief, step = checked_step(run, belief, times[j], readings[j], inputs, breaks, times[j - 1])
+                path.append((belief, step))
+        except RuntimeError:  # the solver failed under this hypothesis: it cannot explain the readings
+            evidence[label], paths[label] = float("-inf"), None
+            continue
         evidence[label] = float(sum(float(s.log_likelihood) for _, s in path))
         paths[label] = path
-    estimates = [float(paths[c.name][-1][0].mean[i]) * c.scale for c, i in zip(candidates, index)]
+    ran = [k for k, c in enumerate(candidates) if paths[c.name] is not None]
+    if not ran:
+        raise RuntimeError(
+            f"the solver failed under every candidate from {times[onset]:.3f} s to {times[end]:.3f} s"
+        )
+    estimates = [
+        float(paths[c.name][-1][0].mean[i]) * c.scale if paths[c.name] is not None else float("nan")
+        for c, i in zip(candidates, index)
+    ]
     physical = [in_range(c, v) for c, v in zip(candidates, estimates)]
-    allowed = [k for k in range(len(candidates)) if physical[k]] or list(range(len(candidates)))
+    allowed = [k for k in ran if physical[k]] or ran
     best = max(allowed, key=lambda k: evidence[candidates[k].name])
     c, i = candidates[best], index[best]
     last = paths[c.name][-1][0]
@@ -286,9 +307,9 @@ def name_change(start: Belief, candidates, index, run_args) -> tuple[dict, list]
 
 def in_range(candidate: Candidate, value: float) -> bool:
     """Whether ``value`` lies in the physical range of ``candidate``'s parameter (its effect's ``ranges``; any
-    value where it has none)."""
+    finite value where it has none)."""
     low, high = candidate.effect.ranges.get(candidate.parameter.split(".")[-1], (-np.inf, np.inf))
-    return bool(low <= value <= high)
+    return bool(np.isfinite(value) and low <= value <= high)
 
 
 __all__ = [
