@@ -283,9 +283,7 @@ def name_change(start: Belief, candidates, index, run_args) -> tuple[dict, list]
         paths[label] = path
     ran = [k for k, c in enumerate(candidates) if paths[c.name] is not None]
     if not ran:
-        raise RuntimeError(
-            f"the solver failed under every candidate from {times[onset]:.3f} s to {times[end]:.3f} s"
-        )
+        raise RuntimeError(f"the solver failed under every candidate from {times[onset]:.3f} s to {times[end]:.3f} s")
     estimates = [
         float(paths[c.name][-1][0].mean[i]) * c.scale if paths[c.name] is not None else float("nan")
         for c, i in zip(candidates, index)
