@@ -177,7 +177,15 @@ def feedback_rows(fb: dict) -> list[Row]:
     lost = [Row("output feedback: rigs whose estimator failed", of(len(failed), n), "none", False)] if failed else []
     return lost + [
         sized(
-            at_most(f"output feedback, reference plant: length RMSE, worst of {n} rigs", fb["rmse_m_max"], 1e-3, mm),
+            at_most(
+                f"output feedback, reference plant: length RMSE, worst of {n} rigs",
+                fb["rmse_m_max"],
+                1e-3,
+                mm,
+                why="the estimate's error: the loop's demand steps at the start, where the fast configuration's length "
+                "departs about 0.5 mm from the reference's, unseen by the pump's sensors; the rig's estimated errors "
+                "then settle away from the truth",
+            ),
             n,
             FEEDBACK,
             "rigs",
