@@ -222,3 +222,11 @@ def track_public(r: dict) -> list[Row]:
             f"{1e-3 * sm['on_mean_Pa']:.0f} kPa; {1e-3 * sm['band_width_median_Pa']:.0f} kPa",
         ),
     ]
+
+
+def start_transient(r: dict) -> list[Row]:
+    """The fast configuration's length against the reference's when the demand rises at the start of a run."""
+    return [
+        info(f"fast − reference length, {x['demand']}, RMS over {r['t_end_s']:.0f} s", mm(x["rms_m"]))
+        for x in r["rows"]
+    ]

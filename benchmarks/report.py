@@ -144,6 +144,7 @@ TOPICS: list[tuple[str, str, list[Source]]] = [
                 tr.track_feedback,
             ),
             Source("track_public", _py("track_public"), tr.track_public),
+            Source("start_transient", _py("start_transient"), tr.start_transient),
         ],
     ),
     (

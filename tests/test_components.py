@@ -164,10 +164,12 @@ def test_a_sampled_series_interpolates_alike_with_its_grid_found_or_searched():
     """A uniform grid of three samples or more is found (its step keys the compiled program); two samples are one
     segment, found alike whatever their step's last bits, so a new ramp per control tick does not recompile."""
     t, v = np.linspace(0.0, 1.0, 11), np.sin(np.linspace(0.0, 3.0, 11))
-    uniform, searched = gj.Sampled(t, v), gj.Sampled(t + 1e-3 * np.sin(7 * t) * (t > 0) * (t < 1), v)
+    uneven = t + 1e-3 * np.sin(7 * t) * (t > 0) * (t < 1)
+    uniform, searched = gj.Sampled(t, v), gj.Sampled(uneven, v)
     assert uniform.spacing == pytest.approx(0.1) and searched.spacing is None
     at = np.linspace(0.0, 1.0, 57)
     np.testing.assert_allclose(uniform(jnp.asarray(at)), np.interp(at, t, v), rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(searched(jnp.asarray(at)), np.interp(at, uneven, v), rtol=1e-12, atol=1e-15)
     ramps = [gj.Sampled(jnp.stack([k * 0.01, (k + 1) * 0.01]), jnp.asarray([1.0, 2.0])) for k in range(1, 40)]
     assert len({jax.tree_util.tree_structure(r) for r in ramps}) == 1
     np.testing.assert_allclose(ramps[6](0.075), 1.5, rtol=1e-12)
