@@ -157,10 +157,12 @@ def track_change(r: dict) -> list[Row]:
     if clean:
         k, n = clean["records_flagged"], clean["records"]
         why = f"largest statistic {clean['max_statistic']:.1f} sd against a threshold of {clean['threshold']:g}"
+        value = of(k, n)
+        dismissed = clean.get("records_with_dismissed_flags", 0)
+        if dismissed:  # flags whose named effect was below a tenth of its typical size
+            value += f" ({dismissed} with a flag dismissed as too small to be a change)"
         rows.append(
-            sized(
-                Row("clean 60 s records flagged", of(k, n), "none", k == 0, "" if k == 0 else why), n, CLEAN, "records"
-            )
+            sized(Row("clean 60 s records flagged", value, "none", k == 0, "" if k == 0 else why), n, CLEAN, "records")
         )
     failed = [name for c in r.get("change", {}).values() for name in c.get("failed", [])]
     if failed:

@@ -57,12 +57,13 @@ def watch_record(path: Path, kind: str | None, base=None) -> dict:
     try:
         watched = tk.watch(exp, model_for(gj.reference("forward") if base is None else base))
     except RuntimeError as err:  # the filter diverged and the solver failed: the record counts as missed
-        row = {"record": path.name, "failed": str(err), "changes": [], "max_statistic": float("nan")}
+        row = {"record": path.name, "failed": str(err), "changes": [], "dismissed": [], "max_statistic": float("nan")}
         if kind is not None:
             at = meta["switch"]["at_s"]
             row.update(at_s=at, false_before=0, delay_s=None, flagged=False, named_right=False)
         return row
     row = {"record": path.name, "changes": watched.summary(), "wall_s": time.perf_counter() - clock}
+    row["dismissed"] = [c.as_dict() for c in watched.dismissed]
     row["max_statistic"] = float(watched.statistic.max())
     if kind is not None:
         at = meta["switch"]["at_s"]
@@ -95,6 +96,7 @@ def change_study(folder: Path, seeds: int, clean: int, log) -> dict:
         rows = [watch_record(p, None, drift_base({})) for p in make_clean_records(folder, clean, 60.0, log)]
         res["clean"] = {
             "records_flagged": sum(bool(r["changes"]) for r in rows),
+            "records_with_dismissed_flags": sum(bool(r.get("dismissed")) for r in rows),
             "records": len(rows),
             "failed": [r["record"] for r in rows if "failed" in r],
             "max_statistic": max(r["max_statistic"] for r in rows if "failed" not in r),
@@ -177,7 +179,8 @@ def table(res: dict) -> list[str]:
         r = res["change"]["clean"]
         lines.append(
             f"clean: {r['records_flagged']}/{r['records']} 60 s records flagged (target 0); largest statistic "
-            f"{r['max_statistic']:.1f} (threshold {r['threshold']:g})"
+            f"{r['max_statistic']:.1f} (threshold {r['threshold']:g}); "
+            f"{r.get('records_with_dismissed_flags', 0)} with a flag dismissed as too small"
         )
     if "feedback" in res:
         r = res["feedback"]

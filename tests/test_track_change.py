@@ -49,6 +49,7 @@ def test_a_leak_opening_is_flagged_within_half_a_second_and_named(leak):
     truth = meta["switch"]["values"]["fluid_leak.conductance"]
     assert 0.3 * truth < change.estimate < 3 * truth  # its size, roughly, from a few tenths of a second
     assert watched.flags().sum() == 1 and watched.statistic.max() > ch.Cusum().threshold
+    assert watched.dismissed == ()
 
 
 def test_after_the_flag_the_leak_is_tracked_in_the_state(leak):
@@ -64,7 +65,7 @@ def test_after_the_flag_the_leak_is_tracked_in_the_state(leak):
 def test_a_clean_record_raises_no_flag(model):
     exp, _ = record("rig0")
     watched = tk.watch(exp, model)
-    assert watched.changes == () and watched.flags().sum() == 0
+    assert watched.changes == () and watched.dismissed == () and watched.flags().sum() == 0
     assert watched.statistic.max() < 0.8 * ch.Cusum().threshold  # not a near miss
 
 
@@ -110,6 +111,27 @@ def test_a_hypothesis_under_which_the_solver_fails_is_not_named_and_does_not_sto
     assert json.loads(json.dumps(change.as_dict()))["evidence"]["trapped air"] is None
     with pytest.raises(RuntimeError, match="under every candidate"):
         ch.name_change(start, tk.CANDIDATES, index, ("all fail", times, times, None, None, 0, 5))
+
+
+def test_a_flag_whose_effect_is_a_small_share_of_its_typical_size_is_dismissed(model):
+    """A change is reported only where its named effect is at least ``smallest`` (a tenth) of its candidate's scale:
+    a 0.3 N tip load or a 2e-13 m³/(s·Pa) leak are; the faint tip load (8 mN) or trapped air (1.3e-4) that the
+    fast configuration's own error over a clean minute reads as one are not. A bad ``smallest`` is refused before
+    anything compiles."""
+    by_name = {c.name: c for c in tk.CANDIDATES}
+
+    def change(effect, estimate):
+        return ch.Change(1.0, 1.5, 1.8, "syringe_displacement_m", effect, by_name[effect].parameter, estimate, 0.0, {})
+
+    assert ch.material(change("tip load", 0.3), by_name["tip load"], 0.1)
+    assert ch.material(change("leak", 2e-13), by_name["leak"], 0.1)
+    assert not ch.material(change("tip load", 7.8e-3), by_name["tip load"], 0.1)
+    assert not ch.material(change("trapped air", 1.3e-4), by_name["trapped air"], 0.1)
+    assert ch.material(change("trapped air", 1.3e-4), by_name["trapped air"], 0.0)  # 0: every flag is a change
+    exp, _ = record("rig0")
+    for bad in (-0.1, float("nan")):
+        with pytest.raises(ValueError, match="smallest must be"):
+            tk.watch(exp, model, smallest=bad)
 
 
 def test_the_track_command_reports_the_change(tmp_path, leak):

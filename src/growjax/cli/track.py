@@ -216,6 +216,7 @@ def run(args: argparse.Namespace) -> dict:
     summary = _summary(args, data, exp, model, result, origin, wall)
     if watched is not None:
         summary["changes"] = watched.summary()
+        summary["dismissed"] = [c.as_dict() for c in watched.dismissed]
     if scored:
         summary["score"] = result.score(exp["robot_length_m"])
     measured = {c: exp[c] for c in ("robot_length_m", "pressure_Pa") if c in exp}
@@ -314,6 +315,10 @@ def summary_lines(summary: dict) -> list[str]:
         lines.append(
             f"  change flagged at {c['flagged_s']:.2f} s (from {c['onset_s']:.2f} s, on {c['sensor']}): "
             f"{c['effect']}, {c['parameter']} {c['estimate']:.3g} ± {c['sd']:.2g}"
+        )
+    for c in s.get("dismissed", ()):
+        lines.append(
+            f"  flag at {c['flagged_s']:.2f} s dismissed: {c['effect']} of {c['estimate']:.3g}, too small to be a change"
         )
     if "changes" in s and not s["changes"]:
         lines.append("  no change flagged")

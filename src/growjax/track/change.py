@@ -113,12 +113,14 @@ class Change:
 class Watch:
     """A record watched: the ``track`` (`growjax.track.TrackResult`, the belief carried through the changes),
     the ``model`` it ran (`watch_model`: the state's layout), the CUSUM ``statistic`` (T,) (the largest of
-    every sensor's two, in sd) and the ``changes`` found."""
+    every sensor's two, in sd), the ``changes`` found and the flags ``dismissed``: those whose named effect was
+    smaller than the watch's ``smallest`` share of its candidate's scale (`material`)."""
 
     track: TrackResult
     model: StateSpace
     statistic: np.ndarray
     changes: tuple[Change, ...]
+    dismissed: tuple[Change, ...] = ()
 
     def flags(self) -> np.ndarray:
         """(T,) 1 at the samples where a change was flagged, else 0."""
@@ -128,6 +130,7 @@ class Watch:
         return out
 
     def summary(self) -> list[dict]:
+        """The changes found, as plain values (`Change.as_dict`)."""
         return [c.as_dict() for c in self.changes]
 
 
@@ -182,6 +185,7 @@ def watch(
     candidates=CANDIDATES,
     cusum: Cusum = Cusum(),
     confirm: float = 0.3,
+    smallest: float = 0.1,
     method=None,
     t_end: float | None = None,
     inputs=None,
@@ -194,6 +198,9 @@ def watch(
         candidates: the effects a change may be (`CANDIDATES`).
         cusum: the detector (`Cusum`).
         confirm: how long after a flag the naming reads on, s (≥ 0).
+        smallest: the smallest change reported, as a share of its candidate's scale (≥ 0): a flag whose named
+            effect is smaller (`material`) is dismissed (the model's own error over a long record, not a change);
+            the filter carries on as after a change.
         method: the filter (default extended Kalman).
         t_end: the last sample used, s.
         inputs: the known inputs (default from the experiment).
@@ -202,18 +209,22 @@ def watch(
         `Watch`.
 
     Raises:
-        ValueError: a bad ``confirm``, a candidate already on, a chosen sensor's column missing.
+        ValueError: a bad ``confirm`` or ``smallest``, a candidate already on, a chosen sensor's column missing.
         RuntimeError: the solver failed inside an interval.
     """
     if not (np.isfinite(confirm) and confirm >= 0):
         raise ValueError(f"confirm must be a non-negative time (s), got {confirm}")
+    if not (np.isfinite(smallest) and smallest >= 0):
+        raise ValueError(f"smallest must be a non-negative share of a candidate's scale, got {smallest}")
     wmodel = watch_model(model, candidates)
     index = [candidate_index(wmodel, c) for c in candidates]
     times, readings, t0, inputs, breaks = prepare(experiment, wmodel, t_end, inputs)
     run = Filter(wmodel, method)
     belief = absent(run.start(t0), index)
     stats = Statistics(len(wmodel.sensors), cusum)
-    beliefs, records, seconds, statistic, changes = [], [], np.zeros(times.size), np.zeros(times.size), []
+    beliefs, records, seconds, statistic = [], [], np.zeros(times.size), np.zeros(times.size)
+    changes, dismissed = [], []
+    scales = {c.name: c for c in candidates}
     k = 0
     while k < times.size:
         clock = time.perf_counter()
@@ -227,7 +238,8 @@ def watch(
             end = min(int(np.searchsorted(times, times[k] + confirm - 1e-9)), times.size - 1)
             run_args = (run, times, readings, inputs, breaks, onset, end)
             change, path = name_change(beliefs[onset], candidates, index, run_args)
-            changes.append(Change(times[onset], times[k], times[end], wmodel.sensors[channel].column, **change))
+            found = Change(times[onset], times[k], times[end], wmodel.sensors[channel].column, **change)
+            (changes if material(found, scales[found.effect], smallest) else dismissed).append(found)
             beliefs[onset + 1 :] = [b for b, _ in path]
             records[onset + 1 :] = [r for _, r in path]
             statistic[k + 1 : end + 1] = 0.0
@@ -235,7 +247,7 @@ def watch(
             stats = Statistics(len(wmodel.sensors), cusum)
         k += 1
     result = assemble(wmodel, run.method, times, beliefs, records, inputs, smooth=False, seconds=seconds)
-    return Watch(result, wmodel, statistic, tuple(changes))
+    return Watch(result, wmodel, statistic, tuple(changes), tuple(dismissed))
 
 
 class Statistics:
@@ -303,6 +315,12 @@ def name_change(start: Belief, candidates, index, run_args) -> tuple[dict, list]
     return fields, paths[c.name]
 
 
+def material(change: Change, candidate: Candidate, smallest: float) -> bool:
+    """Whether ``change``'s estimated effect is at least ``smallest`` times ``candidate``'s scale (its typical size)
+    in size: a change worth reporting, not the model's own error read as a faint effect."""
+    return bool(abs(change.estimate) >= smallest * candidate.scale)
+
+
 def in_range(candidate: Candidate, value: float) -> bool:
     """Whether ``value`` lies in the physical range of ``candidate``'s parameter (its effect's ``ranges``; any
     finite value where it has none)."""
@@ -320,6 +338,7 @@ __all__ = [
     "absent",
     "candidate_index",
     "in_range",
+    "material",
     "name_change",
     "opened",
     "watch",
