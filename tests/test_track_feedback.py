@@ -44,6 +44,7 @@ def test_the_length_loop_on_the_estimate_tracks_the_target(loops):
     assert not r.pressure_limit_crossed and r.status == 0
     assert r.rmse_m < 1e-3
     assert np.ptp(r.length) > 1e-3  # it grew: the target is followed, not held at the start
+    assert r.command[0] == 0 and r.command[1] > 0  # the pump idle over the first tick, the PID acting from the second
 
 
 def test_the_estimate_the_loop_acted_on_holds_the_true_length_in_its_band(loops):

@@ -211,6 +211,7 @@ def _nuts(make_model, priors, mean, y, seed: int, emulate, extra_init: dict, nut
     )
     start_nuts = time.perf_counter()
     mcmc = _run_nuts(make_model(mean, sampled), init_values, inverse_mass, y, seed, emulate is False, **nuts)
+    jax.block_until_ready(mcmc.get_samples())  # the chains run asynchronously: their time, not the dispatch's
     prog.note(f"posterior: NUTS done in {time.perf_counter() - start_nuts:.1f} s", progress)
     return mcmc, sampled, precondition_s
 
