@@ -4,9 +4,9 @@ Run: ``python benchmarks/start_transient.py [--out benchmarks/results/start_tran
 
 The reference parameters, catheter 4 mm, 1 s: a demand of 160 kPa reached from 0 at t = 0 over 0 s (a step), 10 ms
 and 100 ms, the same step at 0.5 s, and the published pulse train (0 kPa until 0.26 s). For each: the length's
-difference fast − reference (mm), its RMS over the samples at 10 ms and its value at 1 s. Output feedback's loop
-starts its demand this way (its feed-forward's first value at t = 0), which is why its estimate carries an offset
-the pump's sensors do not show. Writes the rows with the machine and versions, and prints a table.
+difference fast − reference (mm), its RMS over the samples at 10 ms and its value at 1 s. An estimator on the fast
+configuration would carry that offset unseen by the pump's sensors, which is why output feedback's loop
+(``growjax.control.run_on_estimate``) holds the pump idle over its first tick. Writes the rows with the machine and versions, and prints a table.
 """
 
 from __future__ import annotations
