@@ -224,7 +224,7 @@ def watch(
     stats = Statistics(len(wmodel.sensors), cusum)
     beliefs, records, seconds, statistic = [], [], np.zeros(times.size), np.zeros(times.size)
     changes, dismissed = [], []
-    scales = {c.name: c for c in candidates}
+    by_name = {c.name: c for c in candidates}
     k = 0
     while k < times.size:
         clock = time.perf_counter()
@@ -239,7 +239,7 @@ def watch(
             run_args = (run, times, readings, inputs, breaks, onset, end)
             change, path = name_change(beliefs[onset], candidates, index, run_args)
             found = Change(times[onset], times[k], times[end], wmodel.sensors[channel].column, **change)
-            (changes if material(found, scales[found.effect], smallest) else dismissed).append(found)
+            (changes if material(found, by_name[found.effect], smallest) else dismissed).append(found)
             beliefs[onset + 1 :] = [b for b, _ in path]
             records[onset + 1 :] = [r for _, r in path]
             statistic[k + 1 : end + 1] = 0.0
