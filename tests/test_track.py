@@ -162,10 +162,12 @@ def test_one_program_serves_a_sensor_set_whatever_is_missing(model, tracked):
     pressure[::3] = np.nan
     syringe[200:] = np.nan
     gappy = ex.Experiment(exp.time, {**exp.series, "pressure_Pa": pressure, "syringe_displacement_m": syringe})
+    before = tk.Filter(model).traces()  # the full records are tracked (``tracked``): their program is compiled
     result = tk.track(gappy, model)
     assert np.all(np.isfinite(result.band("robot_length_m")[0]))
     assert np.array_equal(result.dof, np.isfinite(pressure).astype(int) + np.isfinite(syringe))
-    assert tk.Filter(model).traces() == 1
+    assert tk.Filter(model).traces() == before  # none traced for the gaps (a count of this test's own, whatever ran
+    # before it in this process: the output-feedback loop steps the same filter with inputs of its own)
     full = tracked["rig2"][0]
     width = lambda r: np.subtract(*r.band("robot_length_m")[2:0:-1])  # noqa: E731
     assert np.mean(width(result)[200:]) > np.mean(width(full)[200:])  # less read, less known

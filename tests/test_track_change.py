@@ -113,7 +113,7 @@ def test_a_hypothesis_under_which_the_solver_fails_is_not_named_and_does_not_sto
         ch.name_change(start, tk.CANDIDATES, index, ("all fail", times, times, None, None, 0, 5))
 
 
-def test_a_flag_whose_effect_is_a_small_share_of_its_typical_size_is_dismissed(model):
+def test_a_flag_whose_effect_is_a_small_share_of_its_typical_size_is_dismissed(model, leak):
     """A change is reported only where its named effect is at least ``smallest`` (a tenth) of its candidate's scale:
     a 0.3 N tip load or a 2e-13 m³/(s·Pa) leak are; the faint tip load (8 mN) or trapped air (1.3e-4) that the
     fast configuration's own error over a clean minute reads as one are not. A bad ``smallest`` is refused before
@@ -128,6 +128,12 @@ def test_a_flag_whose_effect_is_a_small_share_of_its_typical_size_is_dismissed(m
     assert not ch.material(change("tip load", 7.8e-3), by_name["tip load"], 0.1)
     assert not ch.material(change("trapped air", 1.3e-4), by_name["trapped air"], 0.1)
     assert ch.material(change("trapped air", 1.3e-4), by_name["trapped air"], 0.0)  # 0: every flag is a change
+    # the watch sets such a flag aside and reads on as after a change: the leak, held to a hundred times its scale
+    exp, _ = record("leak")
+    strict = tk.watch(exp, model, smallest=100.0)
+    assert strict.changes == () and strict.flags().sum() == 0
+    assert [(c.effect, c.flagged_s) for c in strict.dismissed] == [("leak", leak[0].changes[0].flagged_s)]
+    np.testing.assert_allclose(strict.track.band("robot_length_m")[0], leak[0].track.band("robot_length_m")[0])
     exp, _ = record("rig0")
     for bad in (-0.1, float("nan")):
         with pytest.raises(ValueError, match="smallest must be"):
