@@ -81,42 +81,41 @@ SHARED_PROGRAMS = {
 }
 
 
-# The longest scopes first (seconds of CPU of a cold run on a 2-core CPU, roughly), so that no worker is left with a
-# long unit while the other is idle; the rest follow in xdist's order (most tests first). Each tutorial executed at
-# its reduced sizes (tests/test_docs.py, in a kernel of its own) is a unit of its own.
+# The longest scopes first (seconds each took in a cold run on a quiet 2-core CPU, two workers), so that no worker
+# is left with a long unit while the other is idle; the rest follow in xdist's order (most tests first). Each
+# tutorial executed at its reduced sizes (tests/test_docs.py, in a kernel of its own) is a unit of its own.
 LONGEST_FIRST = (
-    "fits_of_the_published_pulse",  # 305 s
-    "tutorial track",  # 295 s
-    "tutorial sets",  # 291 s
-    "tutorial fit_posterior",  # 191 s
-    "test_model.py",  # 129 s
-    "test_discover.py",
-    "test_design.py",
-    "test_discover_set.py",
-    "tutorial control",  # 99 s
-    "test_sets.py",
-    "test_sweep.py",  # its command-line runs are subprocesses, beside its own compiles
-    "tutorial discover",  # 83 s
-    "test_control.py",
-    "test_resampling.py",
-    "test_cli.py",
+    "fits_of_the_published_pulse",  # 164 s
+    "tutorial sets",  # 114 s
+    "tutorial fit_posterior",  # 107 s
+    "test_sweep.py",  # 80 s
+    "test_model.py",  # 70 s
+    "tutorial track",  # 68 s
+    "test_sets.py",  # 67 s
+    "tutorial control",  # 60 s
+    "test_design.py",  # 57 s
+    "test_discover_set.py",  # 57 s
+    "test_discover.py",  # 55 s
+    "tutorial discover",  # 41 s
+    "test_control.py",  # 41 s
     "test_population.py",
+    "test_resampling.py",
     "test_effects.py",
-    "test_fidelity.py",
-    "test_track_change.py",
+    "test_cli.py",
+    "test_inference_data.py",
     "test_track.py",
-    "docs build",  # 36 s
-    "test_progress.py",
-    "tutorial sweep",
-    "test_install.py",
+    "test_fidelity.py",
+    "test_xla_flags.py",
     "test_growth_law.py",
+    "test_progress.py",
+    "docs build",
+    "test_track_change.py",
+    "test_install.py",
+    "test_track_feedback.py",
+    "tutorial sweep",
     "test_api.py",
     "tutorial simulate",
-    "test_inference_data.py",
     "test_layering.py",
-    "test_xla_flags.py",
-    "test_bad_input.py",
-    "test_cli_stops.py",
 )
 
 
