@@ -130,6 +130,24 @@ def track(r: dict) -> list[Row]:
     return rows
 
 
+def track_walk(r: dict) -> list[Row]:
+    """Y's random walk set faster than the default: what the drift records gain, what the still rigs pay."""
+    q = r.get("walk")
+    rows = []
+    for name, m in r["methods"].items():
+        sm, d = m["summary"], m.get("drift_summary") or {}
+        label = f"Y's walk {100 * q:.0f} %/√s, {name}"
+        rows.append(info(f"{label}: length RMSE, worst of {sm['records']} still rigs", mm(sm["rmse_worst_m"])))
+        if "coverage_mean" in d:
+            rows.append(
+                info(f"{label}, Y +10 % over 60 s: share inside the length band, mean", f"{d['coverage_mean']:.2f}")
+            )
+            rows.append(
+                info(f"{label}, Y +10 % over 60 s: share whose Y band covers the true Y", f"{d['y_coverage_mean']:.2f}")
+            )
+    return rows
+
+
 def track_change(r: dict) -> list[Row]:
     rows = []
     for kind, label in (("leak", "a leak opening"), ("tip", "the tip loaded")):

@@ -137,6 +137,11 @@ TOPICS: list[tuple[str, str, list[Source]]] = [
         "plant; the public experiment's unrecorded demand.",
         [
             Source("track", _py("track", "--methods", "extended"), tr.track),
+            Source(
+                "track_walk",
+                _py("track", "--methods", "extended", "--walk", "0.04", "--out", "benchmarks/results/track_walk.json"),
+                tr.track_walk,
+            ),
             Source("track_change", _py("track_change", "--feedback", "0"), tr.track_change),
             Source(
                 "track_feedback",

@@ -1,6 +1,6 @@
 """Tracking the robot from the pump's own sensors, measured against the issue's targets.
 
-Run: ``python benchmarks/track.py [--rigs 20] [--methods extended unscented] [--drift 10] [--data DIR]``
+Run: ``python benchmarks/track.py [--rigs 20] [--methods extended unscented] [--drift 10] [--walk Q] [--data DIR]``
 (a first run makes the reference records, about a minute each after the reference configuration's compile; later
 runs read them back from ``--data``, default ``benchmarks/results/track_data``).
 
@@ -47,9 +47,13 @@ METHODS = {"extended": tk.ExtendedKalman(), "unscented": tk.Unscented()}
 TARGETS = {"rmse_m": 5e-4, "coverage": (0.80, 0.97), "step_s": 1e-3, "smooth_s": 5.0}
 
 
+WALK = {"walk": None}  # Y's random walk per √s (None: the default), set by --walk
+
+
 def model_for(base):
     """The filter's model: pressure and syringe, Y a random walk, the default tolerance budget."""
-    return tk.state_space(base, sensors=tk.sensor_set("pressure,syringe"), estimate=("Y",))
+    walk = None if WALK["walk"] is None else {"Y": WALK["walk"]}
+    return tk.state_space(base, sensors=tk.sensor_set("pressure,syringe"), estimate=("Y",), walk=walk)
 
 
 def nees(model, result, rig: dict, base) -> float:
@@ -221,9 +225,11 @@ def main():
     ap.add_argument("--drift-t-end", type=float, default=60.0)
     ap.add_argument("--methods", nargs="+", choices=sorted(METHODS), default=["extended", "unscented"])
     ap.add_argument("--data", default=str(HERE / "results" / "track_data"))
+    ap.add_argument("--walk", type=float, default=None, help="Y's random walk per √s (default: the package's)")
     ap.add_argument("--data-only", action="store_true", help="make the records and stop")
     ap.add_argument("--out", default=str(HERE / "results" / "track.json"))
     args = ap.parse_args()
+    WALK["walk"] = args.walk
     jax.config.update("jax_compilation_cache_dir", os.environ.get("GROWJAX_CACHE_DIR", str(HERE / ".jax_cache")))
     log = lambda text: print(text, flush=True)  # noqa: E731
     clock = time.perf_counter()
@@ -234,6 +240,7 @@ def main():
     if args.data_only:
         return
     res = {"environment": environment(), "xla_flags": os.environ.get("XLA_FLAGS", ""), "targets": TARGETS}
+    res["walk"] = args.walk
     res["baseline"] = baseline_step(model_for(gj.reference("forward")), rigs[0])
     res["baseline"]["step_median_s"] = float(np.median(res["baseline"]["step_wall_s"]))
     res["methods"] = {name: run_method(name, rigs, drifts, log) for name in args.methods}
