@@ -3,6 +3,7 @@ output feedback and the public experiment's demand."""
 
 from __future__ import annotations
 
+import numpy as np
 from _rows import Row, at_most, info, ms, s, within
 
 RIGS, DRIFT, SEEDS, CLEAN, FEEDBACK = 20, 1, 10, 10, 10  # the sizes the targets are set for
@@ -203,6 +204,7 @@ def feedback_rows(fb: dict) -> list[Row]:
     if len(failed) == n:
         return [Row("output feedback: rigs whose estimator failed", of(n, n), "none", False, "every run failed")]
     lost = [Row("output feedback: rigs whose estimator failed", of(len(failed), n), "none", False)] if failed else []
+    share = float(np.mean([r.get("estimate_coverage_90", 0.0) for r in fb["rows"] if "failed" not in r]))
     return lost + [
         sized(
             at_most(
@@ -222,6 +224,7 @@ def feedback_rows(fb: dict) -> list[Row]:
             "output feedback: rigs whose estimate's 90 % band holds ≥ 0.8 of the samples",
             of(sum(r.get("estimate_coverage_90", 0.0) >= 0.8 for r in fb["rows"] if "failed" not in r), n),
         ),
+        info("output feedback: share of samples inside the estimate's 90 % band, mean of rigs", f"{share:.2f}"),
     ]
 
 
