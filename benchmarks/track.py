@@ -47,13 +47,11 @@ METHODS = {"extended": tk.ExtendedKalman(), "unscented": tk.Unscented()}
 TARGETS = {"rmse_m": 5e-4, "coverage": (0.80, 0.97), "step_s": 1e-3, "smooth_s": 5.0}
 
 
-WALK = {"walk": None}  # Y's random walk per √s (None: the default), set by --walk
-
-
-def model_for(base):
-    """The filter's model: pressure and syringe, Y a random walk, the default tolerance budget."""
-    walk = None if WALK["walk"] is None else {"Y": WALK["walk"]}
-    return tk.state_space(base, sensors=tk.sensor_set("pressure,syringe"), estimate=("Y",), walk=walk)
+def model_for(base, walk: float | None = None):
+    """The filter's model: pressure and syringe, Y a random walk (``walk`` per √s; None: the package's default),
+    the default tolerance budget."""
+    walks = None if walk is None else {"Y": walk}
+    return tk.state_space(base, sensors=tk.sensor_set("pressure,syringe"), estimate=("Y",), walk=walks)
 
 
 def nees(model, result, rig: dict, base) -> float:
@@ -147,12 +145,12 @@ def summarise(rows: list[dict]) -> dict:
     }
 
 
-def run_method(name, rigs, drifts, log) -> dict:
+def run_method(name, rigs, drifts, log, walk: float | None = None) -> dict:
     method = METHODS[name]
     base = gj.reference("forward")
     out = {"rigs": [], "drift": []}
     for path in rigs:
-        out["rigs"].append(score_record(path, model_for(base), method, base))
+        out["rigs"].append(score_record(path, model_for(base, walk), method, base))
         r = out["rigs"][-1]
         if "failed" in r:
             log(f"{name:10s} {r['record']:7s} failed: {r['failed']}")
@@ -162,7 +160,7 @@ def run_method(name, rigs, drifts, log) -> dict:
             f"{r['nis_per_reading']:.2f}  step {1e3 * np.median(r['step_wall_s']):.2f} ms"
         )
     for path in drifts:
-        out["drift"].append(score_record(path, model_for(drift_base({})), method, drift_base({})))
+        out["drift"].append(score_record(path, model_for(drift_base({}), walk), method, drift_base({})))
         r = out["drift"][-1]
         if "failed" in r:
             log(f"{name:10s} {r['record']:7s} failed: {r['failed']}")
@@ -174,7 +172,7 @@ def run_method(name, rigs, drifts, log) -> dict:
     out["summary"] = summarise(out["rigs"])
     out["drift_summary"] = summarise(out["drift"]) if out["drift"] else None
     if rigs:
-        out["smooth_10s_s"] = smooth_time(model_for(base), method, rigs[0])
+        out["smooth_10s_s"] = smooth_time(model_for(base, walk), method, rigs[0])
     return out
 
 
@@ -229,7 +227,6 @@ def main():
     ap.add_argument("--data-only", action="store_true", help="make the records and stop")
     ap.add_argument("--out", default=str(HERE / "results" / "track.json"))
     args = ap.parse_args()
-    WALK["walk"] = args.walk
     jax.config.update("jax_compilation_cache_dir", os.environ.get("GROWJAX_CACHE_DIR", str(HERE / ".jax_cache")))
     log = lambda text: print(text, flush=True)  # noqa: E731
     clock = time.perf_counter()
@@ -241,9 +238,9 @@ def main():
         return
     res = {"environment": environment(), "xla_flags": os.environ.get("XLA_FLAGS", ""), "targets": TARGETS}
     res["walk"] = args.walk
-    res["baseline"] = baseline_step(model_for(gj.reference("forward")), rigs[0])
+    res["baseline"] = baseline_step(model_for(gj.reference("forward"), args.walk), rigs[0])
     res["baseline"]["step_median_s"] = float(np.median(res["baseline"]["step_wall_s"]))
-    res["methods"] = {name: run_method(name, rigs, drifts, log) for name in args.methods}
+    res["methods"] = {name: run_method(name, rigs, drifts, log, args.walk) for name in args.methods}
     compact(res)
     res["load_average"] = os.getloadavg()
     res["wall_s"] = time.perf_counter() - clock
