@@ -7,6 +7,7 @@ file pays for one compile.
 """
 
 import json
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -174,16 +175,18 @@ def test_one_program_serves_a_sensor_set_whatever_is_missing(model, tracked):
 
 
 def test_the_track_command_writes_the_bands_and_scores_the_unread_length(tmp_path):
+    """Without DATA the command reads the shipped record of the pump's sensors (the synthetic experiment, every
+    other command's default, has no syringe column)."""
     from growjax.cli import main
 
-    data = TRACK / "rig0.csv"
     out = tmp_path / "out"
-    assert main(["track", str(data), "--t-end", "3", "--out", str(out), "--json", str(tmp_path / "s.json")]) == 0
+    assert main(["track", "--t-end", "3", "--out", str(out), "--json", str(tmp_path / "s.json")]) == 0
     header = (out / "track.csv").read_text().splitlines()[0].split(",")
     for stem, unit in (("robot_length", "m"), ("pressure", "Pa"), ("Y", "Pa")):
         assert {f"{stem}_{unit}", f"{stem}_lower_{unit}", f"{stem}_upper_{unit}"} <= set(header)
     assert header[0] == "time_s" and "measured_robot_length_m" in header
     summary = json.loads((tmp_path / "s.json").read_text())
+    assert Path(summary["data"]).resolve() == (TRACK / "rig0.csv").resolve()
     assert summary["score"]["samples"] == 300 and summary["score"]["rmse_m"] < 1e-3  # 0.2 mm noise on the truth
     assert (out / "track.png").is_file()
 

@@ -117,9 +117,10 @@ def recorded_parameters(data: Path) -> dict:
     return {k: float(v) for k, v in values.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
 
 
-def data_path(data: str | None, data_dir: str | None = None) -> Path:
+def data_path(data: str | None, data_dir: str | None = None, default: Path | None = None) -> Path:
     """The experiment a command reads: a path, a named public data set (``mammobot``:
-    `growjax.data.datasets.fetch`, from ``data_dir`` where given), or the shipped synthetic experiment."""
+    `growjax.data.datasets.fetch`, from ``data_dir`` where given), or, where none is given, ``default`` (None: the
+    shipped synthetic experiment)."""
     from growjax.data import datasets
 
     if data is not None and (Path(data).exists() or data not in datasets.NAMES):
@@ -129,7 +130,7 @@ def data_path(data: str | None, data_dir: str | None = None) -> Path:
     if data is None:
         if data_dir is not None:
             raise ValueError(f"--data-dir applies to a named data set: name it ({', '.join(datasets.NAMES)})")
-        return datasets.default_data_path()
+        return datasets.default_data_path() if default is None else default
     return datasets.fetch(data, data_dir=data_dir)
 
 

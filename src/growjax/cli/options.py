@@ -259,13 +259,16 @@ def shared(
     fidelity: bool = True,
     rtol: bool = True,
     seed: bool = True,
+    default_data: str | None = None,
 ) -> None:
     """The options every command that reads data takes: DATA (several with ``many``), ``--no-catheter``,
     ``--data-dir``, ``--drive``, ``--param``, ``--fidelity`` (where the command's model runs in a configuration
     of its choosing), ``--rtol`` (where it sets the solver's tolerance), ``--seed`` (where it draws), ``--t-end``,
-    ``--out`` (default ``out/COMMAND``) and ``--json``."""
+    ``--out`` (default ``out/COMMAND``) and ``--json``; ``default_data`` says what the command reads without DATA
+    where that is not the shipped synthetic experiment."""
     help_ = _DATA_HELP + ("; several files, or a TOML manifest, for several experiments" if many else "")
-    parser.add_argument("data", nargs="*" if many else "?", default=None, metavar="DATA", help=help_ + _DATA_DEFAULT)
+    default = _DATA_DEFAULT if default_data is None else f" (default: {default_data})"
+    parser.add_argument("data", nargs="*" if many else "?", default=None, metavar="DATA", help=help_ + default)
     rows = [NO_CATHETER, DATA_DIR, DRIVE, PARAM]
     rows += [FIDELITY] if fidelity else []
     rows += [RTOL] if rtol else []

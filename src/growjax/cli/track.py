@@ -21,6 +21,7 @@ from growjax.cli.command import Process
 NAME = "track"
 HELP = "the length, pressure and parameters over time with their bands, from the rig's own sensors"
 METHODS = ("extended", "unscented")
+DEFAULT_RECORD = "track/rig0.csv"  # the data without DATA: a shipped record with the pump's sensors and the length
 PROCESS = Process()
 
 
@@ -40,7 +41,7 @@ def _pairs(items, flag: str) -> dict:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The shared options, ``--quiet`` and the command's own."""
-    options.shared(parser, NAME)
+    options.shared(parser, NAME, default_data=f"a shipped 3 s record of the pump's sensors, {DEFAULT_RECORD}")
     options.quiet(parser)
     options.add(parser, (options.TOLERANCE,))
     options.add(
@@ -171,9 +172,10 @@ def _load(args):
     """(data path, experiment windowed to --t-end, parameters, their origin); a sensor's column may have empty
     cells (samples it did not take)."""
     import growjax as gj
+    from growjax.data import datasets
     from growjax.data import experiment as ex
 
-    data = loader.data_path(args.data, args.data_dir)
+    data = loader.data_path(args.data, args.data_dir, default=datasets.dataset(DEFAULT_RECORD))
     exp = ex.read(data, catheter=args.catheter, sparse=ex.MEASURED_COLUMNS).window(args.t_end)
     loader.unused_columns_note(args, exp)
     recorded = loader.recorded_parameters(data)
