@@ -188,6 +188,9 @@ def test_the_track_command_writes_the_bands_and_scores_the_unread_length(tmp_pat
     summary = json.loads((tmp_path / "s.json").read_text())
     assert Path(summary["data"]).resolve() == (TRACK / "rig0.csv").resolve()
     assert summary["score"]["samples"] == 300 and summary["score"]["rmse_m"] < 1e-3  # 0.2 mm noise on the truth
+    # a reading falls in the band widened by the length sensor's noise (0.2 mm, its default): 0.91 here, 0.47
+    # against the band of the true length alone
+    assert summary["score"]["noise_m"] == 2e-4 and summary["score"]["coverage_90"] > 0.8
     assert (out / "track.png").is_file()
 
 

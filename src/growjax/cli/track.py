@@ -219,8 +219,11 @@ def run(args: argparse.Namespace) -> dict:
     if watched is not None:
         summary["changes"] = watched.summary()
         summary["dismissed"] = [c.as_dict() for c in watched.dismissed]
-    if scored:
-        summary["score"] = result.score(exp["robot_length_m"])
+    if scored:  # the band a reading falls in: widened by the length sensor's noise (--noise length=SD)
+        from growjax.track import sensors as ts
+
+        noise = ts.sensor("length", ts.parse_noise(args.noise).get("robot_length_m")).noise
+        summary["score"] = {**result.score(exp["robot_length_m"], noise), "noise_m": noise}
     measured = {c: exp[c] for c in ("robot_length_m", "pressure_Pa") if c in exp}
     compare = None
     if args.estimate_demand and args.drive == "forward":
@@ -304,8 +307,9 @@ def summary_lines(summary: dict) -> list[str]:
     if s.get("score"):
         sc = s["score"]
         lines.append(
-            f"  against the measured length (not read): RMSE {1e3 * sc['rmse_m']:.3f} mm, band covers "
-            f"{100 * sc['coverage_90']:.0f} % of {sc['samples']} samples"
+            f"  against the measured length (not read): RMSE {1e3 * sc['rmse_m']:.3f} mm, band (with its "
+            f"{1e3 * sc.get('noise_m', 0.0):.2g} mm reading noise) covers {100 * sc['coverage_90']:.0f} % of "
+            f"{sc['samples']} samples"
         )
     c = s["consistency"]
     if c["nis_per_reading"] is not None:

@@ -176,16 +176,18 @@ class TrackResult:
         """The CSV: ``time_s``, every reported column with its band, then ``extra`` {column: (T,)}."""
         write_csv(path, self.time, {**self.columns, **(extra or {})})
 
-    def score(self, measured_length) -> dict:
-        """The length estimate against a measured length (T,) m at the same samples (NaN: none there):
-        {"rmse_m", "coverage_90" (share of samples inside the band), "samples"}."""
+    def score(self, measured_length, noise_m: float = 0.0) -> dict:
+        """The length estimate against a measured length (T,) m at the same samples (NaN: none there), read with
+        noise of sd ``noise_m`` (m; 0 for the true length): {"rmse_m", "coverage_90" (share of samples inside the
+        band widened by that noise, the band a reading falls in), "samples"}."""
         y = np.asarray(measured_length, float)
         est, lo, hi = self.band("robot_length_m")
         ok = np.isfinite(y)
         if not np.any(ok):
             return {"rmse_m": None, "coverage_90": None, "samples": 0}
         err = est[ok] - y[ok]
-        inside = (y[ok] >= lo[ok]) & (y[ok] <= hi[ok])
+        half = np.sqrt(((hi[ok] - lo[ok]) / 2) ** 2 + (Z90 * noise_m) ** 2)
+        inside = np.abs(err) <= half
         return {
             "rmse_m": float(np.sqrt(np.mean(err**2))),
             "coverage_90": float(np.mean(inside)),
