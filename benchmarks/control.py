@@ -1,4 +1,4 @@
-"""Control study on 0–10 s (issue: length control that knows its own uncertainty).
+"""Control study on 0–10 s: length control that knows its own uncertainty.
 
 Designs on the fast configuration, evaluates tracking on the reference configuration
 (``gj.Config(fidelity="reference")``): the optimised open-loop demand profile, the tuned length PID

@@ -45,7 +45,7 @@ same robot (the published pulse train over the shipped record, fresh noise): ``g
 over the two, one Y for the robot (``--design-from`` the pair's results file ``--truths retraction_folding
 trapped_air none --inputs design --with-first``).
 
-Targets (the issue): realised sd within ±25 % of the prediction; coverage 0.80–0.97; the design's realised
+Targets: realised sd within ±25 % of the prediction; coverage 0.80–0.97; the design's realised
 interval ≤ 0.5× the published pulse train's; the design beats the best random input; no run of the design crosses
 the membrane limit or the stroke on the reference configuration over ``--safety-draws`` (default 100) fresh
 draws of the rig and θ.

@@ -8,7 +8,7 @@ length comes from the **reference** configuration at its Y (published pulse trai
 NUTS samples Y and σ through the emulator of the fast configuration (its RMS error and the fast configuration's
 error against the reference, ``--model-error``, join the noise; by default that error is measured here, over
 the same window and samples, at 5 Y across the box: its largest RMS). A
-calibrated posterior covers the truth with its 90 % interval in 0.8–0.97 of replicates (the issue's band)
+calibrated posterior covers the truth with its 90 % interval in 0.8–0.97 of replicates
 and ranks it uniformly. This is the check the default test run makes on data from the emulator itself.
 """
 

@@ -1,4 +1,4 @@
-"""Tracking the robot from the pump's own sensors, measured against the issue's targets.
+"""Tracking the robot from the pump's own sensors, measured against its targets.
 
 Run: ``python benchmarks/track.py [--rigs 20] [--methods extended unscented] [--drift 10] [--walk Q] [--data DIR]``
 (a first run makes the reference records, about a minute each after the reference configuration's compile; later

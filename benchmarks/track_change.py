@@ -1,4 +1,4 @@
-"""Change detection and output feedback, measured against the issue's targets.
+"""Change detection and output feedback, measured against their targets.
 
 Run: ``python benchmarks/track_change.py [--seeds 10] [--clean 10] [--feedback 10] [--data DIR]`` (a first run makes
 the reference records, ``_track_data.py``; later runs read them back from ``--data``, default

@@ -346,7 +346,7 @@ def test_design_takes_the_growth_law_of_what_is_known(tmp_path, monkeypatch):
 
 
 @pytest.mark.slow
-def test_posterior_command_writes_inference_data_and_the_issue_keys(tmp_path):
+def test_posterior_command_writes_inference_data_and_the_summary_keys(tmp_path):
     cmd = [
         sys.executable,
         "-m",
