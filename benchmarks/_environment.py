@@ -10,6 +10,9 @@ import sys
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
+# The one-minute load average as the benchmark starts (this module is imported first): the other work on the
+# machine, before the benchmark's own processes add theirs.
+LOAD_AT_START = round(os.getloadavg()[0], 2) if hasattr(os, "getloadavg") else None
 
 
 def _cpu() -> str:
@@ -31,8 +34,8 @@ def _command() -> str:
 
 
 def environment() -> dict:
-    """The date, CPU model and count, the one-minute load average (other work on the machine), the JAX device,
-    the versions of Python, jax and growjax, and the command line."""
+    """The date, CPU model and count, the one-minute load average as the benchmark started (other work on the
+    machine), the JAX device, the versions of Python, jax and growjax, and the command line."""
     import jax
     import jaxlib
 
@@ -43,7 +46,7 @@ def environment() -> dict:
         "machine": f"{_cpu()}, {os.cpu_count()} cores",
         "cpu_model": _cpu(),
         "cpu_count": os.cpu_count(),
-        "load_1min": round(os.getloadavg()[0], 2) if hasattr(os, "getloadavg") else None,
+        "load_1min": LOAD_AT_START,
         "device": str(jax.devices()[0].platform),
         "python": platform.python_version(),
         "jax": jax.__version__,

@@ -54,6 +54,7 @@ from pathlib import Path
 
 import numpy as np
 from scipy.integrate import solve_ivp
+from scipy.optimize import brentq
 
 import growjax as gj
 from growjax import sweep as sw
@@ -329,17 +330,24 @@ def rod_pressure(c: Lumped, pressure: float, velocity: float, displacement: floa
 def robot_inflow(c: Lumped, pressure: float, displacement: float, catheter: float) -> float:
     """Flow into the robot (m³/s): the valve–rod series balance q = Q(P − p_r(q/A_r)), by fixed-point
     passes from the rest pressure until the valve drop moves < 1 mPa (the published growth term is
-    < 1e-5 Pa, so one pass converges: the next would move it by ~1e-16 Pa)."""
+    < 1e-5 Pa, so one pass converges: the next would move it by ~1e-16 Pa). Where the passes do not settle (a
+    growth term comparable with the drop: a low ext or n < 1 at the paper box's corners) the balance is solved by
+    bracketing: q − Q(P − p_r(q/A_r)) rises with q and changes sign between 0 and the flow at the rest pressure."""
     p_rest = rod_pressure(c, pressure, 0.0, displacement, catheter)
     delta = pressure - p_rest
-    q = valve_flow(c, delta, pressure - 0.5 * delta)
+    q0 = q = valve_flow(c, delta, pressure - 0.5 * delta)
     for _ in range(8):
         new = pressure - rod_pressure(c, pressure, q / c.rod_area, displacement, catheter)
         q = valve_flow(c, new, pressure - 0.5 * new)
         if abs(new - delta) < 1e-3:
-            break
+            return q
         delta = new
-    return q
+
+    def excess(flow: float) -> float:
+        drop = pressure - rod_pressure(c, pressure, flow / c.rod_area, displacement, catheter)
+        return flow - valve_flow(c, drop, pressure - 0.5 * drop)
+
+    return brentq(excess, min(0.0, q0), max(0.0, q0), xtol=1e-30, rtol=1e-14)
 
 
 def platform_velocity(c: Lumped, drive: float, x_platform: float) -> float:
