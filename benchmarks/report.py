@@ -164,7 +164,8 @@ HEADER = """# Benchmarks
 Written by `python benchmarks/report.py` from the results files in `benchmarks/results/`, each written by the
 command beside its rows. Times are wall-clock seconds after compilation unless a row says otherwise, on the
 machine named in the row; where other work shared it, its load (the one-minute load average as the benchmark
-started) is named too, and a missed time target on such a machine says so. A figure that has no target is shown for information (—).
+started) is named too, and a missed time target on such a machine says so. A figure that has no target is shown
+for information (—).
 """
 
 COLUMNS = "| measured | value | target | met | growjax, machine | command |\n|---|---|---|---|---|---|\n"
