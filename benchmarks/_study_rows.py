@@ -53,7 +53,13 @@ def windows(r: dict) -> list[Row]:
     for pair in r["pairs"]:
         worst[pair["likelihood"]] = max(worst.get(pair["likelihood"], 0.0), pair["z"])
     fmt = lambda v: f"{v:.2f} se"  # noqa: E731
-    rows = [at_most(f"largest |ΔY| between disjoint windows, {k} likelihood", v, 2.0, fmt) for k, v in worst.items()]
+    why = {"independent": "above the target: independent noise leaves out the model's error, which the windows show"}
+    rows = [
+        at_most(
+            f"largest |ΔY| between disjoint windows, {k} likelihood", v, 2.0, fmt, why=why.get(k, "above the target")
+        )
+        for k, v in worst.items()
+    ]
     rows.append(at_most("0–10 s interval of Y, share of the 5–15 kPa box", r["interval_share_of_box"], 0.33, share))
     return rows
 
