@@ -136,23 +136,21 @@ def fit_speed(r: dict) -> list[Row]:
 
 
 def set_speed(r: dict) -> list[Row]:
-    each = r.get("each_experiment_fit")
-    rows = [info("joint fit of a set of eight experiments", s(r["set"]["warm_s"]))]
+    evaluation = r.get("ratio_evaluation_set_over_one")
     why = "above the target"
-    if "ratio_evaluation_set_over_one" in r:
-        why += (
-            f": one evaluation of the set's model (its runs over {r.get('devices', 1)} devices) costs "
-            f"{ratio(r['ratio_evaluation_set_over_one'])} times one experiment's"
-        )
-    if each:
+    if evaluation is not None:
+        why += f": one evaluation of the set's model (its runs over {r.get('devices', 1)} devices) costs "
+        why += f"{ratio(evaluation)} times one experiment's"
+    if r.get("each_experiment_fit"):
         ratio_of, label = r["ratio_set_over_mean_fit"], "that fit ÷ the mean single-experiment fit"
     else:
         ratio_of, label = r["ratio_set_over_one_fit"], "that fit ÷ its first experiment's fit"
-    rows.append(at_most(label, ratio_of, 3, ratio, why=why, timed=True))
-    if "ratio_evaluation_set_over_one" in r:
-        rows.append(
-            info("one evaluation of the set's model ÷ one experiment's", ratio(r["ratio_evaluation_set_over_one"]))
-        )
+    rows = [
+        info("joint fit of a set of eight experiments", s(r["set"]["warm_s"])),
+        at_most(label, ratio_of, 3, ratio, why=why, timed=True),
+    ]
+    if evaluation is not None:
+        rows.append(info("one evaluation of the set's model ÷ one experiment's", ratio(evaluation)))
     return rows
 
 

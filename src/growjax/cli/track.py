@@ -130,8 +130,9 @@ def _amplitude_and_time(text: str) -> tuple[float, float]:
     return amplitude, time_scale
 
 
-def model_of(args, params):
-    """The state-space model the options describe (``params``: the nominal parameters)."""
+def model_of(args, params, noises: dict):
+    """The state-space model the options describe (``params``: the nominal parameters; ``noises``: --noise parsed,
+    {column: sd})."""
     import growjax as gj
     from growjax import track as tk
     from growjax.calibration import tolerance as tl
@@ -139,7 +140,7 @@ def model_of(args, params):
 
     if getattr(args, "fidelity", "fast") != "fast":
         raise ValueError("track steps the fast configuration (--fidelity fast)")
-    chosen = ts.sensor_set(",".join(args.sensors), ts.parse_noise(args.noise))
+    chosen = ts.sensor_set(",".join(args.sensors), noises)
     estimate = [n.strip() for n in args.estimate.split(",") if n.strip()]
     tolerance_texts = [t.strip() for t in args.tolerance]
     budget = tolerance_texts != ["none"]
@@ -190,10 +191,12 @@ def _load(args):
 def run(args: argparse.Namespace) -> dict:
     """Track DATA; write ``track.csv`` and ``track.png`` under ``--out``; the JSON summary."""
     from growjax import track as tk
+    from growjax.track import sensors as ts
     from growjax.track.figure import track_figure
 
     data, exp, params, origin = _load(args)
-    model = model_of(args, params)
+    noises = ts.parse_noise(args.noise)
+    model = model_of(args, params, noises)
     method = tk.Unscented() if args.filter == "unscented" else tk.ExtendedKalman()
     if exp.time.size < 2:
         raise ValueError(f"{data} has fewer than two samples up to --t-end {args.t_end} s")
@@ -220,9 +223,7 @@ def run(args: argparse.Namespace) -> dict:
         summary["changes"] = watched.summary()
         summary["dismissed"] = [c.as_dict() for c in watched.dismissed]
     if scored:  # the band a reading falls in: widened by the length sensor's noise (--noise length=SD)
-        from growjax.track import sensors as ts
-
-        noise = ts.sensor("length", ts.parse_noise(args.noise).get("robot_length_m")).noise
+        noise = ts.sensor("length", noises.get("robot_length_m")).noise
         summary["score"] = {**result.score(exp["robot_length_m"], noise), "noise_m": noise}
     measured = {c: exp[c] for c in ("robot_length_m", "pressure_Pa") if c in exp}
     compare = None
